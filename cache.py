@@ -1,0 +1,99 @@
+"""A content-addressed on-disk cache for reference renders and precomputations.
+
+Keys are SHA-256 hashes of a canonical JSON of the inputs (scene, knobs, versions), so a
+cached result is never computed again and a change of any input misses the cache.
+Entries are written atomically (temporary name, then rename).
+
+The folder is ``TRANSLUCENT_CACHE`` if set, else ``$XDG_CACHE_HOME/translucent`` or
+``~/.cache/translucent``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import pickle
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .atomic import atomic_path
+
+__all__ = ["cache_dir", "content_hash", "Cache"]
+
+
+def cache_dir() -> Path:
+    """The cache folder (created on first use)."""
+    given = os.environ.get("TRANSLUCENT_CACHE")
+    if given:
+        return Path(given).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "translucent"
+
+
+def _canonical(value: Any) -> Any:
+    """A JSON-able, order-independent form; arrays hash by dtype, shape and bytes."""
+    if isinstance(value, np.ndarray):
+        return {"__ndarray__": hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest(),
+                "dtype": str(value.dtype), "shape": list(value.shape)}
+    if isinstance(value, dict):
+        return {str(k): _canonical(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
+    if isinstance(value, (list, tuple)):
+        return [_canonical(v) for v in value]
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    if hasattr(value, "cache_key"):
+        return _canonical(value.cache_key())
+    return value
+
+
+def content_hash(*parts: Any) -> str:
+    """SHA-256 hex digest of the canonical JSON of ``parts``.
+
+    Objects with a ``cache_key()`` method (scenes, materials) contribute what it returns.
+    """
+    text = json.dumps(_canonical(list(parts)), sort_keys=True, separators=(",", ":"),
+                      default=repr)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+class Cache:
+    """One namespace of the cache: ``Cache("reference").path(key, ".exr")``.
+
+    Parameters
+    ----------
+    namespace : str
+        Sub-folder (``"reference"``, ``"prt"``, ...).
+    root : path, optional
+        Overrides :func:`cache_dir`.
+    """
+
+    def __init__(self, namespace: str, root=None):
+        self.root = Path(root) if root is not None else cache_dir()
+        self.folder = self.root / namespace
+
+    def path(self, key: str, suffix: str) -> Path:
+        """Where the entry for ``key`` lives (it may not exist)."""
+        return self.folder / key[:2] / f"{key}{suffix}"
+
+    def load_pickle(self, key: str):
+        """The pickled object stored under ``key``, or None when absent or unreadable."""
+        path = self.path(key, ".pkl")
+        if not path.is_file():
+            return None
+        try:
+            with open(path, "rb") as handle:
+                return pickle.load(handle)
+        except Exception:  # a stale or foreign entry is a miss, not a crash
+            return None
+
+    def store_pickle(self, key: str, value) -> Path:
+        """Store ``value`` under ``key`` atomically and return the path."""
+        path = self.path(key, ".pkl")
+        with atomic_path(path) as tmp, open(tmp, "wb") as handle:
+            pickle.dump(value, handle, protocol=pickle.HIGHEST_PROTOCOL)
+        return path

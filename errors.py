@@ -1,0 +1,71 @@
+"""The one exception type for bad input, naming the file, field and value."""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["InputError", "check_finite", "check_positive", "check_nonnegative"]
+
+
+class InputError(ValueError):
+    """Bad input: says which file, which field, which value, and what is accepted.
+
+    Subclasses :class:`ValueError` so that callers catching ``ValueError`` keep working.
+    The command line turns it into exit code 2.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong and what would be accepted ("must be >= 0").
+    file : str or os.PathLike, optional
+        The file the value came from.
+    field : str, optional
+        The field (key, argument, channel) holding the value.
+    value : object, optional
+        The offending value, printed with ``repr``.
+    """
+
+    def __init__(self, message: str, *, file: Any = None, field: str | None = None,
+                 value: Any = ...):
+        self.file = None if file is None else str(file)
+        self.field = field
+        self.value = value
+        self.reason = message
+        parts = []
+        if self.file is not None:
+            parts.append(self.file)
+        if field is not None:
+            parts.append(f"{field} = {_short_repr(value)}" if value is not ... else field)
+        parts.append(message)
+        super().__init__(": ".join(parts))
+
+
+def _short_repr(value: Any, limit: int = 120) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def check_finite(value, field: str, *, file=None):
+    """Return ``value`` as a float64 array, raising :class:`InputError` on NaN or Inf."""
+    import numpy as np
+
+    array = np.asarray(value, dtype=np.float64)
+    if not np.all(np.isfinite(array)):
+        raise InputError("must be finite (no NaN or Inf)", file=file, field=field, value=value)
+    return array
+
+
+def check_nonnegative(value, field: str, *, file=None):
+    """Return ``value`` as a finite float64 array, raising :class:`InputError` if any entry < 0."""
+    array = check_finite(value, field, file=file)
+    if (array < 0).any():
+        raise InputError("must be >= 0", file=file, field=field, value=value)
+    return array
+
+
+def check_positive(value, field: str, *, file=None):
+    """Return ``value`` as a finite float64 array, raising :class:`InputError` if any entry <= 0."""
+    array = check_finite(value, field, file=file)
+    if (array <= 0).any():
+        raise InputError("must be > 0", file=file, field=field, value=value)
+    return array

@@ -1,0 +1,1 @@
+"""Captured slab images -> radial profiles -> posteriors over dipole and SubEdit parameters."""

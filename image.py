@@ -1,0 +1,162 @@
+"""Linear HDR images with metadata, stored as OpenEXR.
+
+An :class:`Image` is what every renderer in the suite returns: the reference path tracer
+and each fast method. Radiance is linear (no sRGB, no tone mapping), float32,
+``H x W x 3``; the per-pixel variance of the *mean* is kept where the producer knows it
+(independent passes of a reference render).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .atomic import atomic_path
+from .errors import InputError
+
+__all__ = ["Image", "read_exr", "write_exr"]
+
+#: Header attribute holding the metadata as JSON (read back losslessly).
+METADATA_ATTRIBUTE = "translucent:metadata"
+
+
+@dataclass(frozen=True)
+class Image:
+    """A linear HDR RGB image with provenance.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, W, 3), float32
+        Linear radiance (W sr^-1 m^-2 in the scene's units; relative where the lights are).
+    variance : ndarray, shape (H, W, 3), optional
+        Variance of the estimate of the mean in each pixel channel (the squared standard
+        error), where known.
+    metadata : dict
+        JSON-serialisable provenance: ``producer`` (``"reference"``, ``"prt"``, ...),
+        ``knobs``, ``seconds``, ``spp``, ``passes``, ``scene_hash``, ``variant``, ...
+    """
+
+    rgb: np.ndarray
+    variance: np.ndarray | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        rgb = np.ascontiguousarray(self.rgb, dtype=np.float32)
+        if rgb.ndim != 3 or rgb.shape[2] != 3:
+            raise InputError("an image must be H x W x 3", field="rgb", value=rgb.shape)
+        object.__setattr__(self, "rgb", rgb)
+        if self.variance is not None:
+            variance = np.ascontiguousarray(self.variance, dtype=np.float32)
+            if variance.shape != rgb.shape:
+                raise InputError(f"must have the shape of rgb {rgb.shape}", field="variance",
+                                 value=variance.shape)
+            object.__setattr__(self, "variance", variance)
+        object.__setattr__(self, "metadata", dict(self.metadata))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)`` in pixels."""
+        return self.rgb.shape[:2]
+
+    def with_metadata(self, **items) -> Image:
+        """Return a copy whose metadata is updated with ``items``."""
+        return replace(self, metadata={**self.metadata, **items})
+
+    def write(self, path) -> Path:
+        """Write as OpenEXR (see :func:`write_exr`) and return the path."""
+        return write_exr(path, self)
+
+    @classmethod
+    def read(cls, path) -> Image:
+        """Read an OpenEXR written by :func:`write_exr` or any RGB EXR (see :func:`read_exr`)."""
+        return read_exr(path)
+
+
+def _header_value(value):
+    """Header attributes OpenEXR can hold natively (str, int, float); JSON otherwise."""
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, (str, int)):
+        return value
+    if isinstance(value, float) and math.isfinite(value):
+        return value
+    return json.dumps(value, sort_keys=True)
+
+
+def write_exr(path, image: Image) -> Path:
+    """Write ``image`` to ``path`` as a ZIP-compressed float32 OpenEXR, atomically.
+
+    Channels ``R, G, B`` hold the radiance, ``variance.R, variance.G, variance.B`` the
+    variance where known. The metadata go into the header twice: as one JSON attribute
+    (read back losslessly) and as individual ``translucent:KEY`` attributes for tools.
+    """
+    import OpenEXR
+
+    if not isinstance(image, Image):
+        raise InputError("expected an Image", file=path, field="image", value=type(image))
+    channels = {"RGB": image.rgb}
+    if image.variance is not None:
+        for index, name in enumerate("RGB"):
+            channels[f"variance.{name}"] = np.ascontiguousarray(image.variance[..., index])
+    header = {
+        "compression": OpenEXR.ZIP_COMPRESSION,
+        "type": OpenEXR.scanlineimage,
+        METADATA_ATTRIBUTE: json.dumps(image.metadata, sort_keys=True, default=str),
+    }
+    for key, value in image.metadata.items():
+        header[f"translucent:{key}"] = _header_value(value)
+    path = Path(path)
+    with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
+        exr.write(str(tmp))
+    return path
+
+
+def read_exr(path) -> Image:
+    """Read an RGB OpenEXR into an :class:`Image`.
+
+    Raises
+    ------
+    InputError
+        When the file is missing, is not a readable EXR, has no R, G and B channels, or
+        holds NaN/Inf pixels; the message names the file and what was found.
+    """
+    import OpenEXR
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("no such file", file=path, field="path", value=str(path))
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as exr:
+            # the header is a view that empties when the file closes: copy what we need
+            metadata_text = exr.header().get(METADATA_ATTRIBUTE)
+            planes = {name: np.array(ch.pixels, dtype=np.float32)
+                      for name, ch in exr.channels().items()}
+    except Exception as error:  # OpenEXR raises bare exceptions on corrupt files
+        raise InputError(f"not a readable OpenEXR file ({error})", file=path) from error
+    missing = [c for c in "RGB" if c not in planes]
+    if missing:
+        raise InputError("an RGB image needs channels R, G and B", file=path,
+                         field="channels", value=sorted(planes))
+    rgb = np.stack([planes[c] for c in "RGB"], axis=-1)
+    bad = ~np.isfinite(rgb)
+    if bad.any():
+        y, x, c = np.argwhere(bad)[0]
+        raise InputError(f"{int(bad.sum())} pixel channels are NaN or Inf (first at "
+                         f"x={x}, y={y}, channel {'RGB'[c]})", file=path, field="pixels",
+                         value=float(rgb[y, x, c]))
+    variance = None
+    if all(f"variance.{c}" in planes for c in "RGB"):
+        variance = np.stack([planes[f"variance.{c}"] for c in "RGB"], axis=-1)
+    metadata = {}
+    if metadata_text is not None:
+        try:
+            metadata = json.loads(metadata_text)
+        except (TypeError, ValueError) as error:
+            raise InputError("metadata attribute is not valid JSON", file=path,
+                             field=METADATA_ATTRIBUTE) from error
+    return Image(rgb, variance, metadata)

@@ -1,0 +1,1 @@
+"""Ground truth: Mitsuba 3 volumetric path tracing and exact-BRDF reference renders."""

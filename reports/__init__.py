@@ -1,0 +1,1 @@
+"""Metrics, error maps, benchmarks, stress runs, the HTML report and the command line."""

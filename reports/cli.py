@@ -1,0 +1,84 @@
+"""The ``translucent`` command line.
+
+``main(argv=None) -> int``: 0 success (or within the threshold), 1 a check failed (metric
+beyond its threshold, regression, unstable kernel), 2 bad usage or bad input. Each
+subcommand lives in its own module under :mod:`translucent.reports.commands` with two
+functions, ``add_arguments(parser)`` and ``run(args) -> int``; the CLI is thin and the work
+happens in the library.
+
+``TRANSLUCENT_OPTIONS`` (environment) is split like a shell line and put before the
+arguments, so a CI suite can change behaviour in one place.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import shlex
+import sys
+
+from ..errors import InputError
+
+__all__ = ["main", "COMMANDS"]
+
+#: subcommand -> (module under translucent.reports.commands, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "doctor": ("doctor", "versions, Mitsuba variant, libLLVM, GPU and cache folder"),
+    "scenes": ("scenes", "list the built-in scenes"),
+    "render": ("render", "render a reference image of a scene with Mitsuba"),
+    "compare": ("compare", "compare a test image with a reference: metrics and error maps"),
+    "approx": ("approx", "render a scene with a fast method"),
+    "report": ("report", "the main job: fast methods against references, as an HTML report"),
+    "bench": ("bench", "run-time-versus-error benchmarks"),
+    "stress": ("stress", "numerical stability sweeps of every kernel"),
+    "fit": ("fit", "fit dipole / SubEdit profiles to a captured slab image"),
+    "capture": ("capture", "make a synthetic slab capture"),
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse exits 2 on usage errors, as we want
+        self.print_usage(sys.stderr)
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="translucent", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--version", action="version",
+                        version=f"translucent {importlib.import_module('translucent').__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name, (module_name, help_text) in COMMANDS.items():
+        try:
+            module = importlib.import_module(f"translucent.reports.commands.{module_name}")
+        except ModuleNotFoundError as error:
+            if error.name == f"translucent.reports.commands.{module_name}":
+                continue  # a command not built yet is simply absent
+            raise
+        command = sub.add_parser(name, help=help_text, description=module.__doc__)
+        module.add_arguments(command)
+        command.set_defaults(run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; return the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    argv = shlex.split(os.environ.get("TRANSLUCENT_OPTIONS", "")) + argv
+    parser = _build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:
+        return int(exit_.code or 0)
+    if not getattr(args, "run", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.run(args) or 0)
+    except InputError as error:
+        print(f"translucent {args.command}: error: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""One module per ``translucent`` subcommand: ``add_arguments(parser)`` and ``run(args)``."""
