@@ -1,0 +1,73 @@
+"""What every fast method offers, so that the command line and the report treat them alike.
+
+A fast method is a module of :mod:`translucent.fast` with three module-level functions:
+
+``applies_to(scene) -> str | None``
+    None when the method can render the scene; otherwise the reason it cannot (shown in
+    the report as "skipped: ...").
+``precompute(scene, **knobs) -> PrecomputedState``
+    The slow step: cached on disk by a hash of what it depends on (geometry, knobs), never
+    by lights or materials when those are edited interactively.
+``DEFAULT_KNOBS: dict``
+    The knobs and their defaults (quality settings the benchmarks sweep).
+
+and a state whose ``render(lights=None, material=None) -> Image`` is the interactive
+path: relighting (new lights) and editing (new material) without precomputing again.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from ..errors import InputError
+from ..image import Image
+
+__all__ = ["METHODS", "PrecomputedState", "method", "StageLog"]
+
+#: method name -> module under translucent.fast
+METHODS: dict[str, str] = {
+    "prt": "translucent.fast.prt",
+    "radiosity": "translucent.fast.radiosity",
+    "splatting": "translucent.fast.splatting",
+    "brdf_pca": "translucent.fast.brdf_pca",
+}
+
+
+class PrecomputedState(Protocol):
+    """The result of ``precompute``: renders interactively."""
+
+    def render(self, lights=None, material=None) -> Image:
+        """Render with new lights and/or material (None keeps the scene's)."""
+
+
+@dataclass
+class StageLog:
+    """What a run did, skipped and how long each stage took, for the report.
+
+    ``skipped`` holds sentences ("no form factors: a single convex object sees nothing
+    else"); ``seconds`` maps a stage name to wall-clock seconds.
+    """
+
+    skipped: list[str] = field(default_factory=list)
+    seconds: dict[str, float] = field(default_factory=dict)
+    notes: dict[str, Any] = field(default_factory=dict)
+
+    def skip(self, sentence: str) -> None:
+        """Record that a step was skipped and why."""
+        self.skipped.append(sentence)
+
+
+def method(name: str):
+    """The module of the fast method called ``name``; an unknown name lists the valid ones."""
+    if name not in METHODS:
+        raise InputError(f"unknown fast method; valid: {', '.join(METHODS)}", field="method",
+                         value=name)
+    try:
+        return importlib.import_module(METHODS[name])
+    except ModuleNotFoundError as error:
+        if error.name == METHODS[name]:
+            raise InputError("this fast method is not built yet", field="method",
+                             value=name) from error
+        raise
