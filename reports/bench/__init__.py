@@ -1,0 +1,1 @@
+"""Benchmarks, one module each (``translucent bench <module>``)."""

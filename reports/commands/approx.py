@@ -1,0 +1,48 @@
+"""Render a scene with a fast method and write the EXR: ``translucent approx METHOD SCENE [...]``.
+
+Each method adds its own options (``--material``, ``--gamma``, ...) through
+``add_approx_arguments(parser)`` in its module, and turns them into a rendered image with
+``approx(scene, args) -> Image``.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from ...fast.base import METHODS
+
+
+def add_arguments(parser):
+    """One sub-command per fast method that is built."""
+    sub = parser.add_subparsers(dest="method", metavar="METHOD", parser_class=type(parser))
+    sub.required = True
+    for name, module_name in METHODS.items():
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as error:
+            if error.name == module_name:
+                continue
+            raise
+        if not hasattr(module, "approx"):
+            continue
+        command = sub.add_parser(name, help=(module.__doc__ or "").strip().split("\n")[0])
+        command.add_argument("scene", help="built-in scene name or path to a scene TOML file")
+        command.add_argument("--out", "-o", default=None,
+                             help="output EXR (default: <scene>_<method>.exr)")
+        if hasattr(module, "add_approx_arguments"):
+            module.add_approx_arguments(command)
+        command.set_defaults(approx_module=module)
+
+
+def run(args) -> int:
+    """Load the scene, render it with the method, write the EXR atomically."""
+    from ...scenes import load_scene
+
+    scene = load_scene(args.scene)
+    image = args.approx_module.approx(scene, args)
+    out = args.out or f"{scene.name}_{args.method}.exr"
+    image.write(out)
+    seconds = image.metadata.get("seconds")
+    timing = f" in {seconds:.3g} s" if isinstance(seconds, (int, float)) else ""
+    print(f"wrote {out} ({image.shape[1]} x {image.shape[0]}){timing}")
+    return 0
