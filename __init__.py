@@ -1,4 +1,4 @@
-"""translucent: how wrong and how fast are subsurface-scattering and BRDF-editing approximations.
+r"""translucent: how wrong and how fast are subsurface-scattering and BRDF-editing approximations.
 
 The suite is organised one folder a concept, data flowing left to right::
 

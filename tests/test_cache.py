@@ -1,0 +1,32 @@
+import numpy as np
+
+from translucent.cache import Cache, cache_dir, content_hash
+from translucent.materials import Dipole, measured_medium
+
+
+def test_hash_is_order_independent_and_content_sensitive():
+    assert content_hash({"a": 1, "b": 2}) == content_hash({"b": 2, "a": 1})
+    assert content_hash(np.arange(4.0)) != content_hash(np.arange(4.0) + 1e-12)
+    assert content_hash(np.arange(4.0)) != content_hash(np.arange(4.0).astype(np.float32))
+
+
+def test_objects_hash_by_their_cache_key():
+    assert content_hash(measured_medium("marble")) == content_hash(
+        Dipole(sigma_a=[0.0021, 0.0041, 0.0071], sigma_s_prime=[2.19, 2.62, 3.00], eta=1.5))
+    assert content_hash(measured_medium("marble")) != content_hash(measured_medium("apple"))
+
+
+def test_cache_dir_follows_environment(tmp_path, monkeypatch):
+    monkeypatch.setenv("TRANSLUCENT_CACHE", str(tmp_path / "c"))
+    assert cache_dir() == tmp_path / "c"
+
+
+def test_pickle_round_trip_and_miss(tmp_path):
+    cache = Cache("unit", root=tmp_path)
+    key = content_hash("x")
+    assert cache.load_pickle(key) is None
+    cache.store_pickle(key, {"a": np.arange(3)})
+    assert np.array_equal(cache.load_pickle(key)["a"], np.arange(3))
+    # a corrupt entry is a miss, not a crash
+    cache.path(key, ".pkl").write_bytes(b"garbage")
+    assert cache.load_pickle(key) is None

@@ -1,0 +1,72 @@
+import numpy as np
+import pytest
+
+from translucent.errors import InputError
+from translucent.image import Image, read_exr, write_exr
+
+
+def test_round_trip_is_lossless(tmp_path, rng):
+    image = Image(rng.random((5, 7, 3)), rng.random((5, 7, 3)) * 1e-3,
+                  {"producer": "test", "spp": 16, "knobs": {"terms": 12}, "seconds": 0.5})
+    path = image.write(tmp_path / "a.exr")
+    back = read_exr(path)
+    assert np.array_equal(back.rgb, image.rgb)
+    assert np.array_equal(back.variance, image.variance)
+    assert back.metadata == image.metadata
+
+
+def test_without_variance(tmp_path, rng):
+    path = Image(rng.random((2, 3, 3))).write(tmp_path / "b.exr")
+    assert read_exr(path).variance is None
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        read_exr(tmp_path / "nothing.exr")
+
+
+def test_corrupt_file(tmp_path):
+    path = tmp_path / "corrupt.exr"
+    path.write_bytes(b"not an exr at all")
+    with pytest.raises(InputError, match="corrupt.exr: not a readable OpenEXR"):
+        read_exr(path)
+
+
+def test_no_rgb_channels(tmp_path):
+    import OpenEXR
+
+    path = tmp_path / "depth.exr"
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"Z": np.zeros((4, 4), np.float32)}) as exr:
+        exr.write(str(path))
+    with pytest.raises(InputError, match=r"depth.exr: channels = \['Z'\]: an RGB image needs"):
+        read_exr(path)
+
+
+def test_nan_pixels_rejected_on_read(tmp_path):
+    rgb = np.ones((4, 4, 3), np.float32)
+    rgb[2, 1, 0] = np.nan
+    path = Image(rgb).write(tmp_path / "nan.exr")
+    with pytest.raises(InputError, match="1 pixel channels are NaN or Inf .first at x=1, y=2"):
+        read_exr(path)
+
+
+def test_shape_checked():
+    with pytest.raises(InputError, match="H x W x 3"):
+        Image(np.zeros((4, 4)))
+    with pytest.raises(InputError, match="variance"):
+        Image(np.zeros((4, 4, 3)), np.zeros((4, 3, 3)))
+
+
+def test_failed_write_leaves_nothing(tmp_path, monkeypatch):
+    import OpenEXR
+
+    def broken_write(self, path):
+        with open(path, "wb") as handle:
+            handle.write(b"half")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(OpenEXR.File, "write", broken_write)
+    with pytest.raises(OSError):
+        write_exr(tmp_path / "out.exr", Image(np.zeros((2, 2, 3))))
+    assert list(tmp_path.iterdir()) == []
