@@ -1,0 +1,104 @@
+"""Compare a test image with a reference: ``translucent compare REF.exr TEST.exr [...]``.
+
+Prints every metric (relative MSE with the reference's noise discounted, RMSE, PSNR, SSIM,
+HDR-FLIP, LDR-FLIP, CIEDE2000) and writes the FLIP, relative-error, CIEDE2000 and SSIM
+error maps (EXR and PNG) next to the test image, or into ``--maps DIR``. With a threshold
+(``--metric flip --max 0.05``, or ``--min`` for psnr and ssim) it exits 0 when the
+metric is within it and 1 when not; 2 on bad input (a missing or corrupt EXR, no R, G, B
+channels, NaN/Inf pixels, images of different sizes), leaving no output behind.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from ...errors import InputError
+
+#: The metric a bare ``--max`` applies to.
+DEFAULT_METRIC = "hdr-flip"
+
+
+def add_arguments(parser):
+    """Add the reference, the test, the metric and its threshold, where the maps go."""
+    from ..metrics import METRICS
+
+    parser.add_argument("reference", help="reference OpenEXR (its variance channels, where "
+                        "present, are discounted from the relative MSE)")
+    parser.add_argument("test", help="test OpenEXR")
+    parser.add_argument("--metric", default=None, type=str.lower, choices=list(METRICS),
+                        help=f"the metric a threshold applies to (default {DEFAULT_METRIC})")
+    bound = parser.add_mutually_exclusive_group()
+    bound.add_argument("--max", type=float, default=None, dest="maximum",
+                       help="fail (exit 1) when the metric is above this (error metrics)")
+    bound.add_argument("--min", type=float, default=None, dest="minimum",
+                       help="fail (exit 1) when the metric is below this (psnr, ssim)")
+    parser.add_argument("--maps", default=None, metavar="DIR",
+                        help="folder for the error maps (default: beside the test image)")
+    parser.add_argument("--no-maps", action="store_true", help="write no error maps")
+
+
+def _threshold(args):
+    """Return the chosen metric and bound, checked against the metric's direction."""
+    from ..metrics import metric
+
+    threshold = args.maximum if args.maximum is not None else args.minimum
+    definition = metric(args.metric or DEFAULT_METRIC)
+    if threshold is None:
+        return definition, None
+    if not math.isfinite(threshold):
+        raise InputError("must be a finite number", field="--max/--min", value=threshold)
+    if definition.lower_is_better and args.minimum is not None:
+        raise InputError(f"{definition.name} is an error (lower is better): give --max",
+                         field="--min", value=args.minimum)
+    if not definition.lower_is_better and args.maximum is not None:
+        raise InputError(f"{definition.name} is a similarity (higher is better): give --min",
+                         field="--max", value=args.maximum)
+    return definition, threshold
+
+
+def _table(metrics, definition, threshold) -> list[str]:
+    from ..metrics import METRICS
+
+    values = metrics.as_dict()
+    rows = []
+    for name, entry in METRICS.items():
+        if name == "flip":
+            continue  # the same number as hdr-flip
+        value = values[entry.field]
+        mark = ""
+        if threshold is not None and entry.field == definition.field:
+            verdict = "ok" if definition.within(value, threshold) else "FAIL"
+            mark = f"  {'<=' if entry.lower_is_better else '>='} {threshold:g}  {verdict}"
+        rows.append(f"{name:<10} {value:>12.6g}  {entry.description}{mark}")
+    return rows
+
+
+def run(args) -> int:
+    """Read both images, compute the metrics, write the maps, print the table."""
+    from ...image import read_exr
+    from ..error_maps import write_error_maps
+    from ..metrics import evaluate
+
+    definition, threshold = _threshold(args)
+    reference = read_exr(args.reference)
+    test = read_exr(args.test)
+    comparison = evaluate(reference, test)
+    metrics = comparison.metrics
+    test_path = Path(args.test)
+    files = {}
+    if not args.no_maps:
+        folder = Path(args.maps) if args.maps else test_path.parent
+        files = write_error_maps(reference, test, folder, prefix=f"{test_path.stem}_",
+                                 comparison=comparison)
+    noise = ("reference variance discounted" if metrics.noise_discounted
+             else "reference has no variance: nothing discounted")
+    print(f"{args.test} against {args.reference} ({test.shape[1]} x {test.shape[0]}; "
+          f"{noise}; display white {metrics.display_white:.4g})")
+    for row in _table(metrics, definition, threshold):
+        print(row)
+    if files:
+        print(f"error maps: {', '.join(str(f.png) for f in files.values())} (and .exr)")
+    if threshold is None:
+        return 0
+    return 0 if definition.within(getattr(metrics, definition.field), threshold) else 1

@@ -1,0 +1,328 @@
+"""pytest plugin: image-metric checks for any project's test suite.
+
+Installed with ``translucent`` and registered through the ``pytest11`` entry point, so a
+project's tests need no conftest. It offers:
+
+``assert_image_close(test, reference, metric="hdr-flip", max=...)``
+    Fails when a metric of :mod:`translucent.reports.metrics` is beyond its bound
+    (``max`` for errors, ``min`` for psnr and ssim) and writes the error maps
+    (:func:`~translucent.reports.error_maps.write_error_maps`) into a folder the
+    message names.
+``assert_render_consistent(test, reference_mean, reference_variance, spp=...)``
+    Mitsuba 3's per-pixel z-test with Šidák correction
+    (:func:`~translucent.reports.statistics.z_test`); on failure writes the p-value
+    image, the rejected pixels, both images and their difference.
+
+Both are importable functions (``from translucent.reports.pytest_plugin import
+assert_image_close``) and methods of the ``image_checks`` fixture, which files each
+test's artifacts under its own folder. Images may be :class:`~translucent.image.Image`,
+``H x W x 3`` arrays or paths to OpenEXR files.
+
+``reference_image(path, producer)`` (fixture) returns the reference stored at ``path``
+(relative paths are taken from the test file's folder), calling ``producer()`` and
+writing its result there when the file is missing or ``--translucent-regenerate`` is
+given; the run's summary lists what was regenerated.
+
+Options: ``--translucent-artifacts DIR`` (default ``translucent-artifacts`` under
+pytest's base temporary folder) and ``--translucent-regenerate``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+__all__ = ["assert_image_close", "assert_render_consistent", "ImageChecks",
+           "artifacts_root"]
+
+#: The configs of the pytest runs in progress, innermost last (pytester nests runs).
+_CONFIGS: list = []
+
+#: Paths regenerated in this run, per config, for the terminal summary.
+_REGENERATED = pytest.StashKey[list]()
+
+
+def pytest_addoption(parser):
+    """Register ``--translucent-artifacts`` and ``--translucent-regenerate``."""
+    group = parser.getgroup("translucent", "image-metric checks (translucent)")
+    group.addoption("--translucent-artifacts", default=None, metavar="DIR",
+                    help="folder for the error maps of failed image checks (default: "
+                         "translucent-artifacts under pytest's base temporary folder)")
+    group.addoption("--translucent-regenerate", action="store_true", default=False,
+                    help="rewrite every reference image requested through the "
+                         "reference_image fixture by calling its producer")
+
+
+def pytest_configure(config):
+    """Remember the run so that the module-level assertions find its artifacts folder."""
+    config.stash[_REGENERATED] = []
+    _CONFIGS.append(config)
+
+
+def pytest_unconfigure(config):
+    """Forget the run."""
+    if config in _CONFIGS:
+        _CONFIGS.remove(config)
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    """List the reference images regenerated in this run."""
+    regenerated = config.stash.get(_REGENERATED, [])
+    if regenerated:
+        terminalreporter.section("translucent: references regenerated")
+        for path in regenerated:
+            terminalreporter.write_line(str(path))
+
+
+def artifacts_root(config=None) -> Path:
+    """Return the folder under which failed image checks leave their artifacts.
+
+    Parameters
+    ----------
+    config : pytest.Config, optional
+        The run; default the innermost run in progress.
+
+    Returns
+    -------
+    Path
+        ``--translucent-artifacts`` when given; otherwise ``translucent-artifacts`` under
+        pytest's base temporary folder, or under the system temporary folder outside
+        pytest.
+    """
+    config = config if config is not None else (_CONFIGS[-1] if _CONFIGS else None)
+    if config is not None:
+        chosen = config.getoption("translucent_artifacts", default=None)
+        if chosen:
+            return Path(chosen).resolve()
+        factory = getattr(config, "_tmp_path_factory", None)
+        if factory is not None:
+            return factory.getbasetemp() / "translucent-artifacts"
+    return Path(tempfile.gettempdir()) / "translucent-artifacts"
+
+
+def _folder_name(text: str) -> str:
+    """Return ``text`` as a safe folder name (node ids hold ``/``, ``::`` and brackets)."""
+    return re.sub(r"[^\w.-]+", "_", text).strip("_")[-150:] or "_"
+
+
+def _current_test() -> str:
+    """Return the running test's node id as a folder name (``outside-pytest`` outside)."""
+    return _folder_name(os.environ.get("PYTEST_CURRENT_TEST", "outside-pytest")
+                        .rsplit(" (", 1)[0])
+
+
+def _new_folder(parent: Path, label: str) -> Path:
+    """Return a folder ``parent/label`` not used before (``label-2``, ... after it)."""
+    label = _folder_name(label)
+    candidate, count = parent / label, 1
+    while candidate.exists():
+        count += 1
+        candidate = parent / f"{label}-{count}"
+    return candidate
+
+
+def _as_image(value, role: str):
+    from ..image import Image, read_exr
+
+    if isinstance(value, Image):
+        return value
+    if isinstance(value, (str, os.PathLike)):
+        return read_exr(value)
+    if isinstance(value, (np.ndarray, list, tuple)):
+        return Image(np.asarray(value, dtype=np.float32))
+    raise TypeError(f"{role} must be a translucent Image, an H x W x 3 array or an OpenEXR "
+                    f"path; got {type(value).__name__}")
+
+
+def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | None = None,
+                       min: float | None = None, *, artifacts=None,
+                       name: str | None = None) -> float:
+    """Assert that ``test`` is within a metric's bound of ``reference``.
+
+    Parameters
+    ----------
+    test, reference : Image, array_like (H, W, 3) or path
+        The image judged and the reference (linear radiance; a reference's variance is
+        discounted from relmse).
+    metric : str
+        A name of :data:`translucent.reports.metrics.METRICS`: flip, hdr-flip, ldr-flip,
+        relmse, rmse, psnr, ssim, ciede2000.
+    max : float, optional
+        Upper bound, for the error metrics.
+    min : float, optional
+        Lower bound, for psnr and ssim.
+    artifacts : str or PathLike, optional
+        Folder under which a failure's error maps go; default
+        ``artifacts_root()/<test id>``.
+    name : str, optional
+        Name of the failure's sub-folder (default the metric's name).
+
+    Returns
+    -------
+    float
+        The metric's value (so a test can log it).
+
+    Raises
+    ------
+    AssertionError
+        When the value is beyond the bound (or NaN); the message gives the value, the
+        bound and the folder holding the error maps.
+    InputError
+        Bad images (different sizes, NaN pixels, an unreadable file) or an unknown
+        metric.
+    TypeError
+        A missing bound, or a bound on the wrong side for the metric.
+    """
+    __tracebackhide__ = True
+    from ..metrics import evaluate
+    from ..metrics import metric as metric_definition
+
+    definition = metric_definition(metric)
+    bound_name, bound = ("max", max) if definition.lower_is_better else ("min", min)
+    other = min if definition.lower_is_better else max
+    if bound is None or other is not None:
+        kind = "an error" if definition.lower_is_better else "a similarity"
+        raise TypeError(f"assert_image_close(metric={definition.name!r}) needs {bound_name}= "
+                        f"and only that bound ({definition.name} is {kind})")
+    test_image, reference_image = _as_image(test, "test"), _as_image(reference, "reference")
+    comparison = evaluate(reference_image, test_image)
+    value = getattr(comparison.metrics, definition.field)
+    if definition.within(value, bound):
+        return value
+    from ..error_maps import write_error_maps
+
+    parent = Path(artifacts) if artifacts is not None else artifacts_root() / _current_test()
+    folder = _new_folder(parent, name or definition.name)
+    write_error_maps(reference_image, test_image, folder, comparison=comparison)
+    relation = "above the maximum" if definition.lower_is_better else "below the minimum"
+    raise AssertionError(f"{definition.name} = {value:.6g}, {relation} {bound:g} "
+                         f"({test_image.shape[1]} x {test_image.shape[0]} pixels); "
+                         f"error maps in {folder}")
+
+
+def assert_render_consistent(test, reference_mean, reference_variance, spp: int | None = None,
+                             *, significance: float | None = None,
+                             required_fraction: float | None = None, artifacts=None,
+                             name: str | None = None):
+    """Assert that a Monte Carlo render is consistent with a reference mean and variance.
+
+    Mitsuba 3's per-pixel z-test with Šidák correction
+    (:func:`translucent.reports.statistics.z_test`).
+
+    Parameters
+    ----------
+    test : Image, array_like (H, W, 3) or path
+        The render judged: a mean of ``spp`` samples per pixel.
+    reference_mean : Image, array_like or path
+        The converged reference.
+    reference_variance : Image, array_like or path
+        The reference's per-sample variance (radiance squared), not the variance of its
+        mean.
+    spp : int, optional
+        Samples per pixel of ``test``; default ``test.metadata["spp"]``.
+    significance, required_fraction : float, optional
+        Override the z-test's 0.01 and 0.9975.
+    artifacts : str or PathLike, optional
+        Folder under which a failure's images go; default ``artifacts_root()/<test id>``.
+    name : str, optional
+        Name of the failure's sub-folder (default ``z-test``).
+
+    Returns
+    -------
+    ZTestResult
+        The test's outcome (when it passed).
+
+    Raises
+    ------
+    AssertionError
+        When fewer pixel channels than required are accepted; the message gives the
+        fraction, alpha and the folder holding the p-value image.
+    """
+    __tracebackhide__ = True
+    from ..statistics import z_test
+
+    test_image = _as_image(test, "test")
+    if spp is None:
+        spp = test_image.metadata.get("spp")
+        if spp is None:
+            raise TypeError("assert_render_consistent needs spp= (the test image's "
+                            "metadata has no 'spp')")
+    reference_image = _as_image(reference_mean, "reference_mean")
+    variance_image = _as_image(reference_variance, "reference_variance")
+    options = {key: value for key, value in (("significance", significance),
+                                             ("required_fraction", required_fraction))
+               if value is not None}
+    result = z_test(test_image.rgb, reference_image.rgb, variance_image.rgb, spp, **options)
+    if result.passed:
+        return result
+    from ..error_maps import write_z_test_maps
+
+    parent = Path(artifacts) if artifacts is not None else artifacts_root() / _current_test()
+    folder = _new_folder(parent, name or "z-test")
+    write_z_test_maps(result, folder, test=test_image, reference=reference_image)
+    raise AssertionError(f"{result.summary()}; p-value image and maps in {folder}")
+
+
+class ImageChecks:
+    """The assertions, filing a test's artifacts under its own folder (fixture ``image_checks``).
+
+    Parameters
+    ----------
+    artifacts : Path
+        This test's folder (created only when a check fails).
+    """
+
+    def __init__(self, artifacts: Path):
+        self.artifacts = Path(artifacts)
+
+    def assert_image_close(self, test, reference, metric: str = "hdr-flip",
+                           max: float | None = None, min: float | None = None, *,
+                           name: str | None = None) -> float:
+        """Run :func:`assert_image_close` with this test's artifacts folder."""
+        __tracebackhide__ = True
+        return assert_image_close(test, reference, metric, max, min, artifacts=self.artifacts,
+                                  name=name)
+
+    def assert_render_consistent(self, test, reference_mean, reference_variance,
+                                 spp: int | None = None, *, name: str | None = None, **options):
+        """Run :func:`assert_render_consistent` with this test's artifacts folder."""
+        __tracebackhide__ = True
+        return assert_render_consistent(test, reference_mean, reference_variance, spp,
+                                        artifacts=self.artifacts, name=name, **options)
+
+
+@pytest.fixture
+def image_checks(request) -> ImageChecks:
+    """Image assertions whose failures leave their maps under this test's folder."""
+    return ImageChecks(artifacts_root(request.config) / _folder_name(request.node.nodeid))
+
+
+@pytest.fixture
+def reference_image(request):
+    """Return ``get(path, producer) -> Image``: the stored reference, regenerated when asked.
+
+    ``producer()`` returns an Image or an ``H x W x 3`` array; it is called, and its result
+    written to ``path`` atomically, when the file is missing or ``--translucent-regenerate``
+    is given. Relative paths are taken from the test file's folder.
+    """
+    from ..image import read_exr
+
+    regenerate = request.config.getoption("translucent_regenerate", default=False)
+    base = Path(request.node.path).parent
+
+    def get(path, producer):
+        path = Path(path)
+        path = path if path.is_absolute() else base / path
+        if regenerate or not path.exists():
+            image = _as_image(producer(), "producer()")
+            image.write(path)
+            request.config.stash[_REGENERATED].append(path)
+            return image
+        return read_exr(path)
+
+    return get

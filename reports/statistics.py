@@ -1,0 +1,275 @@
+r"""Statistical comparison of noisy renders: the per-pixel z-test Mitsuba 3 runs on its own.
+
+A Monte Carlo render is a random image; whether it agrees with a reference is a
+hypothesis test, not a threshold. Each pixel channel gets a z statistic and a two-sided
+p-value; the significance is Šidák-corrected for the number of pixels, and the image
+passes when at least 99.75 % of its pixel channels are accepted. Mitsuba 3's render
+tests (``src/render/tests/test_render.py``) use exactly this rule:
+
+.. math::
+
+    z = |\bar{x} - \mu_\mathrm{ref}| \sqrt{n / \max(\sigma^2_\mathrm{ref}, 10^{-4})},
+    \qquad p = 2 (1 - \Phi(z)),
+    \qquad \alpha = 1 - (1 - 0.01)^{1 / N_\mathrm{pixels}}
+
+where :math:`\bar{x}` is the test image (a mean of n samples per pixel),
+:math:`\mu_\mathrm{ref}` and :math:`\sigma^2_\mathrm{ref}` the reference's mean and
+*per-sample* variance (so :math:`\sigma^2_\mathrm{ref} / n` is the variance of the test's
+mean). :func:`z_test` is that test; :func:`z_test_known_variance` compares two noisy
+renders whose variances of the mean are both known (``Image.variance``).
+
+References
+----------
+- W. Jakob, S. Speierer, N. Roussel, D. Vicini et al.: Mitsuba 3 renderer, 2022,
+  ``src/render/tests/test_render.py`` (the z-test and its thresholds).
+- Z. Šidák: Rectangular confidence regions for the means of multivariate normal
+  distributions. JASA 62(318), 1967.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..image import Image
+
+__all__ = ["ZTestResult", "z_test", "z_test_known_variance", "sidak_alpha"]
+
+#: Family-wise significance of the whole image (Mitsuba 3's render tests).
+SIGNIFICANCE = 0.01
+
+#: Fraction of pixel channels that must be accepted for the image to pass (Mitsuba 3).
+REQUIRED_FRACTION = 0.9975
+
+#: Floor of the reference's per-sample variance (Mitsuba 3): a pixel the reference saw as
+#: noiseless (black background, a directly seen light) does not turn a rounding
+#: difference into an infinite z.
+VARIANCE_FLOOR = 1e-4
+
+#: Floor of the summed variances of two means in :func:`z_test_known_variance` (radiance
+#: squared): a standard error of 1e-5, far below any render noise in the suite and above
+#: float32 rounding of radiance up to about 100 (1.2e-7 relative).
+MEAN_VARIANCE_FLOOR = 1e-10
+
+
+def sidak_alpha(pixels: int, significance: float = SIGNIFICANCE) -> float:
+    r"""Return the per-pixel significance giving a family-wise rate ``significance``.
+
+    Šidák 1967: :math:`\alpha = 1 - (1 - \alpha_\mathrm{family})^{1/N}`, computed as
+    ``-expm1(log1p(-significance) / pixels)`` so that it stays accurate for millions of
+    pixels.
+
+    Parameters
+    ----------
+    pixels : int
+        Number of independent tests N (pixels of the image); >= 1.
+    significance : float
+        Family-wise significance in (0, 1).
+
+    Returns
+    -------
+    float
+        Per-pixel significance, about ``significance / pixels``.
+    """
+    if not (isinstance(pixels, (int, np.integer)) and pixels >= 1):
+        raise InputError("must be an integer >= 1", field="pixels", value=pixels)
+    if not (0 < significance < 1):
+        raise InputError("must be in (0, 1)", field="significance", value=significance)
+    return float(-np.expm1(np.log1p(-significance) / int(pixels)))
+
+
+@dataclass(frozen=True)
+class ZTestResult:
+    """The outcome of a per-pixel z-test over an image.
+
+    Parameters
+    ----------
+    p_values : ndarray, shape (H, W, C)
+        Two-sided p-value of each pixel channel (NaN where an input was NaN).
+    z : ndarray, shape (H, W, C)
+        The z statistic of each pixel channel.
+    alpha : float
+        Šidák-corrected per-pixel significance.
+    fraction_accepted : float
+        Fraction of pixel channels with ``p > alpha`` (NaN counts as rejected).
+    required_fraction : float
+        The fraction needed to pass.
+    significance : float
+        The family-wise significance ``alpha`` was derived from.
+    """
+
+    p_values: np.ndarray
+    z: np.ndarray
+    alpha: float
+    fraction_accepted: float
+    required_fraction: float
+    significance: float
+
+    @property
+    def passed(self) -> bool:
+        """Whether enough pixel channels were accepted."""
+        return bool(self.fraction_accepted >= self.required_fraction)
+
+    @property
+    def accepted(self) -> np.ndarray:
+        """Return the boolean mask of accepted pixel channels (``p > alpha``)."""
+        return self.p_values > self.alpha
+
+    def __bool__(self) -> bool:
+        return self.passed
+
+    def summary(self) -> str:
+        """Return one line: pass or fail, the fraction accepted, alpha and the smallest p."""
+        verdict = "passed" if self.passed else "FAILED"
+        smallest = float(np.nanmin(self.p_values)) if np.isfinite(self.p_values).any() \
+            else math.nan
+        return (f"z-test {verdict}: {100 * self.fraction_accepted:.3f} % of "
+                f"{self.p_values.size} pixel channels accepted (need "
+                f"{100 * self.required_fraction:.2f} %), Sidak alpha = {self.alpha:.3g}, "
+                f"min p = {smallest:.3g}")
+
+
+def _array(value, name: str) -> np.ndarray:
+    if isinstance(value, Image):
+        value = value.rgb
+    array = np.asarray(value, dtype=np.float64)
+    if array.ndim == 2:
+        array = array[..., None]
+    if array.ndim != 3:
+        raise InputError("must be an H x W or H x W x C image", field=name, value=array.shape)
+    return array
+
+
+def _same_shape(arrays: dict[str, np.ndarray]) -> None:
+    shapes = {name: array.shape for name, array in arrays.items()}
+    if len(set(shapes.values())) > 1:
+        listed = ", ".join(f"{name} {shape}" for name, shape in shapes.items())
+        raise InputError(f"images must have the same shape; got {listed}", field="shape",
+                         value=tuple(shapes.values()))
+
+
+def _check_variance(variance: np.ndarray, name: str) -> None:
+    if np.isnan(variance).any() or (variance < 0).any():
+        raise InputError("must be >= 0 and not NaN", field=name,
+                         value=float(np.nanmin(variance)) if not np.isnan(variance).all()
+                         else math.nan)
+
+
+def _result(z: np.ndarray, significance: float, required_fraction: float) -> ZTestResult:
+    from scipy.stats import norm
+
+    if not (0 < required_fraction <= 1):
+        raise InputError("must be in (0, 1]", field="required_fraction",
+                         value=required_fraction)
+    # the survival function keeps tiny p-values that 1 - cdf rounds to zero
+    p_values = 2.0 * norm.sf(z)
+    alpha = sidak_alpha(z.shape[0] * z.shape[1], significance)
+    fraction = float(np.count_nonzero(p_values > alpha) / p_values.size)
+    return ZTestResult(p_values, z, alpha, fraction, required_fraction, significance)
+
+
+def z_test(test_mean, reference_mean, reference_variance, spp: int, *,
+           significance: float = SIGNIFICANCE, required_fraction: float = REQUIRED_FRACTION,
+           variance_floor: float = VARIANCE_FLOOR) -> ZTestResult:
+    r"""Run Mitsuba 3's per-pixel z-test of a render against a reference mean and variance.
+
+    :math:`z = |\bar{x} - \mu| \sqrt{n / \max(\sigma^2, 10^{-4})}`,
+    :math:`p = 2(1 - \Phi(z))`, Šidák-corrected :math:`\alpha` over the H x W pixels,
+    passing when at least ``required_fraction`` of the pixel channels have
+    :math:`p > \alpha` (module docstring).
+
+    Parameters
+    ----------
+    test_mean : Image or array_like, shape (H, W, C) or (H, W)
+        The render judged: a mean of ``spp`` samples per pixel (linear radiance).
+    reference_mean : Image or array_like, same shape
+        The converged reference mean (radiance).
+    reference_variance : Image or array_like, same shape
+        The reference's variance of a *single sample* per pixel channel (radiance
+        squared), e.g. ``spp_ref * Image.variance`` of a reference of ``spp_ref``
+        samples. Not the variance of the reference's mean.
+    spp : int
+        Samples per pixel of ``test_mean``; >= 1.
+    significance : float
+        Family-wise significance (0.01).
+    required_fraction : float
+        Fraction of pixel channels that must be accepted (0.9975).
+    variance_floor : float
+        Lower clamp of ``reference_variance`` (1e-4, radiance squared).
+
+    Returns
+    -------
+    ZTestResult
+        p-values, z, alpha, the fraction accepted and ``passed``.
+
+    Raises
+    ------
+    InputError
+        Different shapes (all listed), a negative or NaN variance, ``spp`` < 1.
+    """
+    if not (isinstance(spp, (int, np.integer)) and spp >= 1):
+        raise InputError("must be an integer >= 1 (samples per pixel of the test image)",
+                         field="spp", value=spp)
+    arrays = {"test_mean": _array(test_mean, "test_mean"),
+              "reference_mean": _array(reference_mean, "reference_mean"),
+              "reference_variance": _array(reference_variance, "reference_variance")}
+    _same_shape(arrays)
+    _check_variance(arrays["reference_variance"], "reference_variance")
+    variance = np.maximum(arrays["reference_variance"], variance_floor)
+    z = np.abs(arrays["test_mean"] - arrays["reference_mean"]) * np.sqrt(spp / variance)
+    return _result(z, significance, required_fraction)
+
+
+def z_test_known_variance(first: Image, second: Image, *, significance: float = SIGNIFICANCE,
+                          required_fraction: float = REQUIRED_FRACTION,
+                          variance_floor: float = MEAN_VARIANCE_FLOOR) -> ZTestResult:
+    r"""Test whether two independent noisy renders estimate the same image.
+
+    With each pixel mean's own variance known (``Image.variance``, the squared standard
+    error of independent passes), the difference of two independent means has variance
+    :math:`\sigma_1^2 + \sigma_2^2`:
+    :math:`z = |\bar{x}_1 - \bar{x}_2| / \sqrt{\max(\sigma_1^2 + \sigma_2^2, \epsilon)}`;
+    p-values, Šidák correction and the pass rule as in :func:`z_test`. Use it where
+    neither image is converged (two reference renders, a reference against a
+    stochastic fast method).
+
+    Parameters
+    ----------
+    first, second : Image
+        Independent renders, each with ``variance`` (radiance squared).
+    significance, required_fraction : float
+        As in :func:`z_test`.
+    variance_floor : float
+        Lower clamp :math:`\epsilon` of the summed variance (radiance squared),
+        ``MEAN_VARIANCE_FLOOR``.
+
+    Returns
+    -------
+    ZTestResult
+        As :func:`z_test`.
+
+    Raises
+    ------
+    InputError
+        An image without variance, different shapes, a negative or NaN variance.
+    """
+    arrays = {}
+    for image, name in ((first, "first"), (second, "second")):
+        if not isinstance(image, Image):
+            raise TypeError(f"{name} must be a translucent.image.Image, "
+                            f"not {type(image).__name__}")
+        if image.variance is None:
+            raise InputError("needs its per-pixel variance of the mean (Image.variance); "
+                             "render several independent passes", field=f"{name}.variance",
+                             value=None)
+        arrays[name] = _array(image.rgb, name)
+        arrays[f"{name}.variance"] = _array(image.variance, f"{name}.variance")
+        _check_variance(arrays[f"{name}.variance"], f"{name}.variance")
+    _same_shape(arrays)
+    variance = np.maximum(arrays["first.variance"] + arrays["second.variance"],
+                          variance_floor)
+    z = np.abs(arrays["first"] - arrays["second"]) / np.sqrt(variance)
+    return _result(z, significance, required_fraction)
