@@ -1,5 +1,19 @@
 """Where things are: meshes, lights, cameras, scene files and Mitsuba ray queries."""
 
+from .meshes import (
+    MESH_GENERATORS,
+    bowl,
+    box,
+    cornell_box,
+    geometry_image,
+    icosphere,
+    load_mesh,
+    mesh_with_vertices,
+    plane,
+    save_mesh,
+    slab,
+    torus,
+)
 from .scene import (
     Camera,
     ConstantEnvironment,
@@ -13,8 +27,34 @@ from .scene import (
     SphereAreaLight,
     SpotLight,
 )
+from .scene_file import (
+    builtin_scene_descriptions,
+    builtin_scene_names,
+    load_scene,
+    loads_scene,
+    save_scene,
+    scene_from_dict,
+)
 
 __all__ = [
+    "MESH_GENERATORS",
+    "bowl",
+    "box",
+    "builtin_scene_descriptions",
+    "builtin_scene_names",
+    "cornell_box",
+    "geometry_image",
+    "icosphere",
+    "load_mesh",
+    "load_scene",
+    "loads_scene",
+    "mesh_with_vertices",
+    "plane",
+    "save_mesh",
+    "save_scene",
+    "scene_from_dict",
+    "slab",
+    "torus",
     "Camera",
     "ConstantEnvironment",
     "DirectionalLight",

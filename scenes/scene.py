@@ -35,6 +35,10 @@ __all__ = [
 #: scale is degenerate (collinear or repeated vertices).
 DEGENERATE_AREA_FRACTION = 1e-12
 
+#: Vertex normals within this of unit length are kept as given (normalising them again
+#: would change their last bits); others are normalised.
+UNIT_NORMAL_TOLERANCE = 1e-12
+
 
 def vector3(value, field_name: str, *, unit: bool = False, file=None) -> np.ndarray:
     """Validate a finite 3-vector (normalised when ``unit``) and return it read-only."""
@@ -134,7 +138,11 @@ class Mesh:
                                  field="normals", value=normals.shape)
             check_finite(normals, "normals", file=where)
         length = np.linalg.norm(normals, axis=1, keepdims=True)
-        normals = np.where(length > 0, normals / np.where(length > 0, length, 1.0), [0, 0, 1.0])
+        # leave unit normals bit for bit as given, so that a saved mesh loads back identical
+        unit = np.abs(length - 1.0) <= UNIT_NORMAL_TOLERANCE
+        normals = np.where(unit, normals,
+                           np.where(length > 0, normals / np.where(length > 0, length, 1.0),
+                                    [0, 0, 1.0]))
         if self.uv is not None:
             uv = np.asarray(self.uv, dtype=np.float64)
             if uv.shape != (len(vertices), 2):
@@ -184,7 +192,7 @@ class Mesh:
         return self.vertices.min(axis=0), self.vertices.max(axis=0)
 
     def transformed(self, matrix=None, *, translate=(0, 0, 0), scale=1.0) -> Mesh:
-        """A copy moved by a 3x3 ``matrix`` (rotation/scale), then ``scale``, then ``translate``."""
+        """Return a copy moved by a 3x3 ``matrix``, then scaled by ``scale``, then translated."""
         linear = np.eye(3) if matrix is None else np.asarray(matrix, dtype=np.float64)
         linear = linear * float(scale)
         vertices = self.vertices @ linear.T + np.asarray(translate, dtype=np.float64)
@@ -192,7 +200,7 @@ class Mesh:
         return Mesh(vertices, self.faces, normals, self.uv, self.grid_shape, self.name)
 
     def cache_key(self) -> dict:
-        """What identifies this mesh in content hashes."""
+        """Return what identifies this mesh in content hashes."""
         return {"vertices": self.vertices, "faces": self.faces, "normals": self.normals,
                 "uv": self.uv, "grid_shape": self.grid_shape}
 
@@ -211,7 +219,7 @@ class SceneObject:
     material: Any
 
     def cache_key(self) -> dict:
-        """What identifies this object in content hashes."""
+        """Return what identifies this object in content hashes."""
         material_key = self.material.cache_key() if hasattr(self.material, "cache_key") \
             else repr(self.material)
         return {"name": self.name, "mesh": self.mesh.cache_key(), "material": material_key}
@@ -442,7 +450,7 @@ class Camera:
         return d / np.linalg.norm(d)
 
     def cache_key(self) -> dict:
-        """What identifies this camera in content hashes."""
+        """Return what identifies this camera in content hashes."""
         return {"origin": self.origin.tolist(), "target": self.target.tolist(),
                 "up": self.up.tolist(), "fov": self.fov, "width": self.width,
                 "height": self.height}
@@ -498,7 +506,7 @@ class Scene:
         object.__setattr__(self, "mm_per_unit", mm)
 
     def object(self, name: str) -> SceneObject:
-        """The object called ``name``; an unknown name lists the valid ones."""
+        """Return the object called ``name``; an unknown name lists the valid ones."""
         for candidate in self.objects:
             if candidate.name == name:
                 return candidate
@@ -506,12 +514,12 @@ class Scene:
                          file=self.source, field="object", value=name)
 
     def with_lights(self, lights) -> Scene:
-        """A copy with other lights (the camera and objects unchanged)."""
+        """Return a copy with other lights (the camera and objects unchanged)."""
         return Scene(self.objects, tuple(lights), self.camera, self.mm_per_unit, self.name,
                      self.description, self.source)
 
     def with_material(self, object_name: str, material) -> Scene:
-        """A copy in which object ``object_name`` has ``material``."""
+        """Return a copy in which object ``object_name`` has ``material``."""
         self.object(object_name)
         objects = tuple(SceneObject(o.name, o.mesh, material) if o.name == object_name else o
                         for o in self.objects)
@@ -519,12 +527,12 @@ class Scene:
                      self.description, self.source)
 
     def with_camera(self, camera: Camera) -> Scene:
-        """A copy seen through ``camera``."""
+        """Return a copy seen through ``camera``."""
         return Scene(self.objects, self.lights, camera, self.mm_per_unit, self.name,
                      self.description, self.source)
 
     def cache_key(self) -> dict:
-        """What identifies this scene in content hashes (everything but name and source)."""
+        """Return what identifies this scene in content hashes (all but name and source)."""
         return {"objects": [o.cache_key() for o in self.objects],
                 "lights": [_light_key(light) for light in self.lights],
                 "camera": self.camera.cache_key(), "mm_per_unit": self.mm_per_unit}
