@@ -1,0 +1,204 @@
+"""The per-pixel z-test: Šidák threshold, same-distribution renders pass, biased ones fail."""
+
+from decimal import Decimal, getcontext
+
+import numpy as np
+import pytest
+
+from translucent.errors import InputError
+from translucent.image import Image
+from translucent.reports.statistics import (
+    REQUIRED_FRACTION,
+    SIGNIFICANCE,
+    sidak_alpha,
+    z_test,
+    z_test_known_variance,
+)
+
+#: sidak_alpha goes through log1p/expm1 in float64: 1e-12 relative is rounding only.
+FLOAT64_RTOL = 1e-12
+
+#: Samples per pixel of the simulated test renders, and of the converged reference.
+TEST_SPP = 64
+REFERENCE_SPP = 65536
+
+#: Pixels of the simulated renders (48 x 48: Sidak alpha about 4.4e-6).
+SHAPE = (48, 48, 3)
+
+
+def render(truth, spp, rng):
+    """A simulated Monte Carlo render: the mean of ``spp`` exponential samples per pixel.
+
+    Exponential samples (mean ``truth``, variance ``truth**2``) are as skewed as the
+    radiance samples of a path tracer; their mean of n is Gamma(n, truth / n).
+    """
+    return rng.gamma(spp, truth / spp)
+
+
+@pytest.fixture
+def scene(rng):
+    """Truth, a converged reference mean and its per-sample variance (exponential samples)."""
+    y, x = np.mgrid[0:SHAPE[0], 0:SHAPE[1]] / SHAPE[0]
+    truth = np.stack([0.2 + x, 0.3 + y, 0.5 + x * y], axis=-1)
+    reference_mean = render(truth, REFERENCE_SPP, rng)
+    return truth, reference_mean, reference_mean**2
+
+
+# ----------------------------------------------------------------------------- Sidak
+
+
+@pytest.mark.parametrize("pixels", [1, 4096, 1920 * 1080])
+def test_sidak_alpha_matches_high_precision(pixels):
+    getcontext().prec = 50
+    exact = Decimal(1) - (Decimal(1) - Decimal(str(SIGNIFICANCE))) ** (Decimal(1) / pixels)
+    assert sidak_alpha(pixels) == pytest.approx(float(exact), rel=FLOAT64_RTOL)
+
+
+def test_sidak_alpha_keeps_the_family_wise_rate():
+    alpha = sidak_alpha(4096)
+    assert 1 - (1 - alpha) ** 4096 == pytest.approx(SIGNIFICANCE, rel=1e-9)
+    assert sidak_alpha(1) == pytest.approx(SIGNIFICANCE, rel=FLOAT64_RTOL)
+
+
+@pytest.mark.parametrize("pixels, significance, match", [
+    (0, 0.01, "pixels = 0: must be an integer >= 1"),
+    (10, 1.5, "significance = 1.5: must be in"),
+])
+def test_sidak_alpha_bad_input(pixels, significance, match):
+    with pytest.raises(InputError, match=match):
+        sidak_alpha(pixels, significance)
+
+
+# ----------------------------------------------------------------------------- z-test
+
+
+def test_a_render_of_the_same_distribution_passes(scene, rng):
+    truth, reference_mean, reference_variance = scene
+    result = z_test(render(truth, TEST_SPP, rng), reference_mean, reference_variance,
+                    TEST_SPP)
+    assert result.passed and bool(result)
+    assert result.p_values.shape == SHAPE
+    assert result.alpha == pytest.approx(sidak_alpha(SHAPE[0] * SHAPE[1]), rel=FLOAT64_RTOL)
+    assert result.fraction_accepted >= REQUIRED_FRACTION
+    assert "passed" in result.summary()
+
+
+def test_a_biased_render_fails(scene, rng):
+    """A 10 % bias at 4096 spp: z = 0.1 sqrt(4096) = 6.4 on average, above the bound 4.6."""
+    truth, reference_mean, reference_variance = scene
+    spp = 4096
+    result = z_test(render(1.1 * truth, spp, rng), reference_mean, reference_variance, spp)
+    assert not result.passed
+    assert "FAILED" in result.summary()
+
+
+def test_a_small_biased_patch_fails(scene, rng):
+    """A 6 x 6 patch (1.6 % of pixels, above the 0.25 % allowed) three times too bright.
+
+    In the patch the test mean is 3 T (1 + e / 8) with e ~ N(0, 1) (64 exponential
+    samples), so z = 16 + 3 e: the rejection bound z = 4.6 (Sidak alpha 4.4e-6) is 3.8
+    sigma below, and every patch channel is rejected.
+    """
+    truth, reference_mean, reference_variance = scene
+    biased = truth.copy()
+    biased[10:16, 20:26] *= 3
+    result = z_test(render(biased, TEST_SPP, rng), reference_mean, reference_variance,
+                    TEST_SPP)
+    assert not result.passed
+    assert not result.accepted[10:16, 20:26].any()
+
+
+def test_p_values_are_uniform_under_the_null(rng):
+    """Gaussian means: the fraction of p below 0.05 is 0.05 within 4 binomial sigmas."""
+    shape = (64, 64, 3)
+    reference = np.ones(shape)
+    variance = np.full(shape, 0.25)
+    spp = 16
+    test = reference + rng.standard_normal(shape) * np.sqrt(variance / spp)
+    p_values = z_test(test, reference, variance, spp).p_values
+    sigma = np.sqrt(0.05 * 0.95 / p_values.size)
+    assert abs(np.mean(p_values < 0.05) - 0.05) < 4 * sigma
+
+
+def test_variance_floor_keeps_noiseless_pixels_finite():
+    reference = np.zeros((16, 16, 3))
+    result = z_test(reference + 1e-6, reference, np.zeros_like(reference), 4)
+    assert result.passed
+    assert np.isfinite(result.z).all()
+
+
+def test_nan_pixels_are_rejected_not_crashed(scene, rng):
+    truth, reference_mean, reference_variance = scene
+    test = render(truth, TEST_SPP, rng)
+    test[0, 0, 0] = np.nan
+    result = z_test(test, reference_mean, reference_variance, TEST_SPP)
+    assert not result.accepted[0, 0, 0]
+    assert result.passed  # one channel in 6912 is within the 0.25 % allowed
+
+
+def test_images_and_grey_arrays_are_accepted(scene, rng):
+    truth, reference_mean, reference_variance = scene
+    test = Image(render(truth, TEST_SPP, rng))
+    assert z_test(test, Image(reference_mean), Image(reference_variance), TEST_SPP).passed
+    grey = z_test(test.rgb[..., 0], reference_mean[..., 0], reference_variance[..., 0],
+                  TEST_SPP)
+    assert grey.p_values.shape == SHAPE[:2] + (1,)
+
+
+@pytest.mark.parametrize("spp", [0, 2.5])
+def test_z_test_needs_integer_spp(spp):
+    with pytest.raises(InputError, match=f"spp = {spp}: must be an integer >= 1"):
+        z_test(np.ones((4, 4)), np.ones((4, 4)), np.ones((4, 4)), spp)
+
+
+def test_z_test_refuses_negative_variance():
+    with pytest.raises(InputError, match=r"reference_variance = -1.0: must be >= 0"):
+        z_test(np.ones((4, 4)), np.ones((4, 4)), -np.ones((4, 4)), 4)
+
+
+def test_z_test_lists_every_shape():
+    with pytest.raises(InputError, match=r"test_mean \(4, 4, 1\), reference_mean "
+                                         r"\(4, 5, 1\), reference_variance \(4, 4, 1\)"):
+        z_test(np.ones((4, 4)), np.ones((4, 5)), np.ones((4, 4)), 4)
+
+
+def test_z_test_refuses_a_stack_of_images():
+    with pytest.raises(InputError, match=r"test_mean = \(2, 4, 4, 3\): must be an H x W"):
+        z_test(np.ones((2, 4, 4, 3)), np.ones((2, 4, 4, 3)), np.ones((2, 4, 4, 3)), 4)
+
+
+# ----------------------------------------------------------------------------- two renders
+
+
+def noisy_pair(truth, rng, passes=8, spp=16, second_truth=None):
+    """Two independent multi-pass renders, each with its variance of the mean."""
+    images = []
+    for mean in (truth, truth if second_truth is None else second_truth):
+        pass_means = np.stack([render(mean, spp, rng) for _ in range(passes)])
+        images.append(Image(pass_means.mean(axis=0),
+                            pass_means.var(axis=0, ddof=1) / passes))
+    return images
+
+
+def test_two_renders_of_the_same_image_agree(scene, rng):
+    truth = scene[0]
+    first, second = noisy_pair(truth, rng)
+    assert z_test_known_variance(first, second).passed
+
+
+def test_two_renders_of_different_images_disagree(scene, rng):
+    truth = scene[0]
+    first, second = noisy_pair(truth, rng, second_truth=1.3 * truth)
+    assert not z_test_known_variance(first, second).passed
+
+
+def test_known_variance_needs_a_variance():
+    with pytest.raises(InputError, match=r"second.variance = None: needs its per-pixel "
+                                         r"variance of the mean"):
+        z_test_known_variance(Image(np.ones((4, 4, 3)), np.ones((4, 4, 3))),
+                              Image(np.ones((4, 4, 3))))
+
+
+def test_known_variance_needs_images():
+    with pytest.raises(TypeError, match="first must be a translucent.image.Image"):
+        z_test_known_variance(np.ones((4, 4, 3)), Image(np.ones((4, 4, 3))))
