@@ -14,6 +14,16 @@ from .meshes import (
     slab,
     torus,
 )
+from .raycast import (
+    GBuffer,
+    RayHits,
+    gbuffer,
+    gbuffer_from_point,
+    gbuffer_orthographic,
+    trace,
+    visibility_matrix,
+    visible,
+)
 from .scene import (
     Camera,
     ConstantEnvironment,
@@ -37,6 +47,14 @@ from .scene_file import (
 )
 
 __all__ = [
+    "GBuffer",
+    "RayHits",
+    "gbuffer",
+    "gbuffer_from_point",
+    "gbuffer_orthographic",
+    "trace",
+    "visibility_matrix",
+    "visible",
     "MESH_GENERATORS",
     "bowl",
     "box",

@@ -1,0 +1,883 @@
+"""Ray queries answered by Mitsuba 3 used as a ray-intersection engine (not a renderer).
+
+The meshes of a scene are merged into one Mitsuba mesh inside an ``mi.Scene``; a batch of
+rays is one vectorised Mitsuba call (large batches are cut into chunks of
+:data:`RAYS_PER_CALL` to bound memory). Mitsuba intersects in float32; positions, normals
+and barycentrics are then evaluated in float64 on the suite's own meshes.
+
+One engine is built per geometry and cached (:func:`ray_engine`): scenes that share their
+``Mesh`` objects (another light, another material, another camera) share it; a deformed
+mesh is a new ``Mesh`` object and gets a new engine.
+
+Conventions
+-----------
+* Lengths in scene units (multiply by ``scene.mm_per_unit`` for mm).
+* Pixel ``(row, col)``: row 0 is the top of the image, column 0 its left; rays go through
+  pixel centres, exactly as Mitsuba's ``perspective`` sensor with ``fov_axis = "x"`` and
+  ``to_world = look_at(origin, target, up)`` (:func:`perspective_sensor_dict`), so that
+  reference renders line up pixel for pixel. Like that sensor, camera rays start at the
+  near clip plane (:data:`NEAR_CLIP` along the viewing axis); depths are measured from the
+  eye.
+* Barycentrics ``(b0, b1, b2)`` weight the triangle's vertices ``faces[t, 0..2]``.
+* Normals: ``geometric_normal`` is the face normal (outward by the winding),
+  ``shading_normal`` the interpolated vertex normal, both unit length.
+
+Public API (stable): :func:`trace` -> :class:`RayHits`, :func:`gbuffer` ->
+:class:`GBuffer` (with :meth:`GBuffer.interpolate`), :func:`gbuffer_from_point`,
+:func:`gbuffer_orthographic`, :func:`visible`, :func:`visibility_matrix`,
+:func:`camera_rays`, :func:`project`, :func:`perspective_sensor_dict`,
+:func:`to_mitsuba_mesh`, :func:`ray_engine`, :class:`RayEngine`.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..errors import InputError, check_finite
+from .scene import Camera, Mesh, Scene
+
+__all__ = [
+    "GBuffer",
+    "NEAR_CLIP",
+    "RAYS_PER_CALL",
+    "RayEngine",
+    "RayHits",
+    "camera_rays",
+    "gbuffer",
+    "gbuffer_from_point",
+    "gbuffer_orthographic",
+    "perspective_sensor_dict",
+    "project",
+    "ray_engine",
+    "to_mitsuba_mesh",
+    "trace",
+    "visibility_matrix",
+    "visible",
+]
+
+#: Rays per Mitsuba call: about 100 MB of ray and hit data in flight at float32.
+RAYS_PER_CALL = 1 << 21
+
+#: Distance of the near clip plane along the viewing axis, scene units: Mitsuba's
+#: ``perspective`` sensor default (``near_clip = 0.01``), which camera rays follow.
+NEAR_CLIP = 1e-2
+
+#: Default offset of shadow-ray end points, as a fraction of the scene's bounding-box
+#: diagonal: float32 intersection has a relative error near 1e-7 of the coordinates, so
+#: 1e-5 clears self-intersection with two orders of margin while staying far below any
+#: feature of the built-in scenes.
+OFFSET_FRACTION = 1e-5
+
+#: Tilt (radians) of the second try of a ray that missed: far above float32 resolution of
+#: a direction (6e-8), far below a pixel of any camera the suite uses (1e-3 rad at 1000
+#: pixels across 60 degrees), so a ray that slipped through an edge finds the surface
+#: while a true miss stays a miss.
+CRACK_TILT = 1e-6
+
+#: Engines kept alive (each holds its meshes, so their ids stay unique while cached).
+ENGINE_CACHE_SIZE = 8
+
+
+# ---------------------------------------------------------------------------------------
+# Mitsuba meshes
+
+
+def to_mitsuba_mesh(mesh: Mesh, name: str | None = None, *, props: dict | None = None,
+                    with_normals: bool = True, with_uv: bool = True):
+    """Build a Mitsuba ``Mesh`` shape from a suite :class:`Mesh` (float32, same indices).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        Positions in scene units.
+    name : str, optional
+        Mitsuba's name for it (default ``mesh.name``).
+    props : dict, optional
+        Plugins to attach, for example ``{"bsdf": {"type": "diffuse"}}`` or
+        ``{"interior": medium_dict}``: dicts are loaded with ``mi.load_dict``, other values
+        (already loaded plugins, numbers) are set as they are.
+    with_normals, with_uv : bool
+        Pass the vertex normals (smooth shading in Mitsuba) and texture coordinates.
+
+    Returns
+    -------
+    mitsuba.Mesh
+    """
+    return _mitsuba_mesh(name or mesh.name, mesh.vertices, mesh.faces,
+                         mesh.normals if with_normals else None,
+                         mesh.uv if with_uv else None, props)
+
+
+def _mitsuba_mesh(name, vertices, faces, normals=None, uv=None, props=None):
+    from ..backend import mitsuba
+
+    mi = mitsuba()
+    properties = mi.Properties()
+    for key, value in (props or {}).items():
+        properties[key] = mi.load_dict(value) if isinstance(value, dict) else value
+    shape = mi.Mesh(name, len(vertices), len(faces), properties,
+                    has_vertex_normals=normals is not None, has_vertex_texcoords=uv is not None)
+    params = mi.traverse(shape)
+    params["vertex_positions"] = mi.Float(np.asarray(vertices, dtype=np.float32).ravel())
+    params["faces"] = mi.UInt32(np.asarray(faces, dtype=np.uint32).ravel())
+    if normals is not None:
+        params["vertex_normals"] = mi.Float(np.asarray(normals, dtype=np.float32).ravel())
+    if uv is not None:
+        params["vertex_texcoords"] = mi.Float(np.asarray(uv, dtype=np.float32).ravel())
+    params.update()
+    return shape
+
+
+def perspective_sensor_dict(camera: Camera, *, spp: int = 1, rfilter: str = "box",
+                            sampler: str = "independent", seed: int = 0) -> dict:
+    """Return the Mitsuba ``perspective`` sensor whose pixels are those of :func:`gbuffer`.
+
+    Parameters
+    ----------
+    camera : Camera
+        ``fov`` is the horizontal field of view (``fov_axis = "x"``).
+    spp : int
+        Samples per pixel of the sampler.
+    rfilter : str
+        Reconstruction filter plugin; ``"box"`` keeps each pixel's samples inside it.
+    sampler : str
+        Sampler plugin name.
+    seed : int
+        Sampler seed (independent passes use different seeds).
+
+    Returns
+    -------
+    dict
+        For ``mi.load_dict`` (as the ``sensor`` of a scene dict).
+    """
+    from ..backend import mitsuba
+
+    mi = mitsuba()
+    return {
+        "type": "perspective",
+        "fov": float(camera.fov),
+        "fov_axis": "x",
+        "near_clip": NEAR_CLIP,
+        "to_world": mi.ScalarTransform4f().look_at(origin=camera.origin.tolist(),
+                                                   target=camera.target.tolist(),
+                                                   up=camera.up.tolist()),
+        "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
+                 "rfilter": {"type": rfilter}, "pixel_format": "rgb"},
+        "sampler": {"type": sampler, "sample_count": int(spp), "seed": int(seed)},
+    }
+
+
+# ---------------------------------------------------------------------------------------
+# the engine
+
+
+@dataclass(frozen=True, eq=False)
+class RayHits:
+    """What a batch of rays hit; arrays of length N (the number of rays).
+
+    Parameters
+    ----------
+    hit : ndarray of bool, (N,)
+    t : ndarray of float64, (N,)
+        Distance along the unit ray direction, scene units; ``inf`` where nothing was hit.
+    position : ndarray of float64, (N, 3)
+        Hit point (barycentric combination of the triangle's vertices); 0 on a miss.
+    geometric_normal, shading_normal : ndarray of float64, (N, 3)
+        Unit face normal and unit interpolated vertex normal; 0 on a miss.
+    object_id : ndarray of int64, (N,)
+        Index into ``scene.objects``; -1 on a miss.
+    triangle_id : ndarray of int64, (N,)
+        Index into that object's ``mesh.faces``; -1 on a miss.
+    barycentrics : ndarray of float64, (N, 3)
+        Weights of the triangle's three vertices (sum 1); 0 on a miss.
+    """
+
+    hit: np.ndarray
+    t: np.ndarray
+    position: np.ndarray
+    geometric_normal: np.ndarray
+    shading_normal: np.ndarray
+    object_id: np.ndarray
+    triangle_id: np.ndarray
+    barycentrics: np.ndarray
+
+
+class RayEngine:
+    """The meshes of a scene, merged into one Mitsuba mesh, answering batched ray queries.
+
+    Parameters
+    ----------
+    meshes : sequence of Mesh
+        In the order of ``scene.objects``; object ``k`` is ``meshes[k]``.
+    """
+
+    def __init__(self, meshes: Sequence[Mesh]):
+        from ..backend import mitsuba
+
+        self.mi = mitsuba()
+        self.meshes = tuple(meshes)
+        if not self.meshes:
+            raise InputError("a ray engine needs at least one mesh", field="meshes", value=[])
+        vertex_offsets = np.cumsum([0] + [len(m.vertices) for m in self.meshes])
+        self.face_offsets = np.cumsum([0] + [len(m.faces) for m in self.meshes])
+        self.vertices = np.concatenate([m.vertices for m in self.meshes])
+        self.faces = np.concatenate([m.faces + offset
+                                     for m, offset in zip(self.meshes, vertex_offsets[:-1],
+                                                          strict=True)])
+        self.normals = np.concatenate([m.normals for m in self.meshes])
+        lower, upper = self.vertices.min(axis=0), self.vertices.max(axis=0)
+        self.bounds = (lower, upper)
+        self.diagonal = float(np.linalg.norm(upper - lower))
+        # Weld vertices that coincide in float32 (the seam between a wall and the floor):
+        # Embree's watertight test then lets no ray slip between neighbouring meshes.
+        welded, index = np.unique(self.vertices.astype(np.float32), axis=0, return_inverse=True)
+        shape = _mitsuba_mesh("geometry", welded, index.reshape(-1)[self.faces])
+        self.scene = self.mi.load_dict({"type": "scene", "geometry": shape})
+
+    def _rays(self, origins, directions, tmax):
+        mi = self.mi
+        ray = mi.Ray3f(mi.Point3f(np.ascontiguousarray(origins.T, dtype=np.float32)),
+                       mi.Vector3f(np.ascontiguousarray(directions.T, dtype=np.float32)))
+        # the (o, d, maxt) constructor does not exist: a third argument would be the time
+        ray.maxt = mi.Float(np.ascontiguousarray(tmax, dtype=np.float32))
+        return ray
+
+    def trace(self, origins, directions, tmax=np.inf) -> RayHits:
+        """Closest hits of rays ``origins + t directions``, ``0 <= t <= tmax``.
+
+        See :func:`trace` (the same, for a scene).
+        """
+        origins, directions, tmax = _ray_batch(origins, directions, tmax)
+        t, global_triangle, uv = self._closest(origins, directions, tmax)
+        missed = np.flatnonzero(global_triangle < 0)
+        if len(missed):
+            # Mitsuba does not run Embree in its robust mode: a ray exactly through an
+            # edge can pass between the two triangles. Retry misses tilted by CRACK_TILT.
+            tilted = directions[missed] + CRACK_TILT * _tilt_directions(directions[missed])
+            retry = self._closest(origins[missed], tilted / np.linalg.norm(tilted, axis=1,
+                                                                            keepdims=True),
+                                  tmax[missed])
+            found = retry[1] >= 0
+            t[missed[found]] = retry[0][found]
+            global_triangle[missed[found]] = retry[1][found]
+            uv[missed[found]] = retry[2][found]
+        return self._hits(t, global_triangle, uv)
+
+    def _closest(self, origins, directions, tmax):
+        count = len(origins)
+        t = np.full(count, np.inf)
+        global_triangle = np.full(count, -1, dtype=np.int64)
+        uv = np.zeros((count, 2))
+        for start in range(0, count, RAYS_PER_CALL):
+            stop = min(count, start + RAYS_PER_CALL)
+            ray = self._rays(origins[start:stop], directions[start:stop], tmax[start:stop])
+            found = self.scene.ray_intersect_preliminary(ray)
+            valid = found.is_valid().numpy().astype(bool)
+            chunk = slice(start, stop)
+            t[chunk] = np.where(valid, found.t.numpy(), np.inf)
+            global_triangle[chunk] = np.where(valid, found.prim_index.numpy().astype(np.int64),
+                                              -1)
+            uv[chunk] = np.where(valid[:, None], found.prim_uv.numpy().T, 0.0)
+        return t, global_triangle, uv
+
+    def _hits(self, t, global_triangle, uv) -> RayHits:
+        hit = global_triangle >= 0
+        count = len(t)
+        object_id = np.full(count, -1, dtype=np.int64)
+        triangle_id = np.full(count, -1, dtype=np.int64)
+        barycentrics = np.zeros((count, 3))
+        position = np.zeros((count, 3))
+        geometric = np.zeros((count, 3))
+        shading = np.zeros((count, 3))
+        if hit.any():
+            triangles = global_triangle[hit]
+            owner = np.searchsorted(self.face_offsets, triangles, side="right") - 1
+            object_id[hit] = owner
+            triangle_id[hit] = triangles - self.face_offsets[owner]
+            weights = np.stack([1.0 - uv[hit, 0] - uv[hit, 1], uv[hit, 0], uv[hit, 1]], axis=1)
+            barycentrics[hit] = weights
+            corners = self.faces[triangles]
+            points = self.vertices[corners]
+            position[hit] = np.einsum("nk,nkd->nd", weights, points)
+            cross = np.cross(points[:, 1] - points[:, 0], points[:, 2] - points[:, 0])
+            geometric[hit] = cross / np.linalg.norm(cross, axis=1, keepdims=True)
+            smooth = np.einsum("nk,nkd->nd", weights, self.normals[corners])
+            length = np.linalg.norm(smooth, axis=1, keepdims=True)
+            # opposite vertex normals can cancel inside a triangle: fall back to the face
+            shading[hit] = np.where(length > 1e-12, smooth / np.maximum(length, 1e-300),
+                                    geometric[hit])
+        return RayHits(hit, t, position, geometric, shading, object_id, triangle_id,
+                       barycentrics)
+
+    def occluded(self, origins, directions, tmax) -> np.ndarray:
+        """Return True where a ray hits anything with ``t <= tmax`` (any hit; cheaper)."""
+        origins, directions, tmax = _ray_batch(origins, directions, tmax)
+        blocked = np.zeros(len(origins), dtype=bool)
+        for start in range(0, len(origins), RAYS_PER_CALL):
+            stop = min(len(origins), start + RAYS_PER_CALL)
+            ray = self._rays(origins[start:stop], directions[start:stop], tmax[start:stop])
+            blocked[start:stop] = self.scene.ray_test(ray).numpy().astype(bool)
+        return blocked
+
+
+def _tilt_directions(directions: np.ndarray) -> np.ndarray:
+    """Return unit vectors perpendicular to each direction, at an angle no edge favours."""
+    helper = np.where(np.abs(directions[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    first = np.cross(directions, helper)
+    first /= np.linalg.norm(first, axis=1, keepdims=True)
+    second = np.cross(directions, first)
+    angle = 0.6435  # atan(3/4): not a multiple of 45 degrees
+    return math.cos(angle) * first + math.sin(angle) * second
+
+
+def _ray_batch(origins, directions, tmax):
+    """Validate and broadcast a batch; directions normalised."""
+    origins = np.asarray(origins, dtype=np.float64)
+    directions = np.asarray(directions, dtype=np.float64)
+    if origins.shape[-1:] != (3,) or directions.shape[-1:] != (3,):
+        raise InputError("origins and directions must be arrays of shape (N, 3)",
+                         field="origins", value=(origins.shape, directions.shape))
+    origins, directions = np.broadcast_arrays(np.atleast_2d(origins), np.atleast_2d(directions))
+    origins, directions = origins.reshape(-1, 3), directions.reshape(-1, 3)
+    check_finite(origins, "origins")
+    check_finite(directions, "directions")
+    length = np.linalg.norm(directions, axis=1, keepdims=True)
+    if (length == 0).any():
+        raise InputError("ray directions must be non-zero", field="directions",
+                         value=int(np.flatnonzero(length[:, 0] == 0)[0]))
+    tmax = np.broadcast_to(np.asarray(tmax, dtype=np.float64), (len(origins),))
+    if np.isnan(tmax).any() or (tmax < 0).any():
+        raise InputError("tmax must be >= 0 (inf for unbounded)", field="tmax",
+                         value=float(tmax[np.isnan(tmax) | (tmax < 0)][0]))
+    # float32 holds up to 3.4e38; Mitsuba treats that as unbounded
+    tmax = np.minimum(tmax, np.finfo(np.float32).max)
+    return origins, directions / length, tmax
+
+
+_ENGINES: collections.OrderedDict = collections.OrderedDict()
+
+
+def ray_engine(scene_or_meshes) -> RayEngine:
+    """Return the cached :class:`RayEngine` of a scene's geometry (built on first use).
+
+    Parameters
+    ----------
+    scene_or_meshes : Scene or sequence of Mesh
+        Scenes holding the same ``Mesh`` objects in the same order share one engine.
+
+    Returns
+    -------
+    RayEngine
+    """
+    meshes = tuple(o.mesh for o in scene_or_meshes.objects) \
+        if isinstance(scene_or_meshes, Scene) else tuple(scene_or_meshes)
+    key = tuple(id(mesh) for mesh in meshes)
+    if key in _ENGINES:
+        _ENGINES.move_to_end(key)
+        return _ENGINES[key]
+    engine = RayEngine(meshes)
+    _ENGINES[key] = engine  # the engine holds the meshes, so these ids are not reused
+    while len(_ENGINES) > ENGINE_CACHE_SIZE:
+        _ENGINES.popitem(last=False)
+    return engine
+
+
+def trace(scene: Scene, origins, directions, tmax=np.inf) -> RayHits:
+    """Intersect a batch of rays with a scene's meshes: the closest hit of each.
+
+    Parameters
+    ----------
+    scene : Scene
+    origins : array_like, (N, 3) or (3,)
+        Ray origins, scene units.
+    directions : array_like, (N, 3) or (3,)
+        Ray directions (normalised here; need not be unit), broadcast against origins.
+    tmax : float or array_like (N,)
+        Largest distance along each ray, scene units (``inf``: unbounded).
+
+    Returns
+    -------
+    RayHits
+        Per ray: hit mask, distance, position, geometric and shading normal, object index,
+        triangle index (within the object), barycentrics.
+    """
+    return ray_engine(scene).trace(origins, directions, tmax)
+
+
+# ---------------------------------------------------------------------------------------
+# G-buffers
+
+
+@dataclass(frozen=True, eq=False)
+class GBuffer:
+    """What each pixel of a view sees: the first surface along its ray.
+
+    Arrays are ``(H, W, ...)``; row 0 is the top of the image.
+
+    Parameters
+    ----------
+    hit : ndarray of bool, (H, W)
+        The pixel sees a surface.
+    position : ndarray of float64, (H, W, 3)
+        Surface point, scene units (0 on background).
+    normal : ndarray of float64, (H, W, 3)
+        Unit shading normal (interpolated vertex normals; 0 on background).
+    geometric_normal : ndarray of float64, (H, W, 3)
+        Unit face normal (0 on background).
+    depth : ndarray of float64, (H, W)
+        Distance from the eye (perspective) or from the image plane (orthographic) to the
+        surface along the pixel's ray, scene units; ``inf`` on background.
+    triangle_id : ndarray of int64, (H, W)
+        Triangle index within the object's mesh; -1 on background.
+    barycentrics : ndarray of float64, (H, W, 3)
+        Weights of the triangle's vertices; 0 on background.
+    object_id : ndarray of int64, (H, W)
+        Index into ``objects``; -1 on background.
+    view_direction : ndarray of float64, (H, W, 3)
+        Unit vector from the surface towards the eye (minus the ray direction), on every
+        pixel: the outgoing direction of shading.
+    object_names : tuple of str
+        Names of the scene's objects, by ``object_id``.
+    meshes : tuple of Mesh
+        The objects' meshes (their faces drive :meth:`interpolate`).
+    camera : Camera or None
+        The perspective camera, or None for an orthographic view.
+    pixel_area : float or None
+        Orthographic views: area of the scene a pixel covers on the image plane, scene
+        units squared (None for perspective views).
+    """
+
+    hit: np.ndarray
+    position: np.ndarray
+    normal: np.ndarray
+    geometric_normal: np.ndarray
+    depth: np.ndarray
+    triangle_id: np.ndarray
+    barycentrics: np.ndarray
+    object_id: np.ndarray
+    view_direction: np.ndarray
+    object_names: tuple
+    meshes: tuple
+    camera: Camera | None = None
+    pixel_area: float | None = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)`` in pixels."""
+        return self.hit.shape
+
+    def _object_index(self, object_name) -> int:
+        if isinstance(object_name, (int, np.integer)) and not isinstance(object_name, bool):
+            if 0 <= object_name < len(self.object_names):
+                return int(object_name)
+        elif object_name in self.object_names:
+            return self.object_names.index(object_name)
+        raise InputError(f"no such object; objects: {', '.join(self.object_names)}",
+                         field="object_name", value=object_name)
+
+    def mask(self, object_name) -> np.ndarray:
+        """Return the (H, W) mask of the pixels that see object ``object_name`` (or its index)."""
+        return self.object_id == self._object_index(object_name)
+
+    def interpolate(self, object_name, vertex_values, *, fill=0.0) -> np.ndarray:
+        """Interpolate per-vertex values of one object across the pixels that see it.
+
+        Barycentric (linear) interpolation over each pixel's triangle; exact for values
+        that are a linear function of position on each triangle.
+
+        Parameters
+        ----------
+        object_name : str or int
+            The object (name or index into the scene's objects).
+        vertex_values : array_like, (V, ...) or (V,)
+            One value (scalar, RGB, ...) per vertex of the object's mesh, any units.
+        fill : float
+            Value of the pixels that do not see the object.
+
+        Returns
+        -------
+        ndarray, (H, W, ...)
+            float64 (or the values' complex/float dtype).
+        """
+        index = self._object_index(object_name)
+        mesh = self.meshes[index]
+        values = np.asarray(vertex_values)
+        if values.shape[:1] != (len(mesh.vertices),):
+            raise InputError(f"needs one value per vertex of '{self.object_names[index]}' "
+                             f"({len(mesh.vertices)})", field="vertex_values",
+                             value=values.shape)
+        dtype = np.result_type(values.dtype, np.float64)
+        out = np.full(self.shape + values.shape[1:], fill, dtype=dtype)
+        where = self.object_id == index
+        corners = mesh.faces[self.triangle_id[where]]
+        weights = self.barycentrics[where]
+        out[where] = np.einsum("nk,nk...->n...", weights, values[corners].astype(dtype))
+        return out
+
+    def interpolate_all(self, values_by_object: Mapping, *, fill=0.0) -> np.ndarray:
+        """Interpolate per-vertex values of several objects into one image.
+
+        Parameters
+        ----------
+        values_by_object : mapping of str (or int) to array_like (V, ...)
+            Per-vertex values of each object to draw; all with the same trailing shape.
+        fill : float
+            Value of pixels that see none of them (background included).
+
+        Returns
+        -------
+        ndarray, (H, W, ...)
+        """
+        out = None
+        for name, values in values_by_object.items():
+            image = self.interpolate(name, values, fill=0.0)
+            if out is None:
+                out = np.full(image.shape, fill, dtype=image.dtype)
+            where = self.mask(name)
+            out[where] = image[where]
+        if out is None:
+            raise InputError("give the values of at least one object",
+                             field="values_by_object", value={})
+        return out
+
+
+def camera_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """Return the eye position and the unit ray directions through the pixel centres.
+
+    The convention of Mitsuba's ``perspective`` sensor (``fov_axis = "x"``,
+    ``look_at``): the image's left edge is towards ``cross(up, forward)``, its top
+    towards ``up``; ``tan`` of the half-angles are ``tan(fov/2)`` horizontally and
+    ``tan(fov/2) * H / W`` vertically.
+
+    Parameters
+    ----------
+    camera : Camera
+
+    Returns
+    -------
+    origin : ndarray, (3,)
+        The eye, scene units.
+    directions : ndarray, (H, W, 3)
+        Unit directions, row 0 at the top.
+    """
+    forward, left, up = _camera_frame(camera)
+    tan_x = math.tan(math.radians(camera.fov) / 2.0)
+    tan_y = tan_x * camera.height / camera.width
+    sx = (np.arange(camera.width) + 0.5) / camera.width
+    sy = (np.arange(camera.height) + 0.5) / camera.height
+    x = tan_x * (1.0 - 2.0 * sx)
+    y = tan_y * (1.0 - 2.0 * sy)
+    directions = forward + x[None, :, None] * left + y[:, None, None] * up
+    directions /= np.linalg.norm(directions, axis=-1, keepdims=True)
+    return camera.origin.copy(), directions
+
+
+def _camera_frame(camera: Camera):
+    forward = camera.forward
+    left = np.cross(camera.up, forward)
+    left /= np.linalg.norm(left)
+    return forward, left, np.cross(forward, left)
+
+
+def project(camera: Camera, points) -> tuple[np.ndarray, np.ndarray]:
+    """Project points onto the image of ``camera``: continuous pixel coordinates.
+
+    The inverse of :func:`camera_rays`: the centre of pixel ``(row, col)`` projects to
+    ``(col + 0.5, row + 0.5)``.
+
+    Parameters
+    ----------
+    camera : Camera
+    points : array_like, (..., 3)
+        Scene units.
+
+    Returns
+    -------
+    xy : ndarray, (..., 2)
+        ``(x, y)`` in pixels from the image's top-left corner (x to the right, y down).
+    in_front : ndarray of bool, (...)
+        The point lies in front of the eye (beyond the near clip plane).
+    """
+    forward, left, up = _camera_frame(camera)
+    relative = np.asarray(points, dtype=np.float64) - camera.origin
+    z = relative @ forward
+    tan_x = math.tan(math.radians(camera.fov) / 2.0)
+    tan_y = tan_x * camera.height / camera.width
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = (relative @ left) / z
+        y = (relative @ up) / z
+    col = (1.0 - x / tan_x) / 2.0 * camera.width
+    row = (1.0 - y / tan_y) / 2.0 * camera.height
+    return np.stack([col, row], axis=-1), z > NEAR_CLIP
+
+
+def _gbuffer_from_rays(scene: Scene, origins, directions, start, shape, *, camera,
+                       pixel_area) -> GBuffer:
+    """Trace one ray per pixel; ``start`` is the distance already travelled from the eye."""
+    engine = ray_engine(scene)
+    hits = engine.trace(origins.reshape(-1, 3) + start.reshape(-1, 1)
+                        * directions.reshape(-1, 3), directions.reshape(-1, 3))
+    height, width = shape
+
+    def image(array):
+        return array.reshape((height, width) + array.shape[1:])
+
+    return GBuffer(
+        hit=image(hits.hit),
+        position=image(hits.position),
+        normal=image(hits.shading_normal),
+        geometric_normal=image(hits.geometric_normal),
+        depth=image(hits.t + start.reshape(-1)),
+        triangle_id=image(hits.triangle_id),
+        barycentrics=image(hits.barycentrics),
+        object_id=image(hits.object_id),
+        view_direction=-np.broadcast_to(directions, (height, width, 3)).copy(),
+        object_names=tuple(o.name for o in scene.objects),
+        meshes=engine.meshes,
+        camera=camera,
+        pixel_area=pixel_area,
+    )
+
+
+def gbuffer(scene: Scene, camera: Camera | None = None) -> GBuffer:
+    """Return the G-buffer of a pinhole camera: the first surface seen through each pixel.
+
+    Parameters
+    ----------
+    scene : Scene
+    camera : Camera, optional
+        Default ``scene.camera``. Its pixels are those of a Mitsuba render through
+        :func:`perspective_sensor_dict` (pixel centres; see the module docstring).
+
+    Returns
+    -------
+    GBuffer
+    """
+    camera = scene.camera if camera is None else camera
+    origin, directions = camera_rays(camera)
+    # Like Mitsuba's sensor, start at the near clip plane (NEAR_CLIP along the axis)
+    start = NEAR_CLIP / (directions @ camera.forward)
+    origins = np.broadcast_to(origin, directions.shape)
+    return _gbuffer_from_rays(scene, origins, directions, start, directions.shape[:2],
+                              camera=camera, pixel_area=None)
+
+
+def _size(size) -> tuple[int, int]:
+    """``size`` as ``(width, height)`` from an int or a pair."""
+    pair = (size, size) if np.ndim(size) == 0 else tuple(size)
+    if len(pair) != 2 or any(isinstance(n, bool) or int(n) != n or not 1 <= int(n) <= 16384
+                             for n in pair):
+        raise InputError("must be an integer in [1, 16384] or a (width, height) pair",
+                         field="size", value=size)
+    return int(pair[0]), int(pair[1])
+
+
+def _default_up(direction: np.ndarray) -> np.ndarray:
+    """Return an up vector not parallel to ``direction``: +y, or +z looking along y."""
+    up = np.array([0.0, 1.0, 0.0])
+    return np.array([0.0, 0.0, 1.0]) if abs(direction @ up) > 0.99 else up
+
+
+def gbuffer_from_point(scene: Scene, position, direction, fov: float, size, *,
+                       up=None) -> GBuffer:
+    """Return the G-buffer seen from a point: a light's view (shadow maps, light sampling).
+
+    Parameters
+    ----------
+    scene : Scene
+    position : (3,) array_like
+        The eye (a point or spot light's position), scene units.
+    direction : (3,) array_like
+        Viewing direction (a spot light's axis).
+    fov : float
+        Horizontal field of view, degrees in (0, 180) (twice a spot's cutoff angle).
+    size : int or (int, int)
+        Image width and height in pixels (one int: square).
+    up : (3,) array_like, optional
+        Image up direction (default +y, or +z when looking nearly along y).
+
+    Returns
+    -------
+    GBuffer
+        With ``camera`` set to the equivalent :class:`Camera`.
+    """
+    from .scene import vector3
+
+    position = vector3(position, "position")
+    direction = vector3(direction, "direction", unit=True)
+    width, height = _size(size)
+    camera = Camera(position, position + direction,
+                    _default_up(direction) if up is None else up, fov, width, height)
+    return gbuffer(scene, camera)
+
+
+def gbuffer_orthographic(scene: Scene, direction, size, *, center=None, extent=None,
+                         up=None) -> GBuffer:
+    """Return an orthographic G-buffer along ``direction``: a directional light's view.
+
+    Parallel rays travel along ``direction`` from an image plane in front of the scene.
+    By default the square image covers the bounding sphere of the scene's meshes.
+
+    Parameters
+    ----------
+    scene : Scene
+    direction : (3,) array_like
+        Direction the rays travel (a directional light's ``direction``).
+    size : int or (int, int)
+        Image width and height in pixels.
+    center : (3,) array_like, optional
+        Point the image is centred on, scene units (default: bounding-box centre).
+    extent : float, optional
+        Half the image width, scene units (default: the bounding sphere's radius); the
+        height follows the aspect ratio.
+    up : (3,) array_like, optional
+        Image up direction (default +y, or +z for near-vertical directions).
+
+    Returns
+    -------
+    GBuffer
+        ``camera`` None; ``pixel_area`` the area one pixel covers, scene units squared;
+        ``depth`` measured from the image plane.
+    """
+    from .scene import vector3
+
+    direction = vector3(direction, "direction", unit=True)
+    width, height = _size(size)
+    engine = ray_engine(scene)
+    lower, upper = engine.bounds
+    middle = (lower + upper) / 2.0 if center is None else vector3(center, "center")
+    radius = float(np.max(np.linalg.norm(engine.vertices - middle, axis=1)))
+    half_width = radius if extent is None else float(check_finite(extent, "extent"))
+    if half_width <= 0:
+        raise InputError("must be > 0", field="extent", value=extent)
+    half_height = half_width * height / width
+    up = _default_up(direction) if up is None else vector3(up, "up", unit=True)
+    left = np.cross(up, direction)
+    if np.linalg.norm(left) < 1e-9:
+        raise InputError("up must not be parallel to direction", field="up", value=up.tolist())
+    left /= np.linalg.norm(left)
+    image_up = np.cross(direction, left)
+    x = half_width * (1.0 - 2.0 * (np.arange(width) + 0.5) / width)
+    y = half_height * (1.0 - 2.0 * (np.arange(height) + 0.5) / height)
+    behind = radius + float(np.linalg.norm(middle - np.clip(middle, lower, upper))) + 1.0
+    plane_origin = middle - direction * behind
+    origins = plane_origin + x[None, :, None] * left + y[:, None, None] * image_up
+    directions = np.broadcast_to(direction, origins.shape)
+    pixel_area = (2.0 * half_width / width) * (2.0 * half_height / height)
+    return _gbuffer_from_rays(scene, origins, directions, np.zeros((height, width)),
+                              (height, width), camera=None, pixel_area=pixel_area)
+
+
+# ---------------------------------------------------------------------------------------
+# visibility
+
+
+def _offset_points(points, normals, towards, offset):
+    """Move ``points`` by ``offset`` along their normals, to the side facing ``towards``."""
+    if normals is None:
+        return points
+    normals = np.broadcast_to(np.asarray(normals, dtype=np.float64), points.shape)
+    side = np.sign(np.einsum("...d,...d->...", normals, towards - points))
+    side = np.where(side == 0, 1.0, side)
+    length = np.linalg.norm(normals, axis=-1)
+    return points + (offset * side / np.where(length > 0, length, 1.0))[..., None] * normals
+
+
+def visible(scene: Scene, points_a, points_b, *, normals_a=None, normals_b=None,
+            offset: float | None = None) -> np.ndarray:
+    """Test whether each pair of points sees the other (nothing in between).
+
+    Each end is first moved by ``offset`` along its normal, to the side facing the other
+    point (surface points would otherwise hit their own triangle); without normals the
+    ends are moved ``offset`` along the segment instead. Pairs closer than twice the
+    offset count as visible.
+
+    Parameters
+    ----------
+    scene : Scene
+    points_a, points_b : array_like, (N, 3) or (3,)
+        End points, scene units; broadcast against each other.
+    normals_a, normals_b : array_like, (N, 3) or (3,), optional
+        Surface normals at the end points (any length, any side).
+    offset : float, optional
+        Scene units; default :data:`OFFSET_FRACTION` times the diagonal of the scene's
+        bounding box.
+
+    Returns
+    -------
+    ndarray of bool, (N,)
+        True where the segment between the (offset) end points is free. Which side of
+        its surface each point faces is not tested: two points on a convex object see
+        each other through its inside (form factors check the cosines themselves).
+    """
+    engine = ray_engine(scene)
+    arrays = [np.asarray(points_a, dtype=np.float64), np.asarray(points_b, dtype=np.float64)]
+    arrays += [np.asarray(n, dtype=np.float64) for n in (normals_a, normals_b) if n is not None]
+    arrays = [array.reshape(-1, 3) for array in np.broadcast_arrays(*arrays)] \
+        if all(array.shape[-1:] == (3,) for array in arrays) else None
+    if arrays is None:
+        raise InputError("points and normals must be arrays of shape (N, 3)",
+                         field="points_a", value=np.shape(points_a))
+    a, b = arrays[:2]
+    rest = iter(arrays[2:])
+    normals_a = None if normals_a is None else next(rest)
+    normals_b = None if normals_b is None else next(rest)
+    check_finite(a, "points_a")
+    check_finite(b, "points_b")
+    offset = engine.diagonal * OFFSET_FRACTION if offset is None else \
+        float(check_finite(offset, "offset"))
+    a_moved = _offset_points(a, normals_a, b, offset)
+    b_moved = _offset_points(b, normals_b, a, offset)
+    segment = b_moved - a_moved
+    length = np.linalg.norm(segment, axis=1)
+    close = length <= 2.0 * offset
+    direction = segment / np.where(close, 1.0, length)[:, None]
+    direction[close] = (0.0, 0.0, 1.0)
+    # stop short of the far end too, and start a little along the segment
+    start = a_moved + (offset if normals_a is None else 0.0) * direction
+    reach = length - offset - (offset if normals_a is None else 0.0)
+    reach = np.where(close, 0.0, np.maximum(reach, 0.0))
+    blocked = engine.occluded(start, direction, reach)
+    return ~blocked | close
+
+
+def visibility_matrix(scene: Scene, points_a, points_b, *, normals_a=None, normals_b=None,
+                      offset: float | None = None) -> np.ndarray:
+    """Test every point of ``points_a`` against every point of ``points_b``.
+
+    Parameters
+    ----------
+    scene : Scene
+    points_a : array_like, (N, 3)
+    points_b : array_like, (M, 3)
+        Scene units.
+    normals_a : array_like, (N, 3), optional
+    normals_b : array_like, (M, 3), optional
+        As in :func:`visible`.
+    offset : float, optional
+        As in :func:`visible`.
+
+    Returns
+    -------
+    ndarray of bool, (N, M)
+        Computed in blocks of about :data:`RAYS_PER_CALL` pairs.
+    """
+    a = np.atleast_2d(np.asarray(points_a, dtype=np.float64))
+    b = np.atleast_2d(np.asarray(points_b, dtype=np.float64))
+    rows_per_block = max(1, RAYS_PER_CALL // max(1, len(b)))
+    out = np.zeros((len(a), len(b)), dtype=bool)
+    for start in range(0, len(a), rows_per_block):
+        stop = min(len(a), start + rows_per_block)
+        block_normals = None if normals_a is None else \
+            np.asarray(normals_a, dtype=np.float64)[start:stop, None, :]
+        out[start:stop] = visible(
+            scene, a[start:stop, None, :], b[None, :, :],
+            normals_a=block_normals,
+            normals_b=None if normals_b is None else np.asarray(normals_b)[None, :, :],
+            offset=offset).reshape(stop - start, len(b))
+    return out
