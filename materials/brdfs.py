@@ -66,6 +66,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..errors import InputError, check_finite
+from .factory import register_material_type
 from .homogeneous import rgb_field
 
 __all__ = [
@@ -504,3 +505,15 @@ class AnalyticBRDF:
         return {"type": "analytic_brdf", "model": self.model, "gamma": self.gamma,
                 "rho_s": self.rho_s.tolist(), "rho_d": self.rho_d.tolist(), "f0": self.f0,
                 "lafortune_c": list(self.lafortune_c)}
+
+
+def _analytic_brdf_to_dict(material: AnalyticBRDF) -> dict:
+    out = {"model": material.model, "gamma": material.gamma, "rho_s": material.rho_s,
+           "rho_d": material.rho_d, "f0": material.f0,
+           "lafortune_c": list(material.lafortune_c)}
+    if material.name:
+        out["name"] = material.name
+    return out
+
+
+register_material_type("analytic_brdf", AnalyticBRDF, to_dict=_analytic_brdf_to_dict)

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from translucent.errors import InputError
 from translucent.materials.brdfs import (
     COSINE_FLOOR,
@@ -280,7 +279,7 @@ def test_model_aliases_and_identity():
     a = AnalyticBRDF("BP", 10, rho_s=0.5)
     assert a.cache_key() != a.with_gamma(11).cache_key()
     assert a.with_gamma(11).rho_s.tolist() == [0.5] * 3
-    with pytest.raises(Exception):
-        a.rho_s[0] = 1.0  # read-only
+    with pytest.raises(ValueError, match="read-only"):
+        a.rho_s[0] = 1.0
     assert pca_variable_range("la") == (1e-3, 1 - 1e-3)
     assert pca_variable_range("bp") == (0.0, math.pi / 2)
