@@ -179,8 +179,8 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
         A missing bound, or a bound on the wrong side for the metric.
     """
     __tracebackhide__ = True
-    from ..metrics import evaluate
-    from ..metrics import metric as metric_definition
+    from .metrics import evaluate
+    from .metrics import metric as metric_definition
 
     definition = metric_definition(metric)
     bound_name, bound = ("max", max) if definition.lower_is_better else ("min", min)
@@ -194,7 +194,7 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
     value = getattr(comparison.metrics, definition.field)
     if definition.within(value, bound):
         return value
-    from ..error_maps import write_error_maps
+    from .error_maps import write_error_maps
 
     parent = Path(artifacts) if artifacts is not None else artifacts_root() / _current_test()
     folder = _new_folder(parent, name or definition.name)
@@ -244,7 +244,7 @@ def assert_render_consistent(test, reference_mean, reference_variance, spp: int 
         fraction, alpha and the folder holding the p-value image.
     """
     __tracebackhide__ = True
-    from ..statistics import z_test
+    from .statistics import z_test
 
     test_image = _as_image(test, "test")
     if spp is None:
@@ -260,7 +260,7 @@ def assert_render_consistent(test, reference_mean, reference_variance, spp: int 
     result = z_test(test_image.rgb, reference_image.rgb, variance_image.rgb, spp, **options)
     if result.passed:
         return result
-    from ..error_maps import write_z_test_maps
+    from .error_maps import write_z_test_maps
 
     parent = Path(artifacts) if artifacts is not None else artifacts_root() / _current_test()
     folder = _new_folder(parent, name or "z-test")

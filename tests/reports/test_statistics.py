@@ -4,7 +4,6 @@ from decimal import Decimal, getcontext
 
 import numpy as np
 import pytest
-
 from translucent.errors import InputError
 from translucent.image import Image
 from translucent.reports.statistics import (

@@ -1,0 +1,177 @@
+"""The pytest plugin: assertions, artifacts on failure, reference regeneration, entry point."""
+
+import textwrap
+
+import numpy as np
+import pytest
+from translucent.errors import InputError
+from translucent.image import Image
+from translucent.reports.pytest_plugin import (
+    artifacts_root,
+    assert_image_close,
+    assert_render_consistent,
+)
+
+pytest_plugins = ["pytester"]
+
+
+def gradient(height=24, width=24):
+    y, x = np.mgrid[0:height, 0:width] / max(height, width)
+    return np.stack([0.2 + x, 0.3 + y, 0.5 + x * y], axis=-1).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------- in this suite
+
+
+def test_the_fixture_is_registered_here(image_checks, tmp_path_factory):
+    """The plugin is active in this suite through its entry point (no conftest)."""
+    image = gradient()
+    assert image_checks.assert_image_close(image, image, max=0.0) == 0.0
+    assert artifacts_root() == tmp_path_factory.getbasetemp() / "translucent-artifacts"
+    assert image_checks.artifacts.parent == artifacts_root()
+
+
+def test_a_failed_image_check_leaves_its_maps_where_the_message_says(image_checks):
+    reference = gradient()
+    with pytest.raises(AssertionError, match=r"hdr-flip = [\d.]+, above the maximum 0.01 "
+                                             r"\(24 x 24 pixels\); error maps in ") as failure:
+        image_checks.assert_image_close(reference * 1.5, reference, max=0.01)
+    folder = image_checks.artifacts / "hdr-flip"
+    assert str(folder) in str(failure.value)
+    assert {path.name for path in folder.iterdir()} == {
+        f"{name}.{ext}" for name in ("flip", "relative_error", "ciede2000", "ssim")
+        for ext in ("exr", "png")}
+
+
+def test_a_second_failure_gets_its_own_folder(tmp_path):
+    reference = gradient()
+    for _ in range(2):
+        with pytest.raises(AssertionError):
+            assert_image_close(reference * 2, reference, "rmse", max=0.0, artifacts=tmp_path)
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["rmse", "rmse-2"]
+
+
+def test_similarity_metrics_take_a_minimum(tmp_path):
+    reference = gradient()
+    assert assert_image_close(reference, reference, "psnr", min=40) == float("inf")
+    with pytest.raises(AssertionError, match="ssim = .*, below the minimum 0.999"):
+        assert_image_close(reference * 0.5, reference, "ssim", min=0.999, artifacts=tmp_path)
+
+
+@pytest.mark.parametrize("metric, bounds, match", [
+    ("hdr-flip", {}, r"needs max= and only that bound \(hdr-flip is an error\)"),
+    ("psnr", {"max": 3.0}, r"needs min= and only that bound \(psnr is a similarity\)"),
+])
+def test_the_bound_must_match_the_metric(metric, bounds, match):
+    with pytest.raises(TypeError, match=match):
+        assert_image_close(gradient(), gradient(), metric, **bounds)
+
+
+def test_images_may_be_exr_paths(tmp_path):
+    path = Image(gradient()).write(tmp_path / "reference.exr")
+    assert assert_image_close(gradient(), path, "rmse", max=0.0) == 0.0
+    with pytest.raises(InputError, match="missing.exr: path = .*: no such file"):
+        assert_image_close(gradient(), tmp_path / "missing.exr", max=0.1)
+
+
+def test_different_sizes_are_bad_input_not_a_failed_check():
+    with pytest.raises(InputError, match="reference is 24 x 24"):
+        assert_image_close(gradient(24, 30), gradient(), max=1.0)
+
+
+def test_render_consistency(rng, tmp_path):
+    """Exponential samples: the mean of 64 is Gamma(64, truth / 64); variance truth**2."""
+    truth = gradient().astype(np.float64)
+    test = Image(rng.gamma(64, truth / 64), metadata={"spp": 64})
+    assert assert_render_consistent(test, truth, truth**2).passed
+    biased = rng.gamma(4096, 1.2 * truth / 4096)
+    with pytest.raises(AssertionError, match=r"z-test FAILED: .* % of 1728 pixel channels "
+                                             r"accepted .*p-value image and maps in "):
+        assert_render_consistent(biased, truth, truth**2, spp=4096, artifacts=tmp_path)
+    written = {path.name for path in (tmp_path / "z-test").iterdir()}
+    assert {"p_value.exr", "p_value.png", "rejected.png", "test.exr", "reference.exr",
+            "difference.exr"} <= written
+
+
+def test_render_consistency_needs_spp():
+    with pytest.raises(TypeError, match="needs spp="):
+        assert_render_consistent(gradient(), gradient(), gradient())
+
+
+# ----------------------------------------------------------------------------- pytester
+
+#: Options of the inner runs: hypothesis is not what translucent installs, and its plugin
+#: re-imports hypothesis (2-3 s here) in every in-process run after pytester restores
+#: sys.modules.
+QUIET = ("-p", "no:cacheprovider", "-p", "no:hypothesispytest")
+
+CONSUMER_TESTS = """
+    import numpy as np
+    import translucent
+
+    def image(scale=1.0):
+        y, x = np.mgrid[0:16, 0:16] / 16
+        return translucent.Image(scale * np.stack([0.2 + x, 0.3 + y, 0.5 + x * y], axis=-1))
+
+    def test_close(image_checks):
+        image_checks.assert_image_close(image(), image(), metric="ldr-flip", max=0.0)
+
+    def test_too_far(image_checks):
+        image_checks.assert_image_close(image(2.0), image(), metric="hdr-flip", max=0.01)
+
+    def test_reference(reference_image):
+        stored = reference_image("refs/gradient.exr", lambda: image())
+        print("producer result shape", stored.shape)
+"""
+
+
+def test_a_fresh_project_gets_the_plugin_from_the_entry_point(pytester):
+    """A project with no conftest that only imports translucent, run in a new process."""
+    pytester.makepyfile(test_consumer=textwrap.dedent(CONSUMER_TESTS))
+    artifacts = pytester.path / "artifacts"
+    result = pytester.runpytest_subprocess(*QUIET, f"--translucent-artifacts={artifacts}")
+    result.assert_outcomes(passed=2, failed=1)
+    result.stdout.fnmatch_lines([f"*hdr-flip = *above the maximum 0.01*error maps in "
+                                 f"{artifacts}*",
+                                 "*references regenerated*", "*refs/gradient.exr"])
+    assert (artifacts / "test_consumer.py_test_too_far" / "hdr-flip" / "flip.png").is_file()
+    assert (pytester.path / "refs" / "gradient.exr").is_file()
+
+
+REGENERATION_TESTS = """
+    import numpy as np
+    from translucent.image import Image
+
+    CALLS = []
+
+    def test_reference(reference_image):
+        def producer():
+            CALLS.append(1)
+            return np.full((4, 4, 3), 2.0)
+        stored = reference_image("gradient.exr", producer)
+        assert float(stored.rgb.mean()) == 2.0
+        print(f"producer called {len(CALLS)} times")
+"""
+
+
+def test_a_stored_reference_is_read_and_regenerated_on_request(pytester):
+    """Missing references are made in the fresh-project test above; here one is stored."""
+    pytester.makepyfile(test_regeneration=textwrap.dedent(REGENERATION_TESTS))
+    reference = Image(np.full((4, 4, 3), 2.0)).write(pytester.path / "gradient.exr")
+    stored = reference.stat().st_mtime_ns
+
+    kept = pytester.runpytest(*QUIET, "-s")
+    kept.assert_outcomes(passed=1)
+    kept.stdout.fnmatch_lines(["*producer called 0 times*"])
+    kept.stdout.no_fnmatch_line("*references regenerated*")
+    assert reference.stat().st_mtime_ns == stored
+
+    regenerated = pytester.runpytest(*QUIET, "-s", "--translucent-regenerate")
+    regenerated.assert_outcomes(passed=1)
+    regenerated.stdout.fnmatch_lines(["*producer called 1 times*",
+                                      "*references regenerated*", "*gradient.exr"])
+
+
+def test_the_options_are_registered(pytestconfig):
+    assert pytestconfig.getoption("translucent_regenerate") is False
+    assert pytestconfig.getoption("translucent_artifacts") is None
