@@ -31,11 +31,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..cache import content_hash
 from ..errors import InputError
 from ..image import Image
 from ..materials.fresnel import fresnel_transmittance
 from ..materials.homogeneous import Dipole
-from ..materials.subedit import LOG_FLOOR, SubEditProfiles, subedit_from_dipole
+from ..materials.subedit import SubEditProfiles, subedit_from_dipole
+from ..scenes.scene import DirectionalLight, PointLight
 from .base import StageLog
 
 __all__ = [
@@ -169,10 +171,10 @@ def irradiance_mipmap(buffer: SurfaceBuffer, flux: np.ndarray, cosine: np.ndarra
         Number of levels, >= 1.
     """
     valid = buffer.valid
-    depth = np.where(valid, buffer.depth, np.nan)
     level = IrradianceLevel(buffer.position, buffer.normal, buffer.uv, cosine,
                             buffer.footprint, np.where(valid[..., None], flux, 0.0),
-                            depth, depth, valid)
+                            np.where(valid, buffer.depth, np.inf),
+                            np.where(valid, buffer.depth, -np.inf), valid)
     pyramid = [level]
     for _ in range(1, levels):
         child_valid = _blocks(level.valid, False)
@@ -188,9 +190,8 @@ def irradiance_mipmap(buffer: SurfaceBuffer, flux: np.ndarray, cosine: np.ndarra
         normal = average(level.normal)
         length = np.linalg.norm(normal, axis=-1, keepdims=True)
         normal = np.where(length > 0, normal / np.maximum(length, 1e-300), 0.0)
-        with np.errstate(all="ignore"):
-            depth_min = np.nanmin(_blocks(level.depth_min, np.nan), axis=2)
-            depth_max = np.nanmax(_blocks(level.depth_max, np.nan), axis=2)
+        depth_min = _blocks(level.depth_min, np.inf).min(axis=2)
+        depth_max = _blocks(level.depth_max, -np.inf).max(axis=2)
         level = IrradianceLevel(average(level.position), normal, average(level.uv),
                                 average(level.cosine), 2.0 * average(level.footprint),
                                 _blocks(level.flux, 0.0).sum(axis=2), depth_min, depth_max,
@@ -292,7 +293,7 @@ def select_irradiance_samples(pyramid: list[IrradianceLevel], material: SubEditP
             passes = level.valid.copy()
         else:
             texel = material.texel_index(level.uv)
-            with np.errstate(invalid="ignore"):
+            with np.errstate(invalid="ignore"):  # inf - inf on invalid texels
                 smooth = (level.depth_max - level.depth_min) < z0
             fine_enough = alpha * level.footprint < ranges[texel] * np.abs(level.cosine)
             passes = level.valid & smooth & fine_enough
@@ -469,7 +470,7 @@ def _bucket_radii(limit: int) -> np.ndarray:
     return np.asarray(radii, dtype=np.int64)
 
 
-def _evaluate_pairs(table, step_inverse, segments, log_scale, distance, texel_in, texel_out):
+def _evaluate_pairs(table, step_inverse, segments, distance, texel_in, texel_out):
     """sqrt(P_i(d) P_o(d)) for pairs (Eq. 8 with Eq. 9), float32, shape (M, 3); 0 at r >= r_s."""
     position = distance * step_inverse
     inside = position < segments
@@ -481,7 +482,7 @@ def _evaluate_pairs(table, step_inverse, segments, log_scale, distance, texel_in
     start_o = table[texel_out, k]
     end_o = table[texel_out, k + 1]
     log_value = 0.5 * ((start_i + start_o) + weight * ((end_i + end_o) - (start_i + start_o)))
-    value = np.exp(log_value + log_scale)
+    value = np.exp(log_value)
     return np.where(inside[:, None], value, 0.0)
 
 
@@ -531,59 +532,181 @@ def splat_level(samples: IrradianceSamples, bounds_low: np.ndarray, bounds_high:
     buckets = _bucket_radii(limit)
     bucket_of = np.searchsorted(buckets, radius.astype(np.int64))
     scale = float(mm_per_unit) ** 2  # mm^-2 -> per scene unit squared
-    kernel = _splat_numpy if backend == "numpy" else _splat_drjit
+    kernels = {"numpy": _NumpyKernel, "drjit": _DrJitKernel}
+    if backend not in kernels:
+        raise InputError(f"unknown backend; valid: {', '.join(kernels)}", field="backend",
+                         value=backend)
+    kernel = kernels[backend](samples, bounds_low, bounds_high, level, level_texel, material,
+                              mm_per_unit, scale)
     pairs = 0
     for bucket in np.unique(bucket_of):
         members = bucket_of == bucket
         dx, dy = _disc_offsets(int(buckets[bucket]))
         pairs += int(members.sum()) * len(dx)
-        kernel(exitance, samples, index[members],
-               np.floor(centre_x[members]).astype(np.int64),
-               np.floor(centre_y[members]).astype(np.int64), dx, dy,
-               bounds_low, bounds_high, level, level_texel, material, mm_per_unit, scale)
+        kernel.splat(index[members], np.floor(centre_x[members]).astype(np.int64),
+                     np.floor(centre_y[members]).astype(np.int64), dx, dy)
     if stats is not None:
         stats["pairs"] = stats.get("pairs", 0) + pairs
-    return exitance.reshape(height, width, 3)
+    return kernel.result().reshape(height, width, 3)
 
 
-def _splat_numpy(exitance, samples, index, column, row, dx, dy, bounds_low, bounds_high,
-                 level, level_texel, material, mm_per_unit, scale):
-    """The numpy kernel of :func:`splat_level` for samples sharing one disc of offsets."""
-    height, width = level.shape
-    valid = level.valid.reshape(-1)
-    position = level.position.reshape(-1, 3)
-    texel_out_all = level_texel.reshape(-1)
-    table = material.flat_log_profile.astype(np.float32)
-    step_inverse = material.segments / (material.r_s / mm_per_unit)
-    per_chunk = max(1, PAIR_CHUNK // len(dx))
-    for start in range(0, len(index), per_chunk):
-        part = slice(start, start + per_chunk)
-        sample = np.repeat(index[part], len(dx))
-        px = (column[part][:, None] + dx[None, :]).reshape(-1)
-        py = (row[part][:, None] + dy[None, :]).reshape(-1)
-        inside = (px >= 0) & (px < width) & (py >= 0) & (py < height)
-        sample, px, py = sample[inside], px[inside], py[inside]
-        pixel = py * width + px
-        hit = valid[pixel]
-        sample, pixel = sample[hit], pixel[hit]
-        offset = position[pixel] - samples.position[sample]
-        distance = np.sqrt(np.einsum("ij,ij->i", offset, offset))
-        within = (distance >= bounds_low[sample]) & (distance < bounds_high[sample])
-        sample, pixel, distance = sample[within], pixel[within], distance[within]
-        if not len(sample):
-            continue
-        value = _evaluate_pairs(table, step_inverse, material.segments, np.float32(0.0),
-                                distance, samples.texel[sample], texel_out_all[pixel])
-        weight = value * samples.flux[sample] * scale
-        for channel in range(3):
-            exitance[:, channel] += np.bincount(pixel, weights=weight[:, channel],
-                                                minlength=len(valid))
+class _NumpyKernel:
+    """The numpy kernel of :func:`splat_level`: pairs in chunks, accumulated by bincount."""
+
+    def __init__(self, samples, bounds_low, bounds_high, level, level_texel, material,
+                 mm_per_unit, scale):
+        self.samples = samples
+        self.bounds_low = bounds_low
+        self.bounds_high = bounds_high
+        self.height, self.width = level.shape
+        self.valid = level.valid.reshape(-1)
+        self.position = level.position.reshape(-1, 3)
+        self.texel_out = level_texel.reshape(-1)
+        self.material = material
+        self.table = material.flat_log_profile.astype(np.float32)
+        self.step_inverse = material.segments / (material.r_s / mm_per_unit)
+        self.flux = samples.flux * scale
+        self.exitance = np.zeros((len(self.valid), 3))
+
+    def splat(self, index, column, row, dx, dy):
+        """Splat samples ``index`` centred on pixels (column, row) over offsets (dx, dy)."""
+        per_chunk = max(1, PAIR_CHUNK // len(dx))
+        for start in range(0, len(index), per_chunk):
+            part = slice(start, start + per_chunk)
+            sample = np.repeat(index[part], len(dx))
+            px = (column[part][:, None] + dx[None, :]).reshape(-1)
+            py = (row[part][:, None] + dy[None, :]).reshape(-1)
+            inside = (px >= 0) & (px < self.width) & (py >= 0) & (py < self.height)
+            sample, px, py = sample[inside], px[inside], py[inside]
+            pixel = py * self.width + px
+            hit = self.valid[pixel]
+            sample, pixel = sample[hit], pixel[hit]
+            offset = self.position[pixel] - self.samples.position[sample]
+            distance = np.sqrt(np.einsum("ij,ij->i", offset, offset))
+            within = (distance >= self.bounds_low[sample]) & (distance < self.bounds_high[sample])
+            sample, pixel, distance = sample[within], pixel[within], distance[within]
+            if not len(sample):
+                continue
+            value = _evaluate_pairs(self.table, self.step_inverse, self.material.segments,
+                                    distance, self.samples.texel[sample], self.texel_out[pixel])
+            weight = value * self.flux[sample]
+            for channel in range(3):
+                self.exitance[:, channel] += np.bincount(pixel, weights=weight[:, channel],
+                                                         minlength=len(self.valid))
+
+    def result(self) -> np.ndarray:
+        """The accumulated exitance, (H * W, 3)."""
+        return self.exitance
 
 
-def _splat_drjit(*arguments):
-    from ._splatting_drjit import splat_bucket
+@functools.lru_cache(maxsize=1)
+def _jit():
+    """Dr.Jit and its array types: CUDA where a GPU is usable, else LLVM (libLLVM set up first)."""
+    import os
 
-    splat_bucket(*arguments)
+    from ..backend import find_libllvm
+
+    libllvm = find_libllvm()
+    if libllvm and "DRJIT_LIBLLVM_PATH" not in os.environ:
+        os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
+    import drjit as dr
+
+    if dr.has_backend(dr.JitBackend.CUDA):
+        import drjit.cuda as types
+    elif dr.has_backend(dr.JitBackend.LLVM):
+        import drjit.llvm as types
+    else:
+        raise InputError("Dr.Jit has neither a CUDA nor an LLVM backend here; use "
+                         "backend = \"numpy\"", field="backend", value="drjit")
+    return dr, types
+
+
+class _DrJitKernel:
+    """The Dr.Jit kernel of :func:`splat_level`: one fused kernel per bucket of samples.
+
+    Each pair (sample, offset) is one lane: gather the pixel's surface point and texel,
+    test the distance against :math:`[R^k_{min}, R^k_{max})`, evaluate Eq. 8-9 and
+    scatter-add into the exitance (float32 on the device, LLVM on the CPU or CUDA).
+    Sizes enter as opaque values so that a kernel compiles once per material layout.
+    """
+
+    def __init__(self, samples, bounds_low, bounds_high, level, level_texel, material,
+                 mm_per_unit, scale):
+        dr, t = _jit()
+        self.dr, self.t = dr, t
+        self.height, self.width = level.shape
+        valid = level.valid.reshape(-1)
+        texel = np.where(valid, level_texel.reshape(-1), -1).astype(np.int32)
+        position = level.position.reshape(-1, 3).astype(np.float32)
+        self.pixel_position = [t.Float(np.ascontiguousarray(position[:, c])) for c in range(3)]
+        self.texel_out = t.Int32(texel)
+        self.table = t.Float(np.ascontiguousarray(material.flat_log_profile, np.float32)
+                             .reshape(-1))
+        self.segments = material.segments
+        self.step_inverse = material.segments / (material.r_s / mm_per_unit)
+        sample_position = samples.position.astype(np.float32)
+        self.sample_position = [t.Float(np.ascontiguousarray(sample_position[:, c]))
+                                for c in range(3)]
+        flux = (samples.flux * scale).astype(np.float32)
+        self.flux = [t.Float(np.ascontiguousarray(flux[:, c])) for c in range(3)]
+        self.texel_in = t.Int32(samples.texel.astype(np.int32))
+        self.low = t.Float(bounds_low.astype(np.float32))
+        self.high = t.Float(bounds_high.astype(np.float32))
+        self.exitance = [dr.zeros(t.Float, self.height * self.width) for _ in range(3)]
+
+    def splat(self, index, column, row, dx, dy):
+        """Splat samples ``index`` centred on pixels (column, row) over offsets (dx, dy)."""
+        lanes = len(index) * len(dx)
+        for start in range(0, lanes, 1 << 30):  # lane indices stay within UInt32
+            self._launch(index, column, row, dx, dy, start, min(lanes, start + (1 << 30)))
+
+    def _launch(self, index, column, row, dx, dy, start, stop):
+        dr, t = self.dr, self.t
+        count = dr.opaque(t.UInt32, len(dx))
+        lane = dr.arange(t.UInt32, stop - start) + dr.opaque(t.UInt32, start)
+        local = lane // count
+        offset = lane - local * count
+        sample = dr.gather(t.UInt32, t.UInt32(index.astype(np.uint32)), local)
+        x = dr.gather(t.Int32, t.Int32(column.astype(np.int32)), local) + \
+            dr.gather(t.Int32, t.Int32(dx.astype(np.int32)), offset)
+        y = dr.gather(t.Int32, t.Int32(row.astype(np.int32)), local) + \
+            dr.gather(t.Int32, t.Int32(dy.astype(np.int32)), offset)
+        width = dr.opaque(t.Int32, self.width)
+        active = (x >= 0) & (x < width) & (y >= 0) & (y < dr.opaque(t.Int32, self.height))
+        pixel = t.UInt32(dr.select(active, y * width + x, 0))
+        texel_out = dr.gather(t.Int32, self.texel_out, pixel, active)
+        active &= texel_out >= 0
+        squared = t.Float(0.0)
+        for c in range(3):
+            difference = dr.gather(t.Float, self.pixel_position[c], pixel, active) - \
+                dr.gather(t.Float, self.sample_position[c], sample, active)
+            squared = dr.fma(difference, difference, squared)
+        distance = dr.sqrt(squared)
+        active &= (distance >= dr.gather(t.Float, self.low, sample, active)) & \
+            (distance < dr.gather(t.Float, self.high, sample, active))
+        position = distance * dr.opaque(t.Float, self.step_inverse)
+        segments = dr.opaque(t.Int32, self.segments)
+        active &= position < t.Float(segments)
+        k = dr.minimum(t.Int32(position), segments - 1)
+        weight = position - t.Float(k)
+        stride = (segments + 1) * 3
+        texel_in = dr.gather(t.Int32, self.texel_in, sample, active)
+        base_in = t.UInt32(texel_in * stride + k * 3)
+        base_out = t.UInt32(texel_out * stride + k * 3)
+        for c in range(3):
+            first = dr.gather(t.Float, self.table, base_in + c, active) + \
+                dr.gather(t.Float, self.table, base_out + c, active)
+            second = dr.gather(t.Float, self.table, base_in + 3 + c, active) + \
+                dr.gather(t.Float, self.table, base_out + 3 + c, active)
+            value = dr.exp(0.5 * dr.fma(weight, second - first, first)) * \
+                dr.gather(t.Float, self.flux[c], sample, active)
+            dr.scatter_reduce(dr.ReduceOp.Add, self.exitance[c], value, pixel, active)
+        dr.eval(self.exitance)
+
+    def result(self) -> np.ndarray:
+        """The accumulated exitance, (H * W, 3), float64."""
+        return np.stack([np.asarray(channel, dtype=np.float64) for channel in self.exitance],
+                        axis=-1)
 
 
 # ====================================================================== accumulation
@@ -668,8 +791,8 @@ def brute_force_exitance(samples: IrradianceSamples, buffer: SurfaceBuffer,
         distance = np.sqrt(np.einsum("ijk,ijk->ij", offset, offset)).reshape(-1)
         texel_o = np.repeat(texel_out[part], len(samples))
         texel_i = np.tile(samples.texel, len(position[part]))
-        value = _evaluate_pairs(table, step_inverse, material.segments, np.float32(0.0),
-                                distance, texel_i, texel_o)
+        value = _evaluate_pairs(table, step_inverse, material.segments, distance, texel_i,
+                                texel_o)
         value = value.reshape(-1, len(samples), 3) * samples.flux[None, :, :]
         exitance[pixels[part]] = value.sum(axis=1) * mm_per_unit**2
     return exitance.reshape(height, width, 3)
@@ -835,9 +958,240 @@ def as_subedit(material) -> SubEditProfiles:
                      field="material", value=type(material).__name__)
 
 
-@functools.lru_cache(maxsize=32)
+_CONVERTED: dict[str, SubEditProfiles] = {}
+
+
 def _converted(material: Dipole) -> SubEditProfiles:
-    return subedit_from_dipole(material).profiles
+    key = content_hash(material)
+    if key not in _CONVERTED:
+        _CONVERTED[key] = subedit_from_dipole(material).profiles
+    return _CONVERTED[key]
 
 
-_ = LOG_FLOOR  # the kernels rely on exp(0.5 * (LOG_FLOOR + x)) underflowing to 0 in float32
+# ====================================================================== scenes
+_LIGHTS = (PointLight, DirectionalLight)
+#: Widest irradiance-buffer cone for a point light (degrees): a light inside the object's
+#: bounding sphere sees only this cone of it.
+MAX_LIGHT_FOV = 160.0
+#: Margin of the irradiance buffer around the bounding sphere (no hit falls on its edge).
+VIEW_MARGIN = 1.02
+
+
+def _translucent_objects(scene) -> list[int]:
+    return [index for index, item in enumerate(scene.objects)
+            if isinstance(item.material, (Dipole, SubEditProfiles))]
+
+
+def applies_to(scene) -> str | None:
+    """None when the method renders ``scene``; otherwise why not.
+
+    It needs a translucent object (Dipole or SubEdit material) and point or directional
+    lights only (Chen et al. 2012, Sect. 6: other lights are future work there).
+    """
+    if not _translucent_objects(scene):
+        return "no translucent object (Dipole or SubEdit material) in the scene"
+    others = sorted({type(light).__name__ for light in scene.lights
+                     if not isinstance(light, _LIGHTS)})
+    if others:
+        return (f"the method handles point and directional lights only; the scene has "
+                f"{', '.join(others)}")
+    if not scene.lights:
+        return "the scene has no light"
+    return None
+
+
+def _check_knobs(knobs: dict) -> dict:
+    unknown = sorted(set(knobs) - set(DEFAULT_KNOBS))
+    if unknown:
+        raise InputError(f"unknown knob; valid: {', '.join(DEFAULT_KNOBS)}", field="knobs",
+                         value=unknown)
+    merged = {**DEFAULT_KNOBS, **knobs}
+    for name in ("irradiance_resolution", "levels"):
+        value = merged[name]
+        if isinstance(value, bool) or int(value) != value or not 1 <= int(value) <= 8192:
+            raise InputError("must be an integer in [1, 8192]", field=name, value=value)
+        merged[name] = int(value)
+    if merged["levels"] > 12:
+        raise InputError("must be <= 12", field="levels", value=merged["levels"])
+    for name in ("z0", "alpha", "epsilon", "lambda_z", "lambda_m"):
+        value = float(merged[name])
+        if not np.isfinite(value) or value < 0 or (name == "epsilon" and value == 0):
+            raise InputError("must be a finite number >= 0 (epsilon > 0)", field=name,
+                             value=merged[name])
+        merged[name] = value
+    if merged["backend"] not in ("numpy", "drjit"):
+        raise InputError("must be 'numpy' or 'drjit'", field="backend", value=merged["backend"])
+    merged["multiresolution"] = bool(merged["multiresolution"])
+    merged["adaptive"] = bool(merged["adaptive"])
+    return merged
+
+
+def precompute(scene, **knobs) -> SplattingState:
+    """Validate the scene and knobs; nothing geometric is precomputed (Chen et al. 2012).
+
+    The method needs no precomputation: every buffer is rebuilt each frame from the current
+    mesh, so a deforming mesh costs nothing extra and nothing can go stale. The only
+    tables (the SubEdit conversion of a dipole and Eq. 14's lookup table) depend on the
+    material alone and are built on first use.
+    """
+    reason = applies_to(scene)
+    if reason is not None:
+        raise InputError(f"the splatting method cannot render this scene: {reason}",
+                         file=scene.source, field="scene", value=scene.name)
+    return SplattingState(scene, _check_knobs(knobs))
+
+
+def _surface_buffer(gbuffer_view, object_index: int, uv_values, footprint) -> SurfaceBuffer:
+    valid = gbuffer_view.hit & (gbuffer_view.object_id == object_index)
+    uv = gbuffer_view.interpolate(object_index, uv_values) if uv_values is not None else \
+        np.zeros(valid.shape + (2,))
+    depth = np.where(valid, gbuffer_view.depth, 0.0)
+    return SurfaceBuffer(gbuffer_view.position, gbuffer_view.normal, uv, depth, valid,
+                         np.where(valid, footprint, 0.0))
+
+
+def _perspective_footprint(gbuffer_view) -> np.ndarray:
+    """Pixel cross-section side at the hit: d (2 tan(fov/2) / W) cos^1.5 of the off-axis angle."""
+    camera = gbuffer_view.camera
+    pixel = 2.0 * math.tan(math.radians(camera.fov) / 2.0) / camera.width
+    cosine = np.clip(-gbuffer_view.view_direction @ camera.forward, 0.0, 1.0)
+    depth = np.where(gbuffer_view.hit, gbuffer_view.depth, 0.0)
+    return depth * pixel * cosine**1.5
+
+
+@dataclass
+class SplattingState:
+    """What :func:`precompute` returns: the scene and knobs (no geometric state).
+
+    ``render(lights=None, material=None, scene=None)`` renders a frame; ``scene`` replaces
+    the geometry (a deformed mesh) without any precomputation.
+    """
+
+    scene: object
+    knobs: dict
+    log: StageLog = field(default_factory=StageLog)
+
+    def render(self, lights=None, material=None, *, scene=None) -> Image:
+        """Render one frame with Chen et al. 2012's four steps; see the module docstring.
+
+        Parameters
+        ----------
+        lights : sequence of PointLight / DirectionalLight, optional
+            Replace the scene's lights.
+        material : SubEditProfiles or Dipole, optional
+            Replace the material of every translucent object.
+        scene : Scene, optional
+            Render this scene (for example with a deformed mesh) instead of the one given
+            to :func:`precompute`.
+        """
+        from ..scenes.raycast import gbuffer
+
+        scene = self.scene if scene is None else scene
+        if lights is not None:
+            scene = scene.with_lights(lights)
+        if material is not None:
+            for index in _translucent_objects(scene):
+                scene = scene.with_material(scene.objects[index].name, material)
+        reason = applies_to(scene)
+        if reason is not None:
+            raise InputError(f"the splatting method cannot render this scene: {reason}",
+                             file=scene.source, field="scene", value=scene.name)
+        log = StageLog()
+        start = time.perf_counter()
+        camera_view = gbuffer(scene)
+        camera = CameraModel.from_camera(scene.camera)
+        camera_footprint = _perspective_footprint(camera_view)
+        log.seconds["buffer generation"] = time.perf_counter() - start
+        radiance = np.zeros(camera_view.shape + (3,))
+        for index in _translucent_objects(scene):
+            radiance += self._render_object(scene, index, camera_view, camera,
+                                            camera_footprint, log)
+        seconds = time.perf_counter() - start
+        self.log = log
+        return Image(radiance.astype(np.float32), metadata={
+            "producer": "splatting", "knobs": self.knobs, "seconds": seconds,
+            "stage_seconds": log.seconds, "notes": log.notes, "skipped": log.skipped})
+
+    def _render_object(self, scene, index, camera_view, camera, camera_footprint, log):
+        item = scene.objects[index]
+        material = as_subedit(item.material)
+        mesh = item.mesh
+        if mesh.uv is None and not material.is_homogeneous:
+            raise InputError("a textured SubEdit material needs a mesh with uv coordinates",
+                             field=f"objects[{index}].mesh.uv", value=None)
+        uv = mesh.uv if mesh.uv is not None else None
+        centre = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
+        radius = float(np.max(np.linalg.norm(mesh.vertices - centre, axis=1)))
+        start = time.perf_counter()
+        camera_buffer = _surface_buffer(camera_view, index, uv, camera_footprint)
+        views = [self._light_view(scene, index, light, uv, centre, radius, material.eta)
+                 for light in scene.lights]
+        log.seconds["buffer generation"] += time.perf_counter() - start
+        if not camera_buffer.valid.any():
+            log.skip(f"object '{item.name}' is out of view: nothing to splat")
+            return np.zeros(camera_buffer.shape + (3,))
+        return splat_frame(camera_buffer, camera, views, material,
+                           mm_per_unit=scene.mm_per_unit, sphere_radius=radius,
+                           knobs=self.knobs, log=log)
+
+    def _light_view(self, scene, index, light, uv, centre, radius, eta) -> LightView:
+        from ..scenes.raycast import gbuffer_from_point, gbuffer_orthographic
+
+        size = self.knobs["irradiance_resolution"]
+        if isinstance(light, PointLight):
+            towards = centre - light.position
+            distance = float(np.linalg.norm(towards))
+            if distance <= radius * VIEW_MARGIN:
+                fov = MAX_LIGHT_FOV
+            else:
+                fov = min(MAX_LIGHT_FOV,
+                          2.0 * math.degrees(math.asin(radius * VIEW_MARGIN / distance)))
+            if distance == 0:
+                towards = np.array([0.0, 0.0, -1.0])
+            view = gbuffer_from_point(scene, light.position, towards, fov, size)
+            buffer = _surface_buffer(view, index, uv, _perspective_footprint(view))
+            offset = light.position - np.where(buffer.valid[..., None], buffer.position, 0.0)
+            squared = np.maximum(np.einsum("...k,...k->...", offset, offset), 1e-300)
+            to_light = offset / np.sqrt(squared)[..., None]
+            irradiance = light.intensity / squared[..., None]
+        else:
+            view = gbuffer_orthographic(scene, light.direction, size, center=centre,
+                                        extent=radius * VIEW_MARGIN)
+            footprint = np.full(view.shape, math.sqrt(view.pixel_area))
+            buffer = _surface_buffer(view, index, uv, footprint)
+            to_light = -light.direction
+            irradiance = light.irradiance
+        return light_view(buffer, to_light, irradiance, eta)
+
+
+# ====================================================================== command line
+def add_approx_arguments(parser) -> None:
+    """Options of ``translucent approx splatting SCENE``."""
+    parser.add_argument("--irradiance-resolution", type=int,
+                        default=DEFAULT_KNOBS["irradiance_resolution"],
+                        help="irradiance buffer side in pixels (default 512)")
+    parser.add_argument("--levels", type=int, default=DEFAULT_KNOBS["levels"],
+                        help="mipmap levels of both buffers (default 3)")
+    parser.add_argument("--no-multiresolution", action="store_true",
+                        help="splat everything at full resolution (ablation)")
+    parser.add_argument("--no-adaptive", action="store_true",
+                        help="use every irradiance sample of the finest level (ablation)")
+    parser.add_argument("--backend", choices=("numpy", "drjit"),
+                        default=DEFAULT_KNOBS["backend"], help="splatting kernel")
+    parser.add_argument("--material", default=None,
+                        help="replace the translucent material: a built-in SubEdit name "
+                             "(checker, veined_marble, wax_gradient) or a SubEdit .npz file")
+
+
+def approx(scene, args) -> Image:
+    """Render ``scene`` with the options parsed by :func:`add_approx_arguments`."""
+    from ..materials.subedit import BUILTIN_SUBEDIT, builtin_subedit, load_subedit
+
+    knobs = {"irradiance_resolution": args.irradiance_resolution, "levels": args.levels,
+             "multiresolution": not args.no_multiresolution, "adaptive": not args.no_adaptive,
+             "backend": args.backend}
+    material = None
+    if args.material:
+        material = builtin_subedit(args.material) if args.material in BUILTIN_SUBEDIT \
+            else load_subedit(args.material)
+    return precompute(scene, **knobs).render(material=material)

@@ -680,7 +680,7 @@ def load_subedit(path) -> SubEditProfiles:
 
 
 def subedit_from_spec(spec: dict, *, file=None) -> SubEditProfiles:
-    """A SubEdit material from a scene-file table.
+    """Build a SubEdit material from a scene-file table.
 
     Accepted: ``{type="subedit", builtin="veined_marble", ...options}``,
     ``{type="subedit", file="marble.npz"}`` (relative to the scene file's folder) or
@@ -709,3 +709,33 @@ def subedit_from_spec(spec: dict, *, file=None) -> SubEditProfiles:
         raise InputError("unknown option; valid: segments, r_s", file=file, field="material",
                          value=unknown)
     return subedit_from_dipole(measured_medium(str(value)), **spec).profiles
+
+
+#: Options a scene-file table of type "subedit" may hold (besides exactly one source).
+SPEC_KEYS = ("builtin", "file", "measured", "segments", "r_s", "resolution", "squares",
+             "first", "second", "seed", "base", "vein")
+
+
+def _from_table(**table) -> SubEditProfiles:
+    profiles = subedit_from_spec(table)
+    profiles.__dict__["_spec"] = dict(table)  # what rebuilds it, for material_to_dict
+    return profiles
+
+
+def _to_table(profiles: SubEditProfiles) -> dict:
+    spec = profiles.__dict__.get("_spec")
+    if spec is None:
+        raise InputError("this SubEdit texture was made in code: save it with save_subedit "
+                         "and refer to it as {type = \"subedit\", file = \"...\"}",
+                         field="material", value=profiles.name)
+    return dict(spec)
+
+
+def _register() -> None:
+    from .factory import register_material_type
+
+    register_material_type("subedit", _from_table, material_class=SubEditProfiles,
+                           to_dict=_to_table, keys=SPEC_KEYS)
+
+
+_register()
