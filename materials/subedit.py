@@ -204,7 +204,7 @@ class SubEditProfiles:
         -------
         ndarray of int64, shape (...)
         """
-        uv = np.nan_to_num(np.asarray(uv, dtype=np.float64), nan=0.0)
+        uv = np.nan_to_num(np.asarray(uv, dtype=np.float64), nan=0.0, posinf=1.0, neginf=0.0)
         height, width = self.resolution
         column = np.clip((uv[..., 0] * width).astype(np.int64), 0, width - 1)
         row = np.clip((uv[..., 1] * height).astype(np.int64), 0, height - 1)
