@@ -234,9 +234,10 @@ def box(size=(1.0, 1.0, 1.0), center=(0.0, 0.0, 0.0), subdivisions: int = 1, *,
         Closed and outward once coincident edge vertices are merged; each side keeps its
         own vertices, so the vertex normals are the flat side normals.
     """
-    size = np.broadcast_to(np.asarray(size, dtype=np.float64), (3,)).copy()
-    for axis in range(3):
-        _positive(size[axis], "size")
+    given = size
+    size = np.broadcast_to(np.asarray(check_finite(size, "size")), (3,)).copy()
+    if (size <= 0).any():
+        raise InputError("each edge must be > 0", field="size", value=given)
     center = vector3(center, "center")
     segments = _proportional_segments(size, _count(subdivisions, "subdivisions"))
     half = size / 2.0
