@@ -201,19 +201,28 @@ def material_to_dict(material) -> dict:
     InputError
         When no registered type has the material's class.
     """
-    _load_plugins()
-    for entry in MATERIAL_TYPES.values():
-        if entry.material_class is not None and type(material) is entry.material_class:
-            if entry.to_dict is not None:
-                values = entry.to_dict(material)
-            else:
-                values = {key: getattr(material, key) for key in entry.keys
-                          if hasattr(material, key)}
-            values = {"type": entry.name, **values}
-            return {key: _plain(value) for key, value in values.items()}
+    entry = _type_of(material)
+    if entry is None:
+        _load_plugins()
+        entry = _type_of(material)
+    if entry is not None:
+        if entry.to_dict is not None:
+            values = entry.to_dict(material)
+        else:
+            values = {key: getattr(material, key) for key in entry.keys
+                      if hasattr(material, key)}
+        values = {"type": entry.name, **values}
+        return {key: _plain(value) for key, value in values.items()}
     raise InputError("no registered material type builds this class; registered: "
                      f"{', '.join(sorted(MATERIAL_TYPES))}", field="material",
                      value=type(material).__name__)
+
+
+def _type_of(material) -> MaterialType | None:
+    for entry in MATERIAL_TYPES.values():
+        if entry.material_class is not None and type(material) is entry.material_class:
+            return entry
+    return None
 
 
 def _plain(value):

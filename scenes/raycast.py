@@ -294,23 +294,28 @@ class RayEngine:
         position = np.zeros((count, 3))
         geometric = np.zeros((count, 3))
         shading = np.zeros((count, 3))
-        if hit.any():
-            triangles = global_triangle[hit]
+        rows = np.flatnonzero(hit)
+        if len(rows):
+            triangles = global_triangle[rows]
             owner = np.searchsorted(self.face_offsets, triangles, side="right") - 1
-            object_id[hit] = owner
-            triangle_id[hit] = triangles - self.face_offsets[owner]
-            weights = np.stack([1.0 - uv[hit, 0] - uv[hit, 1], uv[hit, 0], uv[hit, 1]], axis=1)
-            barycentrics[hit] = weights
+            object_id[rows] = owner
+            triangle_id[rows] = triangles - self.face_offsets[owner]
+            b1, b2 = uv[rows, 0], uv[rows, 1]
+            b0 = 1.0 - b1 - b2
+            barycentrics[rows, 0], barycentrics[rows, 1], barycentrics[rows, 2] = b0, b1, b2
             corners = self.faces[triangles]
-            points = self.vertices[corners]
-            position[hit] = np.einsum("nk,nkd->nd", weights, points)
-            cross = np.cross(points[:, 1] - points[:, 0], points[:, 2] - points[:, 0])
-            geometric[hit] = cross / np.linalg.norm(cross, axis=1, keepdims=True)
-            smooth = np.einsum("nk,nkd->nd", weights, self.normals[corners])
+            p0, p1, p2 = (self.vertices[corners[:, k]] for k in range(3))
+            position[rows] = b0[:, None] * p0 + b1[:, None] * p1 + b2[:, None] * p2
+            cross = np.cross(p1 - p0, p2 - p0)
+            face_normal = cross / np.linalg.norm(cross, axis=1, keepdims=True)
+            geometric[rows] = face_normal
+            smooth = (b0[:, None] * self.normals[corners[:, 0]]
+                      + b1[:, None] * self.normals[corners[:, 1]]
+                      + b2[:, None] * self.normals[corners[:, 2]])
             length = np.linalg.norm(smooth, axis=1, keepdims=True)
             # opposite vertex normals can cancel inside a triangle: fall back to the face
-            shading[hit] = np.where(length > 1e-12, smooth / np.maximum(length, 1e-300),
-                                    geometric[hit])
+            shading[rows] = np.where(length > 1e-12, smooth / np.maximum(length, 1e-300),
+                                     face_normal)
         return RayHits(hit, t, position, geometric, shading, object_id, triangle_id,
                        barycentrics)
 

@@ -269,6 +269,16 @@ def test_nan_vertex_is_rejected_naming_the_file(tmp_path):
         load_mesh(path)
 
 
+def test_nan_vertex_in_a_ply_is_rejected_naming_the_file(tmp_path):
+    path = tmp_path / "broken.ply"
+    path.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                    "property float y\nproperty float z\nelement face 1\n"
+                    "property list uchar int vertex_indices\nend_header\n"
+                    "0 0 0\n1 0 0\n0 nan 0\n3 0 1 2\n")
+    with pytest.raises(InputError, match=r"broken\.ply: vertices\[2\] = .*NaN or Inf"):
+        load_mesh(path)
+
+
 def test_zero_area_face_is_rejected_naming_the_file(tmp_path):
     path = write_obj(tmp_path / "flat.obj", [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0)],
                      [(0, 1, 3), (0, 1, 2)])
