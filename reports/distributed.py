@@ -1,0 +1,90 @@
+"""Independent tasks (reference renders, benchmark sweeps, batches of fits) on Dask.
+
+Local processes by default; ``scheduler="tcp://host:8786"`` (the ``--scheduler ADDRESS``
+option of the commands) sends them to a running Dask cluster. Results come back in the
+order the tasks were given, so a sweep run here and one run on a cluster are compared
+element by element.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
+
+from ..errors import InputError
+
+__all__ = ["run_tasks", "dask_client"]
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, *, workers: int = 2, threads_per_worker: int = 1):
+    """A ``dask.distributed.Client``: to ``scheduler`` if given, else a local process cluster.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        Address of a running scheduler (``tcp://127.0.0.1:8786``). None starts a
+        :class:`~dask.distributed.LocalCluster` on loopback for the duration.
+    workers, threads_per_worker : int
+        Size of the local cluster (ignored with ``scheduler``).
+    """
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        if not isinstance(scheduler, str) or "://" not in scheduler and ":" not in scheduler:
+            raise InputError("expected a scheduler address such as tcp://127.0.0.1:8786",
+                             field="--scheduler", value=scheduler)
+        try:
+            client = Client(scheduler, timeout="10s")
+        except OSError as error:
+            raise InputError(f"no Dask scheduler answers there ({error})", field="--scheduler",
+                             value=scheduler) from error
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    with LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker,
+                      processes=True, host="127.0.0.1", dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        yield client
+
+
+def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], *,
+              scheduler: str | None = None, local: bool = False, progress: bool = True,
+              workers: int = 2) -> list[Any]:
+    """Run ``function(*args)`` for each ``args`` in ``arguments``; results in the same order.
+
+    Parameters
+    ----------
+    function : callable
+        Must be importable by the workers (a module-level function).
+    arguments : iterable of sequences
+        One argument tuple per task.
+    scheduler : str, optional
+        Dask scheduler address; None runs a local process cluster.
+    local : bool
+        Run serially in this process (no Dask at all): the baseline the distributed run is
+        checked against, and the fallback for a single task.
+    progress : bool
+        A progress bar over finished tasks.
+    workers : int
+        Local cluster size.
+    """
+    from tqdm.auto import tqdm
+
+    arguments = [tuple(args) for args in arguments]
+    if local or (scheduler is None and len(arguments) <= 1):
+        return [function(*args) for args in tqdm(arguments, disable=not progress, leave=False)]
+    from dask.distributed import as_completed
+
+    with dask_client(scheduler, workers=workers) as client:
+        futures = [client.submit(function, *args, pure=False) for args in arguments]
+        index = {future.key: position for position, future in enumerate(futures)}
+        results: list[Any] = [None] * len(futures)
+        with tqdm(total=len(futures), disable=not progress, leave=False) as bar:
+            for future in as_completed(futures):
+                results[index[future.key]] = future.result()
+                bar.update()
+    return results
