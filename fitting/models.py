@@ -1,0 +1,456 @@
+r"""Posteriors over profile parameters given a measured radial profile.
+
+Every model maps a parameter vector :math:`\theta` (in its sampling space) to the exitance
+profile at the nodes of the capture's radial grid, which the capture's
+:class:`~translucent.fitting.profile.ProfileOperator` turns into predicted annulus means.
+The log-probability is vectorised: it takes an ``(n, ndim)`` array and returns ``(n,)``,
+as ``emcee.EnsembleSampler(..., vectorize=True)`` calls it.
+
+Likelihood. Each used annulus ``a`` of channel ``c`` has a mean :math:`m`, a standard error
+:math:`s` from its own scatter and :math:`\nu = N - 2` degrees of freedom. With the noise
+level itself estimated from the same pixels, the mean has a Student-t distribution about
+the prediction :math:`\mu` (the marginal over the unknown pixel variance):
+
+.. math:: \ln L = \sum_{a,c} -\frac{\nu + 1}{2}\ln\Big(1 + \frac{(m - \mu)^2}{\nu s^2}\Big)
+
+Priors (documented in ``docs/capture-format.md`` too):
+
+========================  ===============================  ==============================
+parameter                 prior                            range
+========================  ===============================  ==============================
+sigma_a (per channel)     log-uniform                      :data:`SIGMA_A_RANGE` mm^-1
+sigma_s' (per channel)    log-uniform                      :data:`SIGMA_S_PRIME_RANGE`
+eta (when fitted)         uniform                          :data:`ETA_FIT_RANGE`
+exposure (when unknown)   log-uniform                      :data:`EXPOSURE_RANGE`
+SubEdit ln P knots        uniform box + smoothness         :data:`KNOT_BOX_NATS` about the
+                          (Gaussian second differences)    data's peak
+========================  ===============================  ==============================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..materials.dipole import dipole_reflectance_profile
+from .capture import CaptureSpec
+from .multipole import slab_reflectance_profile, slab_transmittance_profile
+from .profile import RadialProfile
+from .subedit_profile import subedit_knots, subedit_log_profile
+
+__all__ = [
+    "DipoleModel",
+    "ETA_FIT_RANGE",
+    "EXPOSURE_RANGE",
+    "ProfileModel",
+    "SIGMA_A_RANGE",
+    "SIGMA_S_PRIME_RANGE",
+    "SubEditModel",
+    "student_t_log_likelihood",
+]
+
+#: Absorption prior, mm^-1 (log-uniform): from 1e-5 (no capture of a few cm can tell less)
+#: to 10 (opaque within 0.1 mm); the measured media of Jensen et al. 2001 span 2e-4 .. 1.45.
+SIGMA_A_RANGE = (1e-5, 10.0)
+#: Reduced scattering prior, mm^-1 (log-uniform): 0.01 (10 cm transport length) to 1000
+#: (1 um); the measured media span 0.03 .. 20.4.
+SIGMA_S_PRIME_RANGE = (1e-2, 1e3)
+#: Relative index prior when fitted (uniform): water-like to glass-like and beyond.
+ETA_FIT_RANGE = (1.0, 2.0)
+#: Exposure prior when unknown (log-uniform, stored units per mm^-2): wide enough never to
+#: bind; the data fix the scale to a few per cent.
+EXPOSURE_RANGE = (1e-30, 1e30)
+#: SubEdit knot box: ln P within this many nats below / above ln of the measured peak
+#: (divided by the exposure when known). Never binding in practice.
+KNOT_BOX_NATS = (60.0, 10.0)
+#: Default smoothness of SubEdit profiles: the prior standard deviation of the second
+#: difference of ln P between adjacent knots, nats. A dipole sampled at 8 knots has second
+#: differences of 0.1-3 nats; 2 lets such shapes through while damping knot-to-knot noise.
+SUBEDIT_SMOOTHNESS = 2.0
+
+CHANNELS = "RGB"
+#: Grid points evaluated together by :meth:`DipoleModel.initial_guess`.
+GRID_BLOCK = 48
+
+
+def student_t_log_likelihood(residual, stderr, dof) -> np.ndarray:
+    """Sum over the last axis of the Student-t log-density of ``residual`` (up to a constant).
+
+    Parameters
+    ----------
+    residual : ndarray, shape (..., m)
+        Measured minus predicted annulus means.
+    stderr : ndarray, shape (m,)
+        Standard errors of the means, > 0.
+    dof : ndarray, shape (m,)
+        Degrees of freedom, > 0.
+
+    Returns
+    -------
+    ndarray, shape (...)
+    """
+    t2 = (residual / stderr) ** 2
+    return np.sum(-0.5 * (dof + 1.0) * np.log1p(t2 / dof), axis=-1)
+
+
+@dataclass(frozen=True)
+class ParameterInfo:
+    """One coordinate of the sampling space.
+
+    ``transform`` is ``"log"`` (the coordinate is ln of the physical value) or
+    ``"linear"``; ``kind`` groups parameters (``sigma_a``, ``sigma_s_prime``, ``eta``,
+    ``exposure``, ``ln_p``); ``channel`` is 0-2 or None.
+    """
+
+    name: str
+    kind: str
+    transform: str
+    lower: float
+    upper: float
+    channel: int | None = None
+    unit: str = ""
+
+    def to_physical(self, values):
+        """Sampling coordinate -> physical value."""
+        values = np.asarray(values, dtype=np.float64)
+        return np.exp(values) if self.transform == "log" else values
+
+
+class ProfileModel:
+    """Base class: a vectorised log-probability over a measured profile.
+
+    Subclasses set ``parameters`` (a list of :class:`ParameterInfo`) and ``channels``
+    and implement :meth:`profile_nodes` and :meth:`initial_guess`.
+    """
+
+    parameters: list[ParameterInfo]
+    channels: tuple[int, ...] = (0, 1, 2)
+
+    def __init__(self, profile: RadialProfile, spec: CaptureSpec):
+        self.profile = profile
+        self.spec = spec
+        self._observations = [profile.observations(c) for c in range(3)]
+        self.evaluations = 0
+        self.calls = 0
+
+    # --- the sampling space ---------------------------------------------------------------
+    @property
+    def ndim(self) -> int:
+        """Number of parameters."""
+        return len(self.parameters)
+
+    @property
+    def names(self) -> list[str]:
+        """Parameter names, in order."""
+        return [p.name for p in self.parameters]
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """``(ndim, 2)`` prior bounds in the sampling space."""
+        return np.array([[p.lower, p.upper] for p in self.parameters])
+
+    # --- to be provided by subclasses --------------------------------------------------------
+    def profile_nodes(self, theta: np.ndarray) -> np.ndarray:
+        """Predicted exitance times exposure at the grid nodes, shape (n, nodes, 3)."""
+        raise NotImplementedError
+
+    def initial_guess(self) -> np.ndarray:
+        """A starting point for the optimiser, shape (ndim,)."""
+        raise NotImplementedError
+
+    def extra_log_prior(self, theta: np.ndarray) -> np.ndarray:
+        """Log-prior terms beyond the uniform box, shape (n,) (default 0)."""
+        return np.zeros(theta.shape[0])
+
+    # --- the posterior ---------------------------------------------------------------------
+    def predictions(self, theta) -> list[np.ndarray | None]:
+        """Predicted annulus means per channel (None for channels not modelled)."""
+        theta = np.atleast_2d(np.asarray(theta, dtype=np.float64))
+        predicted = self.profile.operator.predict(self.profile_nodes(theta))
+        return [predicted[c] if c in self.channels else None for c in range(3)]
+
+    def log_likelihood(self, theta) -> np.ndarray:
+        """Student-t log-likelihood of the measured annulus means, shape (n,)."""
+        theta = np.atleast_2d(np.asarray(theta, dtype=np.float64))
+        total = np.zeros(theta.shape[0])
+        for c, predicted in enumerate(self.predictions(theta)):
+            if predicted is None:
+                continue
+            mean, stderr, dof = self._observations[c]
+            total += student_t_log_likelihood(mean - predicted, stderr, dof)
+        return np.where(np.isfinite(total), total, -np.inf)
+
+    def in_bounds(self, theta) -> np.ndarray:
+        """True where every coordinate lies within the prior box, shape (n,)."""
+        bounds = self.bounds
+        return np.all((theta >= bounds[:, 0]) & (theta <= bounds[:, 1]), axis=1)
+
+    def log_probability(self, theta, *, bounded: bool = True) -> np.ndarray:
+        """Log-posterior (up to a constant), vectorised: ``(n, ndim) -> (n,)``.
+
+        ``bounded=False`` drops the prior box (used for finite differences at the MAP point
+        when it lies on a bound).
+        """
+        theta = np.atleast_2d(np.asarray(theta, dtype=np.float64))
+        self.calls += 1
+        self.evaluations += theta.shape[0]
+        result = np.full(theta.shape[0], -np.inf)
+        inside = self.in_bounds(theta) if bounded else np.all(np.isfinite(theta), axis=1)
+        if inside.any():
+            points = theta[inside]
+            result[inside] = self.log_likelihood(points) + self.extra_log_prior(points)
+        return np.where(np.isnan(result), -np.inf, result)
+
+    def __call__(self, theta) -> np.ndarray:
+        """The vectorised log-probability for ``emcee`` (see :meth:`log_probability`)."""
+        return self.log_probability(theta)
+
+    def physical(self, samples) -> dict[str, np.ndarray]:
+        """Samples in the sampling space -> ``name -> physical values``."""
+        samples = np.atleast_2d(samples)
+        return {p.name: p.to_physical(samples[:, i]) for i, p in enumerate(self.parameters)}
+
+    def residual_degrees(self) -> int:
+        """Number of annulus means that enter the likelihood."""
+        return int(sum(self._observations[c][0].size for c in self.channels))
+
+
+class DipoleModel(ProfileModel):
+    r"""Dipole (semi-infinite) or multipole (slab) exitance with per-channel coefficients.
+
+    Parameters (sampling space): ``ln sigma_a`` and ``ln sigma_s'`` per channel, then
+    ``eta`` when the sidecar leaves it null (or ``fit_eta``), then ``ln exposure`` when the
+    sidecar's exposure is null. The profile is :math:`R_d(r)` of Jensen et al. 2001 (Eq. 2
+    of Wang et al. 2008) for a semi-infinite slab, and :math:`R(r)` or :math:`T(r)` of the
+    multipole (Eq. 11-12 of Donner & Jensen 2005) for a slab of finite thickness.
+
+    Parameters
+    ----------
+    profile : RadialProfile
+    spec : CaptureSpec
+    fit_eta : bool, optional
+        Fit eta even if the sidecar gives it (default: fit only when it is null).
+    """
+
+    def __init__(self, profile: RadialProfile, spec: CaptureSpec, *, fit_eta: bool | None = None):
+        super().__init__(profile, spec)
+        self.fit_eta = spec.eta is None if fit_eta is None else bool(fit_eta)
+        self.fit_exposure = spec.exposure is None
+        params = []
+        for kind, (low, high) in (("sigma_a", SIGMA_A_RANGE),
+                                  ("sigma_s_prime", SIGMA_S_PRIME_RANGE)):
+            for c in range(3):
+                params.append(ParameterInfo(f"{kind}[{CHANNELS[c]}]", kind, "log",
+                                            np.log(low), np.log(high), c, "mm^-1"))
+        if self.fit_eta:
+            params.append(ParameterInfo("eta", "eta", "linear", *ETA_FIT_RANGE))
+        if self.fit_exposure:
+            params.append(ParameterInfo("exposure", "exposure", "log",
+                                        np.log(EXPOSURE_RANGE[0]), np.log(EXPOSURE_RANGE[1]),
+                                        None, "stored units mm^2"))
+        self.parameters = params
+        self.channels = tuple(c for c in range(3) if self._observations[c][0].size >= 2)
+        if not self.channels:
+            raise InputError("no channel has usable annuli", field="profile")
+
+    def split(self, theta):
+        """``(sigma_a, sigma_s_prime, eta, exposure)`` arrays from ``theta`` (n, ndim)."""
+        theta = np.atleast_2d(theta)
+        sigma_a = np.exp(theta[:, 0:3])
+        sigma_s_prime = np.exp(theta[:, 3:6])
+        index = 6
+        if self.fit_eta:
+            eta = theta[:, index]
+            index += 1
+        else:
+            eta = np.full(theta.shape[0], self.spec.eta if self.spec.eta is not None else 1.3)
+        exposure = np.exp(theta[:, index]) if self.fit_exposure else \
+            np.full(theta.shape[0], self.spec.exposure)
+        return sigma_a, sigma_s_prime, eta, exposure
+
+    def unit_profiles(self, sigma_a, sigma_s_prime, eta) -> np.ndarray:
+        """Exitance per unit entering power at the nodes, mm^-2, shape (n, nodes, 3)."""
+        r = self.profile.operator.grid.nodes[None, :, None]
+        sigma_a = sigma_a[:, None, :]
+        sigma_s_prime = sigma_s_prime[:, None, :]
+        eta = np.asarray(eta, dtype=np.float64)[:, None, None]
+        thickness = self.spec.thickness_mm
+        if self.spec.side == "transmission":
+            return slab_transmittance_profile(r, sigma_a, sigma_s_prime, eta, thickness)
+        if thickness is None:
+            return dipole_reflectance_profile(r, sigma_a, sigma_s_prime, eta)
+        return slab_reflectance_profile(r, sigma_a, sigma_s_prime, eta, thickness)
+
+    def profile_nodes(self, theta):
+        """Exposure times the dipole/multipole exitance at the nodes, shape (n, nodes, 3)."""
+        sigma_a, sigma_s_prime, eta, exposure = self.split(theta)
+        return exposure[:, None, None] * self.unit_profiles(sigma_a, sigma_s_prime, eta)
+
+    def initial_guess(self, grid_points: int = 24) -> np.ndarray:
+        """Best point of a per-channel grid over the prior, with the exposure profiled out.
+
+        Each channel's (sigma_a, sigma_s') is chosen on a ``grid_points`` x ``grid_points``
+        log grid (and eta in {1.1, 1.3, 1.5} when fitted); the best exposure for each grid
+        point is the weighted least-squares scale. The channels' exposures are then
+        combined geometrically.
+        """
+        log_a = np.linspace(*np.log(SIGMA_A_RANGE), grid_points)
+        log_s = np.linspace(*np.log(SIGMA_S_PRIME_RANGE), grid_points)
+        etas = np.array([1.1, 1.3, 1.5]) if self.fit_eta else np.array([self.split(
+            np.zeros((1, self.ndim)))[2][0]])
+        grid_a, grid_s, grid_eta = (g.ravel() for g in np.meshgrid(log_a, log_s, etas,
+                                                                    indexing="ij"))
+        predicted = [np.empty((grid_a.size, self._observations[c][0].size)) for c in range(3)]
+        # in blocks: a slab's pole count is set by the block's least absorbing point
+        for start in range(0, grid_a.size, GRID_BLOCK):
+            block = slice(start, start + GRID_BLOCK)
+            unit = self.unit_profiles(np.repeat(np.exp(grid_a[block])[:, None], 3, axis=1),
+                                      np.repeat(np.exp(grid_s[block])[:, None], 3, axis=1),
+                                      grid_eta[block])
+            for c, values in enumerate(self.profile.operator.predict(unit)):
+                predicted[c][block] = values
+        best = {}
+        for c in self.channels:
+            mean, stderr, dof = self._observations[c]
+            u = predicted[c]
+            weights = 1.0 / stderr ** 2
+            with np.errstate(invalid="ignore", divide="ignore"):
+                scale = (u * mean * weights).sum(axis=1) / (u * u * weights).sum(axis=1)
+            if not self.fit_exposure:
+                scale = np.full_like(scale, self.spec.exposure)
+            scale = np.where(np.isfinite(scale) & (scale > 0), scale, np.nan)
+            loglike = student_t_log_likelihood(mean - scale[:, None] * u, stderr, dof)
+            loglike = np.where(np.isfinite(loglike), loglike, -np.inf)
+            k = int(np.argmax(loglike))
+            best[c] = (grid_a[k], grid_s[k], grid_eta[k], scale[k])
+        theta = np.zeros(self.ndim)
+        fallback = best[self.channels[0]]
+        for c in range(3):
+            a, s, _, _ = best.get(c, fallback)
+            theta[c], theta[3 + c] = a, s
+        index = 6
+        if self.fit_eta:
+            theta[index] = float(np.median([best[c][2] for c in best]))
+            index += 1
+        if self.fit_exposure:
+            scales = np.array([best[c][3] for c in best], dtype=np.float64)
+            scales = scales[np.isfinite(scales) & (scales > 0)]
+            theta[index] = float(np.mean(np.log(scales))) if scales.size else 0.0
+        return np.clip(theta, self.bounds[:, 0], self.bounds[:, 1])
+
+    def material(self, values: dict[str, float]) -> dict:
+        """The material dict (``type = "dipole"``) from physical parameter values."""
+        sigma_a = [float(values[f"sigma_a[{c}]"]) for c in CHANNELS]
+        sigma_s_prime = [float(values[f"sigma_s_prime[{c}]"]) for c in CHANNELS]
+        eta = float(values["eta"]) if self.fit_eta else float(self.split(
+            np.zeros((1, self.ndim)))[2][0])
+        return {"type": "dipole", "sigma_a": sigma_a, "sigma_s_prime": sigma_s_prime,
+                "eta": eta, "g": 0.0}
+
+
+class SubEditModel(ProfileModel):
+    r"""SubEdit profile: ``n + 1`` knot values of :math:`\ln P` per channel (Eq. 9 of Chen et al. 2012).
+
+    The exitance is :math:`P(r)` (for a homogeneous material Eq. 8 of Chen et al. gives
+    :math:`R_d = P`). With the exposure known, :math:`P` is absolute (mm^-2); unknown, the
+    exposure is absorbed into :math:`P` (relative profile). The smoothness prior is a
+    Gaussian of standard deviation ``smoothness`` on the second differences of the knot
+    values.
+
+    Parameters
+    ----------
+    profile : RadialProfile
+    spec : CaptureSpec
+    segments : int
+        n, >= 2.
+    r_s_mm : float, optional
+        Maximum scattering radius (default: the outer edge of the last used annulus).
+    smoothness : float
+        Prior standard deviation of second differences of ln P, nats, > 0.
+    channels : tuple of int
+        Channels modelled (each channel's posterior is independent of the others).
+    """
+
+    def __init__(self, profile: RadialProfile, spec: CaptureSpec, *, segments: int = 8,
+                 r_s_mm: float | None = None, smoothness: float = SUBEDIT_SMOOTHNESS,
+                 channels=(0, 1, 2)):
+        super().__init__(profile, spec)
+        if int(segments) < 2:
+            raise InputError("must be >= 2", field="segments", value=segments)
+        if not (np.isfinite(smoothness) and smoothness > 0):
+            raise InputError("must be > 0", field="smoothness", value=smoothness)
+        self.segments = int(segments)
+        self.smoothness = float(smoothness)
+        self.channels = tuple(c for c in channels if self._observations[c][0].size >= 2)
+        if not self.channels:
+            raise InputError("no requested channel has usable annuli", field="channels",
+                             value=channels)
+        if r_s_mm is None:
+            last = max(int(np.flatnonzero(profile.used[:, c])[-1]) for c in self.channels)
+            r_s_mm = float(profile.edges_mm[last + 1])
+        if not (np.isfinite(r_s_mm) and r_s_mm > 0):
+            raise InputError("must be > 0", field="r_s_mm", value=r_s_mm)
+        self.r_s_mm = float(r_s_mm)
+        self.knots = subedit_knots(self.r_s_mm, self.segments)
+        self.exposure = 1.0 if spec.exposure is None else float(spec.exposure)
+        peak = max(float(np.nanmax(self._observations[c][0])) for c in self.channels)
+        centre = np.log(max(peak, 1e-300) / self.exposure)
+        params = []
+        for c in self.channels:
+            for k in range(self.segments + 1):
+                params.append(ParameterInfo(f"ln_p{k}[{CHANNELS[c]}]", "ln_p", "linear",
+                                            centre - KNOT_BOX_NATS[0], centre + KNOT_BOX_NATS[1],
+                                            c, "ln mm^-2" if spec.exposure else "ln (relative)"))
+        self.parameters = params
+
+    def knot_values(self, theta) -> np.ndarray:
+        """Knot values per modelled channel, shape (n, channels, segments + 1)."""
+        theta = np.atleast_2d(theta)
+        return theta.reshape(theta.shape[0], len(self.channels), self.segments + 1)
+
+    def profile_nodes(self, theta):
+        """Exposure times P(r) at the nodes, shape (n, nodes, 3) (0 in channels not modelled)."""
+        knots = self.knot_values(theta)
+        nodes = self.profile.operator.grid.nodes
+        out = np.zeros((knots.shape[0], nodes.size, 3))
+        with np.errstate(under="ignore"):
+            for i, c in enumerate(self.channels):
+                out[:, :, c] = self.exposure * np.exp(subedit_log_profile(nodes, knots[:, i],
+                                                                           self.r_s_mm))
+        return out
+
+    def extra_log_prior(self, theta):
+        """Smoothness: Gaussian second differences of the knot values, shape (n,)."""
+        second = np.diff(self.knot_values(theta), n=2, axis=-1)
+        return -0.5 * np.sum((second / self.smoothness) ** 2, axis=(1, 2))
+
+    def initial_guess(self) -> np.ndarray:
+        """ln of the measured annulus means at the knots (linear inter-/extrapolation)."""
+        theta = []
+        for c in self.channels:
+            use = self.profile.used[:, c]
+            radius = self.profile.radius_mm[use, c]
+            mean = self.profile.mean[use, c]
+            positive = mean > 0
+            log_mean = np.log(mean[positive] / self.exposure)
+            radius = radius[positive]
+            values = np.interp(self.knots, radius, log_mean)
+            if radius.size >= 2:  # extrapolate linearly beyond the measured range
+                slope_in = (log_mean[1] - log_mean[0]) / max(radius[1] - radius[0], 1e-12)
+                slope_out = (log_mean[-1] - log_mean[-2]) / max(radius[-1] - radius[-2], 1e-12)
+                values = np.where(self.knots < radius[0],
+                                  log_mean[0] + slope_in * (self.knots - radius[0]), values)
+                values = np.where(self.knots > radius[-1],
+                                  log_mean[-1] + slope_out * (self.knots - radius[-1]), values)
+            theta.append(values)
+        theta = np.concatenate(theta)
+        return np.clip(theta, self.bounds[:, 0], self.bounds[:, 1])
+
+    def material(self, values: dict[str, float]) -> dict:
+        """The SubEdit profile dict (``type = "subedit"``) from physical knot values."""
+        log_profile = [[float(values[f"ln_p{k}[{CHANNELS[c]}]"]) if c in self.channels else None
+                        for k in range(self.segments + 1)] for c in range(3)]
+        return {"type": "subedit", "r_s": self.r_s_mm, "segments": self.segments,
+                "log_profile": log_profile, "absolute": self.spec.exposure is not None}

@@ -1,0 +1,469 @@
+r"""Radial profiles of a capture, and the operator that predicts them from a model profile.
+
+Measurement (:func:`measure_profile`):
+
+1. Pixels are masked per channel and counted: NaN/Inf, saturated (stored value at or above
+   ``saturation_level``) and below black (stored value below ``black_level``, or at the
+   floor 0 of an integer encoding, where the noise has been clipped).
+2. The incident point is refined to sub-pixel precision (:func:`refine_incident_point`).
+3. Pixels are grouped into annuli about it (:func:`annulus_edges`): at least
+   :data:`MIN_PIXELS_PER_ANNULUS` pixels each, 1 px wide near the centre, widening
+   geometrically beyond.
+4. Per annulus and channel: the mean of the valid pixels and its standard error from the
+   annulus's own scatter, taken about a straight line in radius so that the profile's
+   gradient across the annulus is not counted as noise (N - 2 degrees of freedom).
+5. Annuli are dropped (and counted) where the data are censored: any annulus holding a
+   saturated pixel, and every annulus inside it; the first annulus whose below-black
+   fraction exceeds :data:`BELOW_BLACK_FRACTION` (the noise floor), and every annulus
+   outside it; annuli with fewer than :data:`MIN_VALID_PIXELS` valid pixels.
+
+Prediction (:class:`ProfileOperator`): the mean of annulus ``a`` in channel ``c`` is
+``exposure * (M_c @ f(nodes))[a]`` for a radial exitance profile ``f`` (mm^-2), with
+``M_c = A_c K``: ``K`` the beam convolution (:mod:`translucent.fitting.beam`) and ``A_c``
+the exact average over the annulus's valid pixel footprints (each pixel split into the
+rings of the radial grid by exact disc-square overlap areas).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+from .beam import beam_convolution_matrix
+from .capture import Capture
+from .geometry import RadialGrid, disc_rectangle_area, radial_grid
+
+__all__ = [
+    "ProfileOperator",
+    "RadialProfile",
+    "annulus_edges",
+    "annulus_average_matrix",
+    "measure_profile",
+    "refine_incident_point",
+]
+
+#: An annulus needs this many pixel centres (before masking) to be formed: the first
+#: annulus is then a disc of radius ~2 px.
+MIN_PIXELS_PER_ANNULUS = 12
+#: ... and this many valid pixels to be used: 4 degrees of freedom for its scatter, the
+#: fewest for which the Student-t likelihood keeps a finite variance.
+MIN_VALID_PIXELS = 7
+#: Relative width of the outer annuli (5 % of the radius): narrow enough that the profile
+#: is nearly linear across one, wide enough to keep the number of annuli near 60.
+ANNULUS_GROWTH = 0.05
+#: Fraction of below-black pixels at which an annulus counts as having reached the noise
+#: floor. Dropping the lower tail of pixels biases the mean upward by about
+#: phi(z) sigma for a fraction Phi(-z); at 0.1 % (z = 3.1) that is 0.003 sigma per pixel,
+#: negligible against the annulus's standard error.
+BELOW_BLACK_FRACTION = 1e-3
+#: Iterations and tolerance (pixels) of the thresholded-centroid refinement.
+CENTROID_ITERATIONS = 50
+CENTROID_TOLERANCE_PX = 1e-4
+#: Pixels above this fraction of the peak define the bright core whose centroid is the
+#: incident point.
+CENTROID_THRESHOLD = 0.2
+#: Sub-pixel resolution of the radial grid near the centre (fraction of a pixel); the grid
+#: starts at the smaller of this and 1 um.
+GRID_RESOLUTION_PX = 0.01
+#: Largest change of ln(profile) between grid nodes. A profile linear between nodes then
+#: misrepresents an exponential decay by about step^2 / 12 = 0.08 % on average.
+MAX_LOG_STEP = 0.1
+#: Bounds of the grid's uniform spacing, pixels.
+GRID_SPACING_PX = (0.1, 1.0)
+
+
+def annulus_edges(r_max_px: float) -> np.ndarray:
+    """Annulus edges in pixels: 0, then widths of max(1 px, 5 % of r), >= 12 pixels each.
+
+    Parameters
+    ----------
+    r_max_px : float
+        Outermost radius to cover, pixels.
+
+    Returns
+    -------
+    ndarray
+        Increasing edges starting at 0 (the last one >= ``r_max_px``).
+    """
+    edges = [0.0]
+    while edges[-1] < r_max_px:
+        last = edges[-1]
+        edges.append(max(last + 1.0, last * (1.0 + ANNULUS_GROWTH),
+                         np.sqrt(last * last + MIN_PIXELS_PER_ANNULUS / np.pi)))
+    return np.asarray(edges)
+
+
+def refine_incident_point(signal, start_xy, *, saturated=None, search_radius_px=None):
+    r"""Sub-pixel incident point: the centroid of the bright core, iterated to a fixed point.
+
+    The weights are :math:`\max(v - t, 0)` with :math:`t` = :data:`CENTROID_THRESHOLD`
+    times the peak, over a disc that is recentred on each new estimate. Any radially
+    symmetric profile is a fixed point at its true centre; saturated pixels keep the peak
+    value (a symmetric plateau), NaN pixels weigh nothing.
+
+    Parameters
+    ----------
+    signal : ndarray, shape (H, W)
+        Linear signal (black removed), summed over channels.
+    start_xy : (float, float)
+        Starting point ``(x, y)`` in pixels (the sidecar's ``incident_px``).
+    saturated : ndarray of bool, optional
+        Pixels clipped in the stored image.
+    search_radius_px : float, optional
+        Where to look for the peak around the start (default: a quarter of the image).
+
+    Returns
+    -------
+    (float, float)
+        ``(x, y)`` in the sidecar's convention (pixel centres at half-integers).
+    """
+    signal = np.nan_to_num(np.asarray(signal, dtype=np.float64), nan=0.0, posinf=0.0,
+                           neginf=0.0)
+    height, width = signal.shape
+    ys, xs = np.mgrid[0:height, 0:width]
+    xs = xs + 0.5
+    ys = ys + 0.5
+    x, y = float(start_xy[0]), float(start_xy[1])
+    if search_radius_px is None:
+        search_radius_px = 0.25 * max(height, width)
+    near = (xs - x) ** 2 + (ys - y) ** 2 <= search_radius_px ** 2
+    if saturated is not None and (saturated & near).any():
+        peak = signal[saturated & near].max()
+        signal = np.where(saturated, peak, signal)
+    if not near.any():
+        return x, y
+    peak = signal[near].max()
+    if not peak > 0:
+        return x, y
+    threshold = CENTROID_THRESHOLD * peak
+    # start at the brightest pixel near the given point (the point may be off by pixels)
+    core = near & (signal >= threshold)
+    weights = np.where(core, signal - threshold, 0.0)
+    x = float((weights * xs).sum() / weights.sum())
+    y = float((weights * ys).sum() / weights.sum())
+    for _ in range(CENTROID_ITERATIONS):
+        core_radius = np.sqrt(max(core.sum(), 1) / np.pi)
+        window = (xs - x) ** 2 + (ys - y) ** 2 <= (2.0 * core_radius + 3.0) ** 2
+        weights = np.where(window, np.clip(signal - threshold, 0.0, None), 0.0)
+        total = weights.sum()
+        if not total > 0:
+            break
+        new_x = float((weights * xs).sum() / total)
+        new_y = float((weights * ys).sum() / total)
+        moved = np.hypot(new_x - x, new_y - y)
+        x, y = new_x, new_y
+        core = window & (signal >= threshold)
+        if moved < CENTROID_TOLERANCE_PX:
+            break
+    return x, y
+
+
+def _pixel_ring_pairs(radius_px, centre_xy, grid_px, shape):
+    """Split every pixel into the rings of the grid: (pixel index, ring index, area, mean r)."""
+    height, width = shape
+    ys, xs = np.mgrid[0:height, 0:width]
+    x0 = (xs - centre_xy[0]).ravel().astype(np.float64)
+    y0 = (ys - centre_xy[1]).ravel().astype(np.float64)
+    x1, y1 = x0 + 1.0, y0 + 1.0
+    nearest_x = np.where(x0 > 0, x0, np.where(x1 < 0, -x1, 0.0))
+    nearest_y = np.where(y0 > 0, y0, np.where(y1 < 0, -y1, 0.0))
+    rho_min = np.hypot(nearest_x, nearest_y)
+    rho_max = np.hypot(np.maximum(np.abs(x0), np.abs(x1)), np.maximum(np.abs(y0), np.abs(y1)))
+    keep = rho_min < radius_px
+    pixel_index = np.flatnonzero(keep)
+    first = np.searchsorted(grid_px, rho_min[keep], side="right") - 1
+    last = np.searchsorted(grid_px, rho_max[keep], side="left")
+    last = np.minimum(last, grid_px.size - 1)
+    counts = np.maximum(last - first, 0)
+    pixel = np.repeat(pixel_index, counts)
+    ring = np.repeat(first, counts) + (np.arange(counts.sum())
+                                       - np.repeat(np.cumsum(counts) - counts, counts))
+    inner, outer = grid_px[ring], grid_px[ring + 1]
+    area = (disc_rectangle_area(outer, x0[pixel], x1[pixel], y0[pixel], y1[pixel])
+            - disc_rectangle_area(inner, x0[pixel], x1[pixel], y0[pixel], y1[pixel]))
+    # area-weighted mean radius of a full thin ring: where a linear profile is evaluated
+    mean_r = 2.0 / 3.0 * (outer ** 3 - inner ** 3) / np.maximum(outer ** 2 - inner ** 2, 1e-300)
+    good = area > 0
+    return pixel[good], ring[good], area[good], mean_r[good]
+
+
+def annulus_average_matrix(pairs, annulus_of_pixel, valid, n_annuli, grid_px):
+    """Matrix ``A`` (annuli x nodes): annulus mean of a profile linear between grid nodes.
+
+    Parameters
+    ----------
+    pairs : tuple
+        ``(pixel, ring, area, mean_r)`` from the exact pixel-ring split.
+    annulus_of_pixel : ndarray of int
+        Annulus of each pixel (by its centre), -1 outside every annulus.
+    valid : ndarray of bool
+        Pixels that take part (per channel).
+    n_annuli : int
+    grid_px : ndarray
+        Grid nodes in pixels.
+
+    Returns
+    -------
+    ndarray, shape (n_annuli, grid size)
+        Each row sums to 1 where its annulus has a valid pixel, else 0.
+    """
+    pixel, ring, area, mean_r = pairs
+    annulus = annulus_of_pixel[pixel]
+    use = (annulus >= 0) & valid[pixel]
+    annulus, ring, area, mean_r = annulus[use], ring[use], area[use], mean_r[use]
+    t = (mean_r - grid_px[ring]) / (grid_px[ring + 1] - grid_px[ring])
+    n = grid_px.size
+    matrix = (np.bincount(annulus * n + ring, area * (1.0 - t), minlength=n_annuli * n)
+              + np.bincount(annulus * n + ring + 1, area * t, minlength=n_annuli * n))
+    matrix = matrix[: n_annuli * n].reshape(n_annuli, n)
+    totals = matrix.sum(axis=1, keepdims=True)
+    return np.divide(matrix, totals, out=np.zeros_like(matrix), where=totals > 0)
+
+
+@dataclass(frozen=True)
+class ProfileOperator:
+    """Predicts the used annulus means of each channel from a profile on the radial grid.
+
+    Parameters
+    ----------
+    grid : RadialGrid
+        Nodes in mm.
+    matrices : tuple of 3 ndarray
+        ``M_c`` of shape (used annuli of channel c, grid size): beam convolution then exact
+        pixel-footprint average.
+    """
+
+    grid: RadialGrid
+    matrices: tuple
+
+    def predict(self, profile_nodes) -> list[np.ndarray]:
+        """Annulus means per channel for profiles at the nodes.
+
+        Parameters
+        ----------
+        profile_nodes : ndarray, shape (..., grid size, 3)
+            Exitance profile in mm^-2 (already multiplied by any exposure).
+
+        Returns
+        -------
+        list of 3 ndarray, shape (..., used annuli of the channel)
+        """
+        profile_nodes = np.asarray(profile_nodes)
+        return [profile_nodes[..., channel] @ matrix.T
+                for channel, matrix in enumerate(self.matrices)]
+
+
+@dataclass(frozen=True)
+class RadialProfile:
+    """The measured radial profile of a capture (see the module docstring).
+
+    Attributes
+    ----------
+    edges_mm : ndarray, shape (n + 1,)
+        Annulus edges, mm from the refined incident point.
+    radius_mm : ndarray, shape (n, 3)
+        Mean pixel-centre radius of each annulus's valid pixels, mm (for plots).
+    mean, stderr : ndarray, shape (n, 3)
+        Annulus mean of the linear signal (stored units above black) and its standard
+        error; NaN where no valid pixel.
+    dof : ndarray of int, shape (n, 3)
+        Degrees of freedom of the scatter (valid pixels - 2).
+    used : ndarray of bool, shape (n, 3)
+        Annuli that enter the likelihood.
+    centre_px : (float, float)
+        Refined incident point.
+    masked : dict
+        Pixel counts per channel: ``nan``, ``saturated``, ``below_black``, ``valid``.
+    dropped : dict
+        Annulus counts per channel: ``saturated``, ``noise_floor``, ``too_few_pixels``.
+    operator : ProfileOperator
+    """
+
+    edges_mm: np.ndarray
+    radius_mm: np.ndarray
+    mean: np.ndarray
+    stderr: np.ndarray
+    dof: np.ndarray
+    used: np.ndarray
+    centre_px: tuple[float, float]
+    given_centre_px: tuple[float, float]
+    masked: dict[str, list[int]]
+    dropped: dict[str, list[int]]
+    operator: ProfileOperator
+    pixel_size_mm: float
+    notes: list[str] = field(default_factory=list)
+
+    def observations(self, channel: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(mean, stderr, dof)`` of the used annuli of ``channel``."""
+        use = self.used[:, channel]
+        return self.mean[use, channel], self.stderr[use, channel], self.dof[use, channel]
+
+    def summary(self) -> dict[str, Any]:
+        """Counts for the fit report (JSON-able)."""
+        return {"centre_px": list(self.centre_px), "given_centre_px": list(self.given_centre_px),
+                "annuli": int(self.mean.shape[0]),
+                "used_annuli": self.used.sum(axis=0).tolist(),
+                "used_radius_mm": [
+                    [float(self.edges_mm[np.flatnonzero(self.used[:, c])[0]]),
+                     float(self.edges_mm[np.flatnonzero(self.used[:, c])[-1] + 1])]
+                    if self.used[:, c].any() else None for c in range(3)],
+                "masked_pixels": self.masked, "dropped_annuli": self.dropped,
+                "notes": list(self.notes)}
+
+
+def _channel_masks(capture: Capture):
+    spec = capture.spec
+    stored = capture.pixels
+    finite = np.isfinite(stored)
+    with np.errstate(invalid="ignore"):
+        saturated = finite & (stored >= spec.saturation_level)
+        integer_floor = spec.image.lower().endswith((".png", ".tif", ".tiff"))
+        below = finite & ((stored < spec.black_level) | (integer_floor & (stored <= 0.0)))
+    return finite, saturated, below
+
+
+def _grid_spacing(mean, radius_mm, used, pixel_mm) -> float:
+    """Uniform spacing of the radial grid from the steepest measured log-slope (mm)."""
+    steepest = 0.0
+    for c in range(3):
+        m = mean[used[:, c], c]
+        r = radius_mm[used[:, c], c]
+        positive = m > 0
+        if positive.sum() >= 2:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                slopes = np.abs(np.diff(np.log(m[positive])) / np.diff(r[positive]))
+            slopes = slopes[np.isfinite(slopes)]
+            if slopes.size:
+                steepest = max(steepest, float(slopes.max()))
+    low, high = GRID_SPACING_PX[0] * pixel_mm, GRID_SPACING_PX[1] * pixel_mm
+    return high if steepest == 0 else float(np.clip(MAX_LOG_STEP / steepest, low, high))
+
+
+def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
+                    refine_centre: bool = True) -> RadialProfile:
+    """Measure the radial profile of every channel of ``capture`` (see the module docstring).
+
+    Parameters
+    ----------
+    capture : Capture
+    r_max_mm : float, optional
+        Outermost radius to use, mm (default: the farthest image corner).
+    refine_centre : bool
+        Refine ``incident_px`` to sub-pixel (default); False keeps the sidecar's point.
+
+    Returns
+    -------
+    RadialProfile
+
+    Raises
+    ------
+    InputError
+        When no channel keeps enough usable annuli to fit (at least 4).
+    """
+    spec = capture.spec
+    height, width = capture.shape
+    finite, saturated, below = _channel_masks(capture)
+    signal = capture.linear_signal()
+    valid = finite & ~saturated & ~below
+    given = tuple(float(v) for v in spec.incident_px)
+    centre = given
+    if refine_centre:
+        summed = np.where(finite, signal, 0.0).sum(axis=2)
+        centre = refine_incident_point(summed, given, saturated=saturated.any(axis=2))
+    ys, xs = np.mgrid[0:height, 0:width]
+    radius_px = np.hypot(xs + 0.5 - centre[0], ys + 0.5 - centre[1]).ravel()
+    corner = max(np.hypot(cx - centre[0], cy - centre[1])
+                 for cx in (0, width) for cy in (0, height))
+    pixel = spec.pixel_size_mm
+    r_max_px = corner if r_max_mm is None else min(corner, r_max_mm / pixel)
+    edges = annulus_edges(r_max_px)
+    n_annuli = edges.size - 1
+    annulus = np.searchsorted(edges, radius_px, side="right") - 1
+    annulus[(annulus >= n_annuli) | (radius_px > r_max_px)] = -1
+    inside = annulus >= 0
+
+    mean = np.full((n_annuli, 3), np.nan)
+    stderr = np.full((n_annuli, 3), np.nan)
+    dof = np.zeros((n_annuli, 3), dtype=np.int64)
+    radius_mean = np.full((n_annuli, 3), np.nan)
+    used = np.zeros((n_annuli, 3), dtype=bool)
+    dropped = {"saturated": [0, 0, 0], "noise_floor": [0, 0, 0], "too_few_pixels": [0, 0, 0]}
+    masked = {"nan": [0, 0, 0], "saturated": [0, 0, 0], "below_black": [0, 0, 0],
+              "valid": [0, 0, 0]}
+    for c in range(3):
+        ok = valid[..., c].ravel() & inside
+        values = signal[..., c].ravel()
+        masked["nan"][c] = int((~finite[..., c]).sum())
+        masked["saturated"][c] = int(saturated[..., c].sum())
+        masked["below_black"][c] = int(below[..., c].sum())
+        masked["valid"][c] = int(valid[..., c].sum())
+        idx = annulus[ok]
+        v = values[ok]
+        r = radius_px[ok]
+        count = np.bincount(idx, minlength=n_annuli).astype(np.float64)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            m = np.bincount(idx, v, minlength=n_annuli) / count
+            rm = np.bincount(idx, r, minlength=n_annuli) / count
+            dv = v - m[idx]
+            dr = r - rm[idx]
+            svv = np.bincount(idx, dv * dv, minlength=n_annuli)
+            svr = np.bincount(idx, dv * dr, minlength=n_annuli)
+            srr = np.bincount(idx, dr * dr, minlength=n_annuli)
+            slope_ss = np.where(srr > 0, svr * svr / np.where(srr > 0, srr, 1.0), 0.0)
+            residual = np.clip(svv - slope_ss, 0.0, None)
+            se = np.sqrt(residual / (count - 2.0) / count)
+        enough = count >= MIN_VALID_PIXELS
+        mean[:, c] = np.where(count > 0, m, np.nan)
+        stderr[:, c] = np.where(enough, se, np.nan)
+        dof[:, c] = np.maximum(count - 2, 0).astype(np.int64)
+        radius_mean[:, c] = rm * pixel
+        keep = enough & (se > 0)
+        # censoring from above: every annulus up to the outermost one with a clipped pixel
+        sat_annuli = annulus[saturated[..., c].ravel() & inside]
+        if sat_annuli.size:
+            clipped = np.arange(n_annuli) <= sat_annuli.max()
+            dropped["saturated"][c] = int((keep & clipped).sum())
+            keep &= ~clipped
+        # censoring from below: the noise floor, and everything beyond it
+        below_count = np.bincount(annulus[below[..., c].ravel() & inside], minlength=n_annuli)
+        total = count + below_count
+        with np.errstate(invalid="ignore", divide="ignore"):
+            floor = (below_count / np.maximum(total, 1)) > BELOW_BLACK_FRACTION
+        if floor.any():
+            beyond = np.arange(n_annuli) >= np.flatnonzero(floor)[0]
+            dropped["noise_floor"][c] = int((keep & beyond).sum())
+            keep &= ~beyond
+        dropped["too_few_pixels"][c] = int(((count > 0) & ~enough).sum())
+        used[:, c] = keep
+    if (used.sum(axis=0) < 4).all():
+        raise InputError("no channel has 4 usable annuli (saturated, below black or too "
+                         "few pixels everywhere)", file=capture.path, field="image",
+                         value={"used_annuli": used.sum(axis=0).tolist(), **dropped})
+
+    # the forward operator: beam convolution, then the exact pixel-footprint average
+    r_out_mm = edges[min(n_annuli, np.flatnonzero(used.any(axis=1))[-1] + 1)] * pixel \
+        + np.sqrt(2.0) * pixel
+    grid = radial_grid(r_out_mm + 6.0 * spec.beam_radius_mm + pixel,
+                       min(GRID_RESOLUTION_PX * pixel, 1e-3),
+                       _grid_spacing(mean, radius_mean, used, pixel))
+    grid_px = grid.nodes / pixel
+    pairs = _pixel_ring_pairs(r_out_mm / pixel + 2.0, centre, grid_px, (height, width))
+    kernel = beam_convolution_matrix(grid, spec.beam_radius_mm)
+    matrices = []
+    for c in range(3):
+        average = annulus_average_matrix(pairs, annulus, valid[..., c].ravel(), n_annuli,
+                                         grid_px)
+        matrices.append(average[used[:, c]] @ kernel)
+    notes = []
+    shift = float(np.hypot(centre[0] - given[0], centre[1] - given[1]))
+    if shift > 0.5:
+        notes.append(f"incident point moved by {shift:.2f} px from the sidecar's "
+                     f"[{given[0]:.2f}, {given[1]:.2f}] to [{centre[0]:.2f}, {centre[1]:.2f}]")
+    return RadialProfile(edges_mm=edges * pixel, radius_mm=radius_mean, mean=mean,
+                         stderr=stderr, dof=dof, used=used, centre_px=centre,
+                         given_centre_px=given, masked=masked, dropped=dropped,
+                         operator=ProfileOperator(grid, tuple(matrices)), pixel_size_mm=pixel,
+                         notes=notes)

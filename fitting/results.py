@@ -1,0 +1,171 @@
+"""Posterior summaries, the "can the data constrain this?" verdict, and the material file.
+
+A parameter's posterior is summarised by its median and its 16/84 % and 2.5/97.5 %
+quantiles. Its verdict compares the posterior with the prior in the sampling space (where
+the priors of :mod:`translucent.fitting.models` are uniform):
+
+* ``unconstrained``: the 68 % interval covers more than :data:`UNCONSTRAINED_RATIO` of the
+  prior's 68 % interval: the data say little beyond the prior;
+* ``upper limit`` / ``lower limit``: the 95 % interval reaches within
+  :data:`EDGE_FRACTION` of a prior bound: only one side is constrained;
+* ``constrained`` otherwise; ``nuisance`` for the exposure scale.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..atomic import atomic_write_text
+
+__all__ = ["ParameterSummary", "summarise_posterior", "toml_text", "write_material"]
+
+#: A 68 % posterior interval wider than this fraction of the prior's 68 % interval means
+#: the data barely constrain the parameter (1 would be the prior itself).
+UNCONSTRAINED_RATIO = 0.5
+#: A 95 % interval within this fraction of the prior width from a bound reaches the bound.
+EDGE_FRACTION = 0.02
+#: SubEdit knots (smoothness prior, no informative box): a 68 % interval wider than this
+#: (nats) is reported as weakly constrained.
+KNOT_WIDTH_NATS = 1.0
+
+
+@dataclass(frozen=True)
+class ParameterSummary:
+    """Posterior of one parameter, in physical units.
+
+    Attributes
+    ----------
+    name, unit : str
+    median, low68, high68, low95, high95 : float
+        Median and the 16, 84, 2.5 and 97.5 % quantiles.
+    status : str
+        ``constrained``, ``upper limit``, ``lower limit``, ``unconstrained``,
+        ``weakly constrained`` or ``nuisance``.
+    prior : (float, float)
+        Prior range, physical units.
+    width_ratio : float
+        68 % posterior width over the prior's 68 % width (sampling space).
+    """
+
+    name: str
+    unit: str
+    median: float
+    low68: float
+    high68: float
+    low95: float
+    high95: float
+    status: str
+    prior: tuple[float, float]
+    width_ratio: float
+
+    def describe(self) -> str:
+        """One line for the terminal."""
+        text = (f"{self.name:>18} = {self.median:.4g}  (68 %: {self.low68:.4g} .. "
+                f"{self.high68:.4g}; 95 %: {self.low95:.4g} .. {self.high95:.4g}) {self.unit}")
+        if self.status == "upper limit":
+            text += f"  [upper limit: < {self.high95:.3g} at 97.5 %]"
+        elif self.status == "lower limit":
+            text += f"  [lower limit: > {self.low95:.3g} at 2.5 %]"
+        elif self.status == "weakly constrained":
+            text += (f"  [weakly constrained: 68 % interval {self.high68 - self.low68:.2g} "
+                     "nats wide]")
+        elif self.status not in ("constrained", "nuisance"):
+            text += f"  [{self.status}: posterior {self.width_ratio:.0%} as wide as the prior]"
+        return text
+
+
+def summarise_posterior(model, samples) -> list[ParameterSummary]:
+    """Median, 68 % and 95 % intervals and the verdict of every parameter of ``model``.
+
+    Parameters
+    ----------
+    model : ProfileModel
+    samples : ndarray, shape (m, ndim)
+        Flat chain in the sampling space.
+
+    Returns
+    -------
+    list of ParameterSummary
+    """
+    samples = np.atleast_2d(samples)
+    quantiles = np.percentile(samples, [50, 16, 84, 2.5, 97.5], axis=0)
+    out = []
+    for i, info in enumerate(model.parameters):
+        q = quantiles[:, i]
+        width = info.upper - info.lower
+        ratio = float((q[2] - q[1]) / (0.68 * width)) if width > 0 else 0.0
+        if info.kind == "exposure":
+            status = "nuisance"
+        elif info.kind == "ln_p":
+            status = "constrained" if q[2] - q[1] <= KNOT_WIDTH_NATS else "weakly constrained"
+        elif ratio > UNCONSTRAINED_RATIO:
+            status = "unconstrained"
+        elif q[3] - info.lower < EDGE_FRACTION * width:
+            status = "upper limit"
+        elif info.upper - q[4] < EDGE_FRACTION * width:
+            status = "lower limit"
+        else:
+            status = "constrained"
+        physical = info.to_physical(q)
+        prior = tuple(float(v) for v in info.to_physical([info.lower, info.upper]))
+        out.append(ParameterSummary(info.name, info.unit, *map(float, physical), status,
+                                    prior, ratio))
+    return out
+
+
+def summaries_to_json(summaries) -> list[dict]:
+    """The summaries as JSON-able dicts."""
+    return [asdict(s) for s in summaries]
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def toml_text(table: dict, comments: list[str] = ()) -> str:
+    """A flat TOML document: comment lines, then ``key = value`` lines.
+
+    ``None`` values inside lists (channels not fitted) are written as ``nan``.
+    """
+    lines = [f"# {line}" if line else "#" for line in comments]
+    for key, value in table.items():
+        if isinstance(value, list):
+            value = [[float("nan") if v is None else v for v in item]
+                     if isinstance(item, list) else (float("nan") if item is None else item)
+                     for item in value]
+        lines.append(f"{key} = {_toml_value(value)}")
+    return "\n".join(lines) + "\n"
+
+
+def write_material(path, material: dict, summaries, *, source: str = "",
+                   diagnostics: str = "") -> None:
+    """Write the fitted material as TOML (the keys the scene files take), atomically.
+
+    The posterior intervals go in comment lines, so the file is the material table of
+    ``materials/factory.py`` and nothing else: ``type``, ``sigma_a``, ``sigma_s_prime``,
+    ``eta``, ``g`` for a dipole.
+    """
+    comments = ["Fitted by translucent fit" + (f" from {source}" if source else ""),
+                "Values are posterior medians; intervals (16-84 %) below."]
+    if diagnostics:
+        comments.append(diagnostics)
+    comments += [s.describe().strip() for s in summaries]
+    atomic_write_text(path, toml_text(material, comments))
