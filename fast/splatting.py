@@ -56,6 +56,10 @@ __all__ = [
     "splat_level",
     "bilateral_upsample",
     "brute_force_exitance",
+    "gather_frame",
+    "splat_frame",
+    "light_view",
+    "rendering_radius_table",
 ]
 
 #: The knobs of the method and their defaults (Chen et al. 2012, Sect. 4 and 5).
@@ -939,6 +943,29 @@ def splat_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list[
     return radiance
 
 
+def gather_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list[LightView],
+                 material: SubEditProfiles, *, mm_per_unit: float) -> np.ndarray:
+    """Ground truth for :func:`splat_frame`: Eq. 5 gathered over every finest-level sample.
+
+    Same buffers, same SubEdit material, no selection, no truncation at the effective
+    range, no multiresolution (:func:`brute_force_exitance`), then Eq. 7.
+
+    Returns
+    -------
+    ndarray (H, W, 3)
+        Outgoing radiance.
+    """
+    parts = []
+    for view in lights:
+        rows, cols = np.nonzero(view.buffer.valid)
+        parts.append(IrradianceSamples(view.buffer.position[rows, cols],
+                                       material.texel_index(view.buffer.uv[rows, cols]),
+                                       view.flux[rows, cols], np.zeros(len(rows), np.int64)))
+    exitance = brute_force_exitance(IrradianceSamples.concatenate(parts), camera_buffer,
+                                    material, mm_per_unit=mm_per_unit)
+    return _exitant_radiance(exitance, camera_buffer, camera, material.eta)
+
+
 def _exitant_radiance(exitance, buffer: SurfaceBuffer, camera: CameraModel, eta: float):
     """Eq. 7 of Chen et al. 2012: :math:`L = F_t(\\omega_o) B / \\pi` at valid pixels."""
     to_camera = camera.origin - np.where(buffer.valid[..., None], buffer.position, 0.0)
@@ -1071,7 +1098,14 @@ class SplattingState:
     knobs: dict
     log: StageLog = field(default_factory=StageLog)
 
-    def render(self, lights=None, material=None, *, scene=None) -> Image:
+    def render_ground_truth(self, lights=None, material=None, *, scene=None) -> Image:
+        """The brute-force ground truth of :meth:`render` (see :func:`gather_frame`).
+
+        Same buffers and material; cost pixels x irradiance samples, so keep both small.
+        """
+        return self.render(lights, material, scene=scene, _ground_truth=True)
+
+    def render(self, lights=None, material=None, *, scene=None, _ground_truth=False) -> Image:
         """Render one frame with Chen et al. 2012's four steps; see the module docstring.
 
         Parameters
@@ -1105,14 +1139,16 @@ class SplattingState:
         radiance = np.zeros(camera_view.shape + (3,))
         for index in _translucent_objects(scene):
             radiance += self._render_object(scene, index, camera_view, camera,
-                                            camera_footprint, log)
+                                            camera_footprint, log, _ground_truth)
         seconds = time.perf_counter() - start
         self.log = log
+        producer = "splatting ground truth" if _ground_truth else "splatting"
         return Image(radiance.astype(np.float32), metadata={
-            "producer": "splatting", "knobs": self.knobs, "seconds": seconds,
+            "producer": producer, "knobs": self.knobs, "seconds": seconds,
             "stage_seconds": log.seconds, "notes": log.notes, "skipped": log.skipped})
 
-    def _render_object(self, scene, index, camera_view, camera, camera_footprint, log):
+    def _render_object(self, scene, index, camera_view, camera, camera_footprint, log,
+                       ground_truth):
         item = scene.objects[index]
         material = as_subedit(item.material)
         mesh = item.mesh
@@ -1130,6 +1166,9 @@ class SplattingState:
         if not camera_buffer.valid.any():
             log.skip(f"object '{item.name}' is out of view: nothing to splat")
             return np.zeros(camera_buffer.shape + (3,))
+        if ground_truth:
+            return gather_frame(camera_buffer, camera, views, material,
+                                mm_per_unit=scene.mm_per_unit)
         return splat_frame(camera_buffer, camera, views, material,
                            mm_per_unit=scene.mm_per_unit, sphere_radius=radius,
                            knobs=self.knobs, log=log)

@@ -85,12 +85,15 @@ def _moment_factors(delta):
     small = np.abs(delta) < _SERIES_THRESHOLD
     safe = np.where(small, 1.0, delta)
     with np.errstate(over="ignore", invalid="ignore"):
-        e1 = np.expm1(safe) / safe
-        e2 = (safe * np.exp(safe) - np.expm1(safe)) / (safe * safe)
-    d = delta
-    e1_series = 1.0 + d / 2.0 + d * d / 6.0 + d**3 / 24.0
-    e2_series = 0.5 + d / 3.0 + d * d / 8.0 + d**3 / 30.0 + d**4 / 144.0
-    return np.where(small, e1_series, e1), np.where(small, e2_series, e2)
+        expm1 = np.expm1(safe)
+        inverse = 1.0 / safe
+        e1 = expm1 * inverse
+        e2 = ((expm1 + 1.0) - e1) * inverse  # (d e^d - expm1(d)) / d^2
+    if small.any():
+        d = delta
+        e1 = np.where(small, 1.0 + d * (1 / 2 + d * (1 / 6 + d / 24)), e1)
+        e2 = np.where(small, 0.5 + d * (1 / 3 + d * (1 / 8 + d * (1 / 30 + d / 144))), e2)
+    return e1, e2
 
 
 def segment_moment(log_start, log_end, r_start, length):
