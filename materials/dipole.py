@@ -144,7 +144,13 @@ def total_diffuse_reflectance(sigma_a, sigma_s_prime, eta):
         Dimensionless, in [0, 1).
     """
     dtype = _float_dtype(sigma_a, sigma_s_prime, eta)
-    albedo = reduced_albedo(np.asarray(sigma_a, dtype), np.asarray(sigma_s_prime, dtype))
-    root = np.sqrt(3.0 * np.clip(1.0 - albedo, 0.0, None))
+    sigma_a = np.asarray(sigma_a, dtype)
+    sigma_t_prime = reduced_extinction(sigma_a, sigma_s_prime)
+    albedo = reduced_albedo(sigma_a, sigma_s_prime)
+    # 1 - alpha' as sigma_a / sigma_t' directly: the subtraction loses every digit when
+    # the albedo is close to 1 (float32 rounds 1 - 1e-9 to 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        one_minus_albedo = np.where(sigma_t_prime > 0, sigma_a / sigma_t_prime, 1.0)
+    root = np.sqrt(3.0 * one_minus_albedo)
     boundary = dipole_boundary_factor(np.asarray(eta, dtype))
     return (0.5 * albedo * (1.0 + np.exp(-4.0 / 3.0 * boundary * root)) * np.exp(-root)).astype(dtype)

@@ -65,7 +65,8 @@ def fresnel_reflectance(eta, cos_theta_i):
     dtype = _float_dtype(eta, cos_theta_i)
     eta = np.asarray(eta, dtype=dtype)
     cos_i = np.clip(np.asarray(cos_theta_i, dtype=dtype), 0.0, 1.0)
-    sin2_t = (1.0 - cos_i**2) / eta**2
+    # (1 - cos)(1 + cos) keeps its digits near normal incidence, where 1 - cos^2 cancels
+    sin2_t = (1.0 - cos_i) * (1.0 + cos_i) / eta**2
     total = sin2_t >= 1.0
     cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, 1.0))
     with np.errstate(invalid="ignore", divide="ignore"):
