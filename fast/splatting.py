@@ -137,9 +137,9 @@ def _blocks(array: np.ndarray, fill) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class IrradianceLevel:
-    """One level of the irradiance mipmap (Sect. 4, "Buffer generation").
+    r"""One level of the irradiance mipmap (Sect. 4, "Buffer generation").
 
-    ``flux`` (H, W, 3) sums the children's :math:`E\\,\\Delta A`; ``position``, ``normal``,
+    ``flux`` (H, W, 3) sums the children's :math:`E\,\Delta A`; ``position``, ``normal``,
     ``uv``, ``cosine`` and ``footprint`` average the valid children (a standard mipmap);
     ``depth_min`` / ``depth_max`` are the min/max mipmap of the light-space depth.
     """
@@ -157,7 +157,7 @@ class IrradianceLevel:
 
 def irradiance_mipmap(buffer: SurfaceBuffer, flux: np.ndarray, cosine: np.ndarray,
                       levels: int) -> list[IrradianceLevel]:
-    """The irradiance buffer's mipmap: standard averages plus a min/max depth pyramid.
+    r"""Build the irradiance buffer's mipmap: standard averages plus a min/max depth pyramid.
 
     Chen et al. 2012, Sect. 4: level 0 is the buffer; each coarser texel averages its
     valid 2 x 2 children (footprint doubled), sums their flux, and keeps the minimum and
@@ -205,7 +205,7 @@ def irradiance_mipmap(buffer: SurfaceBuffer, flux: np.ndarray, cosine: np.ndarra
 
 
 def median_depth_mipmap(buffer: SurfaceBuffer, levels: int) -> list[SurfaceBuffer]:
-    """The splatting buffer's mipmap: in each 2 x 2 block, copy the texel of median depth.
+    """Build the splatting buffer's mipmap: in each 2 x 2 block, copy the median-depth texel.
 
     Chen et al. 2012, Sect. 4: a median filter (not an average) keeps sharp geometric
     features. Among the valid children the lower median of the depths is taken; a block
@@ -330,7 +330,7 @@ class RenderingRadiusTable:
     radii: np.ndarray
 
     def __call__(self, resolution) -> np.ndarray:
-        """:math:`\\bar R(T)` by linear interpolation in :math:`\\ln T` (clamped at the ends)."""
+        r"""Return :math:`\bar R(T)`, linear in :math:`\ln T` (clamped at the ends)."""
         t = np.log(np.clip(np.nan_to_num(np.asarray(resolution, np.float64), nan=1.0,
                                          posinf=1e30), 1e-30, None))
         return np.interp(t, np.log(self.resolutions), self.radii)
@@ -339,7 +339,7 @@ class RenderingRadiusTable:
 def minimal_rendering_radius_table(mean_profile, epsilon: float = 0.001, *,
                                    resolutions=None, radius_samples: int = 128
                                    ) -> RenderingRadiusTable:
-    r"""Tabulate Eq. 14 of Chen et al. 2012: the smallest normalised radius rendered at a resolution.
+    r"""Tabulate Eq. 14 of Chen et al. 2012: the smallest radius rendered at a resolution.
 
     For a resolution :math:`T` (pixels across the effective scattering range),
     :math:`\bar R(T)` is the smallest :math:`r` such that the splatted (sampled) tail
@@ -599,7 +599,7 @@ class _NumpyKernel:
                                                          minlength=len(self.valid))
 
     def result(self) -> np.ndarray:
-        """The accumulated exitance, (H * W, 3)."""
+        """Return the accumulated exitance, (H * W, 3)."""
         return self.exitance
 
 
@@ -708,7 +708,7 @@ class _DrJitKernel:
         dr.eval(self.exitance)
 
     def result(self) -> np.ndarray:
-        """The accumulated exitance, (H * W, 3), float64."""
+        """Return the accumulated exitance, (H * W, 3), float64."""
         return np.stack([np.asarray(channel, dtype=np.float64) for channel in self.exitance],
                         axis=-1)
 
@@ -805,10 +805,10 @@ def brute_force_exitance(samples: IrradianceSamples, buffer: SurfaceBuffer,
 # ====================================================================== one frame
 @dataclass(frozen=True, eq=False)
 class LightView:
-    """An irradiance buffer with what the light delivers to it.
+    r"""An irradiance buffer with what the light delivers to it.
 
-    ``flux`` (H, W, 3): :math:`E(x_i)\\Delta A_{x_i}` (Eq. 5-6 of Chen et al. 2012);
-    ``cosine`` (H, W): :math:`|n\\cdot L|`.
+    ``flux`` (H, W, 3): :math:`E(x_i)\Delta A_{x_i}` (Eq. 5-6 of Chen et al. 2012);
+    ``cosine`` (H, W): :math:`|n\cdot L|`.
     """
 
     buffer: SurfaceBuffer
@@ -862,7 +862,7 @@ def rendering_radius_table(material: SubEditProfiles, epsilon: float = 0.001
 def splat_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list[LightView],
                 material: SubEditProfiles, *, mm_per_unit: float, sphere_radius: float,
                 knobs: dict | None = None, log: StageLog | None = None) -> np.ndarray:
-    """Steps 2-4 of Chen et al. 2012 on given buffers: exitance -> radiance (Eq. 5-17, Eq. 7).
+    r"""Run steps 2-4 of Chen et al. 2012 on given buffers: radiance by Eq. 5-17 and Eq. 7.
 
     Parameters
     ----------
@@ -945,7 +945,7 @@ def splat_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list[
 
 def gather_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list[LightView],
                  material: SubEditProfiles, *, mm_per_unit: float) -> np.ndarray:
-    """Ground truth for :func:`splat_frame`: Eq. 5 gathered over every finest-level sample.
+    """Render the ground truth of :func:`splat_frame`: Eq. 5 over every finest-level sample.
 
     Same buffers, same SubEdit material, no selection, no truncation at the effective
     range, no multiresolution (:func:`brute_force_exitance`), then Eq. 7.
@@ -967,7 +967,7 @@ def gather_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list
 
 
 def _exitant_radiance(exitance, buffer: SurfaceBuffer, camera: CameraModel, eta: float):
-    """Eq. 7 of Chen et al. 2012: :math:`L = F_t(\\omega_o) B / \\pi` at valid pixels."""
+    r"""Eq. 7 of Chen et al. 2012: :math:`L = F_t(\omega_o) B / \pi` at valid pixels."""
     to_camera = camera.origin - np.where(buffer.valid[..., None], buffer.position, 0.0)
     to_camera /= np.maximum(np.linalg.norm(to_camera, axis=-1, keepdims=True), 1e-300)
     cosine = np.clip(np.abs(np.einsum("...k,...k->...", buffer.normal, to_camera)), 0.0, 1.0)
@@ -976,7 +976,7 @@ def _exitant_radiance(exitance, buffer: SurfaceBuffer, camera: CameraModel, eta:
 
 
 def as_subedit(material) -> SubEditProfiles:
-    """The SubEdit profiles of a material: itself, or a converted :class:`Dipole`."""
+    """Return the SubEdit profiles of a material: itself, or a converted :class:`Dipole`."""
     if isinstance(material, SubEditProfiles):
         return material
     if isinstance(material, Dipole):
@@ -1099,7 +1099,7 @@ class SplattingState:
     log: StageLog = field(default_factory=StageLog)
 
     def render_ground_truth(self, lights=None, material=None, *, scene=None) -> Image:
-        """The brute-force ground truth of :meth:`render` (see :func:`gather_frame`).
+        """Render the brute-force ground truth of :meth:`render` (see :func:`gather_frame`).
 
         Same buffers and material; cost pixels x irradiance samples, so keep both small.
         """

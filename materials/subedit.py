@@ -80,7 +80,7 @@ _SERIES_THRESHOLD = 1e-2
 
 
 def _moment_factors(delta):
-    r""":math:`E_1 = \int_0^1 e^{\delta t}dt` and :math:`E_2 = \int_0^1 t e^{\delta t}dt`, stable."""
+    r"""Return :math:`E_1 = \int_0^1 e^{\delta t}dt`, :math:`E_2 = \int_0^1 t e^{\delta t}dt`."""
     delta = np.asarray(delta, dtype=np.float64)
     small = np.abs(delta) < _SERIES_THRESHOLD
     safe = np.where(small, 1.0, delta)
@@ -256,7 +256,7 @@ class SubEditProfiles:
     # ---------------------------------------------------------------- energy
     @functools.cached_property
     def _cumulative_knot_energy(self) -> np.ndarray:
-        """:math:`\\int_0^{r_k} P r\\,dr` at every knot, shape (T, n + 1, 3)."""
+        r"""Return :math:`\int_0^{r_k} P r\,dr` at every knot, shape (T, n + 1, 3)."""
         table = self.flat_log_profile
         step = self.r_s / self.segments
         radii = self.knot_radii[:-1][None, :, None]
@@ -341,8 +341,11 @@ class SubEditProfiles:
 
     @functools.cached_property
     def sampling_scattering_range(self) -> np.ndarray:
-        """The smallest channel range per texel, mm, shape (H, W): the one that sets the
-        irradiance sampling rate of Eq. 11 of Chen et al. 2012 (no channel undersampled)."""
+        """Return the smallest channel range per texel, mm, shape (H, W).
+
+        It sets the irradiance sampling rate of Eq. 11 of Chen et al. 2012, so that no
+        channel is undersampled.
+        """
         return self.channel_scattering_ranges().min(axis=-1)
 
     @functools.cached_property
@@ -383,7 +386,7 @@ class SubEditProfiles:
 
     # ---------------------------------------------------------------- construction
     def with_name(self, name: str) -> SubEditProfiles:
-        """A copy labelled ``name``."""
+        """Return a copy labelled ``name``."""
         return SubEditProfiles(self.log_profile, self.r_s, self.eta, name)
 
     @classmethod
@@ -411,18 +414,18 @@ class SubEditProfiles:
         return cls(table, first.r_s, eta, name)
 
     def cache_key(self) -> dict:
-        """What identifies this material in content hashes."""
+        """Return what identifies this material in content hashes."""
         return {"type": "subedit", "log_profile": self.log_profile, "r_s": self.r_s,
                 "eta": self.eta}
 
 
 # -------------------------------------------------------------------- dipole conversion
 class DipoleConversion(NamedTuple):
-    """A dipole converted to a SubEdit profile, and how far the profile is from it.
+    r"""A dipole converted to a SubEdit profile, and how far the profile is from it.
 
     ``relative_error`` per channel: energy-weighted L1 distance
-    :math:`(\\int_0^{r_s}|P - R_d|r\\,dr + \\int_{r_s}^\\infty R_d r\\,dr) /
-    \\int_0^\\infty R_d r\\,dr`; ``truncated_energy``: the second term alone.
+    :math:`(\int_0^{r_s}|P - R_d|r\,dr + \int_{r_s}^\infty R_d r\,dr) /
+    \int_0^\infty R_d r\,dr`; ``truncated_energy``: the second term alone.
     """
 
     profiles: SubEditProfiles
@@ -493,7 +496,8 @@ def subedit_from_dipole(dipole: Dipole, *, segments: int = DEFAULT_SEGMENTS,
     grid = _quadrature_grid(r_s, segments, 0.01 * float(np.min(finite_depths, initial=1.0)))
     target = dipole.profile(grid)  # (m, 3)
     weights = np.gradient(grid)[:, None] * grid[:, None] * target
-    weights = weights + TAIL_WEIGHT * weights.max(axis=0, keepdims=True) * np.gradient(grid)[:, None] / r_s
+    weights = weights + TAIL_WEIGHT * weights.max(axis=0, keepdims=True) * \
+        np.gradient(grid)[:, None] / r_s
     position = grid * segments / r_s
     k = np.minimum(position.astype(np.int64), segments - 1)
     fraction = position - k
@@ -561,7 +565,7 @@ def _texel_centres(resolution: int):
 
 def checker_material(resolution: int = 64, squares: int = 8, first: str = "Marble",
                      second: str = "Skin1", segments: int = DEFAULT_SEGMENTS) -> SubEditProfiles:
-    """A checkerboard of two measured media (Jensen et al. 2001), ``squares`` per side.
+    """Build a checkerboard of two measured media (Jensen et al. 2001), ``squares`` per side.
 
     The heterogeneous "marble chessboard" of Chen et al. 2012, Fig. 8, made from the
     measured table.
@@ -592,7 +596,7 @@ def veined_marble_material(resolution: int = 128, seed: int = 7, base: str = "Ma
 
 def wax_gradient_material(resolution: int = 64, first: str = "Apple", second: str = "Potato",
                           segments: int = DEFAULT_SEGMENTS) -> SubEditProfiles:
-    """A smooth gradient along v between two measured media (a wax of varying range)."""
+    """Build a smooth gradient along v between two measured media (a wax of varying range)."""
     a, b = _converted_pair(first, second, segments)
     _, v = _texel_centres(resolution)
     return SubEditProfiles.blend(a, b, v, name=f"wax_gradient({first},{second})")
@@ -612,7 +616,7 @@ def _builtin_cached(name: str, options: tuple) -> SubEditProfiles:
 
 
 def builtin_subedit(name: str, **options) -> SubEditProfiles:
-    """The built-in heterogeneous material ``name`` (see :data:`BUILTIN_SUBEDIT`).
+    """Return the built-in heterogeneous material ``name`` (see :data:`BUILTIN_SUBEDIT`).
 
     Options are passed to its constructor (``resolution``, measured-medium names, ...).
     Unknown names raise :class:`InputError` listing the valid ones.

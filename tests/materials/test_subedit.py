@@ -5,7 +5,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
-
 from translucent.errors import InputError
 from translucent.materials import measured_medium, measured_medium_names
 from translucent.materials.factory import material_from_dict, material_to_dict
@@ -247,37 +246,35 @@ def test_save_and_load_round_trip(tmp_path):
     assert np.allclose(loaded.log_profile, texture.log_profile, rtol=1e-6, atol=1e-4)
 
 
-def test_load_rejects_bad_files(tmp_path):
+def write_archive(path, **fields):
+    """A SubEdit archive with valid fields, some replaced (None drops a field)."""
+    table = {"format": np.array("translucent-subedit"), "version": np.array(1),
+             "log_profile": np.zeros((1, 1, 3, 3)), "r_s": np.array(1.0)}
+    table.update(fields)
+    np.savez(path, **{key: value for key, value in table.items() if value is not None})
+    return path
+
+
+@pytest.mark.parametrize(("fields", "message"), [
+    ({"format": np.array("other")}, "format = 'other': must be 'translucent-subedit'"),
+    ({"log_profile": None}, "log_profile: missing field"),
+    ({"log_profile": np.full((1, 1, 3, 3), np.nan)}, "holds NaN"),
+    ({"log_profile": np.zeros((1, 3, 3))}, r"must have shape \(H, W, n \+ 1 >= 2, 3\)"),
+    ({"r_s": np.array(-2.0)}, r"bad.npz: r_s = -2.0: must be > 0 mm"),
+    ({"version": np.array(9)}, "version = 9: unsupported version"),
+])
+def test_load_rejects_bad_fields(tmp_path, fields, message):
+    with pytest.raises(InputError, match=message):
+        load_subedit(write_archive(tmp_path / "bad.npz", **fields))
+
+
+def test_load_rejects_missing_and_unreadable_files(tmp_path):
     with pytest.raises(InputError, match="no such file"):
         load_subedit(tmp_path / "missing.npz")
     garbage = tmp_path / "garbage.npz"
     garbage.write_bytes(b"not an archive")
     with pytest.raises(InputError, match="not a readable .npz archive"):
         load_subedit(garbage)
-    wrong = tmp_path / "wrong.npz"
-    np.savez(wrong, format=np.array("other"), version=np.array(1),
-             log_profile=np.zeros((1, 1, 3, 3)), r_s=np.array(1.0))
-    with pytest.raises(InputError, match="format = 'other': must be 'translucent-subedit'"):
-        load_subedit(wrong)
-    missing = tmp_path / "missing_field.npz"
-    np.savez(missing, format=np.array("translucent-subedit"), version=np.array(1))
-    with pytest.raises(InputError, match="log_profile: missing field"):
-        load_subedit(missing)
-    nan = tmp_path / "nan.npz"
-    np.savez(nan, format=np.array("translucent-subedit"), version=np.array(1),
-             log_profile=np.full((1, 1, 3, 3), np.nan), r_s=np.array(1.0))
-    with pytest.raises(InputError, match="holds NaN"):
-        load_subedit(nan)
-    bad_radius = tmp_path / "radius.npz"
-    np.savez(bad_radius, format=np.array("translucent-subedit"), version=np.array(1),
-             log_profile=np.zeros((1, 1, 3, 3)), r_s=np.array(-2.0))
-    with pytest.raises(InputError, match="radius.npz: r_s = -2.0: must be > 0 mm"):
-        load_subedit(bad_radius)
-    future = tmp_path / "future.npz"
-    np.savez(future, format=np.array("translucent-subedit"), version=np.array(9),
-             log_profile=np.zeros((1, 1, 3, 3)), r_s=np.array(1.0))
-    with pytest.raises(InputError, match="version = 9: unsupported version"):
-        load_subedit(future)
 
 
 # ---------------------------------------------------------------------------- scene files
