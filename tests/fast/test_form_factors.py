@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-
 from translucent.errors import InputError
 from translucent.fast.form_factors import (
     build_patches,

@@ -2,7 +2,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from translucent.errors import InputError
 from translucent.fast.optical_distance import (
     closed_surface,

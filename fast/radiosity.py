@@ -1,0 +1,1371 @@
+r"""Translucent radiosity: diffuse inter-reflection combined with subsurface scattering.
+
+Sheng, Shi, Wang, Narasimhan: Translucent radiosity: efficiently combining diffuse
+inter-reflection and subsurface scattering. IEEE TVCG 20(7), 2014.
+
+The scene is cut into patches; the radiosity (exitance) :math:`B` of every patch solves
+
+.. math:: B = \sum_{N \ge 1} (SF)^{N-1} SE = (I - SF)^{-1} SE \qquad \text{(Eq. 14)}
+
+with :math:`E` the irradiance from the lights, :math:`F` the form factors (irradiance of
+patch i from the radiosity of patch j, :mod:`translucent.fast.form_factors`) and
+:math:`S` the scattering factors: :math:`S_{ji}` takes the irradiance of patch i to the
+radiosity of patch j through the material (Eq. 7-8). For an opaque Lambertian patch
+:math:`S = P = \mathrm{diag}(\rho)` and Eq. 14 is classical radiosity (Eq. 2).
+
+Scattering factors (Eq. 8, Sect. 5.2). With the exit point at the centroid :math:`c_j`,
+
+.. math:: S_{ji} = \frac{1}{A_j}\int_{A_i}\int_{A_j} s\,dA_j\,dA_i
+          \approx \int_{A_i} s(d(x, c_j))\,dA_x,
+
+where :math:`s(r)` is a 1D profile (:mod:`translucent.materials.profiles`) of the
+shortest optical distance :math:`d` (:mod:`translucent.fast.optical_distance`). The
+normalisation by :math:`A_j` (the paper prints :math:`A_i`; the two agree for equal
+patches) makes :math:`B_j = \sum_i S_{ji} E_i` an exitance for patches of any size, and the
+energy condition of Eq. 15 reads :math:`\sum_j A_j S_{ji} / A_i < 1` (the power-form
+column sums). The integral over the incident patch uses its sub-triangle centroids, 100
+on a patch's neighbours, fewer as the distance grows (``m^2`` with ``m`` falling
+exponentially), the centroid alone beyond a threshold, nothing beyond max_d. The patch's
+own term, where the profile peaks, is integrated in polar coordinates about the centroid
+against the exact cumulative integral of the tabulated profile (``self_term="polar"``,
+the default; ``"samples"`` uses 100 samples as the paper does -- the bench measures both).
+
+Every sample stores only the profile-grid segment and offset of its distance (Sect. 5.2:
+"each index contains [...] profile indices and offsets"), gathered in a sparse operator
+``W`` (pairs x grid nodes): a change of translucency re-tabulates the profile and computes
+``S.data = W @ table`` for the three channels at once, nothing else.
+
+Solving (Sect. 5.3): Jacobi iteration :math:`B \leftarrow SE + SFB` (the paper's solver) or
+GMRES / BiCGSTAB from :mod:`scipy.sparse.linalg`, to a relative residual
+:math:`\|SE - (I - SF)B\| / \|SE\|` of 0.5 %. Before any iteration the condition of Eq. 15 is
+checked; a material that breaks it raises :class:`~translucent.errors.InputError` naming
+the object, patch, channel and column sum. When :math:`3P^2` float32 numbers fit the
+``transfer_budget_mb`` knob, :math:`T = (I - SF)^{-1}S` is precomputed and relighting is one
+matrix-vector product per channel (Sect. 6.4).
+
+Images: direct lighting of diffuse surfaces is evaluated per pixel through the G-buffer
+(the paper's hybrid that removes per-patch shadow artifacts), the global part
+:math:`FB` and the radiosity of translucent surfaces come from the patch solution,
+averaged to the vertices and interpolated. :meth:`RadiosityState.components` gives the
+decomposition of the paper's Fig. 6: direct only, inter-reflection only (translucent
+patches as diffuse ones of the same total reflectance), subsurface only (:math:`B = SE`),
+and both.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse import linalg as sparse_linalg
+from scipy.spatial import cKDTree
+
+from ..errors import InputError
+from ..image import Image
+from ..materials.homogeneous import Lambertian
+from ..materials.profiles import (
+    MixedProfiles,
+    RadialGrid,
+    RadialProfile,
+    mixed_profile,
+    profile_for,
+    radial_cumulative_integral,
+)
+from ..scenes.scene import (
+    ConstantEnvironment,
+    DirectionalLight,
+    ImageEnvironment,
+    PointLight,
+    RectangularAreaLight,
+    SphereAreaLight,
+    SpotLight,
+)
+from .base import StageLog
+from .form_factors import Patches, build_patches, form_factors, needs_form_factors
+from .optical_distance import (
+    closed_surface,
+    is_convex,
+    optical_distances,
+    subdivision_barycentrics,
+    voxelize,
+)
+
+__all__ = [
+    "COMPONENTS",
+    "DEFAULT_KNOBS",
+    "SOLVERS",
+    "ConvergenceError",
+    "RadiosityState",
+    "ScatteringGeometry",
+    "ScatteringMatrix",
+    "add_approx_arguments",
+    "applies_to",
+    "approx",
+    "check_convergence",
+    "direct_irradiance",
+    "precompute",
+    "scattering_geometry",
+    "scattering_matrix",
+    "solve_radiosity",
+    "transfer_matrix",
+]
+
+#: Version of the precomputed data layout (part of the cache key).
+FORMAT_VERSION = 1
+
+#: Knobs of :func:`precompute` and their defaults.
+DEFAULT_KNOBS: dict = {
+    # patches and form factors
+    "triangles_per_patch": 1,        # 1: triangles; n > 1: coplanar neighbours merged
+    "rays_per_patch": 256,           # form-factor rays from each patch
+    "form_factor_threshold": 0.0,    # F entries below this are dropped
+    # scattering factors
+    "max_distance_mm": None,         # max_d; None: where every profile keeps 99.9 %
+    "profile_energy_cutoff": 1e-3,   # energy fraction beyond max_d when it is derived
+    "self_samples": 100,             # samples on a patch's nearest neighbours (m^2)
+    "sample_falloff": 2.0,           # m falls as exp(-distance / (this x patch radius))
+    "centroid_beyond": 8.0,          # centroid only beyond this many patch radii
+    "self_term": "polar",            # "polar" (exact profile integral) or "samples"
+    "voxels_per_axis": 48,           # voxel grid of a concave object, along its longest side
+    "profile_samples": 2048,         # radial grid nodes of the tabulated profiles
+    "mix_points": 8,                 # points along a path for heterogeneous fractions
+    # solving and lighting
+    "solver": "jacobi",              # "jacobi", "gmres" or "bicgstab"
+    "tolerance": 5e-3,               # relative residual (the paper's 0.5 %)
+    "max_iterations": 2000,
+    "transfer_budget_mb": 512,       # precompute T when 3 P^2 float32 fit
+    "light_samples": 16,             # samples per area light / environment per point
+    "seed": 0,
+}
+
+#: The iterative solvers.
+SOLVERS = ("jacobi", "gmres", "bicgstab")
+
+#: The bounce decomposition of Sheng et al. 2014, Fig. 6.
+COMPONENTS = ("direct", "interreflection", "subsurface", "both")
+
+#: Gauss-Legendre nodes per triangle edge for the polar self term: the integrand along an
+#: edge is C(sqrt(h^2 + s^2)) h / (h^2 + s^2), smooth; 8 nodes integrate a constant
+#: profile over a triangle to 1e-12 and the dipole to 1e-6.
+POLAR_NODES = 8
+
+#: Residual growth (over the smallest seen) that stops an iteration as diverging.
+DIVERGENCE_FACTOR = 1e3
+
+
+class ConvergenceError(RuntimeError):
+    """The radiosity iteration did not reach its tolerance; carries the numbers.
+
+    Attributes
+    ----------
+    residual : float
+        The relative residual reached.
+    iterations : int
+    """
+
+    def __init__(self, message: str, *, residual: float, iterations: int):
+        super().__init__(message)
+        self.residual = residual
+        self.iterations = iterations
+
+
+# ---------------------------------------------------------------------------------------
+# scattering geometry: distances, samples, profile indices (material independent)
+
+
+@dataclass(eq=False)
+class ObjectScattering:
+    """The cached scattering samples of one translucent object.
+
+    Parameters
+    ----------
+    object_index : int
+    patches : ndarray of int
+        Its global patch indices.
+    pair_position : ndarray of int
+        Position of each (exit, incident) pair of the object in the data of S.
+    sample_operator : scipy.sparse.csr_matrix, shape (pairs, K)
+        Interpolation weights (mm^2) of every sample onto the profile grid: the S entries
+        of the pairs are ``sample_operator @ table``.
+    diagonal_position : ndarray of int
+        Position of each patch's own entry in the data of S.
+    self_cumulative, self_segment : scipy.sparse.csr_matrix, shape (patches, K)
+        The polar self term: ``self_cumulative @ C + self_segment @ table`` with C the
+        cumulative radial integral of the table (None when ``self_term="samples"``).
+    samples : dict or None
+        Heterogeneous objects only: ``pair``, ``weight`` (mm^2), ``distance`` (mm), and
+        ``fractions`` (pairs x materials), ``patch_label``.
+    facts : dict
+        Counts and timings for the report.
+    """
+
+    object_index: int
+    patches: np.ndarray
+    pair_position: np.ndarray
+    sample_operator: sparse.csr_matrix
+    diagonal_position: np.ndarray
+    self_cumulative: sparse.csr_matrix | None
+    self_segment: sparse.csr_matrix | None
+    samples: dict | None
+    facts: dict = field(default_factory=dict)
+
+
+@dataclass(eq=False)
+class ScatteringGeometry:
+    """Everything S needs that does not depend on the material (Sheng et al. 2014, Sect. 5.2).
+
+    Parameters
+    ----------
+    indptr, indices : ndarray
+        The CSR pattern of S (rows: exit patch j, columns: incident patch i), diagonal
+        included for every patch.
+    diagonal_position : ndarray of int, shape (P,)
+        Position of each patch's diagonal entry in the data.
+    grid : RadialGrid
+        The profile grid; its ``max_radius`` is the cut-off max_d (mm).
+    objects : dict of int to ObjectScattering
+        The translucent objects.
+    """
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    diagonal_position: np.ndarray
+    grid: RadialGrid
+    objects: dict
+
+    @property
+    def nnz(self) -> int:
+        """Stored entries of S (per channel)."""
+        return len(self.indices)
+
+    @property
+    def bytes(self) -> int:
+        """Memory held by the cached operators and pattern."""
+        total = self.indptr.nbytes + self.indices.nbytes + self.diagonal_position.nbytes
+        for item in self.objects.values():
+            for matrix in (item.sample_operator, item.self_cumulative, item.self_segment):
+                if matrix is not None:
+                    total += matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes
+            total += item.pair_position.nbytes
+            if item.samples:
+                total += sum(np.asarray(v).nbytes for v in item.samples.values())
+        return int(total)
+
+
+def _samples_per_edge(distance, radius, knobs) -> np.ndarray:
+    """M (samples = m^2) for each pair: Sheng et al. 2014, Sect. 5.2, decreasing with distance."""
+    most = max(1, int(round(math.sqrt(knobs["self_samples"]))))
+    m = np.rint(most * np.exp(-distance / (knobs["sample_falloff"] * radius)))
+    m = np.clip(m, 1, most).astype(np.int64)
+    return np.where(distance > knobs["centroid_beyond"] * radius, 1, m)
+
+
+def _polar_self_nodes(patches: Patches, members: np.ndarray):
+    r"""Nodes of the polar integral of :math:`s(|x - c|)` over each patch about its centroid.
+
+    :math:`\int_{A} s(|x-c|)\,dA = \sum_{\text{edges}} \pm\int C(\rho(\varphi))\,d\varphi` with
+    :math:`C(\rho) = \int_0^\rho s(r) r\,dr`; along an edge at distance h from c,
+    :math:`d\varphi = h\,ds / (h^2 + s^2)` and :math:`\rho = \sqrt{h^2 + s^2}`.
+
+    Returns
+    -------
+    rows : ndarray of int
+        Index into ``members``.
+    rho : ndarray
+        mm.
+    weight : ndarray
+        Radians (signed).
+    """
+    mm = patches.mm_per_unit
+    rows, faces = patches.faces_of(members)
+    corners = patches.triangles[faces] * mm
+    center = patches.centroid[members][rows] * mm
+    normal = patches.normal[members][rows]
+    nodes, weights = np.polynomial.legendre.leggauss(POLAR_NODES)
+    t, w = 0.5 * (nodes + 1.0), 0.5 * weights
+    out_rows, out_rho, out_weight = [], [], []
+    for edge in range(3):
+        a, b = corners[:, edge], corners[:, (edge + 1) % 3]
+        direction = b - a
+        length = np.linalg.norm(direction, axis=1)
+        unit = direction / length[:, None]
+        s_a = np.einsum("ij,ij->i", a - center, unit)
+        foot = a - s_a[:, None] * unit
+        h = np.linalg.norm(foot - center, axis=1)
+        orientation = np.sign(np.einsum("ij,ij->i", np.cross(a - center, b - center), normal))
+        keep = (h > 1e-12 * length) & (orientation != 0)
+        s = s_a[:, None] + length[:, None] * t[None, :]
+        rho = np.sqrt(h[:, None] ** 2 + s**2)
+        weight = orientation[:, None] * h[:, None] / rho**2 * length[:, None] * w[None, :]
+        out_rows.append(np.repeat(rows[keep], len(t)))
+        out_rho.append(rho[keep].ravel())
+        out_weight.append(weight[keep].ravel())
+    return np.concatenate(out_rows), np.concatenate(out_rho), np.concatenate(out_weight)
+
+
+def _self_operators(grid: RadialGrid, count: int, rows, rho, weight):
+    r"""Sparse operators of the polar self term on the profile grid (exact for the table).
+
+    :math:`C(\rho) = C_k + h_k[s_k a(f) + s_{k+1} b(f)]` on segment k at offset f, with
+    :math:`a = r_k(f - f^2/2) + h_k(f^2/2 - f^3/3)`, :math:`b = r_k f^2/2 + h_k f^3/3`.
+    """
+    # radii at or beyond max_d land on the last segment with f = 1: C(max_d) exactly
+    k, f = grid.locate(rho)
+    f = f.astype(np.float64)
+    radius = grid.radius
+    left = radius[k]
+    h = radius[k + 1] - left
+    a = h * (left * (f - f * f / 2) + h * (f * f / 2 - f**3 / 3))
+    b = h * (left * f * f / 2 + h * f**3 / 3)
+    shape = (count, grid.samples)
+    cumulative = sparse.coo_matrix((weight, (rows, k)), shape=shape).tocsr()
+    segment = sparse.coo_matrix((np.concatenate([weight * a, weight * b]),
+                                 (np.concatenate([rows, rows]), np.concatenate([k, k + 1]))),
+                                shape=shape).tocsr()
+    return cumulative, segment
+
+
+def _pair_fractions(centroids_mm, face_centroids_mm, face_labels, exit_local, incident_local,
+                    materials: int, points: int) -> np.ndarray:
+    """Fraction of the segment between two patch centroids inside each material.
+
+    The material at a point is that of the nearest surface face (the paper's checkerboard
+    block is labelled on its surface). Returns shape (pairs, materials).
+    """
+    tree = cKDTree(face_centroids_mm)
+    t = (np.arange(points) + 0.5) / points
+    fractions = np.zeros((len(exit_local), materials))
+    chunk = max(1, (1 << 20) // points)
+    for start in range(0, len(exit_local), chunk):
+        stop = min(len(exit_local), start + chunk)
+        a = centroids_mm[exit_local[start:stop]]
+        b = centroids_mm[incident_local[start:stop]]
+        along = a[:, None] + t[None, :, None] * (b - a)[:, None]
+        _, nearest = tree.query(along.reshape(-1, 3))
+        labels = face_labels[nearest].reshape(stop - start, points)
+        for m in range(materials):
+            fractions[start:stop, m] = (labels == m).mean(axis=1)
+    return fractions
+
+
+def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
+                        max_distance_mm: float, knobs: dict, log: StageLog | None = None
+                        ) -> ScatteringGeometry:
+    """Distances, samples and profile indices of every scattering factor (Sect. 5.2).
+
+    Parameters
+    ----------
+    scene : Scene
+    patches : Patches
+    translucent : list of int
+        Indices of the translucent objects (the others get a diagonal S = P).
+    max_distance_mm : float
+        The cut-off max_d, mm.
+    knobs : dict
+        :data:`DEFAULT_KNOBS` entries ``self_samples``, ``sample_falloff``,
+        ``centroid_beyond``, ``self_term``, ``voxels_per_axis``, ``profile_samples``,
+        ``mix_points``.
+    log : StageLog, optional
+        Receives what was skipped (voxel grids of convex objects) and the timings.
+
+    Returns
+    -------
+    ScatteringGeometry
+    """
+    log = log if log is not None else StageLog()
+    grid = RadialGrid(max_distance_mm, knobs["profile_samples"])
+    mm = patches.mm_per_unit
+    rows_all = [np.arange(len(patches))]
+    cols_all = [np.arange(len(patches))]
+    per_object = []
+    for index in translucent:
+        obj = scene.objects[index]
+        started = time.perf_counter()
+        members = patches.of_object(index)
+        centroids = patches.centroid[members] * mm
+        radius = patches.radius[members] * mm
+        mesh = obj.mesh
+        facts = {"patches": int(len(members))}
+        if is_convex(mesh.vertices, mesh.faces):
+            voxels = None
+            log.skip(f"no voxel grid for '{obj.name}': a convex object, the shortest path "
+                     "inside is the straight line (Euclidean distance)")
+        else:
+            size = float(np.ptp(mesh.vertices, axis=0).max()) * mm
+            voxels = voxelize(mesh.vertices[mesh.faces] * mm, size / knobs["voxels_per_axis"],
+                              fill=closed_surface(mesh.faces, mesh.vertices))
+            facts["voxels"] = int(voxels.nodes)
+            facts["voxel_size_mm"] = float(voxels.voxel_size)
+        tree = cKDTree(centroids)
+        reach = max_distance_mm + float(radius.max())
+        undirected = tree.query_pairs(reach, output_type="ndarray")
+        exit_local = np.concatenate([undirected[:, 0], undirected[:, 1]])
+        incident_local = np.concatenate([undirected[:, 1], undirected[:, 0]])
+        if knobs["self_term"] == "samples":
+            exit_local = np.concatenate([exit_local, np.arange(len(members))])
+            incident_local = np.concatenate([incident_local, np.arange(len(members))])
+        delta = np.linalg.norm(centroids[exit_local] - centroids[incident_local], axis=1)
+        keep = delta <= max_distance_mm + radius[incident_local]
+        exit_local, incident_local, delta = exit_local[keep], incident_local[keep], delta[keep]
+        m = _samples_per_edge(delta, radius[incident_local], knobs)
+        # one inside test per patch pair, shared by its samples (voxel resolution anyway)
+        pair_inside = voxels.segment_inside(centroids[exit_local], centroids[incident_local]) \
+            if voxels is not None else None
+        pair_rows, pair_faces = patches.faces_of(members[incident_local])
+        pair_m = m[pair_rows]
+        sample_pair, sample_weight, sample_distance = [], [], []
+        for value in np.unique(pair_m):
+            chosen = np.flatnonzero(pair_m == value)
+            barycentric = subdivision_barycentrics(int(value))
+            corners = patches.triangles[pair_faces[chosen]] * mm
+            points = np.einsum("sk,nkd->nsd", barycentric, corners).reshape(-1, 3)
+            owners = np.repeat(pair_rows[chosen], len(barycentric))
+            starts = centroids[exit_local[owners]]
+            distance = optical_distances(voxels, starts, points, max_distance_mm,
+                                         inside=None if voxels is None
+                                         else pair_inside[owners])
+            weight = np.repeat(patches.triangle_area[pair_faces[chosen]] * mm * mm / value**2,
+                               len(barycentric))
+            inside = np.isfinite(distance)
+            sample_pair.append(owners[inside])
+            sample_weight.append(weight[inside])
+            sample_distance.append(distance[inside])
+        sample_pair = np.concatenate(sample_pair) if sample_pair else np.zeros(0, np.int64)
+        sample_weight = np.concatenate(sample_weight) if sample_weight else np.zeros(0)
+        sample_distance = np.concatenate(sample_distance) if sample_distance else np.zeros(0)
+        k, f = grid.locate(sample_distance)
+        f = f.astype(np.float64)
+        operator = sparse.coo_matrix(
+            (np.concatenate([sample_weight * (1.0 - f), sample_weight * f]),
+             (np.concatenate([sample_pair, sample_pair]), np.concatenate([k, k + 1]))),
+            shape=(len(exit_local), grid.samples)).tocsr()
+        operator.sum_duplicates()
+        self_cumulative = self_segment = None
+        if knobs["self_term"] == "polar":
+            rows, rho, weight = _polar_self_nodes(patches, members)
+            self_cumulative, self_segment = _self_operators(grid, len(members), rows,
+                                                            np.minimum(rho, max_distance_mm),
+                                                            weight)
+        samples = None
+        if isinstance(obj.material, MixedProfiles):
+            material = obj.material
+            if len(material.face_labels) != len(mesh.faces):
+                raise InputError(f"needs one label per face of '{obj.name}' "
+                                 f"({len(mesh.faces)})", field="face_labels",
+                                 value=len(material.face_labels))
+            start = patches.face_offset[index]
+            first_face = patches.patch_faces[patches.patch_face_start[members]] - start
+            samples = {
+                "pair": sample_pair, "weight": sample_weight, "distance": sample_distance,
+                "fractions": _pair_fractions(centroids, mesh.face_centroids * mm,
+                                             material.face_labels, exit_local, incident_local,
+                                             len(material.profiles), knobs["mix_points"]),
+                "patch_label": material.face_labels[first_face],
+            }
+        rows_all.append(members[exit_local])
+        cols_all.append(members[incident_local])
+        facts.update({"pairs": int(len(exit_local)), "samples": int(len(sample_pair)),
+                      "seconds": time.perf_counter() - started})
+        per_object.append((index, members, len(exit_local), operator, self_cumulative,
+                           self_segment, samples, facts))
+        log.seconds[f"scattering '{obj.name}'"] = facts["seconds"]
+        log.notes.setdefault("scattering", {})[obj.name] = facts
+    rows = np.concatenate(rows_all)
+    cols = np.concatenate(cols_all)
+    order = np.lexsort((cols, rows))
+    position = np.empty(len(order), dtype=np.int64)
+    position[order] = np.arange(len(order))
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=len(patches)))])
+    diagonal = position[:len(patches)]
+    objects = {}
+    offset = len(patches)
+    for index, members, count, operator, self_c, self_s, samples, facts in per_object:
+        objects[index] = ObjectScattering(index, members, position[offset:offset + count],
+                                          operator, diagonal[members], self_c, self_s,
+                                          samples, facts)
+        offset += count
+    return ScatteringGeometry(indptr.astype(np.int64), cols[order].astype(np.int32), diagonal,
+                              grid, objects)
+
+
+# ---------------------------------------------------------------------------------------
+# the scattering matrix of a material
+
+
+@dataclass(eq=False)
+class ScatteringMatrix:
+    """S for the three RGB channels, one sparsity pattern (Sheng et al. 2014, Sect. 5.3).
+
+    Parameters
+    ----------
+    indptr, indices : ndarray
+        CSR pattern (rows: exit patch, columns: incident patch).
+    data : ndarray, shape (nnz, 3)
+        Dimensionless scattering factors.
+    """
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    data: np.ndarray
+
+    def channel(self, c: int) -> sparse.csr_matrix:
+        """S of channel ``c`` as a CSR matrix (shares the pattern)."""
+        size = len(self.indptr) - 1
+        return sparse.csr_matrix((self.data[:, c], self.indices, self.indptr),
+                                 shape=(size, size))
+
+    def dot(self, vectors) -> np.ndarray:
+        """``S_c @ vectors[:, c]`` for c = R, G, B; shape (P, 3)."""
+        vectors = np.asarray(vectors)
+        return np.stack([self.channel(c) @ vectors[:, c] for c in range(3)], axis=1)
+
+    def power_column_sums(self, area) -> np.ndarray:
+        r""":math:`\sum_j A_j S_{ji} / A_i` per patch and channel, shape (P, 3) (Eq. 15)."""
+        area = np.asarray(area, dtype=np.float64)
+        return np.stack([self.channel(c).T @ area for c in range(3)], axis=1) / area[:, None]
+
+    @property
+    def bytes(self) -> int:
+        """Memory of the three channels and the shared pattern."""
+        return int(self.data.nbytes + self.indices.nbytes + self.indptr.nbytes)
+
+
+def _object_profile_tables(profile: RadialProfile, grid: RadialGrid):
+    table = profile.tabulate(grid)
+    return table, radial_cumulative_integral(grid.radius, table)
+
+
+def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
+                      materials: dict | None = None) -> ScatteringMatrix:
+    """Build S from the cached geometry and the materials: one sparse product per object.
+
+    Sheng et al. 2014, Sect. 4-5.2: "the subsurface scattering matrix is then computed by
+    just indexing, based on distances, into the reflection/transmission profiles";
+    heterogeneous objects mix their profiles per sample with Eq. 16.
+
+    Parameters
+    ----------
+    geometry : ScatteringGeometry
+    scene : Scene
+    patches : Patches
+    materials : dict of str to material, optional
+        Overrides of the scene's materials by object name.
+
+    Returns
+    -------
+    ScatteringMatrix
+
+    Raises
+    ------
+    InputError
+        A translucent material on an object that was opaque at precomputation, an opaque
+        one where S was precomputed (it still works: S = P), an unsupported material, or
+        a profile with NaN / negative values.
+    """
+    materials = materials or {}
+    grid = geometry.grid
+    data = np.zeros((geometry.nnz, 3))
+    for index, obj in enumerate(scene.objects):
+        material = materials.get(obj.name, obj.material)
+        profile = profile_for(material)
+        members = patches.of_object(index)
+        if profile is None:
+            data[geometry.diagonal_position[members]] = material.albedo
+            continue
+        item = geometry.objects.get(index)
+        if item is None:
+            raise InputError(f"object '{obj.name}' was opaque when the scattering factors "
+                             "were precomputed: precompute with it translucent",
+                             field="material", value=getattr(material, "name", "") or
+                             type(material).__name__)
+        if isinstance(profile, MixedProfiles):
+            data[item.pair_position] += _mixed_values(item, profile, grid)
+            labels = item.samples["patch_label"]
+            for label, homogeneous in enumerate(profile.profiles):
+                table, cumulative = _object_profile_tables(homogeneous, grid)
+                mine = labels == label
+                if item.self_cumulative is not None:
+                    values = item.self_cumulative @ cumulative + item.self_segment @ table
+                    data[item.diagonal_position[mine]] += values[mine]
+            continue
+        table, cumulative = _object_profile_tables(profile, grid)
+        data[item.pair_position] += item.sample_operator @ table
+        if item.self_cumulative is not None:
+            data[item.diagonal_position] += (item.self_cumulative @ cumulative
+                                             + item.self_segment @ table)
+    return ScatteringMatrix(geometry.indptr, geometry.indices, data)
+
+
+def _mixed_values(item: ObjectScattering, profile: MixedProfiles, grid: RadialGrid):
+    samples = item.samples
+    fractions = samples["fractions"][samples["pair"]]
+    distance = samples["distance"]
+    materials = len(profile.profiles)
+    zero = np.stack([p.tabulate(grid)[0] for p in profile.profiles])
+    at = np.zeros((len(distance), materials, 3))
+    for m, homogeneous in enumerate(profile.profiles):
+        table = homogeneous.tabulate(grid)
+        k, f = grid.locate(fractions[:, m] * distance)
+        at[:, m] = table[k] * (1.0 - f[:, None]) + table[k + 1] * f[:, None]
+    values = mixed_profile(zero, at, fractions) * samples["weight"][:, None]
+    pairs = len(item.pair_position)
+    return np.stack([np.bincount(samples["pair"], values[:, c], minlength=pairs)
+                     for c in range(3)], axis=1)
+
+
+# ---------------------------------------------------------------------------------------
+# convergence and solving
+
+
+def check_convergence(S: ScatteringMatrix, F, patches: Patches) -> dict:
+    r"""Check the convergence condition of Sheng et al. 2014, Eq. 15, before solving.
+
+    :math:`\|S\|_1 < 1` in power form: the energy leaving every patch through the material
+    is less than what enters it. With :math:`\|F\| \le 1` (row sums of ray-cast form
+    factors never exceed 1) the spectral radius of :math:`SF` is below
+    :math:`\max_i\sum_j A_j S_{ji}/A_i \cdot \max_j \sum_k A_k F_{kj}/A_j`.
+
+    Returns
+    -------
+    dict
+        ``max_scattering_column_sum`` (and where: ``patch``, ``object``, ``channel``),
+        ``max_form_factor_row_sum``, ``max_form_factor_power_column_sum``,
+        ``spectral_radius_bound``.
+
+    Raises
+    ------
+    InputError
+        When a column sum of S reaches 1: the material returns more light than it
+        receives and the series of Eq. 14 diverges. The message names the object, patch,
+        channel and value.
+    """
+    sums = S.power_column_sums(patches.area)
+    patch, channel = np.unravel_index(int(np.argmax(sums)), sums.shape)
+    largest = float(sums[patch, channel])
+    object_name = patches.object_names[patches.object_of[patch]]
+    report = {"max_scattering_column_sum": largest, "patch": int(patch),
+              "object": object_name, "channel": "RGB"[channel]}
+    if F is not None and F.nnz:
+        report["max_form_factor_row_sum"] = float(np.asarray(F.sum(axis=1)).max())
+        power = (F.T @ patches.area) / patches.area
+        report["max_form_factor_power_column_sum"] = float(power.max())
+        report["spectral_radius_bound"] = largest * report["max_form_factor_power_column_sum"]
+    else:
+        report["max_form_factor_row_sum"] = 0.0
+        report["spectral_radius_bound"] = 0.0
+    if not largest < 1.0:
+        raise InputError(
+            f"the scattering factors break the convergence condition of Eq. 15 (Sheng et al. "
+            f"2014): patch {patch} of '{object_name}' sends {largest:.4f} of the light it "
+            f"receives back out in channel {'RGB'[channel]} (must be < 1); the material "
+            "reflects more energy than it receives -- check its profile (total reflectance "
+            "< 1) and the cut-off max_d", field="material", value=largest)
+    return report
+
+
+def _relative_residual(S: ScatteringMatrix, F, B, source) -> np.ndarray:
+    residual = source - B + S.dot(F @ B) if F is not None else source - B
+    norm = np.linalg.norm(source, axis=0)
+    return np.linalg.norm(residual, axis=0) / np.where(norm > 0, norm, 1.0)
+
+
+def solve_radiosity(S: ScatteringMatrix, F, source, *, solver: str = "jacobi",
+                    tolerance: float = 5e-3, max_iterations: int = 2000) -> tuple[np.ndarray, dict]:
+    r"""Solve :math:`(I - SF)B = \text{source}` (Sheng et al. 2014, Eq. 14, Sect. 5.3).
+
+    ``source`` is :math:`SE`, or any right-hand side (an emission L in the classical
+    :math:`S = P` case, Eq. 2).
+
+    Parameters
+    ----------
+    S : ScatteringMatrix
+    F : scipy.sparse matrix or None
+        Form factors (None: no inter-reflection, B = source).
+    source : ndarray, shape (P, 3)
+    solver : str
+        ``"jacobi"`` (:math:`B \leftarrow \text{source} + SFB`), ``"gmres"`` or
+        ``"bicgstab"``.
+    tolerance : float
+        Relative residual :math:`\|\text{source} - (I - SF)B\| / \|\text{source}\|` per
+        channel (0.5 % in the paper).
+    max_iterations : int
+
+    Returns
+    -------
+    B : ndarray, shape (P, 3)
+    info : dict
+        ``iterations`` (the largest over channels; matrix-vector products of SF for
+        Krylov methods), ``residual`` (per channel, recomputed), ``solver``.
+
+    Raises
+    ------
+    ConvergenceError
+        When the residual does not reach ``tolerance`` in ``max_iterations``, becomes
+        non-finite or grows by :data:`DIVERGENCE_FACTOR`: no garbage is returned.
+    """
+    if solver not in SOLVERS:
+        raise InputError(f"unknown solver; valid: {', '.join(SOLVERS)}", field="solver",
+                         value=solver)
+    source = np.asarray(source, dtype=np.float64)
+    if F is None or F.nnz == 0:
+        return source.copy(), {"iterations": 0, "residual": [0.0, 0.0, 0.0], "solver": solver}
+    if solver == "jacobi":
+        B, iterations = _jacobi(S, F, source, tolerance, max_iterations)
+    else:
+        B, iterations = _krylov(S, F, source, solver, tolerance, max_iterations)
+    residual = _relative_residual(S, F, B, source)
+    return B, {"iterations": int(iterations), "residual": residual.tolist(), "solver": solver}
+
+
+def _jacobi(S, F, source, tolerance, max_iterations):
+    B = source.copy()
+    norm = np.linalg.norm(source, axis=0)
+    norm = np.where(norm > 0, norm, 1.0)
+    smallest = np.inf
+    history = []
+    for iteration in range(1, max_iterations + 1):
+        updated = source + S.dot(F @ B)
+        # the change of one Jacobi step is the residual of the previous iterate
+        residual = float((np.linalg.norm(updated - B, axis=0) / norm).max())
+        history.append(residual)
+        B = updated
+        if not np.isfinite(residual) or residual > DIVERGENCE_FACTOR * smallest:
+            raise ConvergenceError(f"Jacobi iteration diverges: relative residual {residual:.3g}"
+                                   f" after {iteration} iterations (smallest {smallest:.3g})",
+                                   residual=residual, iterations=iteration)
+        smallest = min(smallest, residual)
+        if residual <= tolerance:
+            return B, iteration
+    raise ConvergenceError(f"Jacobi iteration reached a relative residual of {history[-1]:.3g}"
+                           f" after {max_iterations} iterations, above the tolerance "
+                           f"{tolerance:g}: the spectral radius of SF is close to 1 (albedo near "
+                           "1); raise max_iterations or use solver='gmres'",
+                           residual=history[-1], iterations=max_iterations)
+
+
+def _krylov(S, F, source, solver, tolerance, max_iterations):
+    size = len(source)
+    B = np.zeros_like(source)
+    most = 0
+    method = sparse_linalg.gmres if solver == "gmres" else sparse_linalg.bicgstab
+    for c in range(3):
+        S_c = S.channel(c)
+        products = [0]
+
+        def matvec(x, S_c=S_c, products=products):
+            products[0] += 1
+            return x - S_c @ (F @ x)
+
+        operator = sparse_linalg.LinearOperator((size, size), matvec=matvec, dtype=np.float64)
+        if not np.any(source[:, c]):
+            continue
+        solution, status = method(operator, source[:, c], x0=source[:, c].copy(),
+                                  rtol=tolerance, atol=0.0, maxiter=max_iterations)
+        if status != 0 or not np.all(np.isfinite(solution)):
+            residual = float(np.linalg.norm(source[:, c] - matvec(solution))
+                             / np.linalg.norm(source[:, c]))
+            raise ConvergenceError(f"{solver} stopped with status {status} in channel "
+                                   f"{'RGB'[c]} at relative residual {residual:.3g}",
+                                   residual=residual, iterations=products[0])
+        B[:, c] = solution
+        most = max(most, products[0])
+    return B, most
+
+
+def transfer_matrix(S: ScatteringMatrix, F) -> list[np.ndarray]:
+    r"""Compute the relighting operator :math:`T = (I - SF)^{-1}S` per channel (float32).
+
+    Sheng et al. 2014, Sect. 6.4: with T, relighting is :math:`B = TE`, one matrix-vector
+    product per channel. Costs :math:`O(P^3)` time and :math:`3P^2` floats.
+    """
+    size = len(S.indptr) - 1
+    dense_F = F.toarray().astype(np.float64) if F is not None else np.zeros((size, size))
+    out = []
+    for c in range(3):
+        S_c = S.channel(c).toarray()
+        system = np.eye(size) - S_c @ dense_F
+        out.append(np.linalg.solve(system, S_c).astype(np.float32))
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# direct lighting
+
+
+def _spot_falloff(light: SpotLight, directions) -> np.ndarray:
+    """Mitsuba's ``spot`` profile: 1 inside the beam, linear in angle to 0 at the cutoff."""
+    cos_theta = np.clip(directions @ light.direction, -1.0, 1.0)
+    angle = np.degrees(np.arccos(cos_theta))
+    ramp = (light.cutoff_angle - angle) / max(light.cutoff_angle - light.beam_width, 1e-12)
+    return np.where(angle <= light.beam_width, 1.0, np.where(angle < light.cutoff_angle,
+                                                              ramp, 0.0))
+
+
+def _environment_radiance(light, directions) -> np.ndarray:
+    """Radiance arriving from ``directions`` (pointing away from the scene), (N, 3)."""
+    if isinstance(light, ConstantEnvironment):
+        return np.broadcast_to(light.radiance, directions.shape).copy()
+    # Mitsuba's envmap: u = atan2(x, -z) / 2pi, v = acos(y) / pi, pixel centres
+    height, width = light.radiance.shape[:2]
+    u = (np.arctan2(directions[:, 0], -directions[:, 2]) / (2 * np.pi)) % 1.0
+    v = np.arccos(np.clip(directions[:, 1], -1.0, 1.0)) / np.pi
+    col = np.clip((u * width).astype(int), 0, width - 1)
+    row = np.clip((v * height).astype(int), 0, height - 1)
+    return light.radiance[row, col].astype(np.float64) * light.scale
+
+
+def _cosine_directions(normals, count, rng):
+    from .form_factors import stratified_cosine_directions
+
+    return stratified_cosine_directions(normals, count, rng)
+
+
+def direct_irradiance(scene, points, normals, *, lights=None, samples: int = 16,
+                      seed: int = 0, visible=None, trace=None) -> np.ndarray:
+    """Irradiance from the lights at surface points, with shadows (W m^-2 in scene units).
+
+    The :math:`E` of Sheng et al. 2014, Eq. 7 (per patch) and of the per-pixel direct
+    lighting of diffuse surfaces (Sect. 6.1, the hybrid of [36], [37]). Point, spot
+    (Mitsuba's linear angular falloff) and directional lights are exact; rectangular and
+    spherical area lights and environments are integrated with ``samples`` stratified
+    samples per point.
+
+    Parameters
+    ----------
+    scene : Scene
+    points, normals : ndarray, shape (N, 3)
+        Scene units; unit normals on the lit side.
+    lights : sequence, optional
+        Default ``scene.lights``.
+    samples : int
+    seed : int
+    visible, trace : callable, optional
+        Ray queries (default :mod:`translucent.scenes.raycast`).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
+    if visible is None or trace is None:
+        from ..scenes import raycast
+
+        visible = visible or raycast.visible
+        trace = trace or raycast.trace
+    lights = scene.lights if lights is None else tuple(lights)
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    total = np.zeros((len(points), 3))
+    if len(points) == 0:
+        return total
+    for light in lights:
+        if isinstance(light, (PointLight, SpotLight)):
+            to_light = light.position - points
+            distance2 = np.einsum("ij,ij->i", to_light, to_light)
+            direction = to_light / np.sqrt(distance2)[:, None]
+            cosine = np.clip(np.einsum("ij,ij->i", normals, direction), 0.0, None)
+            strength = cosine / distance2
+            if isinstance(light, SpotLight):
+                strength = strength * _spot_falloff(light, -direction)
+            lit = strength > 0
+            if lit.any():
+                seen = visible(scene, points[lit], light.position, normals_a=normals[lit])
+                strength[np.flatnonzero(lit)[~seen]] = 0.0
+            total += strength[:, None] * light.intensity
+        elif isinstance(light, DirectionalLight):
+            cosine = np.clip(normals @ -light.direction, 0.0, None)
+            lit = cosine > 0
+            if lit.any():
+                hits = trace(scene, points[lit] + 1e-5 * normals[lit], -light.direction)
+                cosine[np.flatnonzero(lit)[hits.hit]] = 0.0
+            total += cosine[:, None] * light.irradiance
+        elif isinstance(light, RectangularAreaLight):
+            total += _area_light_irradiance(scene, light, points, normals, samples, rng, visible)
+        elif isinstance(light, SphereAreaLight):
+            total += _sphere_light_irradiance(scene, light, points, normals, samples, rng,
+                                              trace)
+        elif isinstance(light, (ConstantEnvironment, ImageEnvironment)):
+            directions = _cosine_directions(normals, samples, rng)
+            flat = directions.reshape(-1, 3)
+            origins = np.repeat(points + 1e-5 * normals, samples, axis=0)
+            hits = trace(scene, origins, flat)
+            radiance = _environment_radiance(light, flat) * (~hits.hit)[:, None]
+            total += np.pi * radiance.reshape(len(points), samples, 3).mean(axis=1)
+        else:
+            raise InputError("translucent radiosity cannot light with this light type",
+                             field="lights", value=type(light).__name__)
+    return total
+
+
+def _area_light_irradiance(scene, light, points, normals, samples, rng, visible):
+    side = int(np.ceil(np.sqrt(samples)))
+    cells = np.arange(side * side)[:samples]
+    u = (cells % side + rng.random(samples)) / side * 2.0 - 1.0
+    v = (cells // side + rng.random(samples)) / side * 2.0 - 1.0
+    positions = light.center + u[:, None] * light.u_axis + v[:, None] * light.v_axis
+    result = np.zeros((len(points), 3))
+    for position in positions:
+        to_light = position - points
+        distance2 = np.einsum("ij,ij->i", to_light, to_light)
+        direction = to_light / np.sqrt(distance2)[:, None]
+        cos_point = np.clip(np.einsum("ij,ij->i", normals, direction), 0.0, None)
+        cos_light = np.clip(-(direction @ light.normal), 0.0, None)
+        strength = cos_point * cos_light / distance2
+        lit = strength > 0
+        if lit.any():
+            seen = visible(scene, points[lit], position, normals_a=normals[lit])
+            strength[np.flatnonzero(lit)[~seen]] = 0.0
+        result += strength[:, None]
+    return result * light.radiance * light.area / len(positions)
+
+
+def _sphere_light_irradiance(scene, light, points, normals, samples, rng, trace):
+    """Cone sampling of the sphere's solid angle: E = (2 pi (1 - cos a) / N) sum L cos V."""
+    to_center = light.center - points
+    distance = np.linalg.norm(to_center, axis=1)
+    axis = to_center / distance[:, None]
+    sin_max = np.clip(light.radius / distance, 0.0, 1.0)
+    cos_max = np.sqrt(1.0 - sin_max**2)
+    result = np.zeros(len(points))
+    helper = np.where(np.abs(axis[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    tangent = np.cross(helper, axis)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    bitangent = np.cross(axis, tangent)
+    for _ in range(samples):
+        cos_theta = 1.0 - rng.random(len(points)) * (1.0 - cos_max)
+        sin_theta = np.sqrt(np.clip(1.0 - cos_theta**2, 0.0, None))
+        phi = 2 * np.pi * rng.random(len(points))
+        direction = (cos_theta[:, None] * axis + (sin_theta * np.cos(phi))[:, None] * tangent
+                     + (sin_theta * np.sin(phi))[:, None] * bitangent)
+        cosine = np.clip(np.einsum("ij,ij->i", normals, direction), 0.0, None)
+        lit = cosine > 0
+        if lit.any():
+            reach = distance[lit] - light.radius
+            hits = trace(scene, points[lit] + 1e-5 * normals[lit], direction[lit],
+                         np.maximum(reach, 0.0))
+            cosine[np.flatnonzero(lit)[hits.hit]] = 0.0
+        result += cosine
+    solid_angle = 2 * np.pi * (1.0 - cos_max)
+    return (solid_angle * result / samples)[:, None] * light.radiance
+
+
+def _emitters_seen(scene, gbuffer) -> np.ndarray:
+    """Radiance of area lights and environments seen directly by the camera, (H, W, 3)."""
+    image = np.zeros(gbuffer.shape + (3,))
+    directions = -gbuffer.view_direction
+    origin = scene.camera.origin
+    depth = np.where(gbuffer.hit, gbuffer.depth, np.inf)
+    for light in scene.lights:
+        if isinstance(light, RectangularAreaLight):
+            denominator = directions @ light.normal
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = ((light.center - origin) @ light.normal) / denominator
+            point = origin + t[..., None] * directions
+            u = (point - light.center) @ light.u_axis / (light.u_axis @ light.u_axis)
+            v = (point - light.center) @ light.v_axis / (light.v_axis @ light.v_axis)
+            seen = (denominator < 0) & (t > 0) & (t < depth) & (np.abs(u) <= 1) & (np.abs(v) <= 1)
+            image[seen] = light.radiance
+        elif isinstance(light, SphereAreaLight):
+            relative = origin - light.center
+            b = directions @ relative
+            c = relative @ relative - light.radius**2
+            disc = b * b - c
+            t = -b - np.sqrt(np.clip(disc, 0.0, None))
+            seen = (disc > 0) & (t > 0) & (t < depth)
+            image[seen] = light.radiance
+        elif isinstance(light, (ConstantEnvironment, ImageEnvironment)):
+            background = ~gbuffer.hit
+            image[background] += _environment_radiance(light, directions[background])
+    return image
+
+
+# ---------------------------------------------------------------------------------------
+# the precomputed state
+
+
+def _materials_of(scene, material) -> dict:
+    """Material overrides by object name: one material for every translucent object, or a dict."""
+    if material is None:
+        return {}
+    if isinstance(material, dict):
+        for name in material:
+            scene.object(name)
+        return dict(material)
+    return {o.name: material for o in scene.objects if profile_for(o.material) is not None}
+
+
+class RadiosityState:
+    """The result of :func:`precompute`: relights and changes translucency interactively.
+
+    Attributes
+    ----------
+    scene : Scene
+    patches : Patches
+    form_factors : scipy.sparse.csr_matrix or None
+        None when no patch sees another.
+    geometry : ScatteringGeometry
+    knobs : dict
+    log : StageLog
+    S : ScatteringMatrix
+        For the current materials.
+    transfer : list of ndarray or None
+        :math:`T = (I - SF)^{-1}S` per channel when it fits ``transfer_budget_mb``.
+    convergence : dict
+        The report of :func:`check_convergence` for the current materials.
+    """
+
+    def __init__(self, scene, patches, F, geometry, knobs, log):
+        self.scene = scene
+        self.patches = patches
+        self.form_factors = F
+        self.geometry = geometry
+        self.knobs = knobs
+        self.log = log
+        self.materials: dict = {}
+        self.transfer = None
+        self.set_material(None)
+
+    # -- materials ---------------------------------------------------------------------
+
+    def set_material(self, material) -> float:
+        """Rebuild S for new materials; return the seconds it took.
+
+        ``material``: one material for every translucent object, or a dict by object name.
+        This is the translucency-change step of Sheng et al. 2014, Sect. 5.2.
+        """
+        started = time.perf_counter()
+        overrides = _materials_of(self.scene, material)
+        self.materials = {**self.materials, **overrides}
+        self.S = scattering_matrix(self.geometry, self.scene, self.patches, self.materials)
+        self.convergence = check_convergence(self.S, self.form_factors, self.patches)
+        self._energy_beyond_cutoff()
+        self.transfer = None
+        self._transfer_materials = None
+        return time.perf_counter() - started
+
+    def _energy_beyond_cutoff(self):
+        max_d = self.geometry.grid.max_radius
+        lost = {}
+        for index in self.geometry.objects:
+            obj = self.scene.objects[index]
+            profile = profile_for(self.materials.get(obj.name, obj.material))
+            profiles = profile.profiles if isinstance(profile, MixedProfiles) else (profile,)
+            for item in profiles:
+                total = item.total()
+                inside = item.total(max_radius=max_d)
+                fraction = float(np.max(1.0 - inside / np.where(total > 0, total, 1.0)))
+                lost[obj.name] = max(lost.get(obj.name, 0.0), fraction)
+        self.log.notes["energy_beyond_max_d"] = lost
+        worst = max(lost.values(), default=0.0)
+        if worst > 10 * self.knobs["profile_energy_cutoff"]:
+            warnings.warn(f"the profile keeps {worst:.1%} of its energy beyond max_d = "
+                          f"{max_d:g} mm; precompute with a larger max_distance_mm",
+                          stacklevel=3)
+
+    def _scene_with_materials(self):
+        scene = self.scene
+        for name, material in self.materials.items():
+            scene = scene.with_material(name, material)
+        return scene
+
+    # -- solving -----------------------------------------------------------------------
+
+    def transfer_fits(self) -> bool:
+        """Return True when 3 P^2 float32 numbers fit ``transfer_budget_mb`` (the rule for T)."""
+        size = len(self.patches)
+        return 3 * size * size * 4 <= self.knobs["transfer_budget_mb"] * 2**20
+
+    def precompute_transfer(self) -> float | None:
+        """Compute T for the current materials when it fits; returns seconds (None: skipped)."""
+        if not self.transfer_fits():
+            self.log.skip(f"no precomputed T: 3 x {len(self.patches)}^2 float32 = "
+                          f"{3 * len(self.patches) ** 2 * 4 / 2**20:.0f} MB exceeds "
+                          f"transfer_budget_mb = {self.knobs['transfer_budget_mb']}; relighting "
+                          "iterates instead")
+            return None
+        started = time.perf_counter()
+        self.transfer = transfer_matrix(self.S, self.form_factors)
+        return time.perf_counter() - started
+
+    def patch_irradiance(self, lights=None) -> np.ndarray:
+        """Direct irradiance E of every patch (at its centroid), shape (P, 3)."""
+        p = self.patches
+        offset_points = p.centroid + 1e-6 * p.radius[:, None] * p.normal
+        return direct_irradiance(self.scene, offset_points, p.normal, lights=lights,
+                                 samples=self.knobs["light_samples"], seed=self.knobs["seed"])
+
+    def solve(self, irradiance, component: str = "both") -> tuple[np.ndarray, dict]:
+        """Radiosity B (P, 3) for patch irradiance E, for one bounce component (Fig. 6)."""
+        if component not in COMPONENTS:
+            raise InputError(f"unknown component; valid: {', '.join(COMPONENTS)}",
+                             field="component", value=component)
+        F = self.form_factors
+        if component in ("direct", "interreflection"):
+            local = self.S.power_column_sums(self.patches.area)
+            diagonal = ScatteringMatrix(np.arange(len(local) + 1), np.arange(len(local)),
+                                        local)
+            source = local * irradiance
+            if component == "direct":
+                return source, {"iterations": 0, "solver": "none"}
+            return solve_radiosity(diagonal, F, source, solver=self.knobs["solver"],
+                                   tolerance=self.knobs["tolerance"],
+                                   max_iterations=self.knobs["max_iterations"])
+        source = self.S.dot(irradiance)
+        if component == "subsurface":
+            return source, {"iterations": 0, "solver": "none"}
+        if self.transfer is not None:
+            B = np.stack([self.transfer[c] @ irradiance[:, c].astype(np.float32)
+                          for c in range(3)], axis=1).astype(np.float64)
+            return B, {"iterations": 0, "solver": "transfer"}
+        return solve_radiosity(self.S, F, source, solver=self.knobs["solver"],
+                               tolerance=self.knobs["tolerance"],
+                               max_iterations=self.knobs["max_iterations"])
+
+    # -- images ------------------------------------------------------------------------
+
+    def _gbuffer(self):
+        if getattr(self, "_cached_gbuffer", None) is None:
+            from ..scenes.raycast import gbuffer
+
+            self._cached_gbuffer = gbuffer(self.scene)
+        return self._cached_gbuffer
+
+    def image(self, B, lights=None, component: str = "both") -> np.ndarray:
+        r"""Compose the image (H, W, 3) from the patch radiosity B.
+
+        Diffuse surfaces: :math:`\rho/\pi (E_{direct} + FB)` with the direct part per pixel;
+        translucent surfaces: :math:`B/\pi` interpolated from the vertices.
+        """
+        gb = self._gbuffer()
+        scene = self._scene_with_materials()
+        rgb = np.zeros(gb.shape + (3,))
+        global_irradiance = (self.form_factors @ B if self.form_factors is not None
+                             and component in ("interreflection", "both")
+                             else np.zeros_like(B))
+        diffuse_pixels = np.zeros(gb.shape, dtype=bool)
+        for index, obj in enumerate(scene.objects):
+            mask = gb.mask(index)
+            if not mask.any():
+                continue
+            if isinstance(obj.material, Lambertian):
+                vertex = self.patches.vertex_values(index, obj.mesh, global_irradiance)
+                rgb[mask] = gb.interpolate(index, vertex)[mask] * obj.material.albedo / np.pi
+                diffuse_pixels |= mask
+            else:
+                vertex = self.patches.vertex_values(index, obj.mesh, B)
+                rgb[mask] = gb.interpolate(index, vertex)[mask] / np.pi
+        if diffuse_pixels.any():
+            points = gb.position[diffuse_pixels]
+            normals = gb.geometric_normal[diffuse_pixels]
+            facing = np.sign(np.einsum("ij,ij->i", normals, gb.view_direction[diffuse_pixels]))
+            shading = gb.normal[diffuse_pixels] * np.where(facing == 0, 1.0, facing)[:, None]
+            direct = direct_irradiance(scene, points + 1e-6 * normals * facing[:, None],
+                                       shading, lights=lights,
+                                       samples=self.knobs["light_samples"],
+                                       seed=self.knobs["seed"] + 1)
+            albedo = np.zeros((len(points), 3))
+            object_id = gb.object_id[diffuse_pixels]
+            for index, obj in enumerate(scene.objects):
+                if isinstance(obj.material, Lambertian):
+                    albedo[object_id == index] = obj.material.albedo
+            rgb[diffuse_pixels] += albedo / np.pi * direct
+        rgb += _emitters_seen(scene.with_lights(self.scene.lights if lights is None
+                                                else lights), gb)
+        return rgb
+
+    def render(self, lights=None, material=None, component: str = "both") -> Image:
+        """Render with new lights and/or material (None keeps the current ones).
+
+        A new material rebuilds S (the translucency change of Sect. 5.2); new lights
+        recompute E and solve (or multiply by T when it was precomputed).
+        """
+        started = time.perf_counter()
+        facts = {}
+        if material is not None:
+            facts["material_seconds"] = self.set_material(material)
+        light_started = time.perf_counter()
+        E = self.patch_irradiance(lights)
+        facts["irradiance_seconds"] = time.perf_counter() - light_started
+        solve_started = time.perf_counter()
+        B, info = self.solve(E, component)
+        facts["solve_seconds"] = time.perf_counter() - solve_started
+        rgb = self.image(B, lights, component)
+        seconds = time.perf_counter() - started
+        return Image(rgb.astype(np.float32), metadata={
+            "producer": "radiosity", "component": component,
+            "knobs": {k: v for k, v in self.knobs.items()}, "seconds": seconds,
+            "patches": len(self.patches), "iterations": info.get("iterations", 0),
+            "solver": info.get("solver"), "residual": info.get("residual"),
+            "convergence": self.convergence, "skipped": list(self.log.skipped), **facts})
+
+    def components(self, lights=None) -> dict[str, Image]:
+        """Render the bounce decomposition of Sheng et al. 2014, Fig. 6, as images."""
+        E = self.patch_irradiance(lights)
+        out = {}
+        for component in COMPONENTS:
+            B, info = self.solve(E, component)
+            out[component] = Image(self.image(B, lights, component).astype(np.float32),
+                                   metadata={"producer": "radiosity", "component": component,
+                                             "iterations": info.get("iterations", 0)})
+        return out
+
+
+# ---------------------------------------------------------------------------------------
+# the fast-method contract
+
+
+def applies_to(scene) -> str | None:
+    """None when every material is Lambertian, a Dipole, a RadialProfile or MixedProfiles.
+
+    Translucent radiosity assumes diffuse surfaces and isotropic multiple scattering
+    (Sheng et al. 2014, Sect. 1, 7); glossy BRDFs and SubEdit textures are not modelled.
+    """
+    translucent = False
+    for obj in scene.objects:
+        try:
+            profile = profile_for(obj.material)
+        except InputError:
+            return (f"object '{obj.name}' has a {type(obj.material).__name__} material; "
+                    "translucent radiosity takes diffuse (Lambertian) surfaces and dipole or "
+                    "tabulated radial profiles only")
+        translucent |= profile is not None
+    if not translucent:
+        return "no translucent object: this is classical radiosity (every S entry is an albedo)"
+    return None
+
+
+def _resolve_knobs(scene, knobs: dict) -> dict:
+    unknown = sorted(set(knobs) - set(DEFAULT_KNOBS))
+    if unknown:
+        raise InputError(f"unknown knob; valid: {', '.join(DEFAULT_KNOBS)}", field="knobs",
+                         value=unknown)
+    resolved = {**DEFAULT_KNOBS, **knobs}
+    if resolved["self_term"] not in ("polar", "samples"):
+        raise InputError("must be 'polar' or 'samples'", field="self_term",
+                         value=resolved["self_term"])
+    if resolved["solver"] not in SOLVERS:
+        raise InputError(f"unknown solver; valid: {', '.join(SOLVERS)}", field="solver",
+                         value=resolved["solver"])
+    for name in ("tolerance", "sample_falloff", "centroid_beyond", "transfer_budget_mb"):
+        if not float(resolved[name]) > 0:
+            raise InputError("must be > 0", field=name, value=resolved[name])
+    for name in ("self_samples", "voxels_per_axis", "profile_samples", "max_iterations",
+                 "light_samples", "mix_points"):
+        if int(resolved[name]) != resolved[name] or resolved[name] < 1:
+            raise InputError("must be an integer >= 1", field=name, value=resolved[name])
+    if resolved["max_distance_mm"] is None:
+        radii = []
+        for obj in scene.objects:
+            profile = profile_for(obj.material)
+            profiles = profile.profiles if isinstance(profile, MixedProfiles) else \
+                ((profile,) if profile is not None else ())
+            radii += [p.support_radius(resolved["profile_energy_cutoff"]) for p in profiles]
+        resolved["max_distance_mm"] = float(max(radii, default=1.0))
+    elif not float(resolved["max_distance_mm"]) > 0:
+        raise InputError("must be > 0 mm", field="max_distance_mm",
+                         value=resolved["max_distance_mm"])
+    return resolved
+
+
+def precompute(scene, **knobs) -> RadiosityState:
+    """Patches, form factors, optical distances and scattering samples; cached on disk.
+
+    Sheng et al. 2014, Sect. 5.1-5.2. The cache key holds the geometry, which objects are
+    translucent (and the labels of heterogeneous ones) and the knobs -- never the lights or
+    the homogeneous materials, so relighting and translucency changes reuse it. With
+    ``max_distance_mm=None`` the cut-off comes from the scene's profiles (part of the key).
+
+    Parameters
+    ----------
+    scene : Scene
+    **knobs
+        See :data:`DEFAULT_KNOBS`.
+
+    Returns
+    -------
+    RadiosityState
+    """
+    from ..cache import Cache, content_hash
+
+    reason = applies_to(scene)
+    if reason is not None and not reason.startswith("no translucent"):
+        raise InputError(f"radiosity does not apply: {reason}", field="scene", value=scene.name)
+    resolved = _resolve_knobs(scene, knobs)
+    translucent = [i for i, o in enumerate(scene.objects) if profile_for(o.material) is not None]
+    labels = {scene.objects[i].name: scene.objects[i].material.face_labels
+              for i in translucent if isinstance(scene.objects[i].material, MixedProfiles)}
+    key = content_hash("radiosity", FORMAT_VERSION, scene.geometry_key(), resolved,
+                       [scene.objects[i].name for i in translucent], labels)
+    cache = Cache("radiosity")
+    stored = cache.load_pickle(key)
+    if stored is not None:
+        patches, F, geometry, log = stored
+        log.notes["cache"] = "hit"
+        return RadiosityState(scene, patches, F, geometry, resolved, log)
+    log = StageLog()
+    started = time.perf_counter()
+    patches = build_patches(scene, triangles_per_patch=resolved["triangles_per_patch"])
+    log.seconds["patches"] = time.perf_counter() - started
+    log.notes["patches"] = len(patches)
+    reason = needs_form_factors(scene)
+    if reason is not None:
+        log.skip(reason)
+        F = None
+    else:
+        started = time.perf_counter()
+        F, facts = form_factors(scene, patches, rays_per_patch=resolved["rays_per_patch"],
+                                threshold=resolved["form_factor_threshold"],
+                                seed=resolved["seed"])
+        log.seconds["form_factors"] = time.perf_counter() - started
+        log.notes["form_factors"] = facts
+    started = time.perf_counter()
+    geometry = scattering_geometry(scene, patches, translucent,
+                                   max_distance_mm=resolved["max_distance_mm"], knobs=resolved,
+                                   log=log)
+    log.seconds["scattering"] = time.perf_counter() - started
+    log.notes["scattering_bytes"] = geometry.bytes
+    log.notes["max_distance_mm"] = resolved["max_distance_mm"]
+    log.notes["cache"] = "miss"
+    cache.store_pickle(key, (patches, F, geometry, log))
+    return RadiosityState(scene, patches, F, geometry, resolved, log)
+
+
+def add_approx_arguments(parser) -> None:
+    """Options of ``translucent approx radiosity SCENE``."""
+    parser.add_argument("--material", default=None,
+                        help="measured material name for every translucent object "
+                             "(Jensen et al. 2001 table, e.g. Marble)")
+    parser.add_argument("--component", default="both", choices=COMPONENTS,
+                        help="bounce component of Sheng et al. 2014, Fig. 6 (default: both)")
+    parser.add_argument("--solver", default=DEFAULT_KNOBS["solver"], choices=SOLVERS)
+    parser.add_argument("--rays", type=int, default=DEFAULT_KNOBS["rays_per_patch"],
+                        help="form-factor rays per patch")
+    parser.add_argument("--max-distance", type=float, default=None,
+                        help="scattering cut-off max_d in mm (default: from the profiles)")
+    parser.add_argument("--triangles-per-patch", type=int,
+                        default=DEFAULT_KNOBS["triangles_per_patch"])
+
+
+def approx(scene, args) -> Image:
+    """Precompute (or load) and render ``scene`` for ``translucent approx radiosity``."""
+    from ..materials import measured_medium
+
+    started = time.perf_counter()
+    material = measured_medium(args.material) if args.material else None
+    if material is not None:
+        for name in _materials_of(scene, material):
+            scene = scene.with_material(name, material)
+    state = precompute(scene, solver=args.solver, rays_per_patch=args.rays,
+                       max_distance_mm=args.max_distance,
+                       triangles_per_patch=args.triangles_per_patch)
+    image = state.render(component=args.component)
+    for sentence in state.log.skipped:
+        print(f"skipped: {sentence}")
+    print(f"patches {len(state.patches)}, iterations {image.metadata['iterations']}, "
+          f"max column sum of S {state.convergence['max_scattering_column_sum']:.4f}")
+    return image.with_metadata(seconds=time.perf_counter() - started,
+                               precompute_seconds=dict(state.log.seconds))
