@@ -41,6 +41,8 @@ class InputError(ValueError):
 
 
 def _short_repr(value: Any, limit: int = 120) -> str:
+    if hasattr(value, "tolist") and hasattr(value, "dtype"):  # numpy arrays and scalars
+        value = value.tolist()
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
