@@ -24,10 +24,7 @@ Public API (stable): :func:`load_scene`, :func:`builtin_scene_names`,
 from __future__ import annotations
 
 import functools
-import json
-import math
 import os
-import sys
 from dataclasses import fields
 from pathlib import Path
 
@@ -35,6 +32,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..materials.factory import material_from_dict, material_to_dict
+from ..tomlio import toml_value, tomllib
 from .meshes import MESH_GENERATORS, cornell_box, load_mesh, rotation_matrix, save_mesh
 from .scene import (
     Camera,
@@ -48,11 +46,6 @@ from .scene import (
     SphereAreaLight,
     SpotLight,
 )
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
 
 __all__ = [
     "CATALOGUE_DIR",
@@ -386,32 +379,8 @@ def builtin_scene_descriptions() -> dict[str, str]:
 # writing
 
 
-def _toml_value(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, (float, np.floating)):
-        number = float(value)
-        if math.isnan(number):
-            return "nan"
-        if math.isinf(number):
-            return "inf" if number > 0 else "-inf"
-        return repr(number)
-    if isinstance(value, str):
-        return json.dumps(value)  # JSON string escapes are valid TOML basic strings
-    if isinstance(value, np.ndarray):
-        return _toml_value(value.tolist())
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(item) for item in value) + "]"
-    if isinstance(value, dict):
-        return "{ " + ", ".join(f"{key} = {_toml_value(item)}" for key, item in value.items()) \
-            + " }"
-    raise InputError("cannot be written to TOML", field="value", value=type(value).__name__)
-
-
 def _table_lines(header: str, table: dict) -> list[str]:
-    return [header] + [f"{key} = {_toml_value(value)}" for key, value in table.items()] + [""]
+    return [header] + [f"{key} = {toml_value(value)}" for key, value in table.items()] + [""]
 
 
 def _light_table(light, *, environment_file: Path | None) -> dict:
