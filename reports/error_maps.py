@@ -202,7 +202,8 @@ def write_map(folder, stem: str, values, name: str, **metadata) -> ErrorMapFiles
     exr = Image(np.repeat(values[..., None], 3, axis=2),
                 metadata={"map": name, "unit": style.unit, "png_range": [style.vmin, style.vmax],
                           "colormap": style.colormap, **metadata}).write(folder / f"{stem}.exr")
-    png = write_png(folder / f"{stem}.png", colour_map(values, style))
+    with _all_or_nothing([exr]):
+        png = write_png(folder / f"{stem}.png", colour_map(values, style))
     return ErrorMapFiles(exr, png)
 
 

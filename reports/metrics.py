@@ -221,8 +221,8 @@ def relative_mse(reference, test, *, reference_variance=None,
     :math:`E[n^2] = \sigma_r^2`, :math:`E[(t - r)^2] = (t - \mu)^2 + \sigma_r^2`:
     subtracting :math:`\sigma_r^2` makes each numerator an unbiased estimate of the
     squared error against the *converged* image. The denominator still carries the
-    reference's noise; its bias is of order :math:`\sigma_r^4 / r^4` (a few 1e-6 for a
-    2 % standard error). The result can be slightly negative when the test is closer to
+    reference's noise; to second order its bias is about :math:`6 \sigma_r^4 / r^4`
+    (1e-6 for a 2 % standard error). The result can be slightly negative when the test is closer to
     the truth than the reference's noise resolves.
 
     Parameters

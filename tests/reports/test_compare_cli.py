@@ -150,3 +150,60 @@ def test_bad_reference_exits_2(pair, capsys):
     assert main(["compare", str(bad), str(pair[1])]) == 2
     assert "the reference is black" in capsys.readouterr().err
     assert not (pair[1].parent / "test_flip.png").exists()
+
+
+# ----------------------------------------------------------------------------- error maps
+
+
+def test_map_files_hold_the_maps(pair, tmp_path):
+    from matplotlib.image import imread
+    from translucent.reports.error_maps import write_error_maps
+    from translucent.reports.metrics import evaluate
+
+    reference, test = Image.read(pair[0]), Image.read(pair[1])
+    comparison = evaluate(reference, test)
+    files = write_error_maps(reference, test, tmp_path / "maps", comparison=comparison)
+    for name, written in files.items():
+        stored = Image.read(written.exr)
+        assert stored.metadata["map"] == name
+        assert np.array_equal(stored.rgb[..., 0], comparison.maps[name].astype(np.float32))
+        assert imread(written.png).shape[:2] == (24, 32)
+
+
+def test_linear_png_is_srgb_encoded(tmp_path):
+    from matplotlib.image import imread
+    from translucent.reports.error_maps import write_linear_png
+
+    rgb = np.zeros((2, 3, 3), np.float32)
+    rgb[0, 0], rgb[0, 1], rgb[0, 2] = 4.0, 2.0, 8.0  # white, half, beyond white
+    pixels = imread(write_linear_png(tmp_path / "image.png", rgb, white=4.0))
+    # sRGB of 0.5 is 0.7354 (IEC 61966-2-1): 188 of 255
+    assert np.round(pixels[0, :, 0] * 255).tolist() == [255, 188, 255]
+    assert pixels[1, :, :3].max() == 0
+
+
+def test_a_failure_while_writing_leaves_no_maps(pair, tmp_path, monkeypatch):
+    from translucent.reports import error_maps
+
+    calls = []
+    original = error_maps.write_png
+
+    def fail_on_the_third(path, pixels):
+        calls.append(path)
+        if len(calls) == 3:
+            raise OSError("disk full")
+        return original(path, pixels)
+
+    monkeypatch.setattr(error_maps, "write_png", fail_on_the_third)
+    with pytest.raises(OSError, match="disk full"):
+        error_maps.write_error_maps(Image.read(pair[0]), Image.read(pair[1]), tmp_path / "maps")
+    assert list((tmp_path / "maps").iterdir()) == []
+
+
+def test_unknown_map_name_lists_the_valid_ones(tmp_path):
+    from translucent.errors import InputError
+    from translucent.reports.error_maps import write_map
+
+    with pytest.raises(InputError, match="name = 'blur': unknown map; valid: flip, "
+                                         "relative_error, ciede2000, ssim, p_value"):
+        write_map(tmp_path, "x", np.zeros((2, 2)), "blur")

@@ -320,3 +320,9 @@ def test_evaluate_maps_have_the_image_shape(pair):
         assert values.shape == (32, 32)
     assert comparison.maps["flip"].mean() == pytest.approx(comparison.metrics.hdr_flip,
                                                            rel=FLOAT32_RTOL)
+
+
+def test_relmse_variance_must_have_the_reference_shape():
+    with pytest.raises(InputError, match=r"reference_variance = \(2, 3\): must have the "
+                                         r"reference's shape \(4, 3\)"):
+        relative_mse(np.ones((4, 3)), np.ones((4, 3)), reference_variance=np.ones((2, 3)))

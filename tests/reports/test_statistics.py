@@ -175,7 +175,8 @@ def noisy_pair(truth, rng, passes=8, spp=16, second_truth=None):
     for mean in (truth, truth if second_truth is None else second_truth):
         pass_means = np.stack([render(mean, spp, rng) for _ in range(passes)])
         images.append(Image(pass_means.mean(axis=0),
-                            pass_means.var(axis=0, ddof=1) / passes))
+                            pass_means.var(axis=0, ddof=1) / passes,
+                            metadata={"passes": passes}))
     return images
 
 
@@ -186,8 +187,13 @@ def test_two_renders_of_the_same_image_agree(scene, rng):
 
 
 def test_two_renders_of_different_images_disagree(scene, rng):
+    """16 passes of 64 spp, one image 1.5 times the other.
+
+    Standard errors 0.031 T and 0.047 T: z = 0.5 / 0.056 = 8.9 on average, above the
+    Student-t bound 5.8 (about 26 Welch-Satterthwaite degrees of freedom, alpha 4.4e-6).
+    """
     truth = scene[0]
-    first, second = noisy_pair(truth, rng, second_truth=1.3 * truth)
+    first, second = noisy_pair(truth, rng, passes=16, spp=64, second_truth=1.5 * truth)
     assert not z_test_known_variance(first, second).passed
 
 
@@ -201,3 +207,37 @@ def test_known_variance_needs_a_variance():
 def test_known_variance_needs_images():
     with pytest.raises(TypeError, match="first must be a translucent.image.Image"):
         z_test_known_variance(np.ones((4, 4, 3)), Image(np.ones((4, 4, 3))))
+
+
+def test_a_render_against_an_exact_value(rng):
+    """A furnace-style check: a noisy render against an analytic constant of zero variance."""
+    exact = Image(np.full((16, 16, 3), 0.8), np.zeros((16, 16, 3)))
+    first, _ = noisy_pair(np.full((16, 16, 3), 0.8), rng)
+    assert z_test_known_variance(first, exact).passed
+    darker, _ = noisy_pair(np.full((16, 16, 3), 0.6), rng)
+    assert not z_test_known_variance(darker, exact).passed
+
+
+def test_estimated_variances_need_students_t(rng):
+    """Eight passes against an exact value, 16 x 16 pixels.
+
+    With the pass count (Student's t, 7 degrees of freedom) every render passes. Judged
+    by normal tails, P(|t_7| > 4.11) = 0.45 % of the 768 channels are rejected on
+    average, 3.5 where 1.9 are allowed: a render fails with probability 0.86 (Poisson),
+    so at least half of 40 renders fail (a binomial tail below 1e-7).
+    """
+    truth = np.full((16, 16, 3), 0.8)
+    exact = Image(truth, np.zeros_like(truth))
+    failures_with_normal_tails = 0
+    for _ in range(40):
+        render_, _ = noisy_pair(truth, rng)
+        assert z_test_known_variance(render_, exact).passed
+        failures_with_normal_tails += not z_test_known_variance(
+            render_, exact, passes=(None, None)).passed
+    assert failures_with_normal_tails >= 20
+
+
+def test_pass_counts_must_be_at_least_two():
+    image = Image(np.ones((4, 4, 3)), np.ones((4, 4, 3)), metadata={"passes": 1})
+    with pytest.raises(InputError, match="first passes = 1: an estimated variance needs"):
+        z_test_known_variance(image, image)
