@@ -75,6 +75,10 @@ class Patches:
     radius : ndarray, shape (P,)
         Largest distance from the centroid to a corner, scene units.
     mm_per_unit : float
+    twin : ndarray of int, shape (P,)
+        The patch on the other side of the same triangles (two-sided thin sheets), or -1.
+    face_back_patch : ndarray of int, shape (F,)
+        The back patch of each global face, or -1 where the face is one-sided.
     """
 
     object_names: tuple
@@ -90,6 +94,20 @@ class Patches:
     normal: np.ndarray
     radius: np.ndarray
     mm_per_unit: float
+    twin: np.ndarray | None = None
+    face_back_patch: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.twin is None:
+            object.__setattr__(self, "twin", np.full(len(self.area), -1, dtype=np.int64))
+        if self.face_back_patch is None:
+            object.__setattr__(self, "face_back_patch",
+                               np.full(len(self.face_patch), -1, dtype=np.int64))
+
+    @property
+    def is_back(self) -> np.ndarray:
+        """True for the back patches of two-sided sheets, shape (P,)."""
+        return (self.twin >= 0) & (np.arange(len(self.area)) > self.twin)
 
     def __len__(self) -> int:
         return len(self.area)
@@ -107,7 +125,8 @@ class Patches:
         within = np.arange(len(rows)) - np.repeat(np.cumsum(counts) - counts, counts)
         return rows, self.patch_faces[starts + within]
 
-    def vertex_values(self, object_index: int, mesh, values) -> np.ndarray:
+    def vertex_values(self, object_index: int, mesh, values, *, back: bool = False
+                      ) -> np.ndarray:
         """Per-patch values of one object averaged to its vertices (area-weighted).
 
         Sheng et al. 2014 compose the image from per-patch radiosity; interpolating the
@@ -120,13 +139,16 @@ class Patches:
             The object's mesh.
         values : ndarray, shape (P, C)
             Per-patch values for the whole scene.
+        back : bool
+            Take the back patches of a two-sided sheet.
 
         Returns
         -------
         ndarray, shape (V, C)
         """
         start, stop = self.face_offset[object_index], self.face_offset[object_index + 1]
-        face_values = np.asarray(values)[self.face_patch[start:stop]]
+        owner = (self.face_back_patch if back else self.face_patch)[start:stop]
+        face_values = np.asarray(values)[owner]
         weights = self.triangle_area[start:stop]
         total = np.zeros((len(mesh.vertices),) + face_values.shape[1:])
         weight = np.zeros(len(mesh.vertices))
@@ -209,7 +231,7 @@ def _merge_coplanar(mesh, max_triangles: int) -> np.ndarray:
     return label
 
 
-def build_patches(scene, *, triangles_per_patch: int = 1) -> Patches:
+def build_patches(scene, *, triangles_per_patch: int = 1, two_sided=()) -> Patches:
     """Cut a scene into radiosity patches.
 
     Parameters
@@ -219,6 +241,10 @@ def build_patches(scene, *, triangles_per_patch: int = 1) -> Patches:
         1: every triangle is a patch (the paper's polygons). More: coplanar
         edge-neighbours are merged greedily up to this many triangles (2 turns the grids
         of the Cornell box into quads), fewer patches for the same geometry.
+    two_sided : iterable of int
+        Objects that are thin sheets: each of their patches gets a twin facing the other
+        way (the two faces of a rose petal, Sheng et al. 2014, Sect. 6.1). The back
+        patches follow all front patches.
 
     Returns
     -------
@@ -259,9 +285,31 @@ def build_patches(scene, *, triangles_per_patch: int = 1) -> Patches:
     corner_distance = np.linalg.norm(triangles - centroid[face_patch][:, None], axis=2).max(axis=1)
     radius = np.zeros(patches)
     np.maximum.at(radius, face_patch, corner_distance)
-    return Patches(tuple(o.name for o in scene.objects), np.concatenate(object_of),
+    object_of = np.concatenate(object_of)
+    twin = np.full(patches, -1, dtype=np.int64)
+    face_back_patch = np.full(len(face_patch), -1, dtype=np.int64)
+    sheets = sorted(set(int(i) for i in two_sided))
+    if sheets:
+        front = np.flatnonzero(np.isin(object_of, sheets))
+        back = np.arange(patches, patches + len(front))
+        twin = np.concatenate([twin, front])
+        twin[front] = back
+        faces = np.flatnonzero(np.isin(face_patch, front))
+        mapping = np.full(patches, -1, dtype=np.int64)
+        mapping[front] = back
+        face_back_patch[faces] = mapping[face_patch[faces]]
+        counts = np.diff(start)[front]
+        extra_faces = np.concatenate([order[start[p]:start[p + 1]] for p in front])
+        start = np.concatenate([start, start[-1] + np.cumsum(counts)])
+        order = np.concatenate([order, extra_faces])
+        area, radius = np.concatenate([area, area[front]]), np.concatenate([radius, radius[front]])
+        centroid = np.concatenate([centroid, centroid[front]])
+        normal = np.concatenate([normal, -normal[front]])
+        object_of = np.concatenate([object_of, object_of[front]])
+    return Patches(tuple(o.name for o in scene.objects), object_of,
                    np.array(offsets), face_patch, start, order, triangles, triangle_area,
-                   area, centroid, normal, radius, float(scene.mm_per_unit))
+                   area, centroid, normal, radius, float(scene.mm_per_unit), twin,
+                   face_back_patch)
 
 
 def needs_form_factors(scene) -> str | None:
@@ -385,11 +433,14 @@ def _first_hit_patches(scene, patches: Patches, origins, directions, trace) -> n
         return patch
     obj = np.asarray(hits.object_id)[found]
     face = np.asarray(hits.triangle_id)[found]
-    hit_patch = patches.face_patch[patches.face_offset[obj] + face]
-    # light leaves a patch on its front side only: a ray reaching a back face is absorbed
+    global_face = patches.face_offset[obj] + face
     front = np.einsum("ij,ij->i", np.asarray(hits.geometric_normal)[found],
                       directions[found]) < 0
-    patch[np.flatnonzero(found)[front]] = hit_patch[front]
+    # light enters a patch on its front side only: a ray reaching a back face is absorbed,
+    # unless the face belongs to a two-sided sheet, whose back patch receives it
+    hit_patch = np.where(front, patches.face_patch[global_face],
+                         patches.face_back_patch[global_face])
+    patch[np.flatnonzero(found)] = hit_patch
     return patch
 
 

@@ -68,9 +68,11 @@ from ..errors import InputError
 from ..image import Image
 from ..materials.homogeneous import Lambertian
 from ..materials.profiles import (
+    DipoleProfile,
     MixedProfiles,
     RadialGrid,
     RadialProfile,
+    SlabProfile,
     mixed_profile,
     profile_for,
     radial_cumulative_integral,
@@ -115,7 +117,7 @@ __all__ = [
 ]
 
 #: Version of the precomputed data layout (part of the cache key).
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
 #: Knobs of :func:`precompute` and their defaults.
 DEFAULT_KNOBS: dict = {
@@ -133,6 +135,7 @@ DEFAULT_KNOBS: dict = {
     "voxels_per_axis": 48,           # voxel grid of a concave object, along its longest side
     "profile_samples": 2048,         # radial grid nodes of the tabulated profiles
     "mix_points": 8,                 # points along a path for heterogeneous fractions
+    "sheet_thickness_mm": None,      # thin (open) translucent sheets: slab thickness
     # solving and lighting
     "solver": "jacobi",              # "jacobi", "gmres" or "bicgstab"
     "tolerance": 5e-3,               # relative residual (the paper's 0.5 %)
@@ -185,14 +188,16 @@ class ObjectScattering:
     ----------
     object_index : int
     patches : ndarray of int
-        Its global patch indices.
-    pair_position : ndarray of int
-        Position of each (exit, incident) pair of the object in the data of S.
+        Its global (front) patch indices.
+    blocks : list of (str, ndarray, ndarray)
+        ``(kind, pair_position, self_position)``: where the pairs and the patches' own
+        terms land in the data of S, and which profile (``"reflection"`` or
+        ``"transmission"``) fills them. One block for a solid object; four for a two-sided
+        sheet (front-front and back-back by reflection, across by transmission, Sheng et
+        al. 2014, Sect. 6.1).
     sample_operator : scipy.sparse.csr_matrix, shape (pairs, K)
         Interpolation weights (mm^2) of every sample onto the profile grid: the S entries
         of the pairs are ``sample_operator @ table``.
-    diagonal_position : ndarray of int
-        Position of each patch's own entry in the data of S.
     self_cumulative, self_segment : scipy.sparse.csr_matrix, shape (patches, K)
         The polar self term: ``self_cumulative @ C + self_segment @ table`` with C the
         cumulative radial integral of the table (None when ``self_term="samples"``).
@@ -205,9 +210,8 @@ class ObjectScattering:
 
     object_index: int
     patches: np.ndarray
-    pair_position: np.ndarray
+    blocks: list
     sample_operator: sparse.csr_matrix
-    diagonal_position: np.ndarray
     self_cumulative: sparse.csr_matrix | None
     self_segment: sparse.csr_matrix | None
     samples: dict | None
@@ -229,6 +233,10 @@ class ScatteringGeometry:
         The profile grid; its ``max_radius`` is the cut-off max_d (mm).
     objects : dict of int to ObjectScattering
         The translucent objects.
+    sheets : tuple of int
+        The translucent objects that are thin two-sided sheets.
+    sheet_thickness_mm : float or None
+        Thickness that turns a Dipole on a sheet into a :class:`SlabProfile`.
     """
 
     indptr: np.ndarray
@@ -236,6 +244,8 @@ class ScatteringGeometry:
     diagonal_position: np.ndarray
     grid: RadialGrid
     objects: dict
+    sheets: tuple = ()
+    sheet_thickness_mm: float | None = None
 
     @property
     def nnz(self) -> int:
@@ -250,7 +260,7 @@ class ScatteringGeometry:
             for matrix in (item.sample_operator, item.self_cumulative, item.self_segment):
                 if matrix is not None:
                     total += matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes
-            total += item.pair_position.nbytes
+            total += sum(a.nbytes + b.nbytes for _, a, b in item.blocks)
             if item.samples:
                 total += sum(np.asarray(v).nbytes for v in item.samples.values())
         return int(total)
@@ -353,8 +363,8 @@ def _pair_fractions(centroids_mm, face_centroids_mm, face_labels, exit_local, in
 
 
 def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
-                        max_distance_mm: float, knobs: dict, log: StageLog | None = None
-                        ) -> ScatteringGeometry:
+                        max_distance_mm: float, knobs: dict, log: StageLog | None = None,
+                        sheet_thickness_mm: float | None = None) -> ScatteringGeometry:
     """Distances, samples and profile indices of every scattering factor (Sect. 5.2).
 
     Parameters
@@ -371,6 +381,10 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
         ``mix_points``.
     log : StageLog, optional
         Receives what was skipped (voxel grids of convex objects) and the timings.
+    sheet_thickness_mm : float, optional
+        Thickness of the thin sheets (objects whose patches have twins, see
+        :func:`~translucent.fast.form_factors.build_patches`): a Dipole on a sheet becomes
+        the reflection and transmission of a slab this thick.
 
     Returns
     -------
@@ -381,11 +395,26 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
     mm = patches.mm_per_unit
     rows_all = [np.arange(len(patches))]
     cols_all = [np.arange(len(patches))]
+    # every block of entries appended to the pattern: (object, kind, pairs, self) slices
+    segments: dict = {}
+    filled = [len(patches)]
+
+    def append(rows, cols):
+        rows_all.append(rows)
+        cols_all.append(cols)
+        filled.append(filled[-1] + len(rows))
+        return filled[-2], filled[-1]
+
+    sheets = []
     per_object = []
     for index in translucent:
         obj = scene.objects[index]
         started = time.perf_counter()
         members = patches.of_object(index)
+        members = members[~patches.is_back[members]]
+        twins = patches.twin[members]
+        if (twins >= 0).any():
+            sheets.append(index)
         centroids = patches.centroid[members] * mm
         radius = patches.radius[members] * mm
         mesh = obj.mesh
@@ -466,8 +495,17 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
                                              len(material.profiles), knobs["mix_points"]),
                 "patch_label": material.face_labels[first_face],
             }
-        rows_all.append(members[exit_local])
-        cols_all.append(members[incident_local])
+        blocks = [("reflection", append(members[exit_local], members[incident_local]), None)]
+        if index in sheets:
+            # the same samples serve both faces: same side by reflection, across by
+            # transmission (Sheng et al. 2014, Sect. 6.1, the petals)
+            blocks.append(("reflection", append(twins[exit_local], twins[incident_local]),
+                           "twin-twin"))
+            blocks.append(("transmission", append(members[exit_local], twins[incident_local]),
+                           append(members, twins)))
+            blocks.append(("transmission", append(twins[exit_local], members[incident_local]),
+                           append(twins, members)))
+        segments[index] = blocks
         facts.update({"pairs": int(len(exit_local)), "samples": int(len(sample_pair)),
                       "seconds": time.perf_counter() - started})
         per_object.append((index, members, len(exit_local), operator, self_cumulative,
@@ -482,14 +520,20 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
     indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=len(patches)))])
     diagonal = position[:len(patches)]
     objects = {}
-    offset = len(patches)
-    for index, members, count, operator, self_c, self_s, samples, facts in per_object:
-        objects[index] = ObjectScattering(index, members, position[offset:offset + count],
-                                          operator, diagonal[members], self_c, self_s,
+    for index, members, _, operator, self_c, self_s, samples, facts in per_object:
+        blocks = []
+        for kind, (lo, hi), own in segments[index]:
+            if own is None:
+                own_position = diagonal[members]
+            elif own == "twin-twin":
+                own_position = diagonal[patches.twin[members]]
+            else:
+                own_position = position[own[0]:own[1]]
+            blocks.append((kind, position[lo:hi], own_position))
+        objects[index] = ObjectScattering(index, members, blocks, operator, self_c, self_s,
                                           samples, facts)
-        offset += count
     return ScatteringGeometry(indptr.astype(np.int64), cols[order].astype(np.int32), diagonal,
-                              grid, objects)
+                              grid, objects, tuple(sheets), sheet_thickness_mm)
 
 
 # ---------------------------------------------------------------------------------------
@@ -534,8 +578,8 @@ class ScatteringMatrix:
         return int(self.data.nbytes + self.indices.nbytes + self.indptr.nbytes)
 
 
-def _object_profile_tables(profile: RadialProfile, grid: RadialGrid):
-    table = profile.tabulate(grid)
+def _object_profile_tables(profile: RadialProfile, grid: RadialGrid, kind: str = "reflection"):
+    table = profile.tabulate(grid, kind)
     return table, radial_cumulative_integral(grid.radius, table)
 
 
@@ -571,7 +615,7 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
     data = np.zeros((geometry.nnz, 3))
     for index, obj in enumerate(scene.objects):
         material = materials.get(obj.name, obj.material)
-        profile = profile_for(material)
+        profile = _sheet_profile(profile_for(material), index, geometry, obj.name)
         members = patches.of_object(index)
         if profile is None:
             data[geometry.diagonal_position[members]] = material.albedo
@@ -582,37 +626,52 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
                              "were precomputed: precompute with it translucent",
                              field="material", value=getattr(material, "name", "") or
                              type(material).__name__)
-        if isinstance(profile, MixedProfiles):
-            data[item.pair_position] += _mixed_values(item, profile, grid)
-            labels = item.samples["patch_label"]
-            for label, homogeneous in enumerate(profile.profiles):
-                table, cumulative = _object_profile_tables(homogeneous, grid)
-                mine = labels == label
-                if item.self_cumulative is not None:
-                    values = item.self_cumulative @ cumulative + item.self_segment @ table
-                    data[item.diagonal_position[mine]] += values[mine]
-            continue
-        table, cumulative = _object_profile_tables(profile, grid)
-        data[item.pair_position] += item.sample_operator @ table
-        if item.self_cumulative is not None:
-            data[item.diagonal_position] += (item.self_cumulative @ cumulative
-                                             + item.self_segment @ table)
+        for kind, pair_position, own_position in item.blocks:
+            if isinstance(profile, MixedProfiles):
+                data[pair_position] += _mixed_values(item, profile, grid, kind)
+                labels = item.samples["patch_label"]
+                for label, homogeneous in enumerate(profile.profiles):
+                    table, cumulative = _object_profile_tables(homogeneous, grid, kind)
+                    mine = labels == label
+                    if item.self_cumulative is not None:
+                        values = item.self_cumulative @ cumulative + item.self_segment @ table
+                        data[own_position[mine]] += values[mine]
+                continue
+            table, cumulative = _object_profile_tables(profile, grid, kind)
+            data[pair_position] += item.sample_operator @ table
+            if item.self_cumulative is not None:
+                data[own_position] += (item.self_cumulative @ cumulative
+                                       + item.self_segment @ table)
     return ScatteringMatrix(geometry.indptr, geometry.indices, data)
 
 
-def _mixed_values(item: ObjectScattering, profile: MixedProfiles, grid: RadialGrid):
+def _sheet_profile(profile, index: int, geometry: ScatteringGeometry, name: str):
+    """Turn a Dipole's profile on a thin sheet into the slab's reflection and transmission."""
+    if index not in geometry.sheets or not isinstance(profile, DipoleProfile):
+        return profile
+    if geometry.sheet_thickness_mm is None:
+        raise InputError(f"object '{name}' is a thin (open) sheet: give the knob "
+                         "sheet_thickness_mm, or a profile with transmission (SlabProfile, "
+                         "a table or two-exponential form)", field="sheet_thickness_mm",
+                         value=None)
+    return SlabProfile(profile.dipole, geometry.sheet_thickness_mm,
+                       entry_fresnel=profile.entry_fresnel)
+
+
+def _mixed_values(item: ObjectScattering, profile: MixedProfiles, grid: RadialGrid,
+                  kind: str = "reflection"):
     samples = item.samples
     fractions = samples["fractions"][samples["pair"]]
     distance = samples["distance"]
     materials = len(profile.profiles)
-    zero = np.stack([p.tabulate(grid)[0] for p in profile.profiles])
+    tables = [p.tabulate(grid, kind) for p in profile.profiles]
+    zero = np.stack([table[0] for table in tables])
     at = np.zeros((len(distance), materials, 3))
-    for m, homogeneous in enumerate(profile.profiles):
-        table = homogeneous.tabulate(grid)
+    for m, table in enumerate(tables):
         k, f = grid.locate(fractions[:, m] * distance)
         at[:, m] = table[k] * (1.0 - f[:, None]) + table[k + 1] * f[:, None]
     values = mixed_profile(zero, at, fractions) * samples["weight"][:, None]
-    pairs = len(item.pair_position)
+    pairs = item.sample_operator.shape[0]
     return np.stack([np.bincount(samples["pair"], values[:, c], minlength=pairs)
                      for c in range(3)], axis=1)
 
@@ -1157,7 +1216,14 @@ class RadiosityState:
                 diffuse_pixels |= mask
             else:
                 vertex = self.patches.vertex_values(index, obj.mesh, B)
-                rgb[mask] = gb.interpolate(index, vertex)[mask] / np.pi
+                seen = gb.interpolate(index, vertex)
+                if index in self.geometry.sheets:
+                    # a two-sided sheet shows the face turned towards the camera
+                    back = self.patches.vertex_values(index, obj.mesh, B, back=True)
+                    behind = np.einsum("hwd,hwd->hw", gb.geometric_normal,
+                                       gb.view_direction) < 0
+                    seen = np.where(behind[..., None], gb.interpolate(index, back), seen)
+                rgb[mask] = seen[mask] / np.pi
         if diffuse_pixels.any():
             points = gb.position[diffuse_pixels]
             normals = gb.geometric_normal[diffuse_pixels]
@@ -1268,6 +1334,9 @@ def _resolve_knobs(scene, knobs: dict) -> dict:
     elif not float(resolved["max_distance_mm"]) > 0:
         raise InputError("must be > 0 mm", field="max_distance_mm",
                          value=resolved["max_distance_mm"])
+    thickness = resolved["sheet_thickness_mm"]
+    if thickness is not None and not float(thickness) > 0:
+        raise InputError("must be > 0 mm", field="sheet_thickness_mm", value=thickness)
     return resolved
 
 
@@ -1296,6 +1365,10 @@ def precompute(scene, **knobs) -> RadiosityState:
         raise InputError(f"radiosity does not apply: {reason}", field="scene", value=scene.name)
     resolved = _resolve_knobs(scene, knobs)
     translucent = [i for i, o in enumerate(scene.objects) if profile_for(o.material) is not None]
+    # an open translucent surface is a thin sheet of constant thickness, lit from both
+    # sides (the rose petals of Sheng et al. 2014, Sect. 6.1)
+    sheets = [i for i in translucent
+              if not closed_surface(scene.objects[i].mesh.faces, scene.objects[i].mesh.vertices)]
     labels = {scene.objects[i].name: scene.objects[i].material.face_labels
               for i in translucent if isinstance(scene.objects[i].material, MixedProfiles)}
     key = content_hash("radiosity", FORMAT_VERSION, scene.geometry_key(), resolved,
@@ -1308,7 +1381,10 @@ def precompute(scene, **knobs) -> RadiosityState:
         return RadiosityState(scene, patches, F, geometry, resolved, log)
     log = StageLog()
     started = time.perf_counter()
-    patches = build_patches(scene, triangles_per_patch=resolved["triangles_per_patch"])
+    patches = build_patches(scene, triangles_per_patch=resolved["triangles_per_patch"],
+                            two_sided=sheets)
+    for index in sheets:
+        log.notes.setdefault("thin sheets", []).append(scene.objects[index].name)
     log.seconds["patches"] = time.perf_counter() - started
     log.notes["patches"] = len(patches)
     reason = needs_form_factors(scene)
@@ -1325,7 +1401,7 @@ def precompute(scene, **knobs) -> RadiosityState:
     started = time.perf_counter()
     geometry = scattering_geometry(scene, patches, translucent,
                                    max_distance_mm=resolved["max_distance_mm"], knobs=resolved,
-                                   log=log)
+                                   log=log, sheet_thickness_mm=resolved["sheet_thickness_mm"])
     log.seconds["scattering"] = time.perf_counter() - started
     log.notes["scattering_bytes"] = geometry.bytes
     log.notes["max_distance_mm"] = resolved["max_distance_mm"]

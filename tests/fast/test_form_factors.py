@@ -108,7 +108,7 @@ def test_cosine_directions_are_cosine_distributed(rng):
 def test_sphere_interior_form_factors_match_the_closed_form():
     scene = _inside_sphere(2)
     patches = build_patches(scene)
-    rays = 2048
+    rays = 1024
     F, facts = form_factors(scene, patches, rays_per_patch=rays, seed=3)
     exact = sphere_form_factors(patches.area)
     # a closed sphere: every ray hits, every row sums to exactly 1
@@ -179,3 +179,23 @@ def test_single_convex_object_needs_no_form_factors():
                                     measured_medium("Marble"))], [], CAMERA)
     assert needs_form_factors(bowl_scene) is None
     assert needs_form_factors(_inside_sphere(1)) is None
+
+
+def test_two_sided_sheets_get_twin_patches_that_receive_from_behind():
+    sheet = plane(2.0, 2.0, (0, 1, 0), subdivisions=2, normal="+y", name="sheet")
+    floor = plane(4.0, 4.0, (0, 0, 0), subdivisions=2, normal="+y", name="floor")
+    scene = Scene([SceneObject("sheet", sheet, measured_medium("Skin1")),
+                   SceneObject("floor", floor, Lambertian(0.5))], [], CAMERA)
+    patches = build_patches(scene, two_sided=[0])
+    front = np.flatnonzero((patches.object_of == 0) & ~patches.is_back)
+    back = patches.twin[front]
+    assert len(patches) == 2 * len(front) + len(floor.faces)
+    assert np.array_equal(patches.twin[back], front)
+    assert np.allclose(patches.normal[back], -patches.normal[front])
+    assert np.allclose(patches.area[back], patches.area[front])
+    F, _ = form_factors(scene, patches, rays_per_patch=256, seed=4)
+    lower = patches.of_object(1)
+    # the floor looks up at the sheet's underside: its rays land on the back patches
+    seen = F[lower].tocsc()
+    assert seen[:, back].sum() > 0
+    assert seen[:, front].sum() == 0

@@ -452,3 +452,49 @@ intensity = 20.0
     assert image.rgb.shape == (12, 12, 3)
     assert image.metadata["component"] == "subsurface"
     assert main(["approx", "radiosity", str(scene_file), "--material", "Unobtainium"]) == 2
+
+
+# ---------------------------------------------------------------------------------------
+# thin sheets
+
+
+def _sheet_scene(material):
+    sheet = plane(6.0, 6.0, (0.0, 1.0, 0.0), subdivisions=8, name="sheet")
+    floor = plane(10.0, 10.0, subdivisions=4, name="floor")
+    return Scene([SceneObject("sheet", sheet, material),
+                  SceneObject("floor", floor, Lambertian(0.5))],
+                 (PointLight([0.0, 4.0, 0.0], 50.0),), CAMERA, mm_per_unit=10.0)
+
+
+def test_thin_sheet_reflects_on_its_side_and_transmits_across():
+    from translucent.materials.profiles import SlabProfile
+
+    skin = measured_medium("Skin1")
+    state = precompute(_sheet_scene(skin), sheet_thickness_mm=3.0, rays_per_patch=32)
+    assert state.log.notes["thin sheets"] == ["sheet"]
+    patches = state.patches
+    front = patches.of_object(0)
+    front = front[~patches.is_back[front]]
+    middle = front[np.argmin(np.linalg.norm(patches.centroid[front] - [0.0, 1.0, 0.0], axis=1))]
+    column = state.S.channel(0)[:, [middle]].toarray().ravel() * patches.area / \
+        patches.area[middle]
+    slab = SlabProfile(skin, 3.0)
+    max_d = state.knobs["max_distance_mm"]
+    assert column[~patches.is_back].sum() == pytest.approx(
+        slab.total(max_radius=max_d)[0], rel=SHEET_ENERGY_RTOL)
+    assert column[patches.is_back].sum() == pytest.approx(
+        slab.total("transmission", max_radius=max_d)[0], rel=SHEET_ENERGY_RTOL)
+    # lit from above only: the back face glows by transmission alone
+    irradiance = state.patch_irradiance()
+    assert np.all(irradiance[patches.twin[middle]] == 0)
+    B, _ = state.solve(irradiance)
+    assert np.all(B[patches.twin[middle]] > 0)
+
+
+def test_dipole_on_a_sheet_needs_a_thickness():
+    with pytest.raises(InputError, match="'sheet' is a thin \\(open\\) sheet.*sheet_thickness_mm"):
+        precompute(_sheet_scene(measured_medium("Skin1")), rays_per_patch=16)
+    # a profile with its own transmission needs none
+    petal = TwoExponentialProfile(0.02, 1.0, transmission=(0.01, 1.0, 0.0, 1.0))
+    state = precompute(_sheet_scene(petal), rays_per_patch=16, max_distance_mm=15.0)
+    assert state.convergence["max_scattering_column_sum"] < 1

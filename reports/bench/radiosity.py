@@ -1,0 +1,325 @@
+"""Translucent radiosity (Sheng et al. 2014): precomputation, relighting and translucency fps.
+
+``translucent bench radiosity`` builds the Cornell box with the translucent block at about
+25,000 patches (the paper's Table 1 scene has 24,640 polygons) and measures
+
+* precomputation: seconds for the patches, the form factors, the optical distances with
+  the scattering samples; the memory of F, of the cached scattering operators and of S,
+  and the process's peak resident memory;
+* relighting: frames per second of the solve alone (new irradiance, the paper's
+  relighting step) for each solver (Jacobi, GMRES, BiCGSTAB: iterations and seconds), and
+  of a whole frame (irradiance with shadow rays, solve, image);
+* relighting with the precomputed T = (I - SF)^-1 S: at 25k patches T needs 3 P^2 float32
+  (7.5 GB) and is skipped by the rule of ``transfer_budget_mb``; it is measured on the same
+  scene cut coarser, at the largest patch count the budget allows (``--transfer-patches``);
+* translucency change: frames per second of re-indexing the profiles (new S) and of
+  re-indexing plus solving, over a sweep of the block's scattering coefficient;
+* the form-factor threshold: entries, memory and the change of the solution it causes;
+* the scattering sampling knobs (polar versus 100-sample self term, sample fall-off) on a
+  flat sheet: seconds and energy error against the profile's closed-form total.
+
+Times are printed in seconds and as ratios to a baseline measured in the same run (one
+copy of 256 MB, which also gives this machine's memory bandwidth); interactive paths
+report the bytes a frame moves against that bandwidth. The paper's GPU figures (GTX 590):
+14 fps relighting, 4 fps translucency change, 4 + 3 min precomputation, 800 MB.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import resource
+import time
+
+import numpy as np
+
+from ...atomic import atomic_write_text
+from ...fast import radiosity
+from ...materials import Dipole, measured_medium
+from ...scenes import RectangularAreaLight, SceneObject
+from ...scenes.scene_file import builtin_scene_path, loads_scene
+
+#: The paper's Table 1, Cornell box (24,640 polygons, GTX 590).
+PAPER = {"relighting fps": 14.0, "translucency change fps": 4.0,
+         "precomputation minutes": 7.0, "memory MB": 800.0}
+
+#: Bytes copied for the bandwidth baseline.
+BASELINE_BYTES = 256 * 2**20
+
+
+def add_arguments(parser):
+    """Options of ``translucent bench radiosity``."""
+    parser.add_argument("--wall-subdivisions", type=int, default=46,
+                        help="segments per Cornell-box wall edge (46: 21,160 wall patches)")
+    parser.add_argument("--block-subdivisions", type=int, default=28,
+                        help="segments along the block's long edge (28: 3,920 patches)")
+    parser.add_argument("--mm-per-unit", type=float, default=275.0,
+                        help="scale (default 275: the 550 mm Cornell box of the paper)")
+    parser.add_argument("--material", default="Marble",
+                        help="measured material of the block (default Marble, as the paper)")
+    parser.add_argument("--rays", type=int, default=radiosity.DEFAULT_KNOBS["rays_per_patch"],
+                        help="form-factor rays per patch")
+    parser.add_argument("--frames", type=int, default=3, help="timed frames per measurement")
+    parser.add_argument("--transfer-patches", type=int, default=6000,
+                        help="about this many patches for the T measurement (budget 512 MB)")
+    parser.add_argument("--skip-sampling", action="store_true",
+                        help="skip the sampling-knob comparison on the flat sheet")
+
+
+def _cornell(wall: int, block: int, mm_per_unit: float, material):
+    """The built-in Cornell box with a translucent block, re-meshed and rescaled."""
+    path = builtin_scene_path("cornell_block")
+    text = path.read_text()
+    text = re.sub(r'(part = "[a-z_]+", size = 2\.0, subdivisions = )\d+', rf"\g<1>{wall}", text)
+    text = re.sub(r'(type = "box".*?subdivisions = )\d+', rf"\g<1>{block}", text)
+    text = re.sub(r"mm_per_unit = [0-9.]+", f"mm_per_unit = {mm_per_unit}", text)
+    scene = loads_scene(text, file=str(path), base_dir=path.parent)
+    objects = [SceneObject(o.name, o.mesh, material) if o.name == "block" else o
+               for o in scene.objects]
+    return type(scene)(objects, scene.lights, scene.camera, scene.mm_per_unit, scene.name,
+                       scene.description, scene.source)
+
+
+def _baseline() -> tuple[float, float]:
+    """Seconds of one 256 MB copy (best of three) and the bandwidth in GB/s (read + write)."""
+    source = np.ones(BASELINE_BYTES // 8)
+    target = np.empty_like(source)
+    best = np.inf
+    for _ in range(3):
+        started = time.perf_counter()
+        np.copyto(target, source)
+        best = min(best, time.perf_counter() - started)
+    return best, 2 * BASELINE_BYTES / best / 1e9
+
+
+def _timed(function, frames: int):
+    """Run once to warm up, then ``frames`` times; return (seconds per frame, last result)."""
+    result = function()
+    started = time.perf_counter()
+    for _ in range(frames):
+        result = function()
+    return (time.perf_counter() - started) / frames, result
+
+
+def _moved_lights(scene, count: int):
+    """The scene's area light slid across the ceiling: the relighting sequence."""
+    light = scene.lights[0]
+    for k in range(count):
+        offset = np.array([0.5 * (k / max(count - 1, 1) - 0.5), 0.0, 0.0])
+        yield (RectangularAreaLight(light.center + offset, light.u_axis, light.v_axis,
+                                    light.radiance),)
+
+
+def _peak_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _precomputation(scene, args, out):
+    started = time.perf_counter()
+    state = radiosity.precompute(scene, rays_per_patch=args.rays)
+    total = time.perf_counter() - started
+    log = state.log
+    F = state.form_factors
+    memory = {"form factors MB": (F.data.nbytes + F.indices.nbytes + F.indptr.nbytes) / 2**20,
+              "scattering operators MB": state.geometry.bytes / 2**20,
+              "S (3 channels) MB": state.S.bytes / 2**20,
+              "peak resident MB": _peak_mb()}
+    out["precomputation"] = {"patches": len(state.patches), "seconds": total,
+                             "stages": dict(log.seconds), "cache": log.notes.get("cache"),
+                             "form factor entries": int(F.nnz),
+                             "scattering entries": int(state.geometry.nnz),
+                             "max_distance_mm": state.knobs["max_distance_mm"],
+                             "skipped": list(log.skipped), **memory,
+                             "convergence": state.convergence}
+    print(f"patches {len(state.patches)} (block {len(state.patches.of_object(5))}), "
+          f"max_d {state.knobs['max_distance_mm']:.1f} mm, cache {log.notes.get('cache')}")
+    for stage, seconds in log.seconds.items():
+        print(f"  {stage:<24} {seconds:8.1f} s")
+    print(f"  total precomputation     {total:8.1f} s   (paper: 4 + 3 min on a GTX 590)")
+    for key, value in memory.items():
+        print(f"  {key:<24} {value:8.1f}")
+    print(f"  F entries {F.nnz:,}, S entries {state.geometry.nnz:,}; max column sum of S "
+          f"{state.convergence['max_scattering_column_sum']:.3f}")
+    return state
+
+
+def _relighting(state, args, baseline, bandwidth, out):
+    lights = list(_moved_lights(state.scene, args.frames + 1))
+    started = time.perf_counter()
+    irradiances = [state.patch_irradiance(light) for light in lights]
+    irradiance_seconds = (time.perf_counter() - started) / len(lights)
+    F = state.form_factors
+    solvers = {}
+    print(f"relighting (solve only; irradiance {irradiance_seconds:.2f} s per light set):")
+    for solver in radiosity.SOLVERS:
+        state.knobs["solver"] = solver
+        frame = iter(range(10**9))
+
+        def solve(state=state, frame=frame):
+            return state.solve(irradiances[next(frame) % len(irradiances)])
+
+        seconds, (_, info) = _timed(solve, args.frames)
+        per_iteration = (F.data.nbytes + F.indices.nbytes + 3 * (state.S.data.nbytes / 3
+                         + state.S.indices.nbytes))
+        moved = per_iteration * max(info["iterations"], 1)
+        solvers[solver] = {"seconds": seconds, "fps": 1.0 / seconds,
+                           "iterations": info["iterations"],
+                           "residual": max(info["residual"]),
+                           "ratio to baseline": seconds / baseline,
+                           "bytes per frame": moved,
+                           "fraction of bandwidth": moved / seconds / 1e9 / bandwidth}
+        print(f"  {solver:<9} {1 / seconds:7.2f} fps  {info['iterations']:4d} iterations  "
+              f"residual {max(info['residual']):.4f}  {seconds / baseline:6.1f} x baseline  "
+              f"{moved / 2**20:7.0f} MB/frame")
+    fastest = min(solvers, key=lambda name: solvers[name]["seconds"])
+    state.knobs["solver"] = fastest
+    frame = iter(range(10**9))
+
+    def whole(state=state, frame=frame):
+        return state.render(lights=lights[next(frame) % len(lights)])
+
+    seconds, image = _timed(whole, max(1, args.frames - 1))
+    out["relighting"] = {"solvers": solvers, "fastest": fastest,
+                         "irradiance seconds": irradiance_seconds,
+                         "frame seconds": seconds, "frame fps": 1.0 / seconds,
+                         "image": list(image.shape)}
+    print(f"  whole frame ({fastest}, {image.shape[1]} x {image.shape[0]}): "
+          f"{1 / seconds:.2f} fps ({seconds:.2f} s: irradiance, solve, per-pixel direct light)")
+
+
+def _translucency(state, args, baseline, out):
+    base = state.scene.object("block").material
+    scales = np.geomspace(0.5, 2.0, args.frames + 1)
+    materials = [Dipole(base.sigma_a, base.sigma_s_prime * s, base.eta, base.g) for s in scales]
+    irradiance = state.patch_irradiance()
+    frame = iter(range(10**9))
+
+    def reindex(state=state, frame=frame):
+        return state.set_material(materials[next(frame) % len(materials)])
+
+    reindex_seconds, _ = _timed(reindex, args.frames)
+    frame = iter(range(10**9))
+
+    def change(state=state, frame=frame):
+        state.set_material(materials[next(frame) % len(materials)])
+        return state.solve(irradiance)
+
+    seconds, (_, info) = _timed(change, args.frames)
+    state.set_material(base)
+    out["translucency change"] = {"re-index seconds": reindex_seconds,
+                                  "re-index fps": 1 / reindex_seconds,
+                                  "with solve seconds": seconds, "with solve fps": 1 / seconds,
+                                  "iterations": info["iterations"],
+                                  "ratio to baseline": seconds / baseline,
+                                  "sigma_s_prime scales": scales.tolist()}
+    print(f"translucency change: re-index {1 / reindex_seconds:.2f} fps "
+          f"({reindex_seconds:.3f} s), with solve {1 / seconds:.2f} fps ({seconds:.3f} s, "
+          f"{seconds / baseline:.1f} x baseline)")
+
+
+def _thresholds(state, out):
+    F_full = state.form_factors
+    irradiance = state.patch_irradiance()
+    reference, _ = radiosity.solve_radiosity(state.S, F_full, state.S.dot(irradiance),
+                                             solver="gmres", tolerance=1e-8)
+    rays = state.knobs["rays_per_patch"]
+    rows = {}
+    print("form-factor threshold (entries below it dropped):")
+    for threshold in (0.0, 1.5 / rays, 2.5 / rays, 4.5 / rays, 0.02):
+        F = F_full.copy()
+        F.data[F.data < threshold] = 0.0
+        F.eliminate_zeros()
+        B, _ = radiosity.solve_radiosity(state.S, F, state.S.dot(irradiance), solver="gmres",
+                                         tolerance=1e-8)
+        change = float(np.abs(B - reference).sum() / np.abs(reference).sum())
+        memory = (F.data.nbytes + F.indices.nbytes + F.indptr.nbytes) / 2**20
+        rows[f"{threshold:.4g}"] = {"entries": int(F.nnz), "MB": memory,
+                                    "relative change of B": change}
+        print(f"  {threshold:7.4f}: {F.nnz:>11,} entries {memory:7.1f} MB  "
+              f"change of B {change:.4f}")
+    out["form factor threshold"] = rows
+
+
+def _transfer(args, baseline, out):
+    ratio = np.sqrt(args.transfer_patches / 25000.0)
+    wall = max(2, int(round(args.wall_subdivisions * ratio)))
+    block = max(2, int(round(args.block_subdivisions * ratio)))
+    scene = _cornell(wall, block, args.mm_per_unit, measured_medium(args.material))
+    state = radiosity.precompute(scene, rays_per_patch=args.rays)
+    if not state.transfer_fits():
+        print(f"T skipped at {len(state.patches)} patches: over transfer_budget_mb")
+        return
+    transfer_seconds = state.precompute_transfer()
+    lights = list(_moved_lights(scene, args.frames + 1))
+    irradiances = [state.patch_irradiance(light) for light in lights]
+    frame = iter(range(10**9))
+
+    def relight(state=state, frame=frame):
+        return state.solve(irradiances[next(frame) % len(irradiances)])
+
+    seconds, _ = _timed(relight, args.frames * 3)
+    state.transfer = None
+    iterative, (_, info) = _timed(relight, args.frames)
+    out["transfer"] = {"patches": len(state.patches), "T seconds": transfer_seconds,
+                       "T MB": 3 * len(state.patches) ** 2 * 4 / 2**20,
+                       "relight seconds": seconds, "relight fps": 1 / seconds,
+                       "iterative seconds": iterative, "iterative fps": 1 / iterative,
+                       "iterations": info["iterations"], "ratio to baseline": seconds / baseline}
+    print(f"precomputed T at {len(state.patches)} patches: {transfer_seconds:.1f} s, "
+          f"{3 * len(state.patches) ** 2 * 4 / 2**20:.0f} MB; relight {1 / seconds:.1f} fps "
+          f"(iterative {state.knobs['solver']} at that size: {1 / iterative:.1f} fps)")
+
+
+def _sampling(out):
+    from ...fast.form_factors import build_patches
+    from ...materials.profiles import DipoleProfile
+    from ...scenes import Camera, Scene, plane
+
+    profile = DipoleProfile(measured_medium("Skin1"))
+    max_d = profile.support_radius(1e-3)
+    scene = Scene([SceneObject("sheet", plane(2.2 * max_d, 2.2 * max_d, subdivisions=24),
+                               profile)], [], Camera([0, 1, 4], [0, 0, 0]))
+    patches = build_patches(scene)
+    middle = int(np.argmin(np.linalg.norm(patches.centroid, axis=1)))
+    expected = profile.total(max_radius=max_d)
+    rows = {}
+    print(f"scattering sampling on a flat Skin1 sheet ({len(patches)} patches, patch radius "
+          f"{patches.radius.mean():.2f} mm): energy error at the middle patch")
+    for term, falloff, beyond in (("samples", 1, 4), ("polar", 1, 4), ("samples", 2, 8),
+                                  ("polar", 2, 8), ("polar", 4, 16)):
+        knobs = dict(radiosity.DEFAULT_KNOBS, self_term=term, sample_falloff=falloff,
+                     centroid_beyond=beyond)
+        started = time.perf_counter()
+        geometry = radiosity.scattering_geometry(scene, patches, [0], max_distance_mm=max_d,
+                                                 knobs=knobs)
+        S = radiosity.scattering_matrix(geometry, scene, patches)
+        seconds = time.perf_counter() - started
+        error = S.power_column_sums(patches.area)[middle] / expected - 1.0
+        key = f"{term}, fall-off {falloff}, centroid beyond {beyond}"
+        rows[key] = {"seconds": seconds, "energy error": error.tolist(),
+                     "samples": geometry.objects[0].facts["samples"]}
+        print(f"  {key:<40} {seconds:6.2f} s  error {np.abs(error).max():.4f}")
+    out["sampling"] = rows
+
+
+def run(args) -> int:
+    """Measure everything, print the tables, write the JSON."""
+    baseline, bandwidth = _baseline()
+    print(f"baseline: 256 MB copy {baseline * 1e3:.1f} ms ({bandwidth:.1f} GB/s read + write)")
+    out = {"baseline seconds": baseline, "bandwidth GB/s": bandwidth, "paper": PAPER}
+    scene = _cornell(args.wall_subdivisions, args.block_subdivisions, args.mm_per_unit,
+                     measured_medium(args.material))
+    state = _precomputation(scene, args, out)
+    _relighting(state, args, baseline, bandwidth, out)
+    _translucency(state, args, baseline, out)
+    _thresholds(state, out)
+    del state
+    _transfer(args, baseline, out)
+    if not args.skip_sampling:
+        _sampling(out)
+    print("paper (GTX 590): 14 fps relighting, 4 fps translucency change, 4 + 3 min "
+          "precomputation, 800 MB")
+    path = args.json or "bench_radiosity.json"
+    atomic_write_text(path, json.dumps(out, indent=2, default=float))
+    print(f"wrote {path}")
+    return 0
