@@ -200,12 +200,34 @@ def _sample_matrix(model, gamma_range, gamma_samples, delta_samples):
     return delta, columns
 
 
+#: Left singular vectors stored per decomposition (the analysis uses up to 64).
+STORED_COMPONENTS = 64
+
+
 @functools.lru_cache(maxsize=32)
 def _decomposition(model, gamma_range, gamma_samples, delta_samples):
+    """SVD of the centred sample matrix; kept in memory and in the ``brdf_pca_basis`` cache.
+
+    The SVD runs with one BLAS thread: threaded LAPACK on a matrix this small gains little
+    and, on a loaded machine, stalls in synchronisation (measured: 1.4 s with one thread,
+    9-35 s with two on a shared 2-core machine).
+    """
+    from threadpoolctl import threadpool_limits
+
+    from ..cache import Cache, content_hash
+
+    key = content_hash("pca_basis", 1, model, list(gamma_range), gamma_samples, delta_samples)
+    cache = Cache("brdf_pca_basis")
+    stored = cache.load_pickle(key)
+    if stored is not None:
+        return stored
     delta, columns = _sample_matrix(model, gamma_range, gamma_samples, delta_samples)
     mean = columns.mean(axis=1)                                          # b_0, Eq. 13
-    left, singular, _ = np.linalg.svd(columns - mean[:, None], full_matrices=False)
-    return delta, mean, left, singular
+    with threadpool_limits(limits=1, user_api="blas"):
+        left, singular, _ = np.linalg.svd(columns - mean[:, None], full_matrices=False)
+    result = (delta, mean, np.ascontiguousarray(left[:, :STORED_COMPONENTS]), singular)
+    cache.store_pickle(key, result)
+    return result
 
 
 def build_pca_basis(model: str, n_basis: int = DEFAULT_BASIS_SIZE, *,
@@ -218,7 +240,7 @@ def build_pca_basis(model: str, n_basis: int = DEFAULT_BASIS_SIZE, *,
     model : str
         A model of :data:`~translucent.materials.brdfs.MODELS`.
     n_basis : int
-        K, basis functions kept besides the mean, in [1, 64].
+        K, basis functions kept besides the mean, in [1, 64] (and < k').
     gamma_range : (float, float), optional
         A sub-range of the model's editing range (default: all of it).
     gamma_samples : int
