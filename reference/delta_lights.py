@@ -23,7 +23,7 @@ replaced by the nearest thing a path can hit:
   disk with the rim, instead of Mitsuba's linear one; equal at both ends and at the
   middle). The shade keeps :math:`R \le d/2`, so a narrow fall-off band forces a smaller
   sphere than a point light's (more noise). A ``beam_width`` equal to ``cutoff_angle``
-  (a hard edge) is given a band of :data:`MIN_SPOT_FALLOFF_DEGREES`.
+  (a hard edge) is given a band of :data:`MIN_SPOT_FALLOFF_FRACTION` of the cutoff.
 * **directional light** (irradiance :math:`E` normal to it): a disk of angular radius
   :math:`\alpha = \arcsin s` in the environment map (a "sun"), its radiance scaled so that
   the irradiance on a surface facing it is exactly :math:`E` on Mitsuba's map grid.
@@ -45,7 +45,7 @@ from ..scenes import DirectionalLight, ImageEnvironment, Mesh, PointLight, Scene
 
 __all__ = [
     "DEFAULT_SIZE",
-    "MIN_SPOT_FALLOFF_DEGREES",
+    "MIN_SPOT_FALLOFF_FRACTION",
     "SHADE_FRACTION",
     "EnvironmentParts",
     "any_perpendicular",
@@ -57,17 +57,22 @@ __all__ = [
 ]
 
 #: Radius of a stand-in sphere as a fraction of the distance to the nearest surface (and
-#: the sine of a stand-in sun's angular radius): 5 % keeps the penumbra under about 6
-#: degrees while a path leaving a translucent object still finds the emitter often enough
-#: for 256 spp references of the catalogue scenes.
+#: the sine of a stand-in sun's angular radius): the penumbra stays within about 6 degrees
+#: of the terminator. Noise falls slowly with size. Measured on the built-in ``sphere``
+#: (Marble, radius 10 mm, point light) at 48 x 48 and 256 spp: relative standard error of
+#: the object pixels 0.91 at size 0.05 (181 of 1044 object pixels received any light),
+#: 0.80 at 0.1 (487 lit), 0.57 at 0.2 (796 lit). Path tracing from the camera finds the
+#: light only where a path leaving the object happens to hit the stand-in, so point-lit
+#: translucent references need very many samples (about 65 000 spp for 5 % at size 0.1).
 DEFAULT_SIZE = 0.1
 
 #: A spot's shade stays within this fraction of the distance to the nearest surface, so it
 #: never touches the scene.
 SHADE_FRACTION = 0.5
 
-#: Fall-off band given to a hard-edged spot light (beam_width == cutoff_angle), degrees.
-MIN_SPOT_FALLOFF_DEGREES = 1.0
+#: Narrowest fall-off band, as a fraction of the cutoff angle: a hard-edged spot light
+#: (beam_width == cutoff_angle) would need an emitter of zero size.
+MIN_SPOT_FALLOFF_FRACTION = 0.05
 
 #: Width of a stand-in sun's environment map when the scene has no image environment:
 #: at least this many texels across the sun disk's diameter.
@@ -170,7 +175,8 @@ def spot_light_equivalent(light: SpotLight, scene: Scene, size: float = DEFAULT_
         One sentence for the image metadata.
     """
     radius, distance = _emitter_radius(light, scene, size, "lights.position")
-    falloff = max(light.cutoff_angle - light.beam_width, MIN_SPOT_FALLOFF_DEGREES)
+    falloff = max(light.cutoff_angle - light.beam_width,
+                  MIN_SPOT_FALLOFF_FRACTION * light.cutoff_angle)
     half_band = math.sin(math.radians(falloff / 2.0))
     radius = min(radius, SHADE_FRACTION * distance * half_band)
     shade_radius = radius / half_band

@@ -146,12 +146,15 @@ class MaterialParts:
     max_albedo : float
         Largest single-scattering albedo of the interior medium over channels (0 without
         one); above :data:`RR_ALBEDO_THRESHOLD` Russian roulette is switched off.
+    chromatic : bool
+        The interior's extinction differs between channels.
     """
 
     bsdf: dict
     interior: dict | None = None
     blocks_delta_lights: bool = False
     max_albedo: float = 0.0
+    chromatic: bool = False
 
 
 MaterialConverter = Callable[[Any, ConversionContext], MaterialParts]
@@ -234,11 +237,13 @@ def dipole_medium(material: Dipole, context: ConversionContext) -> dict:
 def _convert_dipole(material: Dipole, context: ConversionContext) -> MaterialParts:
     medium = dipole_medium(material, context)
     max_albedo = max(context.per_channel(material.albedo))
+    sigma_t = context.per_channel(material.sigma_t)
+    chromatic = max(sigma_t) > min(sigma_t)
     if material.eta == 1.0:
         # index-matched: nothing refracts, delta lights reach the medium through a null surface
-        return MaterialParts({"type": "null"}, medium, False, max_albedo)
+        return MaterialParts({"type": "null"}, medium, False, max_albedo, chromatic)
     boundary = {"type": "dielectric", "int_ior": material.eta, "ext_ior": 1.0}
-    return MaterialParts(boundary, medium, True, max_albedo)
+    return MaterialParts(boundary, medium, True, max_albedo, chromatic)
 
 
 def _convert_lambertian(material: Lambertian, context: ConversionContext) -> MaterialParts:
@@ -267,6 +272,10 @@ class MitsubaConversion:
         Depth at which Russian roulette starts (:data:`NO_RUSSIAN_ROULETTE`: never).
     has_media : bool
         Whether any object has an interior medium.
+    per_channel_recommended : bool
+        A chromatic medium of albedo above :data:`RR_ALBEDO_THRESHOLD`: its long walks
+        converge much faster rendered one channel at a time
+        (:func:`translucent.reference.render`).
     substitutions : list of str
         One sentence for each light replaced by an emitter of finite size.
     """
@@ -276,6 +285,7 @@ class MitsubaConversion:
     max_depth: int
     rr_depth: int
     has_media: bool
+    per_channel_recommended: bool = False
     substitutions: list[str] = field(default_factory=list)
 
 
@@ -412,12 +422,14 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     has_media = False
     blocks_delta = False
     max_albedo = 0.0
+    long_chromatic_walks = False
     for obj in scene.objects:
         context = ConversionContext(scene, obj.name, channel)
         parts = material_converter(obj.material, object_name=obj.name)(obj.material, context)
         has_media |= parts.interior is not None
         blocks_delta |= parts.blocks_delta_lights
         max_albedo = max(max_albedo, parts.max_albedo)
+        long_chromatic_walks |= parts.chromatic and parts.max_albedo > RR_ALBEDO_THRESHOLD
         key = _shape_key(obj.name, used)
         props = {"bsdf": parts.bsdf}
         if parts.interior is not None:
@@ -455,7 +467,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         **emitters,
     }
     return MitsubaConversion(scene_dict, integrator, int(max_depth), int(rr_depth), has_media,
-                             notes)
+                             long_chromatic_walks, notes)
 
 
 def to_mitsuba_dict(scene: Scene, *, integrator: str | None = None,

@@ -158,6 +158,15 @@ def test_russian_roulette_is_off_only_for_albedo_near_one():
     assert convert_scene(_scene(Lambertian(0.9)), rr_depth=12).rr_depth == 12
 
 
+def test_per_channel_is_recommended_for_chromatic_media_of_high_albedo():
+    assert convert_scene(_scene(measured_medium("Marble"))).per_channel_recommended
+    assert not convert_scene(_scene(measured_medium("Skin1"))).per_channel_recommended
+    grey = Dipole(sigma_a=0.0, sigma_s_prime=2.0)
+    assert not convert_scene(_scene(grey)).per_channel_recommended
+    assert not convert_scene(_scene(measured_medium("Marble")),
+                             channel=0).per_channel_recommended
+
+
 def test_max_depth_defaults_to_unbounded():
     conversion = convert_scene(_scene(measured_medium("Skin1")))
     assert conversion.max_depth == -1

@@ -1,0 +1,193 @@
+"""Overhead of the reference renderer over a plain ``mitsuba.render`` call, and integrator choice.
+
+``translucent bench reference [--scene NAME --spp N --passes K --repeats R --size PX]``
+renders a built-in scene through :func:`translucent.reference.render` (cache off: scene
+conversion, ``load_dict``, K passes of N spp, the running mean and variance) and through
+one plain ``mitsuba.render`` call of K x N spp on the same Mitsuba scene, loaded
+beforehand, alternating the two R times after one warm-up each (kernels compiled). It
+prints the median ratio of the suite's time to the plain call's (target at most
+:data:`TARGET_OVERHEAD`) beside the absolute seconds, and writes them as JSON.
+
+``--integrators MATERIAL`` measures instead which estimator converges fastest for a
+medium: the scene's first translucent object gets the measured medium MATERIAL, the
+lights become a constant environment of radiance 1 (every path that leaves finds light,
+so the noise is the medium's), and the scene is rendered with ``volpath``,
+``volpathmis`` and per-channel ``volpath`` at the same spp. Each gets the mean over
+object pixels and channels of the relative variance of the mean, and the efficiency
+``1 / (relative variance x seconds)``, printed as a ratio to ``volpath``'s.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ...atomic import atomic_write_text
+
+#: The overhead the suite may add to a plain Mitsuba render (issue 2).
+TARGET_OVERHEAD = 1.05
+
+#: The estimators ``--integrators`` compares: name -> keyword arguments of ``render``.
+ESTIMATORS = {
+    "volpath": {"integrator": "volpath", "per_channel": False},
+    "volpathmis": {"integrator": "volpathmis", "per_channel": False},
+    "per-channel volpath": {"integrator": "volpath", "per_channel": True},
+}
+
+
+def add_arguments(parser):
+    """Add the scene, sample counts, repeats, image size and the integrator comparison."""
+    parser.add_argument("--scene", default="sphere", help="built-in scene name or TOML "
+                        "path (default sphere)")
+    parser.add_argument("--spp", type=int, default=16, help="samples per pixel of each "
+                        "pass (default 16)")
+    parser.add_argument("--passes", type=int, default=4, help="passes of the suite's "
+                        "render; the plain call renders passes x spp at once (default 4)")
+    parser.add_argument("--repeats", type=int, default=3, help="timed repeats after the "
+                        "warm-up (default 3)")
+    parser.add_argument("--size", type=int, default=48, help="image width in pixels (the "
+                        "height follows the scene's aspect; default 48, 0: the scene's)")
+    parser.add_argument("--integrators", metavar="MATERIAL", default=None,
+                        help="compare volpath, volpathmis and per-channel volpath on this "
+                        "measured medium instead of timing the overhead")
+
+
+def _scene(args):
+    from ...errors import InputError
+    from ...scenes import Camera, load_scene
+
+    scene = load_scene(args.scene)
+    for name in ("spp", "passes", "repeats"):
+        if getattr(args, name) < 1:
+            raise InputError("must be >= 1", field=f"--{name}", value=getattr(args, name))
+    if args.size < 0:
+        raise InputError("must be >= 0 (0: the scene's own size)", field="--size",
+                         value=args.size)
+    if args.size:
+        camera = scene.camera
+        height = max(1, round(args.size * camera.height / camera.width))
+        scene = scene.with_camera(Camera(camera.origin, camera.target, camera.up, camera.fov,
+                                         args.size, height))
+    return scene
+
+
+def _overhead(scene, args) -> dict:
+    from ...backend import mitsuba
+    from ...reference import convert_scene, render
+
+    mi = mitsuba()
+    total_spp = args.spp * args.passes
+    start = time.perf_counter()
+    plain_scene = mi.load_dict(convert_scene(scene, spp=total_spp).scene_dict)
+    load_seconds = time.perf_counter() - start
+
+    def suite():
+        render(scene, spp=args.spp, passes=args.passes, cache=False, progress=False)
+
+    def plain():
+        np.array(mi.render(plain_scene, spp=total_spp, seed=0))
+
+    def timed(function):
+        start = time.perf_counter()
+        function()
+        return time.perf_counter() - start
+
+    timed(suite), timed(plain)  # warm-up: compile the kernels of both
+    suite_seconds, plain_seconds = [], []
+    for _ in range(args.repeats):
+        suite_seconds.append(timed(suite))
+        plain_seconds.append(timed(plain))
+    ratios = [s / p for s, p in zip(suite_seconds, plain_seconds, strict=True)]
+    return {"benchmark": "reference overhead", "scene": scene.name,
+            "size": [scene.camera.width, scene.camera.height], "spp": args.spp,
+            "passes": args.passes, "variant": mi.variant(), "mitsuba": mi.__version__,
+            "suite_seconds": suite_seconds, "plain_seconds": plain_seconds,
+            "load_seconds": load_seconds, "ratios": ratios,
+            "median_ratio": statistics.median(ratios), "target": TARGET_OVERHEAD}
+
+
+def _print_overhead(result) -> None:
+    width, height = result["size"]
+    print(f"reference overhead: {result['scene']} {width} x {height}, {result['spp']} spp x "
+          f"{result['passes']} passes ({result['variant']}, Mitsuba {result['mitsuba']})")
+    print(f"{'repeat':>6}  {'suite s':>9}  {'plain s':>9}  {'ratio':>6}")
+    for index, (suite, plain, ratio) in enumerate(zip(
+            result["suite_seconds"], result["plain_seconds"], result["ratios"], strict=True)):
+        print(f"{index + 1:>6}  {suite:>9.3f}  {plain:>9.3f}  {ratio:>6.3f}")
+    verdict = "within" if result["median_ratio"] <= TARGET_OVERHEAD else "ABOVE"
+    print(f"median ratio {result['median_ratio']:.3f} ({verdict} the target "
+          f"{TARGET_OVERHEAD}); the plain call's scene loaded once in "
+          f"{result['load_seconds']:.3f} s")
+
+
+def _object_mask(scene) -> np.ndarray:
+    from ...scenes.raycast import gbuffer
+
+    return gbuffer(scene).hit
+
+
+def _integrators(scene, args) -> dict:
+    from ...backend import mitsuba
+    from ...materials import Dipole, measured_medium
+    from ...reference import render
+    from ...scenes import ConstantEnvironment
+
+    medium = measured_medium(args.integrators)
+    translucent = [o.name for o in scene.objects if isinstance(o.material, Dipole)]
+    target = translucent[0] if translucent else scene.objects[0].name
+    scene = scene.with_material(target, medium).with_lights([ConstantEnvironment(1.0)])
+    mask = _object_mask(scene)
+    rows = {}
+    for name, options in ESTIMATORS.items():
+        render(scene, spp=1, passes=2, cache=False, progress=False, **options)  # warm-up
+        image = render(scene, spp=args.spp, passes=args.passes, cache=False, progress=False,
+                       **options)
+        relative = image.variance[mask] / np.maximum(image.rgb[mask], 1e-6) ** 2
+        per_channel = relative.mean(axis=0)
+        seconds = image.metadata["seconds"]
+        rows[name] = {"seconds": seconds, "relative_variance": per_channel.tolist(),
+                      "efficiency": float(1.0 / (per_channel.mean() * seconds)),
+                      "channel_efficiency": (1.0 / (per_channel * seconds)).tolist()}
+    baseline = rows["volpath"]["efficiency"]
+    for row in rows.values():
+        row["efficiency_ratio"] = row["efficiency"] / baseline
+    mi = mitsuba()
+    return {"benchmark": "reference integrators", "scene": scene.name,
+            "material": medium.name or args.integrators,
+            "size": [scene.camera.width, scene.camera.height], "spp": args.spp,
+            "passes": args.passes, "variant": mi.variant(), "mitsuba": mi.__version__,
+            "object_pixels": int(mask.sum()), "estimators": rows}
+
+
+def _print_integrators(result) -> None:
+    width, height = result["size"]
+    print(f"integrators on {result['material']} ({result['scene']}, constant environment, "
+          f"{width} x {height}, {result['spp']} spp x {result['passes']} passes, "
+          f"{result['object_pixels']} object pixels)")
+    print(f"{'estimator':>20}  {'seconds':>8}  {'rel. variance R G B':>26}  "
+          f"{'efficiency / volpath':>20}")
+    for name, row in result["estimators"].items():
+        variance = " ".join(f"{v:.2e}" for v in row["relative_variance"])
+        print(f"{name:>20}  {row['seconds']:>8.2f}  {variance:>26}  "
+              f"{row['efficiency_ratio']:>20.2f}")
+
+
+def run(args) -> int:
+    """Run the overhead timing (or the integrator comparison), print it, write the JSON."""
+    scene = _scene(args)
+    if args.integrators:
+        result = _integrators(scene, args)
+        _print_integrators(result)
+        default = "bench_reference_integrators.json"
+    else:
+        result = _overhead(scene, args)
+        _print_overhead(result)
+        default = "bench_reference.json"
+    path = Path(args.json or default)
+    atomic_write_text(path, json.dumps(result, indent=2) + "\n")
+    print(f"wrote {path}")
+    return 0

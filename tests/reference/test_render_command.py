@@ -1,0 +1,101 @@
+"""``translucent render`` and ``translucent bench reference`` from the command line."""
+
+import json
+
+import pytest
+from translucent.image import read_exr
+from translucent.reports.cli import main
+
+SCENE = """
+[scene]
+name = "tiny"
+mm_per_unit = 10.0
+
+[camera]
+origin = [0.0, 0.0, 4.0]
+target = [0.0, 0.0, 0.0]
+fov = 40.0
+width = 8
+height = 6
+
+[[objects]]
+name = "ball"
+mesh = { type = "icosphere", subdivisions = 1, radius = 1.0 }
+material = { type = "lambertian", albedo = 0.5 }
+
+[[lights]]
+type = "constant_env"
+radiance = 1.0
+"""
+
+
+@pytest.fixture
+def scene_file(tmp_path, monkeypatch):
+    monkeypatch.setenv("TRANSLUCENT_CACHE", str(tmp_path / "cache"))
+    path = tmp_path / "tiny.toml"
+    path.write_text(SCENE)
+    return path
+
+
+def test_render_writes_the_exr_with_its_variance_and_metadata(scene_file, tmp_path, capsys):
+    out = tmp_path / "out" / "tiny.exr"
+    assert main(["render", str(scene_file), "--spp", "2", "--passes", "3", "--out",
+                 str(out)]) == 0
+    image = read_exr(out)
+    assert image.shape == (6, 8)
+    assert image.variance is not None
+    assert image.metadata["spp"] == 2 and image.metadata["passes"] == 3
+    assert image.metadata["integrator"] == "path"
+    assert f"wrote {out}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("arguments", "message"), [
+    (["no_such_scene"], "no such built-in scene"),
+    (["{scene}", "--spp", "0"], "spp = 0: must be an integer >= 1"),
+    (["{scene}", "--passes", "-2"], "passes = -2: must be an integer >= 1"),
+    (["{scene}", "--out", "{tmp}/tiny.png"], "must be an OpenEXR file ending in .exr"),
+    (["{scene}", "--integrator", "bdpt"], "invalid choice"),
+])
+def test_bad_input_exits_2_and_writes_nothing(scene_file, tmp_path, capsys, arguments,
+                                             message):
+    arguments = [a.format(scene=scene_file, tmp=tmp_path) for a in arguments]
+    if "--out" not in arguments:
+        arguments += ["--out", str(tmp_path / "result.exr")]
+    assert main(["render", *arguments]) == 2
+    assert message in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.exr")) and not list(tmp_path.glob("*.png"))
+
+
+def test_bad_scene_file_exits_2(tmp_path, capsys):
+    broken = tmp_path / "broken.toml"
+    broken.write_text(SCENE.replace("fov = 40.0", "fov = 40.0\nzoom = 2"))
+    assert main(["render", str(broken), "--out", str(tmp_path / "x.exr")]) == 2
+    assert "zoom" in capsys.readouterr().err
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_bench_reference_writes_its_figures(scene_file, tmp_path, capsys):
+    result = tmp_path / "bench.json"
+    assert main(["bench", "reference", "--scene", str(scene_file), "--spp", "1", "--passes",
+                 "2", "--repeats", "1", "--size", "0", "--json", str(result)]) == 0
+    figures = json.loads(result.read_text())
+    assert figures["spp"] == 1 and figures["passes"] == 2
+    assert len(figures["ratios"]) == 1 and figures["median_ratio"] > 0
+    assert "median ratio" in capsys.readouterr().out
+
+
+@pytest.mark.slow  # three integrators compiled: about 11 s here
+def test_bench_reference_compares_integrators(scene_file, tmp_path):
+    result = tmp_path / "integrators.json"
+    assert main(["bench", "reference", "--scene", str(scene_file), "--integrators", "skin1",
+                 "--spp", "1", "--passes", "2", "--size", "0", "--json", str(result)]) == 0
+    estimators = json.loads(result.read_text())["estimators"]
+    assert set(estimators) == {"volpath", "volpathmis", "per-channel volpath"}
+    assert estimators["volpath"]["efficiency_ratio"] == 1.0
+
+
+def test_bench_reference_refuses_bad_counts(scene_file, tmp_path, capsys):
+    assert main(["bench", "reference", "--scene", str(scene_file), "--repeats", "0",
+                 "--json", str(tmp_path / "b.json")]) == 2
+    assert "--repeats = 0: must be >= 1" in capsys.readouterr().err
+    assert not (tmp_path / "b.json").exists()
