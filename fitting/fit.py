@@ -19,6 +19,7 @@ import numpy as np
 
 from ..atomic import atomic_path, atomic_write_text
 from ..errors import InputError
+from ..materials.subedit import save_subedit
 from .capture import Capture, read_capture
 from .models import DipoleModel, SubEditModel
 from .profile import RadialProfile, measure_profile
@@ -216,6 +217,11 @@ def fit_subedit(capture, *, segments: int = 8, r_s_mm: float | None = None,
                      model.material(_medians(summaries)), notes)
 
 
+def material_is_absolute(result: FitResult) -> bool:
+    """True when the fitted profile is in mm^-2 (the capture's exposure was known)."""
+    return result.capture.spec.exposure is not None
+
+
 def write_outputs(result: FitResult, out_dir) -> dict[str, Path]:
     """Write the summary, material file, corner plot, profile plot and samples of a fit.
 
@@ -237,7 +243,15 @@ def write_outputs(result: FitResult, out_dir) -> dict[str, Path]:
     atomic_write_text(paths["summary"], json.dumps(result.summary(), indent=2) + "\n")
     source = "" if result.capture.path is None else result.capture.path.name
     diagnostics = "; ".join(chain.message for chain in result.chains)
-    write_material(paths["material"], result.material, result.parameters, source=source,
+    material = result.material
+    if result.kind == "subedit":  # the texture file the scene files' "subedit" type loads
+        paths["texture"] = out_dir / f"{kind}_profile.npz"
+        save_subedit(paths["texture"], result.model.texture(_medians(result.parameters)))
+        material = {"type": "subedit", "file": paths["texture"].name}
+        if not material_is_absolute(result):
+            diagnostics += ("; the exposure was unknown: P is relative (scale it before "
+                            "rendering)")
+    write_material(paths["material"], material, result.parameters, source=source,
                    diagnostics=diagnostics)
     title = f"{kind} fit of {source or 'capture'}" + ("" if result.converged
                                                       else " (NOT converged)")

@@ -35,10 +35,10 @@ import numpy as np
 
 from ..errors import InputError
 from ..materials.dipole import dipole_reflectance_profile
+from ..materials.subedit import LOG_FLOOR, SubEditProfiles
 from .capture import CaptureSpec
 from .multipole import slab_reflectance_profile, slab_transmittance_profile
 from .profile import RadialProfile
-from .subedit_profile import subedit_knots, subedit_log_profile
 
 __all__ = [
     "DipoleModel",
@@ -168,8 +168,7 @@ class ProfileModel:
     def predictions(self, theta) -> list[np.ndarray | None]:
         """Predicted annulus means per channel (None for channels not modelled)."""
         theta = np.atleast_2d(np.asarray(theta, dtype=np.float64))
-        predicted = self.profile.operator.predict(self.profile_nodes(theta))
-        return [predicted[c] if c in self.channels else None for c in range(3)]
+        return self.profile.operator.predict(self.profile_nodes(theta), channels=self.channels)
 
     def log_likelihood(self, theta) -> np.ndarray:
         """Student-t log-likelihood of the measured annulus means, shape (n,)."""
@@ -351,7 +350,7 @@ class DipoleModel(ProfileModel):
 
 
 class SubEditModel(ProfileModel):
-    r"""SubEdit profile: ``n + 1`` knot values of :math:`\ln P` per channel (Eq. 9 of Chen et al. 2012).
+    r"""SubEdit profile: ``n + 1`` knot values of :math:`\ln P` per channel (Chen et al. 2012, Eq. 9).
 
     The exitance is :math:`P(r)` (for a homogeneous material Eq. 8 of Chen et al. gives
     :math:`R_d = P`). With the exposure known, :math:`P` is absolute (mm^-2); unknown, the
@@ -393,7 +392,8 @@ class SubEditModel(ProfileModel):
         if not (np.isfinite(r_s_mm) and r_s_mm > 0):
             raise InputError("must be > 0", field="r_s_mm", value=r_s_mm)
         self.r_s_mm = float(r_s_mm)
-        self.knots = subedit_knots(self.r_s_mm, self.segments)
+        self.knots = np.linspace(0.0, self.r_s_mm, self.segments + 1)
+        self._matrix, self._support = self._interpolation()
         self.exposure = 1.0 if spec.exposure is None else float(spec.exposure)
         peak = max(float(np.nanmax(self._observations[c][0])) for c in self.channels)
         centre = np.log(max(peak, 1e-300) / self.exposure)
@@ -410,15 +410,35 @@ class SubEditModel(ProfileModel):
         theta = np.atleast_2d(theta)
         return theta.reshape(theta.shape[0], len(self.channels), self.segments + 1)
 
-    def profile_nodes(self, theta):
-        """Exposure times P(r) at the nodes, shape (n, nodes, 3) (0 in channels not modelled)."""
-        knots = self.knot_values(theta)
+    def _interpolation(self):
+        """Eq. 9 as a matrix on the knot values, built with ``SubEditProfiles`` itself.
+
+        ``ln P`` is linear in the knot values, so evaluating textures whose knot values are
+        unit vectors gives the matrix ``L`` with ``ln P(nodes) = L @ knots``; a texture of
+        zeros marks the nodes outside the support (``r >= r_s``, where P = 0).
+        """
+        count = self.segments + 1
         nodes = self.profile.operator.grid.nodes
-        out = np.zeros((knots.shape[0], nodes.size, 3))
-        with np.errstate(under="ignore"):
+        basis = np.zeros((count, 1, count, 3))
+        basis[np.arange(count), 0, np.arange(count), :] = 1.0
+        values = SubEditProfiles(basis, self.r_s_mm).log_profile_at(
+            nodes[None, :], np.arange(count)[:, None])[..., 0]
+        support = SubEditProfiles(np.zeros((1, 1, count, 3)), self.r_s_mm).log_profile_at(
+            nodes)[..., 0] > LOG_FLOOR
+        return np.where(support[None, :], values, 0.0).T, support
+
+    def profile_nodes(self, theta):
+        """Exposure times P(r) at the nodes, shape (n, nodes, 3) (0 in channels not modelled).
+
+        P is Eq. 9 of Chen et al. 2012 as :class:`~translucent.materials.subedit.SubEditProfiles`
+        evaluates it (through the matrix of :meth:`_interpolation`).
+        """
+        knots = self.knot_values(theta)
+        out = np.zeros((knots.shape[0], self.profile.operator.grid.size, 3))
+        with np.errstate(under="ignore", over="ignore"):
             for i, c in enumerate(self.channels):
-                out[:, :, c] = self.exposure * np.exp(subedit_log_profile(nodes, knots[:, i],
-                                                                           self.r_s_mm))
+                out[:, :, c] = self.exposure * np.exp(knots[:, i] @ self._matrix.T) \
+                    * self._support
         return out
 
     def extra_log_prior(self, theta):
@@ -454,3 +474,13 @@ class SubEditModel(ProfileModel):
                         for k in range(self.segments + 1)] for c in range(3)]
         return {"type": "subedit", "r_s": self.r_s_mm, "segments": self.segments,
                 "log_profile": log_profile, "absolute": self.spec.exposure is not None}
+
+    def texture(self, values: dict[str, float]) -> SubEditProfiles:
+        """A 1 x 1 :class:`SubEditProfiles` from physical knot values (channels not modelled:
+        the floor, a zero profile)."""
+        table = np.full((1, 1, self.segments + 1, 3), LOG_FLOOR)
+        for c in self.channels:
+            table[0, 0, :, c] = [values[f"ln_p{k}[{CHANNELS[c]}]"]
+                                 for k in range(self.segments + 1)]
+        return SubEditProfiles(table, self.r_s_mm, eta=self.spec.eta or 1.3,
+                               name="fitted SubEdit profile")

@@ -239,20 +239,22 @@ class ProfileOperator:
     grid: RadialGrid
     matrices: tuple
 
-    def predict(self, profile_nodes) -> list[np.ndarray]:
+    def predict(self, profile_nodes, channels=(0, 1, 2)) -> list[np.ndarray | None]:
         """Annulus means per channel for profiles at the nodes.
 
         Parameters
         ----------
         profile_nodes : ndarray, shape (..., grid size, 3)
             Exitance profile in mm^-2 (already multiplied by any exposure).
+        channels : sequence of int
+            Channels to predict (the others are None).
 
         Returns
         -------
-        list of 3 ndarray, shape (..., used annuli of the channel)
+        list of 3 (ndarray of shape (..., used annuli of the channel) or None)
         """
         profile_nodes = np.asarray(profile_nodes)
-        return [profile_nodes[..., channel] @ matrix.T
+        return [profile_nodes[..., channel] @ matrix.T if channel in channels else None
                 for channel, matrix in enumerate(self.matrices)]
 
 

@@ -20,7 +20,8 @@ import numpy as np
 
 from ..atomic import atomic_write_text
 
-__all__ = ["ParameterSummary", "summarise_posterior", "toml_text", "write_material"]
+__all__ = ["ParameterSummary", "read_material", "summarise_posterior", "toml_text",
+           "write_material"]
 
 #: A 68 % posterior interval wider than this fraction of the prior's 68 % interval means
 #: the data barely constrain the parameter (1 would be the prior itself).
@@ -169,3 +170,40 @@ def write_material(path, material: dict, summaries, *, source: str = "",
         comments.append(diagnostics)
     comments += [s.describe().strip() for s in summaries]
     atomic_write_text(path, toml_text(material, comments))
+
+
+def read_material(name_or_path):
+    """A :class:`~translucent.materials.Dipole` from a measured-medium name or a TOML file.
+
+    The file holds a material table at its top level (as :func:`write_material` writes
+    it) or under ``[material]``; it is built by
+    :func:`translucent.materials.factory.material_from_dict`.
+
+    Raises
+    ------
+    InputError
+        Unknown name, unreadable file, or a table that is not a dipole medium.
+    """
+    import tomllib
+    from pathlib import Path
+
+    from ..errors import InputError
+    from ..materials import Dipole, measured_medium
+    from ..materials.factory import material_from_dict
+
+    path = Path(str(name_or_path))
+    if path.suffix.lower() != ".toml":
+        return measured_medium(str(name_or_path))
+    if not path.is_file():
+        raise InputError("no such material file", file=path, field="material",
+                         value=str(path))
+    try:
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
+        raise InputError(f"not a readable TOML file ({error})", file=path) from error
+    table = table.get("material", table)
+    material = material_from_dict(table, file=path)
+    if not isinstance(material, Dipole):
+        raise InputError("a capture needs a homogeneous dipole medium", file=path,
+                         field="material.type", value=table.get("type"))
+    return material
