@@ -81,7 +81,9 @@ def test_bench_reference_writes_its_figures(scene_file, tmp_path, capsys):
     figures = json.loads(result.read_text())
     assert figures["spp"] == 1 and figures["passes"] == 2
     assert len(figures["ratios"]) == 1 and figures["median_ratio"] > 0
-    assert "median ratio" in capsys.readouterr().out
+    assert len(figures["cpu_ratios"]) == 1 and figures["median_cpu_ratio"] > 0
+    printed = capsys.readouterr().out
+    assert "median wall-clock ratio" in printed and "median CPU-time ratio" in printed
 
 
 @pytest.mark.slow  # three integrators compiled: about 11 s here
