@@ -422,23 +422,21 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
         stderr[:, c] = np.where(enough, se, np.nan)
         dof[:, c] = np.maximum(count - 2, 0).astype(np.int64)
         radius_mean[:, c] = rm * pixel
-        keep = enough & (se > 0)
-        # censoring from above: every annulus up to the outermost one with a clipped pixel
         sat_annuli = annulus[saturated[..., c].ravel() & inside]
-        if sat_annuli.size:
-            clipped = np.arange(n_annuli) <= sat_annuli.max()
-            dropped["saturated"][c] = int((keep & clipped).sum())
-            keep &= ~clipped
-        # censoring from below: the noise floor, and everything beyond it
         below_count = np.bincount(annulus[below[..., c].ravel() & inside], minlength=n_annuli)
-        total = count + below_count
+        has_pixels = (count + below_count
+                      + np.bincount(sat_annuli, minlength=n_annuli)) > 0
+        # censoring from above: every annulus up to the outermost one with a clipped pixel
+        clipped = np.arange(n_annuli) <= (sat_annuli.max() if sat_annuli.size else -1)
+        # censoring from below: the noise floor, and everything beyond it
         with np.errstate(invalid="ignore", divide="ignore"):
-            floor = (below_count / np.maximum(total, 1)) > BELOW_BLACK_FRACTION
-        if floor.any():
-            beyond = np.arange(n_annuli) >= np.flatnonzero(floor)[0]
-            dropped["noise_floor"][c] = int((keep & beyond).sum())
-            keep &= ~beyond
-        dropped["too_few_pixels"][c] = int(((count > 0) & ~enough).sum())
+            fraction = below_count / np.maximum(count + below_count, 1)
+        floor_annuli = np.flatnonzero((fraction > BELOW_BLACK_FRACTION) & ~clipped)
+        floor = np.arange(n_annuli) >= (floor_annuli[0] if floor_annuli.size else n_annuli)
+        keep = enough & (se > 0) & ~clipped & ~floor
+        dropped["saturated"][c] = int((has_pixels & clipped).sum())
+        dropped["noise_floor"][c] = int((has_pixels & floor & ~clipped).sum())
+        dropped["too_few_pixels"][c] = int((has_pixels & ~clipped & ~floor & ~keep).sum())
         used[:, c] = keep
     if (used.sum(axis=0) < 4).all():
         raise InputError("no channel has 4 usable annuli (saturated, below black or too "
