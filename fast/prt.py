@@ -1,0 +1,1149 @@
+r"""PRT editing and relighting of homogeneous translucent materials (Wang et al. 2008).
+
+The diffuse BSSRDF (Eq. 2) with the dipole profile expanded in a PCA basis,
+:math:`R_d(r, \sigma) \approx \sum_k b_k(r) s_k(\sigma)` (Eq. 4,
+:mod:`translucent.materials.dipole_pca`), turns Eq. 1 into K precomputed transfers
+(Eq. 5-7):
+
+.. math::
+    B(x, \omega_o) = \frac{F_t(\eta, \omega_o)}{\pi} \sum_k s_k(\sigma)\,
+    \sum_i T_k(x, x_i)\,E(x_i), \qquad T_k(x, x_i) = b_k(\lVert x - x_i\rVert)\,A_i
+
+from uniform illumination samples :math:`x_i` (area :math:`A_i`) on the object to every
+vertex :math:`x`, with :math:`E` the irradiance of Eq. 6 (Fresnel-weighted, shadowed).
+
+Precomputation (:func:`precompute`), per translucent object:
+
+1. ``samples = m x 4^n`` uniform surface samples, split into ``m`` parts by median cuts,
+   each laid out on a ``2^n x 2^n`` square by a balanced quadtree (Hašan et al. 2006);
+2. every row of every :math:`T_k` is transformed by the 2D Haar wavelet over those squares
+   and cut to its largest coefficients (energy threshold and term budget: Eq. 8), then
+   quantised to 16-bit values with 16-bit indices (14/18 bits beyond 2^16 samples);
+3. on meshes that are geometry images (``Mesh.grid_shape``) with more than
+   ``spatial_min_vertices`` vertices, a second pass transforms each :math:`T_k` along the
+   vertices with the CDF 9/7 wavelet and keeps its largest coefficients (Eq. 9-10); smaller
+   meshes and unparameterised ones skip it, as in the paper.
+
+The first pass runs on compiled kernels over all cores (``workers``) with a progress bar;
+the result is cached on disk keyed by the object's geometry and the knobs (never by lights
+or material).
+
+Interactive path (``state.render(lights=None, material=None)``):
+
+* relighting: irradiance :math:`E` at the samples from point, spot, directional, area
+  (rectangle, sphere) and environment lights, with shadows from ``scenes`` ray queries
+  (environment: precomputed wavelet-compressed visibility per sample, built only when the
+  scene has an environment light); Haar transform of :math:`E`; one sparse product of the
+  quantised matrix with :math:`E^w` gives all :math:`v_k = T_k^w E^w` (Eq. 8);
+* editing: :math:`s_k(\sigma)` per RGB channel re-weights the cached :math:`v_k`
+  (Eq. 7/10; no transfer product is redone), inverse CDF 9/7 where spatially compressed,
+  then :math:`F_t(\eta, \omega_o)/\pi` per pixel through the camera G-buffer. Changing
+  :math:`\eta` changes :math:`F_t(\eta, \omega_i)` inside :math:`E`, so it relights.
+
+References
+----------
+Wang, Cheslack-Postava, Wang, Luebke, Chen, Hua, Peng, Bao: Real-time editing and
+relighting of homogeneous translucent materials. The Visual Computer 24 (2008).
+Hašan, Pellacini, Bala: Direct-to-indirect transfer for cinematic relighting. ACM TOG 25(3)
+(2006).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import contextlib
+import functools
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+
+from ..errors import InputError
+from ..image import Image
+from ..materials import Dipole, measured_medium
+from ..materials.dipole import dipole_reflectance_profile
+from ..materials.dipole_pca import PARAMETERISATIONS, DipolePCABasis, dipole_pca_basis
+from ..materials.fresnel import fresnel_transmittance
+from ..scenes.scene import (
+    ConstantEnvironment,
+    DirectionalLight,
+    ImageEnvironment,
+    PointLight,
+    RectangularAreaLight,
+    SphereAreaLight,
+    SpotLight,
+)
+from .base import StageLog
+from .sparse_transport import (
+    QuantisedRows,
+    SparseRows,
+    check_approximation,
+    nonlinear_approximation,
+    select_largest,
+)
+from .wavelets import (
+    SpatialWavelet,
+    balanced_split,
+    haar2d_forward,
+    haar2d_inplace,
+    quadtree_layout,
+)
+
+__all__ = [
+    "DEFAULT_KNOBS",
+    "applies_to",
+    "precompute",
+    "PRTState",
+    "ObjectTransfer",
+    "IlluminationSamples",
+    "illumination_samples",
+    "sample_irradiance",
+    "brute_force_radiance",
+    "add_approx_arguments",
+    "approx",
+]
+
+#: Knobs of :func:`precompute` and their defaults.
+DEFAULT_KNOBS: dict = {
+    # illumination samples per translucent object: parts x 4^n
+    "samples": 16384,
+    "parts": 4,
+    # the R_d basis (materials.dipole_pca): parameterisation, K, and the eta it samples
+    "basis": "area_normalised",
+    "basis_terms": 12,
+    "basis_eta": 1.3,
+    # pass 1: Haar coefficients kept per transfer row (energy fraction, term budget)
+    "energy": 0.9999,
+    "terms": 256,
+    # pass 2: CDF 9/7 spatial compression: "auto" (geometry images above
+    # spatial_min_vertices), "on" (any geometry image) or "off"
+    "spatial": "auto",
+    "spatial_min_vertices": 20000,
+    "spatial_first_terms": 1024,
+    "spatial_energy": 0.999,
+    "spatial_terms": 256,
+    # environment lighting: visibility directions (res x 2 res) and terms kept per sample
+    "environment_resolution": 16,
+    "environment_terms": 64,
+    # shadow rays per area light and sample
+    "area_light_samples": 16,
+    "seed": 0,
+    # execution only (not part of the cache key)
+    "workers": 2,
+    "progress": True,
+}
+
+#: Knobs that change how, not what, is computed: left out of the cache key.
+EXECUTION_KNOBS = ("workers", "progress")
+
+#: Bump when the precomputed data change meaning, so that old cache entries miss.
+PRT_VERSION = 1
+
+#: Vertices per block of the first pass (one progress-bar step; memory ~ K x block x terms).
+VERTICES_PER_BLOCK = 256
+
+#: Columns per block of the spatial pass (dense block: vertices x columns x 4 bytes).
+SPATIAL_COLUMNS_PER_BLOCK = 256
+
+#: Rank of the separable approximation of F_t(eta, mu) mu used by environment lighting;
+#: 3 terms reproduce it over eta in [1, 3] to 2e-4 of its largest value (measured by
+#: :func:`fresnel_cosine_factors`).
+FRESNEL_RANK = 3
+
+
+# ------------------------------------------------------------------------ knobs
+
+
+def _check_knobs(knobs: dict) -> dict:
+    unknown = sorted(set(knobs) - set(DEFAULT_KNOBS))
+    if unknown:
+        raise InputError(f"unknown knob; valid: {', '.join(DEFAULT_KNOBS)}", field="knobs",
+                         value=unknown)
+    merged = {**DEFAULT_KNOBS, **knobs}
+    integers = {"samples": (1, 1 << 18), "parts": (1, 4096), "basis_terms": (1, 32),
+                "terms": (1, 1 << 18), "spatial_min_vertices": (0, 10**9),
+                "spatial_first_terms": (1, 1 << 18), "spatial_terms": (1, 1 << 18),
+                "environment_resolution": (2, 256), "environment_terms": (1, 1 << 17),
+                "area_light_samples": (1, 4096), "seed": (0, 2**32 - 1), "workers": (1, 256)}
+    for name, (low, high) in integers.items():
+        value = merged[name]
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+                or not low <= value <= high:
+            raise InputError(f"must be an integer in [{low}, {high}]", field=name, value=value)
+        merged[name] = int(value)
+    per_part = merged["samples"] // merged["parts"]
+    level = round(math.log(max(per_part, 1), 4))
+    if merged["samples"] % merged["parts"] or 4 ** level != per_part:
+        valid = ", ".join(str(merged["parts"] * 4 ** n) for n in range(2, 9))
+        raise InputError(f"must be parts x 4^n (with parts = {merged['parts']}: {valid}, ...)",
+                         field="samples", value=merged["samples"])
+    resolution = merged["environment_resolution"]
+    if resolution & (resolution - 1):
+        raise InputError("must be a power of two", field="environment_resolution",
+                         value=resolution)
+    if merged["basis"] not in PARAMETERISATIONS:
+        raise InputError(f"unknown basis; valid: {', '.join(PARAMETERISATIONS)}",
+                         field="basis", value=merged["basis"])
+    if merged["spatial"] not in ("auto", "on", "off"):
+        raise InputError("must be 'auto', 'on' or 'off'", field="spatial",
+                         value=merged["spatial"])
+    merged["energy"], _ = check_approximation(merged["energy"], merged["terms"])
+    merged["spatial_energy"], _ = check_approximation(merged["spatial_energy"],
+                                                      merged["spatial_terms"])
+    eta = float(merged["basis_eta"])
+    if not 1.0 <= eta <= 3.0:
+        raise InputError("must be in [1, 3]", field="basis_eta", value=merged["basis_eta"])
+    merged["basis_eta"] = eta
+    merged["progress"] = bool(merged["progress"])
+    return merged
+
+
+def _basis(knobs: dict) -> DipolePCABasis:
+    return dipole_pca_basis(knobs["basis"], eta=knobs["basis_eta"], terms=knobs["basis_terms"])
+
+
+# ------------------------------------------------------------- illumination samples
+
+
+@dataclass(frozen=True, eq=False)
+class IlluminationSamples:
+    """Uniform surface samples in the order of their quadtree layout.
+
+    Sample ``p * side**2 + row * side + col`` is the pixel ``(row, col)`` of part ``p``.
+
+    Attributes
+    ----------
+    positions, normals : ndarray, (N, 3)
+        Scene units; unit interpolated vertex normals.
+    area : float
+        Surface area each sample stands for, mm^2 (all equal).
+    parts, side : int
+        ``m`` and ``2^n``.
+    """
+
+    positions: np.ndarray
+    normals: np.ndarray
+    area: float
+    parts: int
+    side: int
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+    def to_wavelets(self, values) -> np.ndarray:
+        """Haar coefficients (Eq. 8) of per-sample values ``(N, C)``, shape ``(N, C)``."""
+        values = np.asarray(values, dtype=np.float32)
+        images = values.T.reshape(values.shape[1], self.parts, self.side, self.side)
+        return haar2d_forward(images).reshape(values.shape[1], -1).T.copy()
+
+
+def illumination_samples(mesh, count: int, parts: int, *, mm_per_unit: float = 1.0,
+                         seed: int = 0) -> IlluminationSamples:
+    """Uniform samples on a mesh, split into parts and laid out by balanced quadtrees.
+
+    Sect. 3.2 of Wang et al. 2008 ("Transfer compression"): ``count = parts x 4^n`` points
+    placed uniformly by area (stratified along the faces' cumulative area, uniform within a
+    face), split into ``parts`` equal groups by median cuts (:func:`balanced_split`), each
+    group laid out on a ``2^n`` square by :func:`quadtree_layout`.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    count, parts : int
+    mm_per_unit : float
+        Scene scale, for the per-sample area in mm^2.
+    seed : int
+
+    Returns
+    -------
+    IlluminationSamples
+    """
+    per_part = count // parts
+    level = round(math.log(max(per_part, 1), 4))
+    if count % parts or 4 ** level != per_part:
+        raise InputError("must be parts x 4^n", field="samples", value=count)
+    rng = np.random.default_rng(seed)
+    areas = mesh.face_areas
+    cumulative = np.cumsum(areas)
+    total = float(cumulative[-1])
+    strata = (np.arange(count) + rng.random(count)) * (total / count)
+    face = np.minimum(np.searchsorted(cumulative, strata, side="right"), len(areas) - 1)
+    root = np.sqrt(rng.random(count))
+    second = rng.random(count)
+    weights = np.stack([1.0 - root, root * (1.0 - second), root * second], axis=1)
+    corners = mesh.faces[face]
+    positions = np.einsum("nk,nkd->nd", weights, mesh.vertices[corners])
+    normals = np.einsum("nk,nkd->nd", weights, mesh.normals[corners])
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300),
+                       mesh.face_normals[face])
+    order = np.concatenate([group[quadtree_layout(positions[group], level).ravel()]
+                            for group in balanced_split(positions, parts)])
+    return IlluminationSamples(positions[order], normals[order],
+                               total * mm_per_unit**2 / count, parts, 2**level)
+
+
+# ------------------------------------------------------------------- pass 1 kernel
+
+
+@numba.njit(cache=True, parallel=True)
+def _transfer_rows(vertices, samples, area, table, sqrt_warp, radius_max, parts, side,
+                   energy, terms, out_indices, out_values, counts):  # pragma: no cover
+    """Rows of T_k (Eq. 7) for a block of vertices, Haar-transformed and cut (Eq. 8).
+
+    ``vertices`` (Vb, 3) and ``samples`` (N, 3) in mm; ``table`` (n + 1, K) holds the basis
+    at its sample distances with a zero row past the last; writes slots ``(K, Vb, terms)``.
+    """
+    count = samples.shape[0]
+    n_radii = table.shape[0] - 1
+    basis_terms = table.shape[1]
+    pixels = side * side
+    for v in numba.prange(vertices.shape[0]):
+        rows = np.empty((basis_terms, count), dtype=np.float32)
+        scratch = np.empty(pixels, dtype=np.float32)
+        x, y, z = vertices[v, 0], vertices[v, 1], vertices[v, 2]
+        for i in range(count):
+            dx = samples[i, 0] - x
+            dy = samples[i, 1] - y
+            dz = samples[i, 2] - z
+            r = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if r > radius_max:
+                for k in range(basis_terms):
+                    rows[k, i] = 0.0
+                continue
+            if sqrt_warp:
+                coordinate = n_radii * math.sqrt(r / radius_max) - 0.5
+            else:
+                coordinate = r * (n_radii - 1) / radius_max
+            coordinate = min(max(coordinate, 0.0), n_radii - 1.0)
+            index = int(coordinate)
+            fraction = coordinate - index
+            for k in range(basis_terms):
+                value = table[index, k] * (1.0 - fraction) + table[index + 1, k] * fraction
+                rows[k, i] = value * area
+        for k in range(basis_terms):
+            for p in range(parts):
+                image = rows[k, p * pixels:(p + 1) * pixels].reshape((side, side))
+                haar2d_inplace(image, scratch)
+            counts[k, v] = select_largest(rows[k], energy, terms, out_indices[k, v],
+                                          out_values[k, v])
+
+
+@contextlib.contextmanager
+def _threads(workers: int):
+    previous = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(workers, numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(previous)
+
+
+def _progress(total: int, description: str, enabled: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=description, unit="vertex", disable=not enabled or None,
+                leave=False)
+
+
+def _first_pass(vertices_mm, samples: IlluminationSamples, samples_mm, basis: DipolePCABasis,
+                energy: float, terms: int, workers: int, progress: bool,
+                label: str) -> list[SparseRows]:
+    """Per basis function k, the Haar-compressed rows of T_k for every vertex (float32)."""
+    table = np.ascontiguousarray(basis.table, dtype=np.float32)
+    sqrt_warp = basis.sampling.distance_warp == "sqrt"
+    budget = min(terms, len(samples))
+    pieces: list[list[SparseRows]] = [[] for _ in range(basis.terms)]
+    with _threads(workers), _progress(len(vertices_mm), f"prt transfer {label}",
+                                      progress) as bar:
+        for start in range(0, len(vertices_mm), VERTICES_PER_BLOCK):
+            block = np.ascontiguousarray(vertices_mm[start:start + VERTICES_PER_BLOCK])
+            indices = np.zeros((basis.terms, len(block), budget), dtype=np.int32)
+            values = np.zeros((basis.terms, len(block), budget), dtype=np.float32)
+            counts = np.zeros((basis.terms, len(block)), dtype=np.int64)
+            _transfer_rows(block, samples_mm, np.float32(samples.area), table, sqrt_warp,
+                           float(basis.sampling.radius_max), samples.parts, samples.side,
+                           energy, budget, indices, values, counts)
+            for k in range(basis.terms):
+                pieces[k].append(SparseRows.from_slots(indices[k], values[k], counts[k],
+                                                       len(samples)))
+            bar.update(len(block))
+    return [SparseRows.concatenate(parts) for parts in pieces]
+
+
+# ------------------------------------------------------------------- pass 2 (spatial)
+
+
+@numba.njit(cache=True, nogil=True)
+def _dense_columns(indptr, indices, values, start, stop, out):  # pragma: no cover
+    """Columns [start, stop) of a CSR matrix into ``out`` (rows, stop - start)."""
+    for r in range(len(indptr) - 1):
+        lo, hi = indptr[r], indptr[r + 1]
+        first = lo + np.searchsorted(indices[lo:hi], start)
+        for j in range(first, hi):
+            column = indices[j]
+            if column >= stop:
+                break
+            out[r, column - start] = values[j]
+
+
+def _spatial_pass(matrix: SparseRows, wavelet: SpatialWavelet, energy: float,
+                  budget: int, workers: int) -> tuple[SparseRows, float]:
+    """CDF 9/7 along the vertices of one T_k^w, keeping its largest coefficients (Eq. 9).
+
+    Column blocks are transformed on ``workers`` threads; the selection streams: entries
+    below a running threshold (the ``budget``-th largest magnitude seen) are dropped as
+    blocks arrive. Returns the matrix (rows = spatial coefficients) and the fraction of
+    the coefficients' energy it keeps.
+    """
+    rows = matrix.rows
+    starts = list(range(0, matrix.columns, SPATIAL_COLUMNS_PER_BLOCK))
+
+    def transform(start):
+        stop = min(start + SPATIAL_COLUMNS_PER_BLOCK, matrix.columns)
+        dense = np.zeros((rows, stop - start), dtype=np.float32)
+        _dense_columns(matrix.indptr, matrix.indices, matrix.values, start, stop, dense)
+        coefficients = wavelet.forward(dense)
+        return start, coefficients
+
+    threshold = 0.0
+    total_energy = 0.0
+    kept_rows, kept_columns, kept_values = [], [], []
+    held = 0
+    with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+        for start, coefficients in pool.map(transform, starts):
+            squared = coefficients.astype(np.float64) ** 2
+            total_energy += float(squared.sum())
+            row, column = np.nonzero(squared > threshold)
+            kept_rows.append(row.astype(np.int32))
+            kept_columns.append((column + start).astype(np.int32))
+            kept_values.append(coefficients[row, column])
+            held += len(row)
+            if held > 2 * budget:
+                values = np.concatenate(kept_values)
+                threshold = float(np.partition(values.astype(np.float64) ** 2,
+                                               len(values) - budget)[len(values) - budget])
+                keep = values.astype(np.float64) ** 2 >= threshold
+                kept_rows = [np.concatenate(kept_rows)[keep]]
+                kept_columns = [np.concatenate(kept_columns)[keep]]
+                kept_values = [values[keep]]
+                held = int(keep.sum())
+    row = np.concatenate(kept_rows)
+    column = np.concatenate(kept_columns)
+    values = np.concatenate(kept_values)
+    squared = values.astype(np.float64) ** 2
+    order = np.argsort(-squared, kind="stable")
+    cumulative = np.cumsum(squared[order])
+    count = min(budget, int(np.searchsorted(cumulative, energy * total_energy) + 1),
+                len(order))
+    chosen = order[:count]
+    kept_fraction = float(cumulative[count - 1] / total_energy) if total_energy > 0 else 1.0
+    chosen = chosen[np.lexsort((column[chosen], row[chosen]))]
+    indptr = np.zeros(rows + 1, dtype=np.int64)
+    np.add.at(indptr, row[chosen] + 1, 1)
+    return SparseRows(np.cumsum(indptr), column[chosen], values[chosen],
+                      matrix.columns), kept_fraction
+
+
+# -------------------------------------------------------------------- precompute
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectTransfer:
+    """The precomputed transfer of one translucent object.
+
+    Attributes
+    ----------
+    name : str
+        The object's name in the scene.
+    samples : IlluminationSamples
+    transfer : QuantisedRows
+        All K matrices stacked: row ``k * R + r`` is row ``r`` of :math:`{}^wT_k^w`
+        (R = vertices, or spatial coefficients when ``spatial_shape`` is set); columns are
+        the Haar coefficients of the samples.
+    spatial_shape : (int, int) or None
+        Geometry-image shape when the second pass was applied.
+    statistics : dict
+        Sizes, timings and kept energies, for the report.
+    """
+
+    name: str
+    samples: IlluminationSamples
+    transfer: QuantisedRows
+    spatial_shape: tuple[int, int] | None
+    statistics: dict
+
+    @property
+    def basis_terms(self) -> int:
+        """K."""
+        return self.transfer.rows // self.row_count
+
+    @property
+    def row_count(self) -> int:
+        """R: rows per basis function."""
+        return int(self.statistics["vertices"])
+
+
+def _spatial_decision(mesh, knobs: dict) -> tuple[bool, str]:
+    if knobs["spatial"] == "off":
+        return False, "spatial compression off (knob spatial = 'off')"
+    if mesh.grid_shape is None:
+        return False, ("no spatial compression: the mesh has no square parameterisation "
+                       "(not a geometry image)")
+    if knobs["spatial"] == "auto" and len(mesh.vertices) <= knobs["spatial_min_vertices"]:
+        return False, (f"no spatial compression: {len(mesh.vertices)} vertices <= "
+                       f"{knobs['spatial_min_vertices']} (small meshes relight fast without "
+                       f"it, Sect. 3.2)")
+    return True, (f"spatial compression: CDF 9/7 over the {mesh.grid_shape[0]} x "
+                  f"{mesh.grid_shape[1]} geometry image")
+
+
+def _transfer_key(scene_object, mm_per_unit: float, knobs: dict) -> str:
+    from ..cache import content_hash
+
+    computed = {k: v for k, v in knobs.items() if k not in EXECUTION_KNOBS}
+    return content_hash("prt-transfer", PRT_VERSION, scene_object.mesh.cache_key(),
+                        mm_per_unit, computed)
+
+
+def _precompute_object(scene_object, mm_per_unit: float, knobs: dict,
+                       log: StageLog) -> ObjectTransfer:
+    mesh = scene_object.mesh
+    basis = _basis(knobs)
+    spatial, sentence = _spatial_decision(mesh, knobs)
+    (log.notes.setdefault("spatial", {}))[scene_object.name] = sentence
+    if not spatial:
+        log.skip(f"object '{scene_object.name}': {sentence}")
+    start = time.perf_counter()
+    samples = illumination_samples(mesh, knobs["samples"], knobs["parts"],
+                                   mm_per_unit=mm_per_unit, seed=knobs["seed"])
+    samples_mm = np.ascontiguousarray(samples.positions * mm_per_unit)
+    vertices_mm = np.ascontiguousarray(mesh.vertices * mm_per_unit)
+    first_terms = knobs["spatial_first_terms"] if spatial else knobs["terms"]
+    matrices = _first_pass(vertices_mm, samples, samples_mm, basis, knobs["energy"],
+                           first_terms, knobs["workers"], knobs["progress"],
+                           scene_object.name)
+    first_seconds = time.perf_counter() - start
+    statistics = {"vertices": len(mesh.vertices), "samples": len(samples),
+                  "basis_terms": basis.terms, "pass1_seconds": first_seconds,
+                  "pass1_nnz": int(sum(m.nnz for m in matrices)),
+                  "dense_entries": len(mesh.vertices) * len(samples) * basis.terms}
+    spatial_shape = None
+    if spatial:
+        start = time.perf_counter()
+        wavelet = SpatialWavelet(mesh.grid_shape)
+        budget = knobs["spatial_terms"] * len(mesh.vertices)
+        compressed, kept = [], []
+        for matrix in matrices:
+            result, fraction = _spatial_pass(matrix, wavelet, knobs["spatial_energy"], budget,
+                                             knobs["workers"])
+            compressed.append(result)
+            kept.append(fraction)
+        matrices = compressed
+        spatial_shape = tuple(mesh.grid_shape)
+        statistics.update(pass2_seconds=time.perf_counter() - start,
+                          pass2_nnz=int(sum(m.nnz for m in matrices)),
+                          pass2_energy_kept=[float(k) for k in kept])
+    transfer = SparseRows.concatenate(matrices).quantised()
+    statistics.update(nnz=transfer.nnz, megabytes=transfer.nbytes / 2**20,
+                      index_bits=transfer.index_bits)
+    return ObjectTransfer(scene_object.name, samples, transfer, spatial_shape, statistics)
+
+
+def _translucent_objects(scene) -> list[int]:
+    return [i for i, item in enumerate(scene.objects) if isinstance(item.material, Dipole)]
+
+
+def applies_to(scene) -> str | None:
+    """None when the method renders ``scene``; otherwise why not.
+
+    It needs a homogeneous translucent object (a :class:`~translucent.materials.Dipole`
+    material) and at least one light.
+    """
+    if not _translucent_objects(scene):
+        return "no homogeneous translucent object (Dipole material) in the scene"
+    if not scene.lights:
+        return "the scene has no light"
+    return None
+
+
+def precompute(scene, **knobs) -> PRTState:
+    """Precompute the transfer of every homogeneous translucent object (Sect. 3.2).
+
+    Cached on disk (namespace ``prt``) by the object's geometry, ``mm_per_unit`` and the
+    knobs (not the lights, not the material): a second call with the same inputs loads it.
+
+    Parameters
+    ----------
+    scene : Scene
+    **knobs
+        See :data:`DEFAULT_KNOBS`.
+
+    Returns
+    -------
+    PRTState
+
+    Raises
+    ------
+    InputError
+        The method does not apply (see :func:`applies_to`) or a knob is invalid.
+    """
+    from ..cache import Cache
+
+    reason = applies_to(scene)
+    if reason is not None:
+        raise InputError(f"the prt method cannot render this scene: {reason}",
+                         file=scene.source, field="scene", value=scene.name)
+    knobs = _check_knobs(knobs)
+    log = StageLog()
+    cache = Cache("prt")
+    transfers = []
+    start = time.perf_counter()
+    for index in _translucent_objects(scene):
+        item = scene.objects[index]
+        key = _transfer_key(item, scene.mm_per_unit, knobs)
+        transfer = cache.load_pickle(key)
+        if isinstance(transfer, ObjectTransfer):
+            log.notes.setdefault("cache", {})[item.name] = "loaded from the cache"
+            spatial, sentence = _spatial_decision(item.mesh, knobs)
+            log.notes.setdefault("spatial", {})[item.name] = sentence
+            if not spatial:
+                log.skip(f"object '{item.name}': {sentence}")
+        else:
+            transfer = _precompute_object(item, scene.mm_per_unit, knobs, log)
+            cache.store_pickle(key, transfer)
+            log.notes.setdefault("cache", {})[item.name] = "computed and stored"
+        transfers.append(transfer)
+    others = [o.name for o in scene.objects if not isinstance(o.material, Dipole)]
+    if others:
+        log.skip(f"objects {', '.join(others)} are not homogeneous translucent: not drawn "
+                 f"by this method (black)")
+    log.seconds["precompute"] = time.perf_counter() - start
+    return PRTState(scene, knobs, transfers, log)
+
+
+# ------------------------------------------------------------------- lighting
+
+
+def _point_irradiance(samples, position, intensity, eta, falloff=None):
+    offset = position - samples.positions
+    squared = np.maximum(np.einsum("nd,nd->n", offset, offset), 1e-300)
+    direction = offset / np.sqrt(squared)[:, None]
+    cosine = np.einsum("nd,nd->n", samples.normals, direction)
+    weight = np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0, 1)) * cosine
+                      / squared, 0.0)
+    if falloff is not None:
+        weight = weight * falloff(-direction)
+    return weight, direction
+
+
+def _spot_falloff(light: SpotLight):
+    """Mitsuba's ``spot`` profile: 1 inside the beam, linear in angle to 0 at the cutoff."""
+    def falloff(directions):
+        angle = np.degrees(np.arccos(np.clip(directions @ light.direction, -1.0, 1.0)))
+        ramp = (light.cutoff_angle - angle) / max(light.cutoff_angle - light.beam_width, 1e-12)
+        return np.where(angle <= light.beam_width, 1.0,
+                        np.where(angle < light.cutoff_angle, ramp, 0.0))
+    return falloff
+
+
+def _stratified_unit_square(count: int, seed: int) -> np.ndarray:
+    side = int(math.ceil(math.sqrt(count)))
+    rng = np.random.default_rng(seed)
+    cells = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
+    cells = cells.reshape(-1, 2)[:count]
+    return (cells + rng.random(cells.shape)) / side
+
+
+def _area_light_points(light, count: int, seed: int):
+    """Points, normals (None for spheres: one-sided test done per sample) and area weight."""
+    uv = _stratified_unit_square(count, seed)
+    if isinstance(light, RectangularAreaLight):
+        points = light.center + (2 * uv[:, :1] - 1) * light.u_axis + \
+            (2 * uv[:, 1:] - 1) * light.v_axis
+        normals = np.broadcast_to(light.normal, points.shape)
+        return points, normals, light.area / len(points)
+    z = 1.0 - 2.0 * uv[:, 0]
+    ring = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
+    phi = 2.0 * np.pi * uv[:, 1]
+    normals = np.stack([ring * np.cos(phi), ring * np.sin(phi), z], axis=1)
+    points = light.center + light.radius * normals
+    return points, normals, 4.0 * np.pi * light.radius**2 / len(points)
+
+
+def sample_irradiance(scene, samples: IlluminationSamples, lights, eta: float, *,
+                      area_light_samples: int = 16, environment=None,
+                      seed: int = 0) -> np.ndarray:
+    r"""Irradiance :math:`E(x_i)` at the illumination samples (Eq. 6 of Wang et al. 2008).
+
+    :math:`E = \int L\,F_t(\eta, \omega_i)\,(n \cdot \omega_i)\,d\omega_i` with shadows from
+    ``scenes`` ray queries: point and spot lights (Mitsuba's linear-in-angle spot profile),
+    directional lights, rectangle and sphere emitters (``area_light_samples`` stratified
+    points each), and environment lights through ``environment`` (an
+    :class:`EnvironmentTransfer`).
+
+    Parameters
+    ----------
+    scene : Scene
+        For the ray queries (every object occludes).
+    samples : IlluminationSamples
+    lights : sequence of lights
+    eta : float
+        Index of refraction in :math:`F_t`.
+
+    Returns
+    -------
+    ndarray, (N, 3), float64
+        W per scene unit squared (the lights' units).
+    """
+    from ..scenes.raycast import visible
+
+    irradiance = np.zeros((len(samples), 3))
+    far = 10.0 * max(1.0, float(np.ptp(samples.positions, axis=0).max()))
+    for light_index, light in enumerate(lights):
+        if isinstance(light, (PointLight, SpotLight)):
+            falloff = _spot_falloff(light) if isinstance(light, SpotLight) else None
+            weight, _ = _point_irradiance(samples, light.position, light.intensity, eta, falloff)
+            lit = weight > 0
+            if lit.any():
+                seen = visible(scene, samples.positions[lit], light.position,
+                               normals_a=samples.normals[lit])
+                weight[np.flatnonzero(lit)[~seen]] = 0.0
+            irradiance += weight[:, None] * light.intensity
+        elif isinstance(light, DirectionalLight):
+            cosine = samples.normals @ -light.direction
+            weight = np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0, 1))
+                              * cosine, 0.0)
+            lit = weight > 0
+            if lit.any():
+                ends = samples.positions[lit] - far * light.direction
+                seen = visible(scene, samples.positions[lit], ends,
+                               normals_a=samples.normals[lit])
+                weight[np.flatnonzero(lit)[~seen]] = 0.0
+            irradiance += weight[:, None] * light.irradiance
+        elif isinstance(light, (RectangularAreaLight, SphereAreaLight)):
+            points, normals, patch = _area_light_points(light, area_light_samples,
+                                                        seed + light_index)
+            for point, normal in zip(points, normals, strict=True):
+                weight, direction = _point_irradiance(samples, point, None, eta)
+                weight *= np.clip(-(direction @ normal), 0.0, None) * patch
+                lit = weight > 0
+                if lit.any():
+                    seen = visible(scene, samples.positions[lit], point,
+                                   normals_a=samples.normals[lit], normals_b=normal)
+                    weight[np.flatnonzero(lit)[~seen]] = 0.0
+                irradiance += weight[:, None] * light.radiance
+        elif isinstance(light, (ConstantEnvironment, ImageEnvironment)):
+            if environment is None:
+                raise InputError("environment lighting needs the precomputed visibility",
+                                 field="environment", value=None)
+            irradiance += environment.irradiance(light, eta)
+        else:
+            raise InputError(f"unknown light type {type(light).__name__}",
+                             field=f"lights[{light_index}]", value=type(light).__name__)
+    return irradiance
+
+
+@functools.lru_cache(maxsize=4)
+def fresnel_cosine_factors(rank: int = FRESNEL_RANK, *, resolution: int = 256):
+    r"""Return a separable form :math:`F_t(\eta, \mu)\,\mu \approx \sum_j a_j(\eta)\,c_j(\mu)`.
+
+    By SVD over :math:`\eta \in [1, 3]` and :math:`\mu \in [0, 1]`: environment visibility
+    (which must not depend on the material) is precomputed with each :math:`c_j`, and the
+    :math:`a_j(\eta)` of the current material combine them at run time.
+
+    Returns
+    -------
+    mu : ndarray, (resolution,)
+    factors : ndarray, (rank, resolution)
+        :math:`c_j` on ``mu``.
+    weights : callable
+        ``weights(eta) -> (rank,)``: the :math:`a_j`.
+    error : float
+        Largest absolute error of the approximation on the grid (the function peaks at ~1).
+    """
+    mu = np.linspace(0.0, 1.0, resolution)
+    etas = np.linspace(1.0, 3.0, resolution)
+    values = fresnel_transmittance(etas[:, None], mu[None, :]) * mu[None, :]
+    _, _, right = np.linalg.svd(values, full_matrices=False)
+    factors = right[:rank]
+
+    def weights(eta):
+        row = fresnel_transmittance(float(eta), mu) * mu
+        return factors @ row
+
+    error = float(np.abs(values - (values @ factors.T) @ factors).max())
+    return mu, factors, weights, error
+
+
+def _environment_directions(resolution: int):
+    """Cell-centre directions (Mitsuba's lat-long convention) of a res x 2 res grid, two squares."""
+    theta = math.pi * (np.arange(resolution) + 0.5) / resolution
+    phi = 2.0 * math.pi * (np.arange(2 * resolution) + 0.5) / (2 * resolution)
+    theta, phi = np.meshgrid(theta, phi, indexing="ij")
+    directions = np.stack([np.sin(phi) * np.sin(theta), np.cos(theta),
+                           -np.cos(phi) * np.sin(theta)], axis=-1)
+    solid_angle = (math.pi / resolution) ** 2 * np.sin(theta)
+    # two squares: phi in [0, pi) then [pi, 2 pi); each row-major
+    squares = np.concatenate([directions[:, :resolution], directions[:, resolution:]], axis=0)
+    angles = np.concatenate([solid_angle[:, :resolution], solid_angle[:, resolution:]], axis=0)
+    return squares.reshape(-1, 3), angles.reshape(-1)
+
+
+def _environment_radiance(light, directions, subsamples: int = 4) -> np.ndarray:
+    """Radiance of an environment light averaged over each direction cell, (D, 3)."""
+    if isinstance(light, ConstantEnvironment):
+        return np.broadcast_to(light.radiance, directions.shape).astype(np.float64)
+    image = light.radiance.astype(np.float64) * light.scale
+    height, width = image.shape[:2]
+    u = (np.arctan2(directions[:, 0], -directions[:, 2]) / (2 * np.pi)) % 1.0
+    v = np.arccos(np.clip(directions[:, 1], -1.0, 1.0)) / np.pi
+    # Mitsuba interpolates bilinearly between texel centres u = (j + 1/2)/W, v = i/(H - 1)
+    x = u * width - 0.5
+    y = v * (height - 1)
+    x0 = np.floor(x).astype(int)
+    y0 = np.clip(np.floor(y).astype(int), 0, height - 1)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    y1 = np.clip(y0 + 1, 0, height - 1)
+    x0w, x1w = x0 % width, (x0 + 1) % width
+    return ((1 - fy) * ((1 - fx) * image[y0, x0w] + fx * image[y0, x1w])
+            + fy * ((1 - fx) * image[y1, x0w] + fx * image[y1, x1w]))
+
+
+@dataclass(frozen=True, eq=False)
+class EnvironmentTransfer:
+    r"""Precomputed wavelet-compressed visibility of the environment at every sample.
+
+    Rows ``j * N + i``: Haar coefficients (over the two squares of the direction grid) of
+    :math:`V_i(\omega)\,c_j(n_i \cdot \omega)\,d\omega`, where :math:`c_j` are the
+    :func:`fresnel_cosine_factors`; Sect. 3.3 of Wang et al. 2008, "Environment lighting".
+    """
+
+    resolution: int
+    transport: QuantisedRows
+    samples: int
+
+    def irradiance(self, light, eta: float) -> np.ndarray:
+        """E at the samples for one environment light and index ``eta``, (N, 3)."""
+        directions, _ = _environment_directions(self.resolution)
+        radiance = _environment_radiance(light, directions)
+        images = radiance.T.reshape(3, 2, self.resolution, self.resolution)
+        radiance_w = haar2d_forward(images.astype(np.float32)).reshape(3, -1).T
+        products = self.transport.product(radiance_w).reshape(FRESNEL_RANK, self.samples, 3)
+        _, _, weights, _ = fresnel_cosine_factors()
+        return np.einsum("j,jnc->nc", weights(eta), products.astype(np.float64))
+
+
+def precompute_environment(scene, samples: IlluminationSamples, resolution: int,
+                           terms: int) -> EnvironmentTransfer:
+    """Visibility of ``resolution x 2 resolution`` directions from every sample, compressed.
+
+    Rays from every sample towards every direction of its upper hemisphere
+    (:func:`translucent.scenes.visible`); each row, weighted by the solid angle and one
+    Fresnel-cosine factor, is Haar-transformed over the two squares of the direction grid
+    and cut to its ``terms`` largest coefficients.
+    """
+    from ..scenes.raycast import visible
+
+    directions, solid_angle = _environment_directions(resolution)
+    mu_grid, factors, _, _ = fresnel_cosine_factors()
+    far = 10.0 * max(1.0, float(np.ptp(samples.positions, axis=0).max()))
+    block = max(1, (1 << 20) // len(directions))
+    pieces: list[list[SparseRows]] = [[] for _ in range(FRESNEL_RANK)]
+    for start in range(0, len(samples), block):
+        stop = min(start + block, len(samples))
+        cosine = samples.normals[start:stop] @ directions.T
+        where = np.nonzero(cosine > 0)
+        seen = np.zeros(cosine.shape, dtype=bool)
+        if len(where[0]):
+            origins = samples.positions[start:stop][where[0]]
+            seen[where] = visible(scene, origins, origins + far * directions[where[1]],
+                                  normals_a=samples.normals[start:stop][where[0]])
+        for j in range(FRESNEL_RANK):
+            factor = np.interp(np.clip(cosine, 0.0, 1.0), mu_grid, factors[j])
+            rows = np.where(seen, factor * solid_angle, 0.0).astype(np.float32)
+            images = haar2d_forward(rows.reshape(-1, 2, resolution, resolution))
+            pieces[j].append(nonlinear_approximation(images.reshape(stop - start, -1), 1.0,
+                                                     terms))
+    stacked = SparseRows.concatenate([piece for rows in pieces for piece in rows])
+    return EnvironmentTransfer(resolution, stacked.quantised(), len(samples))
+
+
+# ----------------------------------------------------------------- the state
+
+
+def brute_force_radiance(transfer: ObjectTransfer, vertices, irradiance, material: Dipole,
+                         *, mm_per_unit: float = 1.0, vertex_indices=None) -> np.ndarray:
+    r"""Eq. 1-2 evaluated directly on the same samples: :math:`\sum_i R_d(r_{vi}) A_i E_i`.
+
+    No basis, no wavelets, no quantisation: the exact dipole :math:`R_d` (all distances,
+    also beyond 65 mm). Omits :math:`F_t(\omega_o)/\pi`, like the vertex values of
+    :meth:`PRTState.vertex_radiance`.
+
+    Parameters
+    ----------
+    transfer : ObjectTransfer
+        For its samples.
+    vertices : ndarray, (V, 3)
+        The object's vertices, scene units.
+    irradiance : ndarray, (N, 3)
+        E at the samples (:func:`sample_irradiance`).
+    material : Dipole
+    mm_per_unit : float
+    vertex_indices : array_like of int, optional
+        Evaluate only these vertices (cost V x N).
+
+    Returns
+    -------
+    ndarray, (V, 3) or (len(vertex_indices), 3), float64
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    if vertex_indices is not None:
+        vertices = vertices[np.asarray(vertex_indices)]
+    samples = transfer.samples
+    out = np.zeros((len(vertices), 3))
+    block = max(1, (1 << 22) // len(samples))
+    for start in range(0, len(vertices), block):
+        chunk = vertices[start:start + block]
+        distance = np.linalg.norm(chunk[:, None, :] - samples.positions[None, :, :],
+                                  axis=-1) * mm_per_unit
+        profile = dipole_reflectance_profile(distance[..., None], material.sigma_a,
+                                             material.sigma_s_prime, material.eta)
+        out[start:start + block] = np.einsum("vnc,nc->vc", profile, irradiance) * samples.area
+    return out
+
+
+def _material(material) -> Dipole:
+    if not isinstance(material, Dipole):
+        raise InputError("the prt method renders homogeneous translucent materials: give a "
+                         "Dipole", field="material", value=type(material).__name__)
+    return material
+
+
+@dataclass
+class _PixelMap:
+    """Where an object's vertices land in the image: barycentric gathers, exit cosines."""
+
+    pixels: np.ndarray
+    corners: np.ndarray
+    barycentrics: np.ndarray
+    cosine: np.ndarray
+
+
+def _same_lights(first, second) -> bool:
+    return len(first) == len(second) and all(a is b for a, b in zip(first, second, strict=True))
+
+
+@dataclass
+class PRTState:
+    """What :func:`precompute` returns; ``render(lights=None, material=None) -> Image``.
+
+    Holds the precomputed transfers, the G-buffer of the scene's camera (computed on first
+    render) and, per object, the per-basis vectors :math:`v_k` of the last lighting: a new
+    material only re-weights them (editing), new lights recompute them (relighting).
+    """
+
+    scene: object
+    knobs: dict
+    transfers: list
+    log: StageLog = field(default_factory=StageLog)
+
+    def __post_init__(self):
+        self.basis = _basis(self.knobs)
+        self._lighting: dict = {}
+        self._pixels: dict | None = None
+        self._environment: dict = {}
+        self._wavelets = {t.name: SpatialWavelet(t.spatial_shape) for t in self.transfers
+                          if t.spatial_shape is not None}
+        self._lock = threading.Lock()
+
+    def _environment_transfer(self, transfer: ObjectTransfer, lights):
+        if not any(isinstance(light, (ConstantEnvironment, ImageEnvironment)) for light in lights):
+            self.log.notes["environment"] = ("no environment light: no environment visibility "
+                                             "precomputed")
+            return None
+        from ..cache import Cache, content_hash
+
+        resolution = self.knobs["environment_resolution"]
+        terms = self.knobs["environment_terms"]
+        key = content_hash("prt-environment", PRT_VERSION, self.scene.geometry_key(),
+                           transfer.name, resolution, terms,
+                           {k: v for k, v in self.knobs.items() if k not in EXECUTION_KNOBS})
+        if key not in self._environment:
+            cache = Cache("prt")
+            environment = cache.load_pickle(key)
+            if not isinstance(environment, EnvironmentTransfer):
+                start = time.perf_counter()
+                environment = precompute_environment(self.scene, transfer.samples, resolution,
+                                                     terms)
+                cache.store_pickle(key, environment)
+                self.log.seconds["environment visibility"] = time.perf_counter() - start
+            self._environment[key] = environment
+        return self._environment[key]
+
+    def irradiance(self, transfer: ObjectTransfer, lights, eta: float) -> np.ndarray:
+        """E at the samples of one object (:func:`sample_irradiance`), (N, 3)."""
+        return sample_irradiance(self.scene, transfer.samples, lights, eta,
+                                 area_light_samples=self.knobs["area_light_samples"],
+                                 environment=self._environment_transfer(transfer, lights),
+                                 seed=self.knobs["seed"])
+
+    def basis_vectors(self, transfer: ObjectTransfer, irradiance) -> np.ndarray:
+        """:math:`v_k = {}^wT_k^w E^w` (Eq. 8-9) for all k, shape (K, R, 3), float32."""
+        irradiance_w = transfer.samples.to_wavelets(irradiance)
+        products = transfer.transfer.product(irradiance_w)
+        return products.reshape(transfer.basis_terms, transfer.row_count, 3)
+
+    def relight(self, transfer: ObjectTransfer, lights, eta: float) -> None:
+        """Recompute E and the per-basis vectors of one object for ``lights`` and ``eta``."""
+        lights = tuple(lights)
+        start = time.perf_counter()
+        irradiance = self.irradiance(transfer, lights, eta)
+        middle = time.perf_counter()
+        vectors = self.basis_vectors(transfer, irradiance)
+        self.log.seconds["irradiance"] = middle - start
+        self.log.seconds["transfer product"] = time.perf_counter() - middle
+        self._lighting[transfer.name] = (lights, float(eta), vectors)
+
+    def vertex_radiance(self, transfer: ObjectTransfer, material: Dipole) -> np.ndarray:
+        r"""Per-vertex :math:`\sum_k s_k(\sigma) v_k` (Eq. 7/10), before :math:`F_t/\pi`, (V, 3).
+
+        Uses the per-basis vectors of the object's last :meth:`relight`.
+        """
+        _, _, vectors = self._lighting[transfer.name]
+        coefficients = self.basis.project(material.sigma_a, material.sigma_s_prime,
+                                          material.eta).astype(np.float32)
+        combined = np.einsum("krc,ck->rc", vectors, coefficients)
+        if transfer.spatial_shape is not None:
+            combined = self._wavelets[transfer.name].inverse(combined)
+        return combined
+
+    def _pixel_maps(self) -> dict:
+        if self._pixels is None:
+            from ..scenes.raycast import gbuffer
+
+            view = gbuffer(self.scene)
+            maps = {}
+            for transfer in self.transfers:
+                where = view.mask(transfer.name)
+                mesh = self.scene.object(transfer.name).mesh
+                cosine = np.einsum("...d,...d->...", view.normal, view.view_direction)[where]
+                maps[transfer.name] = _PixelMap(
+                    np.flatnonzero(where.ravel()), mesh.faces[view.triangle_id[where]],
+                    view.barycentrics[where].astype(np.float32), np.clip(cosine, 0.0, 1.0))
+            self._pixels = {"shape": view.shape, "maps": maps}
+        return self._pixels
+
+    def render(self, lights=None, material=None) -> Image:
+        """Render a frame: relight if the lights (or eta) changed, re-weight for the material.
+
+        Parameters
+        ----------
+        lights : sequence of lights, optional
+            Replace the scene's lights (relighting: E and the products are recomputed);
+            None keeps the lights of the last frame (the scene's at first).
+        material : Dipole, optional
+            Replace the material of every homogeneous translucent object (editing: only the
+            projection onto the basis and the weighted sum are redone, unless eta changes,
+            which changes :math:`F_t` in E and relights).
+
+        Returns
+        -------
+        Image
+            Linear radiance; objects that are not homogeneous translucent are black.
+        """
+        material = None if material is None else _material(material)
+        with self._lock:
+            start = time.perf_counter()
+            maps = self._pixel_maps()
+            height, width = maps["shape"]
+            image = np.zeros((height * width, 3), dtype=np.float32)
+            for transfer in self.transfers:
+                chosen = material or self.scene.object(transfer.name).material
+                cached = self._lighting.get(transfer.name)
+                wanted = tuple(lights) if lights is not None else \
+                    (cached[0] if cached else tuple(self.scene.lights))
+                if cached is None or cached[1] != chosen.eta or not _same_lights(cached[0],
+                                                                                 wanted):
+                    self.relight(transfer, wanted, chosen.eta)
+                radiance = self.vertex_radiance(transfer, chosen)
+                pixel_map = maps["maps"][transfer.name]
+                exit_factor = (fresnel_transmittance(chosen.eta, pixel_map.cosine)
+                               / np.pi).astype(np.float32)
+                gathered = np.einsum("pk,pkc->pc", pixel_map.barycentrics,
+                                     radiance[pixel_map.corners])
+                image[pixel_map.pixels] = gathered * exit_factor[:, None]
+            seconds = time.perf_counter() - start
+            return Image(image.reshape(height, width, 3), metadata={
+                "producer": "prt", "knobs": self.knobs, "seconds": seconds,
+                "stage_seconds": dict(self.log.seconds), "notes": self.log.notes,
+                "skipped": list(self.log.skipped)})
+
+
+# ====================================================================== command line
+
+
+def add_approx_arguments(parser) -> None:
+    """Options of ``translucent approx prt SCENE``."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--material", default=None,
+                       help="a measured medium of Jensen et al. 2001 (Marble, Skin1, ...)")
+    group.add_argument("--sigma-a", type=float, nargs=3, metavar=("R", "G", "B"),
+                       help="absorption coefficient, mm^-1 (with --sigma-s-prime)")
+    parser.add_argument("--sigma-s-prime", type=float, nargs=3, metavar=("R", "G", "B"),
+                        help="reduced scattering coefficient, mm^-1 (with --sigma-a)")
+    parser.add_argument("--eta", type=float, default=None,
+                        help="relative index of refraction (default 1.3, or the medium's)")
+    parser.add_argument("--samples", type=int, default=DEFAULT_KNOBS["samples"],
+                        help="illumination samples: parts x 4^n (default 16384)")
+    parser.add_argument("--parts", type=int, default=DEFAULT_KNOBS["parts"],
+                        help="quadtree parts m (default 4)")
+    parser.add_argument("--terms", type=int, default=DEFAULT_KNOBS["terms"],
+                        help="Haar terms kept per transfer row (default 256)")
+    parser.add_argument("--energy", type=float, default=DEFAULT_KNOBS["energy"],
+                        help="energy fraction kept per transfer row (default 0.9999)")
+    parser.add_argument("--basis", choices=sorted(PARAMETERISATIONS),
+                        default=DEFAULT_KNOBS["basis"], help="R_d basis parameterisation")
+    parser.add_argument("--basis-terms", type=int, default=DEFAULT_KNOBS["basis_terms"],
+                        help="K, PCA terms of R_d (default 12)")
+    parser.add_argument("--spatial", choices=("auto", "on", "off"),
+                        default=DEFAULT_KNOBS["spatial"], help="CDF 9/7 spatial compression")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def material_from_arguments(args) -> Dipole | None:
+    """Return the Dipole the options ask for (None: keep the scene's).
+
+    Raises
+    ------
+    InputError
+        ``--sigma-a`` without ``--sigma-s-prime`` (or the reverse), bad coefficients.
+    """
+    if args.material:
+        medium = measured_medium(args.material)
+        if args.eta is None:
+            return medium
+        return Dipole(medium.sigma_a, medium.sigma_s_prime, args.eta, medium.g, medium.name)
+    if (args.sigma_a is None) != (args.sigma_s_prime is None):
+        raise InputError("give both --sigma-a and --sigma-s-prime (mm^-1, R G B)",
+                         field="sigma_s_prime" if args.sigma_a else "sigma_a", value=None)
+    if args.sigma_a is not None:
+        return Dipole(args.sigma_a, args.sigma_s_prime, 1.3 if args.eta is None else args.eta)
+    if args.eta is not None:
+        raise InputError("--eta needs --material or --sigma-a/--sigma-s-prime", field="eta",
+                         value=args.eta)
+    return None
+
+
+def approx(scene, args) -> Image:
+    """Render ``scene`` with the options parsed by :func:`add_approx_arguments`."""
+    material = material_from_arguments(args)
+    knobs = {"samples": args.samples, "parts": args.parts, "terms": args.terms,
+             "energy": args.energy, "basis": args.basis, "basis_terms": args.basis_terms,
+             "spatial": args.spatial, "progress": not args.no_progress}
+    state = precompute(scene, **knobs)
+    image = state.render(material=material)
+    return image.with_metadata(seconds_precompute=state.log.seconds.get("precompute"))
