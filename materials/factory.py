@@ -3,6 +3,7 @@
 A material table names its ``type`` and that type's keys, for example::
 
     {type = "measured", name = "marble"}
+    {type = "measured", name = "marble", eta = 1.0}   # the table's medium, index-matched
     {type = "dipole", sigma_a = [0.0021, 0.0041, 0.0071], sigma_s_prime = [2.19, 2.62, 3.0],
      eta = 1.5, g = 0}
     {type = "lambertian", albedo = [0.8, 0.8, 0.8]}
@@ -234,18 +235,33 @@ def _plain(value):
     return value
 
 
-def _measured(name: str) -> Dipole:
+def _measured(name: str, eta: float | None = None) -> Dipole:
+    """A measured medium; ``eta`` replaces the table's index (1.0: an index-matched boundary)."""
     try:
-        return measured_medium(name)
+        medium = measured_medium(name)
     except InputError as error:
         raise InputError(error.reason, field="name", value=name) from error
+    if eta is None:
+        return medium
+    try:
+        return Dipole(medium.sigma_a, medium.sigma_s_prime, eta=eta, g=medium.g,
+                      name=medium.name)
+    except InputError as error:
+        raise InputError(error.reason, field="eta", value=eta) from error
 
 
 def _dipole_to_dict(material: Dipole) -> dict:
     lookup = {key.lower(): key for key in MEASURED_MEDIA}
     key = lookup.get(material.name.lower()) if material.name else None
-    if key is not None and material.cache_key() == measured_medium(key).cache_key():
-        return {"type": "measured", "name": key}
+    if key is not None:
+        table = measured_medium(key)
+        same = (np.array_equal(material.sigma_a, table.sigma_a)
+                and np.array_equal(material.sigma_s_prime, table.sigma_s_prime)
+                and material.g == table.g)
+        if same and material.eta == table.eta:
+            return {"type": "measured", "name": key}
+        if same:
+            return {"type": "measured", "name": key, "eta": material.eta}
     out = {"sigma_a": material.sigma_a, "sigma_s_prime": material.sigma_s_prime,
            "eta": material.eta, "g": material.g}
     if material.name:
@@ -260,6 +276,6 @@ def _lambertian_to_dict(material: Lambertian) -> dict:
     return out
 
 
-register_material_type("measured", _measured, keys=("name",))
+register_material_type("measured", _measured, keys=("name", "eta"))
 register_material_type("dipole", Dipole, to_dict=_dipole_to_dict)
 register_material_type("lambertian", Lambertian, to_dict=_lambertian_to_dict)

@@ -118,3 +118,13 @@ def test_registry_checks_names_and_unknown_classes():
         register_material_type("Velvet", Velvet)
     with pytest.raises(InputError, match=r"material = 'object': no registered material type"):
         material_to_dict(object())
+
+
+def test_measured_medium_with_its_index_replaced():
+    from translucent.materials.factory import material_from_dict, material_to_dict
+
+    matched = material_from_dict({"type": "measured", "name": "marble", "eta": 1.0})
+    assert matched.eta == 1.0 and matched.sigma_a.tolist() == [0.0021, 0.0041, 0.0071]
+    assert material_to_dict(matched) == {"type": "measured", "name": "Marble", "eta": 1.0}
+    with pytest.raises(InputError, match=r"material\.eta = 0\.5: must be in \[1, 3\]"):
+        material_from_dict({"type": "measured", "name": "marble", "eta": 0.5})
