@@ -191,9 +191,9 @@ BAD = {
     "unknown material type": (('type = "measured"', 'type = "jade"'),
                               r"objects\[0\]\.material\.type = 'jade': unknown material type; "
                               r"valid: .*dipole, .*lambertian, measured"),
-    "unknown material key": (('name = "marble" }', 'name = "marble", eta = 1.4 }'),
-                             r"objects\[0\]\.material\.eta = 1\.4: unknown key for a measured "
-                             r"material; valid keys: type, name"),
+    "unknown material key": (('name = "marble" }', 'name = "marble", g = 0.4 }'),
+                             r"objects\[0\]\.material\.g = 0\.4: unknown key for a measured "
+                             r"material; valid keys: type, name, eta"),
     "unknown light type": (('type = "point"', 'type = "laser"'),
                            r"lights\[0\]\.type = 'laser': unknown light type; valid: point, "
                            r"spot, directional, rect, sphere, constant_env, image_env"),
