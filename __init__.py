@@ -10,8 +10,11 @@ Importing the top-level package is cheap: Mitsuba is loaded only when a ray quer
 reference render first needs it (see :mod:`translucent.backend`).
 """
 
+from .backend import configure_libllvm
 from .errors import InputError
 from .image import Image
+
+configure_libllvm()
 
 __version__ = "0.1.0"
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["mitsuba", "variant", "find_libllvm", "VARIANT_ORDER", "backend_facts"]
+__all__ = ["mitsuba", "variant", "find_libllvm", "configure_libllvm", "VARIANT_ORDER", "backend_facts"]
 
 VARIANT_ORDER = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 
@@ -67,6 +67,20 @@ def _gpu_usable() -> bool:
         return False
 
 
+def configure_libllvm() -> str | None:
+    """Point ``DRJIT_LIBLLVM_PATH`` at a libLLVM >= 16 unless the user already chose one.
+
+    Called when :mod:`translucent` is imported, because Dr.Jit reads the variable once,
+    when its LLVM backend starts: a module that imports ``drjit`` before
+    :func:`mitsuba` runs would otherwise get the system's LLVM 14 and abort in code
+    generation ("Cannot select fmaximum").
+    """
+    libllvm = find_libllvm()
+    if libllvm and "DRJIT_LIBLLVM_PATH" not in os.environ:
+        os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
+    return os.environ.get("DRJIT_LIBLLVM_PATH")
+
+
 @functools.lru_cache(maxsize=None)
 def mitsuba():
     """Import Mitsuba with a working variant set and return the module.
@@ -82,9 +96,7 @@ def mitsuba():
     InputError
         When ``TRANSLUCENT_VARIANT`` names a variant this Mitsuba does not have.
     """
-    libllvm = find_libllvm()
-    if libllvm and "DRJIT_LIBLLVM_PATH" not in os.environ:
-        os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
+    configure_libllvm()
     import mitsuba as mi
 
     requested = os.environ.get("TRANSLUCENT_VARIANT")

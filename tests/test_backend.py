@@ -46,3 +46,16 @@ def test_bad_variant_override(monkeypatch):
         monkeypatch.delenv("TRANSLUCENT_VARIANT")
         backend.mitsuba.cache_clear()
         backend.mitsuba()
+
+
+def test_importing_drjit_after_the_package_uses_the_found_libllvm():
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "DRJIT_LIBLLVM_PATH"}
+    code = ("import translucent, drjit as dr; from drjit.llvm import Float; "
+            "print(dr.maximum(Float([1, 2, 3]), 2.0))")
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "[2, 2, 3]" in done.stdout
