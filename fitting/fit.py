@@ -164,6 +164,8 @@ def fit_dipole(capture, *, fit_eta: bool | None = None, walkers: int | None = No
                       moves=default_moves(), description="dipole posterior")
     summaries = summarise_posterior(model, chain.samples)
     notes = [] if chain.converged else [chain.message]
+    notes += [f"channel {'RGB'[c]} has no usable annulus: its parameters are the prior's"
+              for c in range(3) if c not in model.channels]
     return FitResult("dipole", capture, profile, model, [chain], chain.samples, summaries,
                      model.material(_medians(summaries)), notes)
 
@@ -247,7 +249,8 @@ def write_outputs(result: FitResult, out_dir) -> dict[str, Path]:
     if result.kind == "subedit":  # the texture file the scene files' "subedit" type loads
         paths["texture"] = out_dir / f"{kind}_profile.npz"
         save_subedit(paths["texture"], result.model.texture(_medians(result.parameters)))
-        material = {"type": "subedit", "file": paths["texture"].name}
+        # absolute: the factory resolves a relative file against the working folder
+        material = {"type": "subedit", "file": str(paths["texture"].resolve())}
         if not material_is_absolute(result):
             diagnostics += ("; the exposure was unknown: P is relative (scale it before "
                             "rendering)")

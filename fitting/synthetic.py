@@ -29,7 +29,7 @@ from .beam import beam_irradiance
 from .capture import CaptureSpec, encode_srgb
 from .multipole import multipole_profiles
 
-__all__ = ["Camera", "apply_camera", "dipole_capture", "exitance_image",
+__all__ = ["Camera", "apply_camera", "default_pixel_size", "dipole_capture", "exitance_image",
            "material_profile_function"]
 
 #: Sub-samples per pixel side for the exitance image, and for the pixels within
@@ -290,6 +290,19 @@ def _capture_spec(material, camera, *, image_name, pixel_size_mm, incident_px, s
                        saturation_level=camera.saturation_level,
                        exposure=exposure if camera.exposure_known else None,
                        encoding=camera.encoding, synthetic=truth)
+
+
+def default_pixel_size(material: Dipole, size: int) -> float:
+    """Pixel size (mm) for a ``size``-pixel image spanning ~12 diffusion lengths.
+
+    The half-width is 6 / sigma_tr of the most absorbing channel (the light has fallen by
+    e^-6 and more there), at most 30 transport lengths of the most scattering-poor
+    channel (a non-absorbing medium has no diffusion length).
+    """
+    sigma_tr = float(np.max(material.sigma_tr))
+    transport = float(np.max(material.mean_free_path))
+    half_width = 6.0 / sigma_tr if sigma_tr > 0 else 30.0 * transport
+    return min(half_width, 30.0 * transport) * 2.0 / size
 
 
 def with_camera(camera: Camera, **changes) -> Camera:

@@ -55,26 +55,13 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=int, default=None)
 
 
-def default_pixel_size(material, size: int) -> float:
-    """Pixel size (mm) so that the image spans ~12 diffusion lengths of the most absorbing channel.
-
-    A non-absorbing medium (sigma_tr = 0) spans 60 transport mean free paths instead.
-    """
-    import numpy as np
-
-    sigma_tr = float(np.max(material.sigma_tr))
-    transport = float(np.max(material.mean_free_path))
-    half_width = 6.0 / sigma_tr if sigma_tr > 0 else 30.0 * transport
-    return min(half_width, 30.0 * transport) * 2.0 / size
-
-
 def run(args) -> int:
     """Generate the capture and write the image and sidecar."""
     from dataclasses import replace
 
     from ...errors import InputError
     from ...fitting.results import read_material
-    from ...fitting.synthetic import Camera, dipole_capture
+    from ...fitting.synthetic import Camera, default_pixel_size, dipole_capture
 
     material = read_material(args.material)
     if args.eta is not None:

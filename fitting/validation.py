@@ -1,0 +1,201 @@
+"""Validation studies of the fitter: coverage on exact-model captures, and the dipole's bias.
+
+* :func:`coverage_study` fits dipole-forward captures of random true parameters and counts
+  how often the truth lies inside the 95 % credible interval. A calibrated posterior puts
+  it there 95 % of the time; the suite asks for at least :data:`COVERAGE_TARGET`.
+* :func:`model_bias_table` fits photon-random-walk captures of the measured media of
+  Jensen et al. 2001 with the dipole and tabulates recovered against true coefficients:
+  the dipole's own bias, since the walk solves the transport the dipole approximates.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..materials import Dipole, measured_medium, measured_medium_names
+from .capture import Capture
+from .fit import fit_dipole
+from .synthetic import Camera, default_pixel_size, dipole_capture
+
+__all__ = ["COVERAGE_TARGET", "BiasRow", "CoverageResult", "coverage_study", "model_bias_table",
+           "bias_table_text"]
+
+#: Fraction of parameters whose truth must lie inside its 95 % interval.
+COVERAGE_TARGET = 0.90
+#: Ranges the random true coefficients are drawn from (log-uniform), mm^-1: the span of
+#: the measured media without the extremes (Spectralon, Ketchup blue).
+TRUTH_SIGMA_A = (0.003, 0.5)
+TRUTH_SIGMA_S_PRIME = (0.3, 5.0)
+
+
+@dataclass
+class CoverageResult:
+    """Outcome of :func:`coverage_study`.
+
+    Attributes
+    ----------
+    inside : ndarray of bool, shape (captures, 6)
+        Truth inside the 95 % interval, per capture and parameter (sigma_a RGB, sigma_s' RGB).
+    converged : ndarray of bool, shape (captures,)
+    z : ndarray, shape (captures, 6)
+        (ln median - ln truth) / half the 68 % width, for a look at calibration.
+    seconds : float
+    """
+
+    inside: np.ndarray
+    converged: np.ndarray
+    z: np.ndarray
+    seconds: float
+
+    @property
+    def fraction(self) -> float:
+        """Fraction of parameters whose truth lies inside its 95 % interval."""
+        return float(self.inside.mean())
+
+
+def coverage_study(captures: int = 20, *, seed: int = 0, size: int = 48,
+                   camera: Camera = Camera(peak_signal=40000), walkers: int | None = 16,
+                   progress: bool = False) -> CoverageResult:
+    """Fit ``captures`` dipole-forward captures with random truth; count 95 % coverage.
+
+    Parameters
+    ----------
+    captures : int
+    seed : int
+    size : int
+        Image size, pixels (the pixel size follows the material, see
+        :func:`~translucent.fitting.synthetic.default_pixel_size`).
+    camera : Camera
+        Exposure unknown unless the camera says otherwise.
+    walkers : int, optional
+    progress : bool
+
+    Returns
+    -------
+    CoverageResult
+    """
+    began = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    inside = np.zeros((captures, 6), dtype=bool)
+    z = np.zeros((captures, 6))
+    converged = np.zeros(captures, dtype=bool)
+    for index in range(captures):
+        sigma_a = np.exp(rng.uniform(*np.log(TRUTH_SIGMA_A), size=3))
+        sigma_s_prime = np.exp(rng.uniform(*np.log(TRUTH_SIGMA_S_PRIME), size=3))
+        material = Dipole(sigma_a=sigma_a, sigma_s_prime=sigma_s_prime, eta=1.3)
+        pixels, spec = dipole_capture(material, size=size,
+                                      pixel_size_mm=default_pixel_size(material, size),
+                                      camera=camera, seed=int(rng.integers(2**31)))
+        result = fit_dipole(Capture(spec, pixels), walkers=walkers,
+                            seed=int(rng.integers(2**31)), progress=progress)
+        converged[index] = result.converged
+        truth = np.concatenate([sigma_a, sigma_s_prime])
+        for i, summary in enumerate(result.parameters[:6]):
+            inside[index, i] = summary.low95 <= truth[i] <= summary.high95
+            half = 0.5 * (np.log(summary.high68) - np.log(summary.low68))
+            z[index, i] = (np.log(summary.median) - np.log(truth[i])) / half
+    return CoverageResult(inside, converged, z, time.perf_counter() - began)
+
+
+@dataclass
+class BiasRow:
+    """One measured medium: true and recovered coefficients (mm^-1), per channel."""
+
+    material: str
+    true_sigma_a: list
+    fit_sigma_a: list
+    fit_sigma_a_68: list
+    true_sigma_s_prime: list
+    fit_sigma_s_prime: list
+    fit_sigma_s_prime_68: list
+    status: list
+    converged: bool
+    tau_max: float
+    pixel_size_mm: float
+    photons: int
+    seconds: float
+
+    def to_json(self) -> dict:
+        """JSON-able dict."""
+        return asdict(self)
+
+
+def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
+                     rotations: int = 16, seed: int = 0, walkers: int | None = None,
+                     progress: bool = False, on_row=None) -> list[BiasRow]:
+    """Fit random-walk captures of measured media with the dipole; recovered against true.
+
+    Each capture: ``size`` x ``size`` pixels spanning ~12 diffusion lengths
+    (:func:`~translucent.fitting.synthetic.default_pixel_size`), eta known, exposure
+    unknown, a pencil beam, the default camera. The walk and the dipole share the boundary
+    (eta), the coefficients and g = 0; what differs is transport against diffusion.
+
+    Parameters
+    ----------
+    materials : sequence of str, optional
+        Catalogue names (default: all twelve).
+    photons : int
+        Photons per channel.
+    size, rotations, seed, walkers, progress
+    on_row : callable, optional
+        Called with each :class:`BiasRow` as it is done (progress reports).
+
+    Returns
+    -------
+    list of BiasRow
+    """
+    from .random_walk import walk_capture
+
+    names = measured_medium_names() if materials is None else list(materials)
+    rng = np.random.default_rng(seed)
+    rows = []
+    for name in names:
+        began = time.perf_counter()
+        material = measured_medium(name)
+        pixel = default_pixel_size(material, size)
+        pixels, spec, _ = walk_capture(material, size=size, pixel_size_mm=pixel,
+                                       photons=photons, rotations=rotations,
+                                       seed=int(rng.integers(2**31)))
+        result = fit_dipole(Capture(spec, pixels), walkers=walkers,
+                            seed=int(rng.integers(2**31)), progress=progress)
+        get = result.parameter
+        row = BiasRow(
+            material=material.name, true_sigma_a=material.sigma_a.tolist(),
+            fit_sigma_a=[get(f"sigma_a[{c}]").median for c in "RGB"],
+            fit_sigma_a_68=[[get(f"sigma_a[{c}]").low68, get(f"sigma_a[{c}]").high68]
+                            for c in "RGB"],
+            true_sigma_s_prime=material.sigma_s_prime.tolist(),
+            fit_sigma_s_prime=[get(f"sigma_s_prime[{c}]").median for c in "RGB"],
+            fit_sigma_s_prime_68=[[get(f"sigma_s_prime[{c}]").low68,
+                                   get(f"sigma_s_prime[{c}]").high68] for c in "RGB"],
+            status=[s.status for s in result.parameters[:6]], converged=result.converged,
+            tau_max=float(result.chains[0].tau.max()), pixel_size_mm=pixel,
+            photons=int(photons), seconds=time.perf_counter() - began)
+        rows.append(row)
+        if on_row is not None:
+            on_row(row)
+    return rows
+
+
+def _ratios(fit, true, status) -> str:
+    """``fit / true`` per channel; * marks a parameter the data did not fully constrain."""
+    parts = []
+    for value, truth, verdict in zip(fit, true, status):
+        text = f"{value / truth:.2f}" if truth > 0 else f"{value:.1e} (true 0)"
+        parts.append(text + ("" if verdict == "constrained" else "*"))
+    return " ".join(parts)
+
+
+def bias_table_text(rows) -> str:
+    """The bias table as Markdown: recovered / true per coefficient and channel."""
+    lines = ["| material | sigma_a fit/true R G B | sigma_s' fit/true R G B | converged |",
+             "| --- | --- | --- | --- |"]
+    for row in rows:
+        sigma_a = _ratios(row.fit_sigma_a, row.true_sigma_a, row.status[:3])
+        sigma_s = _ratios(row.fit_sigma_s_prime, row.true_sigma_s_prime, row.status[3:])
+        lines.append(f"| {row.material} | {sigma_a} | {sigma_s} | "
+                     f"{'yes' if row.converged else 'no'} |")
+    return "\n".join(lines)

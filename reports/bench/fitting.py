@@ -1,0 +1,110 @@
+"""Fitting: time to a converged dipole posterior and to a SubEdit posterior, with tau and calls.
+
+``translucent bench fitting`` makes a dipole-forward capture of a measured medium (fixed
+seed; 96 x 96 pixels, exposure unknown, the default camera), then times
+
+* the three-channel dipole posterior (6 coefficients + exposure): MAP, Laplace start,
+  emcee until 50 tau (target: at most 60 s on the suite's 2-core machine);
+* the SubEdit posterior (``--segments`` segments, three independent channel chains):
+  (target: at most 3 minutes);
+
+and, as the baseline measured in the same run, a weighted least-squares point fit of the
+same dipole model (``scipy.optimize.least_squares``): the posterior's cost is reported as
+a multiple of the point fit's. Also printed: tau, steps, walkers, acceptance and the
+number of log-probability calls (vectorised calls and parameter vectors).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+from ...atomic import atomic_write_text
+
+#: Targets of the task, seconds.
+TARGET_DIPOLE_SECONDS = 60.0
+TARGET_SUBEDIT_SECONDS = 180.0
+
+
+def add_arguments(parser):
+    """Options of ``translucent bench fitting``."""
+    parser.add_argument("--material", default="skin1", help="measured medium (default skin1)")
+    parser.add_argument("--size", type=int, default=96, help="capture size, pixels")
+    parser.add_argument("--segments", type=int, default=8, help="SubEdit segments")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--skip-subedit", action="store_true")
+
+
+def _point_fit_seconds(model) -> tuple[float, np.ndarray]:
+    """Baseline: weighted least squares of the same model from the same starting grid."""
+    from scipy import optimize
+
+    began = time.perf_counter()
+    start = model.initial_guess()
+    observations = [model.profile.observations(c) for c in range(3)]
+
+    def residuals(theta):
+        predicted = model.predictions(theta)
+        return np.concatenate([(observations[c][0] - predicted[c][0]) / observations[c][1]
+                               for c in model.channels])
+
+    bounds = model.bounds
+    result = optimize.least_squares(residuals, start, bounds=(bounds[:, 0], bounds[:, 1]))
+    return time.perf_counter() - began, result.x
+
+
+def _chain_line(chain) -> str:
+    return (f"{chain.steps} steps x {chain.walkers} walkers, tau max {chain.tau.max():.1f} "
+            f"(min {chain.tau.min():.1f}), acceptance {chain.acceptance_fraction.mean():.2f}, "
+            f"{chain.log_prob_calls} calls / {chain.log_prob_evaluations} evaluations, "
+            f"{'converged' if chain.converged else 'NOT converged'}")
+
+
+def run(args) -> int:
+    """Run the three timings, print them against the targets, write the JSON."""
+    from ...fitting.capture import Capture
+    from ...fitting.fit import fit_dipole, fit_subedit
+    from ...fitting.models import DipoleModel
+    from ...fitting.profile import measure_profile
+    from ...fitting.synthetic import Camera, default_pixel_size, dipole_capture
+    from ...materials import measured_medium
+
+    material = measured_medium(args.material)
+    pixels, spec = dipole_capture(material, size=args.size,
+                                  pixel_size_mm=default_pixel_size(material, args.size),
+                                  camera=Camera(peak_signal=40000), seed=args.seed)
+    capture = Capture(spec, pixels)
+    profile = measure_profile(capture)
+    baseline, _ = _point_fit_seconds(DipoleModel(profile, spec))
+    print(f"capture: {material.name}, {args.size} x {args.size}, "
+          f"{spec.pixel_size_mm:.4g} mm/px, annuli used {profile.used.sum(axis=0).tolist()}")
+    print(f"baseline (least-squares point fit of the dipole): {baseline:.2f} s")
+    figures = {"material": material.name, "size": args.size, "baseline_seconds": baseline}
+    status = 0
+    dipole = fit_dipole(capture, seed=args.seed, profile=profile)
+    chain = dipole.chains[0]
+    ok = dipole.converged and dipole.seconds <= TARGET_DIPOLE_SECONDS
+    print(f"dipole posterior: {dipole.seconds:.1f} s = {dipole.seconds / baseline:.0f} x "
+          f"baseline (target <= {TARGET_DIPOLE_SECONDS:.0f} s: {'met' if ok else 'NOT met'})")
+    print("  " + _chain_line(chain))
+    figures["dipole"] = {"seconds": dipole.seconds, "ratio_to_baseline": dipole.seconds / baseline,
+                         "target_met": ok, **chain.summary()}
+    status = max(status, 0 if ok else 1)
+    if not args.skip_subedit:
+        subedit = fit_subedit(capture, segments=args.segments, seed=args.seed, profile=profile)
+        ok = subedit.converged and subedit.seconds <= TARGET_SUBEDIT_SECONDS
+        print(f"SubEdit posterior ({args.segments} segments, 3 chains): {subedit.seconds:.1f} s"
+              f" = {subedit.seconds / baseline:.0f} x baseline (target <= "
+              f"{TARGET_SUBEDIT_SECONDS:.0f} s: {'met' if ok else 'NOT met'})")
+        for c, chain in zip(subedit.model.channels, subedit.chains):
+            print(f"  {'RGB'[c]}: " + _chain_line(chain))
+        figures["subedit"] = {"seconds": subedit.seconds,
+                              "ratio_to_baseline": subedit.seconds / baseline, "target_met": ok,
+                              "chains": [chain.summary() for chain in subedit.chains]}
+        status = max(status, 0 if ok else 1)
+    out = args.json or "bench_fitting.json"
+    atomic_write_text(out, json.dumps(figures, indent=2) + "\n")
+    print(f"wrote {out}")
+    return status

@@ -1,0 +1,36 @@
+"""The long validation studies (slow tier): coverage of the 95 % intervals, the dipole's bias."""
+
+import json
+
+import numpy as np
+import pytest
+
+from translucent.fitting.validation import (
+    COVERAGE_TARGET,
+    bias_table_text,
+    coverage_study,
+    model_bias_table,
+)
+from translucent.materials import measured_medium_names
+
+
+@pytest.mark.slow
+def test_coverage_of_95_percent_intervals_on_exact_model_captures():
+    result = coverage_study(20, seed=2026)
+    assert result.converged.all()
+    assert result.fraction >= COVERAGE_TARGET, (result.fraction, result.inside.mean(axis=0))
+
+
+@pytest.mark.slow
+def test_model_bias_table_of_the_measured_media(tmp_path):
+    rows = model_bias_table(photons=20000, size=64, seed=7)
+    assert [row.material for row in rows] == measured_medium_names()
+    for row in rows:
+        assert row.converged, row.material
+        assert np.all(np.isfinite(row.fit_sigma_a)) and np.all(np.isfinite(row.fit_sigma_s_prime))
+        # a coefficient the data constrain has a 68 % interval that brackets its median
+        for (low, high), median in zip(row.fit_sigma_s_prime_68, row.fit_sigma_s_prime):
+            assert low <= median <= high
+    text = bias_table_text(rows)
+    assert text.count("\n") == len(rows) + 1
+    (tmp_path / "bias.json").write_text(json.dumps([row.to_json() for row in rows]))
