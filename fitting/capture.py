@@ -105,7 +105,7 @@ class CaptureSpec:
     synthetic: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
-        """The sidecar as a JSON-able dict (infinite saturation written as a large number)."""
+        """Return the sidecar as a JSON-able dict (infinite saturation as a large number)."""
         data = asdict(self)
         data["incident_px"] = [float(v) for v in self.incident_px]
         if not math.isfinite(self.saturation_level):
@@ -143,7 +143,7 @@ class Capture:
 
 
 def decode_pixels(pixels, spec: CaptureSpec) -> np.ndarray:
-    """Stored values -> linear signal above black, ``exposure * E`` in the model of this module.
+    """Convert stored values to the linear signal above black, ``exposure * E``.
 
     Linear encodings: ``pixels - black_level``. sRGB (PNG/TIFF): the stored code ``v`` is
     normalised by the largest code (65535), decoded with the sRGB transfer function
@@ -461,6 +461,6 @@ def encode_srgb(linear, spec: CaptureSpec) -> np.ndarray:
 
 
 def with_spec(capture: Capture, **changes) -> Capture:
-    """A copy of ``capture`` whose sidecar has ``changes`` applied (no re-validation)."""
+    """Return a copy of ``capture`` whose sidecar has ``changes`` (not re-validated)."""
     return Capture(spec=replace(capture.spec, **changes), pixels=capture.pixels,
                    path=capture.path)

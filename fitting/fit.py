@@ -94,7 +94,7 @@ class FitResult:
         return int(sum(chain.log_prob_calls for chain in self.chains))
 
     def parameter(self, name: str) -> ParameterSummary:
-        """The summary of the parameter called ``name``."""
+        """Return the summary of the parameter called ``name``."""
         for summary in self.parameters:
             if summary.name == name:
                 return summary
@@ -102,7 +102,7 @@ class FitResult:
                          field="parameter", value=name)
 
     def truths(self) -> np.ndarray | None:
-        """True values in the sampling space, for synthetic captures of the dipole model."""
+        """Return the true values in the sampling space (synthetic dipole captures), or None."""
         truth = self.capture.spec.synthetic
         if self.kind != "dipole" or "sigma_a" not in truth:
             return None
@@ -220,7 +220,7 @@ def fit_subedit(capture, *, segments: int = 8, r_s_mm: float | None = None,
 
 
 def material_is_absolute(result: FitResult) -> bool:
-    """True when the fitted profile is in mm^-2 (the capture's exposure was known)."""
+    """Tell whether the fitted profile is in mm^-2 (the capture's exposure was known)."""
     return result.capture.spec.exposure is not None
 
 

@@ -108,7 +108,7 @@ class RadialGrid:
 
 def radial_grid(r_max_mm: float, resolution_mm: float,
                 max_spacing_mm: float | None = None) -> RadialGrid:
-    """A grid from 0 to ``r_max_mm``: 0, then geometric from ``resolution_mm``, then uniform.
+    """Build a grid from 0 to ``r_max_mm``: 0, geometric from ``resolution_mm``, then uniform.
 
     Successive nodes grow by :data:`GRID_RATIO` until their spacing reaches
     ``max_spacing_mm``; from there on they are equally spaced. The geometric part resolves

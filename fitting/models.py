@@ -113,7 +113,7 @@ class ParameterInfo:
     unit: str = ""
 
     def to_physical(self, values):
-        """Sampling coordinate -> physical value."""
+        """Map sampling coordinates to physical values."""
         values = np.asarray(values, dtype=np.float64)
         return np.exp(values) if self.transform == "log" else values
 
@@ -157,7 +157,7 @@ class ProfileModel:
         raise NotImplementedError
 
     def initial_guess(self) -> np.ndarray:
-        """A starting point for the optimiser, shape (ndim,)."""
+        """Return a starting point for the optimiser, shape (ndim,)."""
         raise NotImplementedError
 
     def extra_log_prior(self, theta: np.ndarray) -> np.ndarray:
@@ -182,7 +182,7 @@ class ProfileModel:
         return np.where(np.isfinite(total), total, -np.inf)
 
     def in_bounds(self, theta) -> np.ndarray:
-        """True where every coordinate lies within the prior box, shape (n,)."""
+        """Tell, per row, whether every coordinate lies within the prior box, shape (n,)."""
         bounds = self.bounds
         return np.all((theta >= bounds[:, 0]) & (theta <= bounds[:, 1]), axis=1)
 
@@ -203,16 +203,16 @@ class ProfileModel:
         return np.where(np.isnan(result), -np.inf, result)
 
     def __call__(self, theta) -> np.ndarray:
-        """The vectorised log-probability for ``emcee`` (see :meth:`log_probability`)."""
+        """Evaluate the vectorised log-probability for ``emcee`` (see :meth:`log_probability`)."""
         return self.log_probability(theta)
 
     def physical(self, samples) -> dict[str, np.ndarray]:
-        """Samples in the sampling space -> ``name -> physical values``."""
+        """Map samples in the sampling space to ``name -> physical values``."""
         samples = np.atleast_2d(samples)
         return {p.name: p.to_physical(samples[:, i]) for i, p in enumerate(self.parameters)}
 
     def residual_degrees(self) -> int:
-        """Number of annulus means that enter the likelihood."""
+        """Count the annulus means that enter the likelihood."""
         return int(sum(self._observations[c][0].size for c in self.channels))
 
 
@@ -270,7 +270,7 @@ class DipoleModel(ProfileModel):
         return sigma_a, sigma_s_prime, eta, exposure
 
     def unit_profiles(self, sigma_a, sigma_s_prime, eta) -> np.ndarray:
-        """Exitance per unit entering power at the nodes, mm^-2, shape (n, nodes, 3)."""
+        """Return the exitance per unit entering power at the nodes, mm^-2, (n, nodes, 3)."""
         r = self.profile.operator.grid.nodes[None, :, None]
         sigma_a = sigma_a[:, None, :]
         sigma_s_prime = sigma_s_prime[:, None, :]
@@ -340,7 +340,7 @@ class DipoleModel(ProfileModel):
         return np.clip(theta, self.bounds[:, 0], self.bounds[:, 1])
 
     def material(self, values: dict[str, float]) -> dict:
-        """The material dict (``type = "dipole"``) from physical parameter values."""
+        """Return the material dict (``type = "dipole"``) of physical parameter values."""
         sigma_a = [float(values[f"sigma_a[{c}]"]) for c in CHANNELS]
         sigma_s_prime = [float(values[f"sigma_s_prime[{c}]"]) for c in CHANNELS]
         eta = float(values["eta"]) if self.fit_eta else float(self.split(
@@ -350,7 +350,7 @@ class DipoleModel(ProfileModel):
 
 
 class SubEditModel(ProfileModel):
-    r"""SubEdit profile: ``n + 1`` knot values of :math:`\ln P` per channel (Chen et al. 2012, Eq. 9).
+    r"""SubEdit profile: ``n + 1`` knots of :math:`\ln P` per channel (Chen et al. 2012, Eq. 9).
 
     The exitance is :math:`P(r)` (for a homogeneous material Eq. 8 of Chen et al. gives
     :math:`R_d = P`). With the exposure known, :math:`P` is absolute (mm^-2); unknown, the
@@ -447,7 +447,7 @@ class SubEditModel(ProfileModel):
         return -0.5 * np.sum((second / self.smoothness) ** 2, axis=(1, 2))
 
     def initial_guess(self) -> np.ndarray:
-        """ln of the measured annulus means at the knots (linear inter-/extrapolation)."""
+        """Ln of the measured annulus means at the knots (linear inter-/extrapolation)."""
         theta = []
         for c in self.channels:
             use = self.profile.used[:, c]
@@ -469,15 +469,17 @@ class SubEditModel(ProfileModel):
         return np.clip(theta, self.bounds[:, 0], self.bounds[:, 1])
 
     def material(self, values: dict[str, float]) -> dict:
-        """The SubEdit profile dict (``type = "subedit"``) from physical knot values."""
+        """Return the SubEdit profile dict (``type = "subedit"``) of physical knot values."""
         log_profile = [[float(values[f"ln_p{k}[{CHANNELS[c]}]"]) if c in self.channels else None
                         for k in range(self.segments + 1)] for c in range(3)]
         return {"type": "subedit", "r_s": self.r_s_mm, "segments": self.segments,
                 "log_profile": log_profile, "absolute": self.spec.exposure is not None}
 
     def texture(self, values: dict[str, float]) -> SubEditProfiles:
-        """A 1 x 1 :class:`SubEditProfiles` from physical knot values (channels not modelled:
-        the floor, a zero profile)."""
+        """Return a 1 x 1 :class:`SubEditProfiles` of physical knot values.
+
+        Channels not modelled hold the floor (a zero profile).
+        """
         table = np.full((1, 1, self.segments + 1, 3), LOG_FLOOR)
         for c in self.channels:
             table[0, 0, :, c] = [values[f"ln_p{k}[{CHANNELS[c]}]"]

@@ -20,8 +20,11 @@ are, per unit power entering the slab, mm^-2,
 and :math:`T(r)` the same with :math:`z \to d - z` in the numerators and distances
 measured from the far surface. The model is the diffusion approximation: it assumes the
 slab is thicker than a transport mean free path :math:`\ell` (for :math:`d < \ell` the
-real source lies outside the slab and T loses its meaning). With :math:`n = 0` and :math:`d \to \infty`, :math:`R` is
-Eq. 2 of Wang et al. 2008 (the dipole of :mod:`translucent.materials.dipole`).
+real source lies outside the slab and T loses its meaning). With :math:`n = 0` and
+:math:`d \to \infty`, :math:`R` is Eq. 2 of Wang et al. 2008 (the dipole of
+:mod:`translucent.materials.dipole`). :class:`translucent.materials.profiles.SlabProfile`
+evaluates the same sum for one material; this module evaluates it for many parameter
+sets at once (the walkers of a fit), with the pole count chosen from the coefficients.
 
 References
 ----------
@@ -53,7 +56,7 @@ MAX_POLES = 64
 
 
 def pole_count(sigma_a, sigma_s_prime, eta, thickness_mm) -> int:
-    """Number ``n`` of mirrored pole pairs either side needed for :data:`POLE_TOLERANCE`.
+    """Count the mirrored pole pairs ``n`` either side needed for :data:`POLE_TOLERANCE`.
 
     Parameters
     ----------

@@ -50,7 +50,8 @@ def corner_plot(path, model, samples, *, truths=None, title: str = "", columns=N
     truths = None if truths is None else np.asarray(truths)[columns]
     # corner needs some spread in every coordinate
     spread = np.ptp(samples, axis=0) > 0
-    figure = corner.corner(samples[:, spread], labels=[n for n, s in zip(labels, spread) if s],
+    shown = [name for name, spreads in zip(labels, spread, strict=True) if spreads]
+    figure = corner.corner(samples[:, spread], labels=shown,
                            quantiles=[0.16, 0.5, 0.84], show_titles=True, title_fmt=".3g",
                            truths=None if truths is None else np.asarray(truths)[spread],
                            truth_color="tab:orange")

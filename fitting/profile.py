@@ -304,7 +304,7 @@ class RadialProfile:
         return self.mean[use, channel], self.stderr[use, channel], self.dof[use, channel]
 
     def summary(self) -> dict[str, Any]:
-        """Counts for the fit report (JSON-able)."""
+        """Return the counts for the fit report (JSON-able)."""
         return {"centre_px": list(self.centre_px), "given_centre_px": list(self.given_centre_px),
                 "annuli": int(self.mean.shape[0]),
                 "used_annuli": self.used.sum(axis=0).tolist(),

@@ -118,7 +118,7 @@ class WalkTally:
 
 
 def _scatter(rng, ux, uy, uz, g):
-    """New directions after Henyey-Greenstein scattering (MCML's rotation formulas)."""
+    """Draw new directions by Henyey-Greenstein scattering (MCML's rotation formulas)."""
     n = ux.size
     xi, eta_phi = rng.random((2, n))
     if g == 0.0:
@@ -322,10 +322,10 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
 def walk_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
                  pixel_size_mm: float = 0.1, incident_px=None, side: str = "reflection",
                  thickness_mm: float | None = None, beam_radius_mm: float = 0.0,
-                 photons: int = 1_000_000, rotations: int = 16, camera: Camera = Camera(),
+                 photons: int = 1_000_000, rotations: int = 16, camera: Camera | None = None,
                  seed: int | None = None, image_name: str = "capture.exr",
                  eta_known: bool = True):
-    """A synthetic capture traced by :func:`photon_random_walk`, with camera defects.
+    """Make a synthetic capture traced by :func:`photon_random_walk`, with camera defects.
 
     Parameters are those of :func:`~translucent.fitting.synthetic.dipole_capture`, plus
     ``photons`` (per channel) and ``rotations`` (film scoring).
@@ -335,6 +335,7 @@ def walk_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
     (ndarray, CaptureSpec, WalkTally)
         Stored values, the sidecar (truth under ``synthetic``) and the walk's tallies.
     """
+    camera = Camera() if camera is None else camera
     height, width = (size, size) if np.isscalar(size) else size
     if incident_px is None:
         incident_px = (width / 2.0, height / 2.0)

@@ -118,7 +118,7 @@ def summarise_posterior(model, samples) -> list[ParameterSummary]:
 
 
 def summaries_to_json(summaries) -> list[dict]:
-    """The summaries as JSON-able dicts."""
+    """Return the summaries as JSON-able dicts."""
     return [asdict(s) for s in summaries]
 
 
@@ -142,7 +142,7 @@ def _toml_value(value) -> str:
 
 
 def toml_text(table: dict, comments: list[str] = ()) -> str:
-    """A flat TOML document: comment lines, then ``key = value`` lines.
+    """Write a flat TOML document: comment lines, then ``key = value`` lines.
 
     ``None`` values inside lists (channels not fitted) are written as ``nan``.
     """
@@ -173,7 +173,7 @@ def write_material(path, material: dict, summaries, *, source: str = "",
 
 
 def read_material(name_or_path):
-    """A :class:`~translucent.materials.Dipole` from a measured-medium name or a TOML file.
+    """Read a :class:`~translucent.materials.Dipole` from a measured-medium name or TOML file.
 
     The file holds a material table at its top level (as :func:`write_material` writes
     it) or under ``[material]``; it is built by
@@ -184,8 +184,9 @@ def read_material(name_or_path):
     InputError
         Unknown name, unreadable file, or a table that is not a dipole medium.
     """
-    import tomllib
     from pathlib import Path
+
+    import tomllib
 
     from ..errors import InputError
     from ..materials import Dipole, measured_medium

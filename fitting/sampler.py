@@ -296,9 +296,10 @@ def run_chain(model, *, walkers: int | None = None, max_steps: int = 20000,
     try:
         while sampler.iteration < max_steps:
             steps = min(check_every, max_steps - sampler.iteration)
-            for state in sampler.sample(state, iterations=steps):
+            for _ in sampler.sample(state, iterations=steps):
                 if bar is not None:
                     bar.update(1)
+            state = sampler.get_last_sample()
             tau = sampler.get_autocorr_time(tol=0)
             if np.all(np.isfinite(tau)) and previous_tau is not None:
                 long_enough = sampler.iteration > CONVERGENCE_TAUS * tau.max()

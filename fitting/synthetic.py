@@ -98,7 +98,7 @@ class Camera:
 
 
 def apply_camera(exitance, camera: Camera, rng, *, exposure: float | None = None):
-    """Exitance image -> stored values with shot noise, read noise, black level and clipping.
+    """Turn an exitance image into stored values: shot and read noise, black level, clipping.
 
     Parameters
     ----------
@@ -158,7 +158,7 @@ def material_profile_function(material: Dipole, *, side="reflection", thickness_
 
 
 def _beam_convolved_table(profile_fn, beam_radius_mm, r_max_mm):
-    """The beam-convolved profile on a fine radial table, by polar quadrature."""
+    """Tabulate the beam-convolved profile on a fine radial table, by polar quadrature."""
     w = beam_radius_mm
     table_r = np.concatenate([[0.0], np.geomspace(1e-4, r_max_mm, 1200)])
     radial, radial_w = np.polynomial.legendre.leggauss(BEAM_RADIAL_POINTS)
@@ -229,9 +229,9 @@ def exitance_image(profile_fn, shape, pixel_size_mm, centre_px, beam_radius_mm=0
 def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
                    pixel_size_mm: float = 0.1, incident_px=None, side: str = "reflection",
                    thickness_mm: float | None = None, beam_radius_mm: float = 0.0,
-                   camera: Camera = Camera(), seed: int | None = None,
+                   camera: Camera | None = None, seed: int | None = None,
                    image_name: str = "capture.exr", eta_known: bool = True):
-    """A synthetic capture of the exact dipole/multipole model, with camera defects.
+    """Make a synthetic capture of the exact dipole/multipole model, with camera defects.
 
     Parameters
     ----------
@@ -245,7 +245,8 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
     side : str
     thickness_mm : float or None
     beam_radius_mm : float
-    camera : Camera
+    camera : Camera, optional
+        Default: ``Camera()``.
     seed : int, optional
     image_name : str
         The sidecar's ``image`` (its suffix should match ``camera.file_format``).
@@ -257,6 +258,7 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
     (ndarray, CaptureSpec)
         Stored values (H, W, 3) and the sidecar; ``spec.synthetic`` holds the truth.
     """
+    camera = Camera() if camera is None else camera
     height, width = (size, size) if np.isscalar(size) else size
     if incident_px is None:
         incident_px = (width / 2.0, height / 2.0)
@@ -274,7 +276,7 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
 
 def _capture_spec(material, camera, *, image_name, pixel_size_mm, incident_px, side,
                   thickness_mm, beam_radius_mm, exposure, eta_known, generator, extra=None):
-    """The sidecar of a synthetic capture, with its truth under ``synthetic``."""
+    """Return the sidecar of a synthetic capture, with its truth under ``synthetic``."""
     truth = {"generator": generator, "sigma_a": material.sigma_a.tolist(),
              "sigma_s_prime": material.sigma_s_prime.tolist(), "eta": material.eta,
              "g": material.g, "exposure": exposure, "incident_px": list(incident_px),
@@ -306,5 +308,5 @@ def default_pixel_size(material: Dipole, size: int) -> float:
 
 
 def with_camera(camera: Camera, **changes) -> Camera:
-    """A copy of ``camera`` with ``changes``."""
+    """Return a copy of ``camera`` with ``changes``."""
     return replace(camera, **changes)

@@ -57,7 +57,7 @@ class CoverageResult:
 
 
 def coverage_study(captures: int = 20, *, seed: int = 0, size: int = 48,
-                   camera: Camera = Camera(peak_signal=40000), walkers: int | None = 16,
+                   camera: Camera | None = None, walkers: int | None = 16,
                    progress: bool = False) -> CoverageResult:
     """Fit ``captures`` dipole-forward captures with random truth; count 95 % coverage.
 
@@ -68,8 +68,8 @@ def coverage_study(captures: int = 20, *, seed: int = 0, size: int = 48,
     size : int
         Image size, pixels (the pixel size follows the material, see
         :func:`~translucent.fitting.synthetic.default_pixel_size`).
-    camera : Camera
-        Exposure unknown unless the camera says otherwise.
+    camera : Camera, optional
+        Default: ``Camera(peak_signal=40000)``, exposure unknown.
     walkers : int, optional
     progress : bool
 
@@ -78,6 +78,7 @@ def coverage_study(captures: int = 20, *, seed: int = 0, size: int = 48,
     CoverageResult
     """
     began = time.perf_counter()
+    camera = Camera(peak_signal=40000) if camera is None else camera
     rng = np.random.default_rng(seed)
     inside = np.zeros((captures, 6), dtype=bool)
     z = np.zeros((captures, 6))
@@ -183,14 +184,14 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
 def _ratios(fit, true, status) -> str:
     """``fit / true`` per channel; * marks a parameter the data did not fully constrain."""
     parts = []
-    for value, truth, verdict in zip(fit, true, status):
+    for value, truth, verdict in zip(fit, true, status, strict=True):
         text = f"{value / truth:.2f}" if truth > 0 else f"{value:.1e} (true 0)"
         parts.append(text + ("" if verdict == "constrained" else "*"))
     return " ".join(parts)
 
 
 def bias_table_text(rows) -> str:
-    """The bias table as Markdown: recovered / true per coefficient and channel."""
+    """Format the bias table as Markdown: recovered / true per coefficient and channel."""
     lines = ["| material | sigma_a fit/true R G B | sigma_s' fit/true R G B | converged |",
              "| --- | --- | --- | --- |"]
     for row in rows:

@@ -98,7 +98,7 @@ def run(args) -> int:
         print(f"SubEdit posterior ({args.segments} segments, 3 chains): {subedit.seconds:.1f} s"
               f" = {subedit.seconds / baseline:.0f} x baseline (target <= "
               f"{TARGET_SUBEDIT_SECONDS:.0f} s: {'met' if ok else 'NOT met'})")
-        for c, chain in zip(subedit.model.channels, subedit.chains):
+        for c, chain in zip(subedit.model.channels, subedit.chains, strict=True):
             print(f"  {'RGB'[c]}: " + _chain_line(chain))
         figures["subedit"] = {"seconds": subedit.seconds,
                               "ratio_to_baseline": subedit.seconds / baseline, "target_met": ok,

@@ -5,7 +5,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import integrate
-
 from translucent.errors import InputError
 from translucent.fitting.beam import (
     beam_convolution_kernel,

@@ -1,10 +1,9 @@
-"""The capture format: round trips of every image encoding, and a clear error for every bad field."""
+"""The capture format: round trips of every encoding, and a clear error for every bad field."""
 
 import json
 
 import numpy as np
 import pytest
-
 from translucent.errors import InputError
 from translucent.fitting.capture import (
     CaptureSpec,

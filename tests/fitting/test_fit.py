@@ -1,11 +1,10 @@
 """Fits of synthetic captures: recovery, robustness to real defects, honesty, outputs, CLI."""
 
 import json
-import tomllib
 
 import numpy as np
 import pytest
-
+import tomllib
 from translucent.fitting.capture import Capture, read_capture, write_capture
 from translucent.fitting.fit import fit_capture, fit_dipole, fit_subedit, write_outputs
 from translucent.fitting.synthetic import Camera, dipole_capture

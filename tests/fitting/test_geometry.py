@@ -3,7 +3,6 @@
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from translucent.fitting.geometry import GRID_RATIO, disc_rectangle_area, radial_grid
 
 #: Areas are sums of a few O(R^2) terms: agreement to 1e-9 of R^2 is round-off.

@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-
 from translucent.errors import InputError
 from translucent.fitting.capture import Capture
 from translucent.fitting.models import (

@@ -1,10 +1,9 @@
-"""The multipole of Donner & Jensen 2005: its limits, energy, and the per-material implementation."""
+"""The multipole of Donner & Jensen 2005: limits, energy, the per-material implementation."""
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from translucent.fitting.multipole import multipole_profiles, pole_count
 from translucent.materials import Dipole, dipole_reflectance_profile
 from translucent.materials.profiles import SlabProfile

@@ -1,11 +1,10 @@
-"""Radial profiles: the forward operator against analytic pixel integrals, centre refinement, masks."""
+"""Radial profiles: the operator against analytic pixel integrals, centre refinement, masks."""
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.special import erf
-
 from translucent.errors import InputError
 from translucent.fitting.capture import Capture, CaptureSpec
 from translucent.fitting.profile import (

@@ -1,8 +1,7 @@
-"""The photon random walk: a published benchmark, energy conservation, and the dipole where it holds."""
+"""The photon random walk: a published benchmark, energy conservation, the dipole where it holds."""
 
 import numpy as np
 import pytest
-
 from translucent.errors import InputError
 from translucent.fitting.random_walk import Film, photon_random_walk, walk_capture
 from translucent.materials import Dipole, dipole_reflectance_profile
@@ -51,7 +50,7 @@ def test_agrees_with_the_dipole_where_the_dipole_holds():
     dipole = dipole_reflectance_profile(fine, 0.01, 1.0, 1.3)
     expected = [np.trapezoid((dipole * fine)[(fine >= a) & (fine <= b)],
                              fine[(fine >= a) & (fine <= b)]) * 2 / (b * b - a * a)
-                for a, b in zip(edges[:-1], edges[1:])]
+                for a, b in zip(edges[:-1], edges[1:], strict=True)]
     ratio = tally.reflectance[:, 0] / expected
     error = tally.reflectance_se[:, 0] / expected
     assert np.all(np.abs(ratio - 1) < DIPOLE_ACCURACY + 3 * error), ratio

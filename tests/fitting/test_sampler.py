@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-
 from translucent.errors import InputError
 from translucent.fitting.fit import default_moves
 from translucent.fitting.sampler import CONVERGENCE_TAUS, find_map, laplace_covariance, run_chain

@@ -4,7 +4,6 @@ import json
 
 import numpy as np
 import pytest
-
 from translucent.fitting.validation import (
     COVERAGE_TARGET,
     bias_table_text,
@@ -29,7 +28,8 @@ def test_model_bias_table_of_the_measured_media(tmp_path):
         assert row.converged, row.material
         assert np.all(np.isfinite(row.fit_sigma_a)) and np.all(np.isfinite(row.fit_sigma_s_prime))
         # a coefficient the data constrain has a 68 % interval that brackets its median
-        for (low, high), median in zip(row.fit_sigma_s_prime_68, row.fit_sigma_s_prime):
+        for (low, high), median in zip(row.fit_sigma_s_prime_68, row.fit_sigma_s_prime,
+                                       strict=True):
             assert low <= median <= high
     text = bias_table_text(rows)
     assert text.count("\n") == len(rows) + 1
