@@ -1,0 +1,341 @@
+"""BRDF editing by PCA with global illumination (Nguyen et al. 2010), fast/brdf_pca.py."""
+
+import math
+import os
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from translucent.errors import InputError
+from translucent.fast import brdf_pca as bp
+from translucent.materials import Dipole, Lambertian
+from translucent.materials.brdf_pca import build_pca_basis
+from translucent.materials.brdfs import (
+    GAMMA_RANGES,
+    MODELS,
+    AnalyticBRDF,
+    fixed_term,
+    pca_variable,
+)
+from translucent.scenes import ConstantEnvironment, PointLight, load_scene
+from translucent.scenes.raycast import visible
+
+#: The compiled kernels and materials.brdfs evaluate the same float64 formulas in a
+#: different order: differences are rounding, amplified at most ~1e3 times by the
+#: steepest terms (Cook-Torrance's 1 / cos^4 near grazing).
+KERNEL_RTOL = 1e-10
+
+#: Images are float32: sums of a few float32 terms agree to a few ulps (6e-8 each).
+FLOAT32_RTOL = 1e-5
+
+#: Freezing with a budget that keeps every coefficient is exact linear algebra on
+#: 16-bit quantised rows: each entry carries up to 1.5e-5 of its row's largest entry
+#: (sparse_transport.QuantisedRows), so products agree to ~1e-4 of the pixel's value.
+QUANTISATION_RTOL = 1e-4
+
+#: Quasi-Monte Carlo (R2 points) on a smooth disk integrand converges like ~1/N; with
+#: 4096 points the measured relative error is 3e-5; 1e-3 bounds it with margin.
+DISK_QMC_RTOL = 1e-3
+
+TINY = dict(gather_samples=256, bounces=1, transfer_coefficients=96,
+            diffuse_coefficients=48, gather_coefficients=48, frozen_coefficients=48,
+            light_samples=4, block_pairs=1 << 14)
+
+
+def _tiny_scene(width=24, height=18):
+    scene = load_scene("glossy")
+    return scene.with_camera(replace(scene.camera, width=width, height=height))
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return _tiny_scene()
+
+
+@pytest.fixture(scope="module")
+def state(scene, tmp_path_factory):
+    # module-scoped: set up before conftest's per-test private cache, so point it there too
+    with pytest.MonkeyPatch.context() as patch:
+        if not os.environ.get("TRANSLUCENT_CACHE"):
+            patch.setenv("TRANSLUCENT_CACHE", str(tmp_path_factory.getbasetemp() / "cache"))
+        return bp.precompute(scene, **TINY)
+
+
+# -- wavelets -----------------------------------------------------------------------------
+
+
+def test_haar_is_orthonormal_and_invertible(rng):
+    values = rng.normal(size=(5, 64))
+    coefficients = bp.haar_forward(values)
+    np.testing.assert_allclose(bp.haar_inverse(coefficients), values, atol=1e-12)
+    other = rng.normal(size=64)
+    np.testing.assert_allclose(coefficients @ bp.haar_forward(other), values @ other,
+                               rtol=1e-12)
+    constant = bp.haar_forward(np.ones(8))
+    np.testing.assert_allclose(constant, [math.sqrt(8)] + [0] * 7, atol=1e-12)
+    with pytest.raises(InputError, match=r"shape = \(6,\): the last axis must have a "
+                                         r"power-of-two length"):
+        bp.haar_forward(np.ones(6))
+
+
+# -- compiled BRDF terms against materials.brdfs -----------------------------------------
+
+
+@pytest.mark.parametrize("model", MODELS)
+@settings(max_examples=60, deadline=None)
+@given(cos_l=st.one_of(st.sampled_from([0.0, 1e-300, 1e-9, 1.0]), st.floats(-1, 1)),
+       cos_v=st.one_of(st.sampled_from([1e-300, 1e-9, 1.0]), st.floats(1e-6, 1)),
+       azimuth=st.floats(0, math.pi))
+def test_compiled_terms_match_the_materials(model, cos_l, cos_v, azimuth):
+    sin_l, sin_v = math.sqrt(1 - cos_l**2), math.sqrt(1 - cos_v**2)
+    l_dot_v = cos_l * cos_v + sin_l * sin_v * math.cos(azimuth)
+    c = (-0.7, 0.9)
+    got = bp._fixed_scalar(bp.MODEL_CODES[model], cos_l, cos_v, l_dot_v, 0.3)
+    assert got == pytest.approx(float(fixed_term(model, cos_l, cos_v, l_dot_v, f0=0.3)),
+                                rel=KERNEL_RTOL)
+    got = bp._variable_scalar(bp.MODEL_CODES[model], cos_l, cos_v, l_dot_v, *c)
+    assert got == pytest.approx(float(pca_variable(model, cos_l, cos_v, l_dot_v,
+                                                   lafortune_c=c)), rel=KERNEL_RTOL,
+                                abs=1e-15)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_compiled_basis_matches_interpolated_pca(model, rng):
+    material = AnalyticBRDF(model, GAMMA_RANGES[model][0], f0=0.3, lafortune_c=(-0.8, 1.0))
+    basis = build_pca_basis(model, 4, gamma_samples=50, delta_samples=128)
+    parameters = bp._material_parameters(material, basis)
+    out = np.empty(5)
+    for _ in range(50):
+        cos_l, cos_v = rng.uniform(0.01, 1, 2)
+        l_dot_v = cos_l * cos_v + math.sqrt((1 - cos_l**2) * (1 - cos_v**2)) * rng.uniform(-1, 1)
+        bp._glossy_basis(parameters[0], cos_l, cos_v, l_dot_v, *parameters[1:], out)
+        expected = fixed_term(model, cos_l, cos_v, l_dot_v, f0=0.3) * basis.basis_values(
+            pca_variable(model, cos_l, cos_v, l_dot_v, lafortune_c=(-0.8, 1.0)))
+        np.testing.assert_allclose(out, expected, rtol=KERNEL_RTOL, atol=1e-300)
+    bp._glossy_basis(parameters[0], -0.1, 0.5, 0.0, *parameters[1:], out)
+    np.testing.assert_array_equal(out, 0.0)
+
+
+# -- sub-area sampling ----------------------------------------------------------------
+
+
+def _disk_quadrature(material, basis, x, n_x, out, centre, normal, area, n=800):
+    """Midpoint rule in polar coordinates on the disk: the integral Eq. 3 estimates."""
+    radius = math.sqrt(area / math.pi)
+    first, second = (v[0] for v in bp._tangent_frames(np.asarray(normal)[None]))
+    rr = (np.arange(n) + 0.5) / n * radius
+    phi = (np.arange(n) + 0.5) / n * 2 * math.pi
+    r, p = np.meshgrid(rr, phi, indexing="ij")
+    q = centre + (r * np.cos(p))[..., None] * first + (r * np.sin(p))[..., None] * second
+    d = q - x
+    r2 = np.einsum("...d,...d->...", d, d)
+    w = d / np.sqrt(r2)[..., None]
+    cos_x, cos_q = w @ n_x, -(w @ normal)
+    cos_v = float(out @ n_x)
+    values = fixed_term(material.model, cos_x, cos_v, w @ out, f0=material.f0)[..., None] * \
+        basis.basis_values(pca_variable(material.model, cos_x, cos_v, w @ out))
+    integrand = np.where((cos_x > 0) & (cos_q > 0), cos_x * cos_q / r2, 0.0)[..., None] * values
+    weights = (radius / n) * (2 * math.pi / n) * r
+    return np.einsum("ij,ijk->k", weights, integrand)
+
+
+def test_subarea_estimate_converges_to_the_disk_integral():
+    """Eq. 3 with uniform points of K_g converges to the integral over the disk, which the
+    single point at its centre misses where the lobe varies across the disk (Fig. 2)."""
+    material = AnalyticBRDF("BP", 200.0, rho_s=1.0)
+    basis = build_pca_basis("BP", 6)
+    x, n_x = np.zeros(3), np.array([0.0, 0.0, 1.0])
+    out = np.array([math.sin(0.6), 0.0, math.cos(0.6)])
+    mirror = np.array([-math.sin(0.6), 0.0, math.cos(0.6)])
+    centre = 0.6 * (mirror + np.array([0.03, 0.02, 0.0]))
+    normal = -mirror
+    area = math.pi * 0.12**2
+    exact = _disk_quadrature(material, basis, x, n_x, out, centre, normal, area)
+    estimate = bp.disk_transfer(material, basis, x, n_x, out, centre, normal, area,
+                                points=4096)
+    np.testing.assert_allclose(estimate, exact, rtol=DISK_QMC_RTOL,
+                               atol=DISK_QMC_RTOL * np.abs(exact).max())
+    c = basis.coefficients(material.gamma)
+    d = centre - x
+    r2 = d @ d
+    w = d / math.sqrt(r2)
+    point = (w @ n_x) * (-(w @ normal)) * area / (r2 + area / math.pi) * \
+        basis.basis_values(pca_variable("BP", w @ n_x, out @ n_x, w @ out))
+    assert abs(estimate @ c - exact @ c) < 0.1 * abs(point @ c - exact @ c)
+
+
+# -- precomputation and the interactive path ----------------------------------------------
+
+
+def test_precomputation_facts(state, scene):
+    notes = state.log.notes
+    assert notes["gather_samples"] == TINY["gather_samples"]
+    # one glossy gather sample to six diffuse ones (Sect. 5.1)
+    assert notes["glossy_gather_samples"] == round(256 / 7)
+    assert notes["columns"] == 256
+    assert any("back_wall" in s and "no PCA transfer" in s for s in state.log.skipped)
+    assert sorted(state.glossy_objects) == ["box", "floor", "sphere"]
+    total_area = sum(o.mesh.area for o in scene.objects)
+    assert 0 < state.data.gather_area.sum() <= total_area * 1.001
+    for budget in notes["budgets"].values():
+        assert sum(budget) <= TINY["transfer_coefficients"] and budget[0] == max(budget)
+
+
+def _exact_direct(state, scene, materials):
+    """Direct lighting of every view sample from scratch: BRDF x irradiance x visibility."""
+    data = state.data
+    total = np.zeros((len(data.pixel), 3))
+    for light in scene.lights:
+        to_light = light.position - data.view_position
+        distance = np.linalg.norm(to_light, axis=1)
+        wi = to_light / distance[:, None]
+        cosine = np.clip(np.einsum("ij,ij->i", wi, data.view_normal), 0, None)
+        seen = visible(scene, data.view_position, light.position, normals_a=data.view_normal)
+        for index, obj in enumerate(scene.objects):
+            rows = data.view_object == index
+            material = materials.get(obj.name, obj.material)
+            if isinstance(material, Lambertian):
+                f = np.broadcast_to(material.albedo / math.pi, (rows.sum(), 3))
+            else:
+                f = material.eval(wi[rows], data.view_out[rows], data.view_normal[rows])
+            total[rows] += f * (light.intensity * (seen * cosine / distance**2)[rows, None])
+    return total
+
+
+def test_direct_lighting_is_the_exact_brdf(state, scene):
+    image = state.render(component="direct").rgb.reshape(-1, 3)[state.data.pixel]
+    np.testing.assert_allclose(image, _exact_direct(state, scene, {}), rtol=FLOAT32_RTOL,
+                               atol=1e-7)
+    sphere = scene.object("sphere").material.with_gamma(0.05)
+    edited = state.render(material={"sphere": sphere}, component="direct")
+    np.testing.assert_allclose(edited.rgb.reshape(-1, 3)[state.data.pixel],
+                               _exact_direct(state, scene, {"sphere": sphere}),
+                               rtol=FLOAT32_RTOL, atol=1e-7)
+    state.render(material={"sphere": scene.object("sphere").material})
+
+
+def test_editing_changes_only_the_edited_object(state, scene):
+    before = state.render().rgb
+    after = state.edit("floor", 250.0).rgb
+    floor = np.zeros(before.shape[:2], dtype=bool).reshape(-1)
+    floor[state.data.pixel[state.data.view_object == 0]] = True
+    floor = floor.reshape(before.shape[:2])
+    np.testing.assert_array_equal(after[~floor], before[~floor])
+    assert np.abs(after[floor] - before[floor]).max() > 0
+    assert state.render().metadata["gamma"]["floor"] == 250.0
+    state.edit("floor", scene.object("floor").material.gamma)
+
+
+def test_editing_equals_rendering_the_edited_scene(state, scene):
+    """A new gamma through Eq. 15 gives the image of a scene built with that gamma: the
+    precomputation (cached) does not depend on gamma."""
+    edited = state.edit("box", 1.7).rgb
+    other = scene.with_material("box", scene.object("box").material.with_gamma(1.7))
+    fresh = bp.precompute(other, **TINY)
+    assert fresh.log.notes["cache"] == "hit"
+    np.testing.assert_array_equal(fresh.render().rgb, edited)
+    state.edit("box", scene.object("box").material.gamma)
+
+
+def test_relighting_equals_rendering_the_relit_scene(state, scene):
+    lights = [PointLight([-1.0, 2.0, 1.0], 8.0), PointLight([1.0, 1.0, 2.0], 3.0)]
+    relit = state.relight(lights).rgb
+    fresh = bp.precompute(scene.with_lights(lights), **TINY).render().rgb
+    np.testing.assert_allclose(relit, fresh, rtol=FLOAT32_RTOL, atol=1e-7)
+    doubled = state.relight([PointLight(light.position, 2 * light.intensity)
+                             for light in lights]).rgb
+    np.testing.assert_allclose(doubled, 2 * relit, rtol=FLOAT32_RTOL, atol=1e-7)
+    state.relight(scene.lights)
+
+
+def test_freezing_with_every_coefficient_is_exact(scene):
+    knobs = dict(TINY, frozen_coefficients=1 << 16)
+    state = bp.precompute(scene, **knobs)
+    before = state.render().rgb
+    seconds = state.freeze(editing="floor")
+    assert seconds >= 0 and sorted(state.frozen) == ["box", "sphere"]
+    frozen = state.render().rgb
+    np.testing.assert_allclose(frozen, before, rtol=QUANTISATION_RTOL,
+                               atol=QUANTISATION_RTOL * before.max())
+    # the edited object keeps its K + 1 rows; a frozen one comes back when edited
+    state.edit("floor", 10.0)
+    state.edit("box", 0.5)
+    assert "box" not in state.frozen
+
+
+def test_freezing_shrinks_the_working_set(scene):
+    state = bp.precompute(scene, **TINY)
+    state.render()
+    before = state.storage_bytes()
+    state.freeze()
+    after = state.storage_bytes()
+    assert after["transfer"] < before["transfer"]
+    assert after["diffuse"] == before["diffuse"] and after["gather"] == before["gather"]
+    image = state.relight([PointLight([0.5, 2.5, 1.5], 10.0)])
+    assert np.all(np.isfinite(image.rgb)) and image.metadata["frozen"] == ["box", "floor",
+                                                                           "sphere"]
+
+
+# -- stability ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_gamma_at_the_ends_of_every_range_renders_finite_images(model):
+    scene = _tiny_scene(16, 12)
+    floor = AnalyticBRDF(model, GAMMA_RANGES[model][0], rho_s=0.3, rho_d=0.4, f0=0.5)
+    scene = scene.with_material("floor", floor)
+    state = bp.precompute(scene, **dict(TINY, gather_samples=64, n_basis=4))
+    low, high = GAMMA_RANGES[model]
+    for gamma in (low, high):
+        image = state.edit("floor", gamma).rgb
+        assert np.all(np.isfinite(image)) and image.max() > 0
+    for bad in (low * 0.999, high * 1.001):
+        with pytest.raises(InputError, match=rf"must be in \[{low:g}, {high:g}\] for the "
+                                             rf"{model} model"):
+            state.edit("floor", bad)
+
+
+# -- bad input ---------------------------------------------------------------------------
+
+
+def test_bad_knobs_and_scenes(scene):
+    with pytest.raises(InputError, match=r"knobs = \['gather'\]: unknown knob; valid: "
+                                         r"gather_samples"):
+        bp.precompute(scene, gather=10)
+    with pytest.raises(InputError, match=r"gather_samples = 8: must be an integer in "
+                                         r"\[16, 1048576\]"):
+        bp.precompute(scene, gather_samples=8)
+    with pytest.raises(InputError, match=r"subarea = 'yes': must be true or false"):
+        bp.precompute(scene, subarea="yes")
+    with pytest.raises(InputError, match=r"glossy_ratio = 2.0: must be in \[0, 1\]"):
+        bp.precompute(scene, glossy_ratio=2.0)
+    milk = scene.with_material("box", Dipole(sigma_a=0.01, sigma_s_prime=1.0))
+    assert "Dipole material" in bp.applies_to(milk)
+    with pytest.raises(InputError, match="does not apply: object 'box' has a Dipole"):
+        bp.precompute(milk)
+    diffuse = scene
+    for name in ("floor", "sphere", "box"):
+        diffuse = diffuse.with_material(name, Lambertian(0.5))
+    assert bp.applies_to(diffuse) == "no object has an analytic BRDF: there is nothing to edit"
+    lit = scene.with_lights([ConstantEnvironment(1.0)])
+    assert "environment lights are not supported" in bp.applies_to(lit)
+
+
+def test_bad_edits(state, scene):
+    with pytest.raises(InputError, match=r"object = 'back_wall': not an object with an "
+                                         r"analytic BRDF; editable: floor"):
+        state.edit("back_wall", 10)
+    with pytest.raises(InputError, match=r"material\['floor'\] = 'ward': only gamma, rho_s "
+                                         r"and rho_d can change"):
+        state.render(material={"floor": AnalyticBRDF("W", 0.3)})
+    with pytest.raises(InputError, match="several objects have an analytic BRDF: pass a dict"):
+        state.render(material=AnalyticBRDF("BP", 10))
+    with pytest.raises(InputError, match=r"material = 'lamp': no such object"):
+        state.render(material={"lamp": Lambertian(0.5)})
+    with pytest.raises(InputError, match=r"component = 'glossy': must be 'all', 'direct' or "
+                                         r"'indirect'"):
+        state.render(component="glossy")
+    with pytest.raises(InputError, match=r"lights\[0\] = 'ConstantEnvironment': environment"):
+        state.relight([ConstantEnvironment(1.0)])
