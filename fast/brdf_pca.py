@@ -132,8 +132,9 @@ DEFAULT_KNOBS = {
     "frozen_coefficients": 192,
     # samples per area light for direct lighting
     "light_samples": 16,
-    # (view sample, gather sample) pairs per block of the transfer computation
-    "block_pairs": 1 << 20,
+    # (view sample, gather sample) pairs per block of the transfer computation: each block
+    # starts a few threaded kernels, which costs ~25 ms on a loaded machine
+    "block_pairs": 1 << 22,
     "seed": 0,
 }
 
@@ -193,8 +194,10 @@ def _haar_rows_serial(rows):  # pragma: no cover - compiled
 #: The product of :class:`~translucent.fast.sparse_transport.QuantisedRows` with an RGB
 #: vector, compiled without threads for the interactive path: its rows take a few
 #: milliseconds, and on a loaded machine waking a thread team costs more than that
-#: (measured on 2 shared cores: 18 ms threaded against 5 ms serial for 20k rows of 96).
-_product_serial = numba.njit(cache=True)(_product_rgb.py_func)
+#: (measured on 2 shared cores: 25 ms per threaded call whatever its size, against 5 ms
+#: serial for 20k rows of 96). Not cached on disk: the cache is keyed by the Python
+#: function, whose threaded build it would load instead.
+_product_serial = numba.njit(cache=False)(_product_rgb.py_func)
 
 
 def _product(matrix: QuantisedRows, vector) -> np.ndarray:
@@ -610,10 +613,13 @@ def _engine(scene):
     return engine, engine.diagonal * OFFSET_FRACTION
 
 
+#: Rays per Mitsuba call: a block of the transfer at the default ``block_pairs`` in one
+#: call (about 200 MB of ray data in flight), so its arrays need no copy.
+RAYS_PER_CALL = 1 << 22
+
+
 def _occluded(engine, origins, directions, reach) -> np.ndarray:
     """Any-hit tests of rays given as (3, N) float32 arrays, through the scene's engine."""
-    from ..scenes.raycast import RAYS_PER_CALL
-
     mi = engine.mi
     count = origins.shape[1]
     blocked = np.zeros(count, dtype=bool)
