@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 from translucent.backend import mitsuba
+from translucent.errors import InputError
 from translucent.materials.brdfs import GAMMA_RANGES, MODELS, AnalyticBRDF
 from translucent.reference.brdf_plugins import PLUGIN_NAME, bsdf_dict, register_plugin
 
@@ -177,3 +178,57 @@ def test_5_render_a_furnace_rectangle():
     standard_error = image.std(axis=0) / math.sqrt(len(image))
     z_critical = norm.ppf(1 - (1 - (1 - SIGNIFICANCE) ** (1 / 3)) / 2)
     assert np.all(np.abs(image.mean(axis=0) - expected) <= z_critical * standard_error)
+
+
+def _small_glossy_scene(diffuse: bool):
+    from dataclasses import replace
+
+    from translucent.scenes import load_scene
+
+    scene = load_scene("glossy")
+    scene = scene.with_camera(replace(scene.camera, width=24, height=18))
+    if diffuse:
+        for obj in scene.objects:
+            if isinstance(obj.material, AnalyticBRDF):
+                scene = scene.with_material(obj.name, replace(obj.material, rho_s=0.0))
+    return scene
+
+
+def test_6_scene_conversion_uses_the_plugin_two_sided():
+    from translucent.reference import to_mitsuba_dict
+
+    description = to_mitsuba_dict(_small_glossy_scene(diffuse=False))
+    loaded = mitsuba().load_dict(description)
+    names = sorted(str(shape.bsdf()) for shape in loaded.shapes())
+    assert sum("AnalyticBRDFPlugin" in name for name in names) == 3
+    assert all("TwoSided" in name for name in names)
+
+
+def test_7_lambertian_gather_is_the_path_tracer_on_diffuse_scenes():
+    """With no glossy lobe the method's transport is all of the transport: the integrator
+    must agree with Mitsuba's path tracer of the same depth (bounces + 3 segments)."""
+    from translucent.reference import render
+    from translucent.reference.brdf_plugins import render_lambertian_gather
+    from translucent.reports.statistics import z_test_known_variance
+
+    scene = _small_glossy_scene(diffuse=True)
+    limit = render_lambertian_gather(scene, bounces=1, spp=64, passes=4)
+    path = render(scene, spp=64, passes=4, max_depth=4, progress=False)
+    result = z_test_known_variance(limit, path)
+    assert result.passed, result.summary()
+
+
+def test_7_lambertian_gather_misses_glossy_paths():
+    """Every path it drops (glossy reflection after the first surface) carries light >= 0,
+    so on a glossy scene its image is darker than the path tracer's, beyond the noise."""
+    from translucent.reference import render
+    from translucent.reference.brdf_plugins import render_lambertian_gather
+
+    scene = _small_glossy_scene(diffuse=False)
+    limit = render_lambertian_gather(scene, bounces=1, spp=64, passes=4)
+    path = render(scene, spp=64, passes=4, max_depth=4, progress=False)
+    difference = path.rgb.sum() - limit.rgb.sum()
+    standard_error = math.sqrt(path.variance.sum() + limit.variance.sum())
+    assert difference > 5 * standard_error
+    with pytest.raises(InputError, match=r"bounces = -1: must be an integer >= 0"):
+        render_lambertian_gather(scene, bounces=-1)
