@@ -290,8 +290,8 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
     seed : int, optional
     progress : bool
     **options
-        ``fit_eta``, ``walkers``, ``max_steps`` (dipole); ``segments``, ``r_s_mm``,
-        ``smoothness`` (SubEdit).
+        ``r_min_mm`` (profile); ``fit_eta``, ``walkers``, ``max_steps`` (dipole);
+        ``segments``, ``r_s_mm``, ``smoothness`` (SubEdit).
 
     Returns
     -------
@@ -303,7 +303,7 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
         raise InputError(f"unknown model; valid: {', '.join(MODELS)}", field="model",
                          value=unknown[0])
     capture = read_capture(path)
-    profile = measure_profile(capture)
+    profile = measure_profile(capture, r_min_mm=options.pop("r_min_mm", 0.0) or 0.0)
     results = {}
     for kind in models:
         if kind == "dipole":

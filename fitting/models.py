@@ -71,8 +71,16 @@ KNOT_BOX_NATS = (60.0, 10.0)
 SUBEDIT_SMOOTHNESS = 2.0
 
 CHANNELS = "RGB"
-#: Grid points evaluated together by :meth:`DipoleModel.initial_guess`.
+#: Grid points evaluated together by :meth:`DipoleModel.initial_guesses`.
 GRID_BLOCK = 48
+#: Grid of the starting-point search: points per decade range of sigma_a and sigma_s'.
+GRID_POINTS = 32
+#: Exposures tried for the shared-exposure start: a log grid from the channels' smallest
+#: own best exposure / e^3 to their largest x e^3.
+SCALE_SEARCH_NATS = 3.0
+SCALE_SEARCH_POINTS = 121
+#: Grid basins per channel polished on their own before the joint MAP search.
+CHANNEL_CANDIDATES = 4
 
 
 def student_t_log_likelihood(residual, stderr, dof) -> np.ndarray:
@@ -287,18 +295,25 @@ class DipoleModel(ProfileModel):
         sigma_a, sigma_s_prime, eta, exposure = self.split(theta)
         return exposure[:, None, None] * self.unit_profiles(sigma_a, sigma_s_prime, eta)
 
-    def initial_guess(self, grid_points: int = 24) -> np.ndarray:
-        """Best point of a per-channel grid over the prior, with the exposure profiled out.
+    def initial_guess(self) -> np.ndarray:
+        """Return the best of :meth:`initial_guesses` (the shared-exposure grid point)."""
+        return self.initial_guesses()[0]
 
-        Each channel's (sigma_a, sigma_s') is chosen on a ``grid_points`` x ``grid_points``
-        log grid (and eta in {1.1, 1.3, 1.5} when fitted); the best exposure for each grid
-        point is the weighted least-squares scale. The channels' exposures are then
-        combined geometrically.
+    def initial_guesses(self, grid_points: int = GRID_POINTS) -> list[np.ndarray]:
+        """Return starting points for the optimiser from a grid over the prior.
+
+        Each channel's (sigma_a, sigma_s') runs over a ``grid_points`` x ``grid_points``
+        log grid (and eta over {1.1, 1.3, 1.5} when fitted). The first point shares one
+        exposure (and eta) between the channels, as the model does: for each exposure on a
+        fine log grid, each channel takes its best grid point, and the exposure with the
+        best total wins. The second lets every channel take its own best exposure
+        (weighted least squares) and combines them geometrically. Two starts guard the
+        MAP search against the valleys of the sigma_a - sigma_s' - exposure degeneracy.
         """
         log_a = np.linspace(*np.log(SIGMA_A_RANGE), grid_points)
         log_s = np.linspace(*np.log(SIGMA_S_PRIME_RANGE), grid_points)
-        etas = np.array([1.1, 1.3, 1.5]) if self.fit_eta else np.array([self.split(
-            np.zeros((1, self.ndim)))[2][0]])
+        fixed_eta = self.split(np.zeros((1, self.ndim)))[2][0]
+        etas = np.array([1.1, 1.3, 1.5]) if self.fit_eta else np.array([fixed_eta])
         grid_a, grid_s, grid_eta = (g.ravel() for g in np.meshgrid(log_a, log_s, etas,
                                                                     indexing="ij"))
         predicted = [np.empty((grid_a.size, self._observations[c][0].size)) for c in range(3)]
@@ -310,7 +325,8 @@ class DipoleModel(ProfileModel):
                                       grid_eta[block])
             for c, values in enumerate(self.profile.operator.predict(unit)):
                 predicted[c][block] = values
-        best = {}
+        # each channel on its own: the weighted least-squares exposure of every grid point
+        own = {}
         for c in self.channels:
             mean, stderr, dof = self._observations[c]
             u = predicted[c]
@@ -321,22 +337,132 @@ class DipoleModel(ProfileModel):
                 scale = np.full_like(scale, self.spec.exposure)
             scale = np.where(np.isfinite(scale) & (scale > 0), scale, np.nan)
             loglike = student_t_log_likelihood(mean - scale[:, None] * u, stderr, dof)
-            loglike = np.where(np.isfinite(loglike), loglike, -np.inf)
-            k = int(np.argmax(loglike))
-            best[c] = (grid_a[k], grid_s[k], grid_eta[k], scale[k])
+            k = int(np.argmax(np.where(np.isfinite(loglike), loglike, -np.inf)))
+            own[c] = (k, scale[k])
+        scales = np.array([own[c][1] for c in own], dtype=np.float64)
+        scales = scales[np.isfinite(scales) & (scales > 0)]
+        own_scale = float(np.exp(np.mean(np.log(scales)))) if scales.size else 1.0
+        guesses = [self._grid_theta(grid_a, grid_s, grid_eta, {c: own[c][0] for c in own},
+                                    own_scale)]
+        refined = self._refined_channel_start(predicted, grid_a, grid_s, grid_eta)
+        if refined is not None:
+            guesses.append(refined)
+        # one exposure (and eta) for all channels, as the model has it
+        if self.fit_exposure and scales.size:
+            trial_scales = np.exp(np.linspace(np.log(scales.min()) - SCALE_SEARCH_NATS,
+                                              np.log(scales.max()) + SCALE_SEARCH_NATS,
+                                              SCALE_SEARCH_POINTS))
+        else:
+            trial_scales = np.array([own_scale if self.fit_exposure else self.spec.exposure])
+        best_total, shared = -np.inf, None
+        for eta in etas:
+            subset = np.flatnonzero(grid_eta == eta)
+            totals = np.zeros(trial_scales.size)
+            picks = {}
+            for c in self.channels:
+                mean, stderr, dof = self._observations[c]
+                loglike = student_t_log_likelihood(
+                    mean - trial_scales[:, None, None] * predicted[c][subset][None], stderr, dof)
+                loglike = np.where(np.isfinite(loglike), loglike, -np.inf)
+                picks[c] = subset[np.argmax(loglike, axis=1)]
+                totals += loglike.max(axis=1)
+            k = int(np.argmax(totals))
+            if totals[k] > best_total:
+                best_total = totals[k]
+                shared = ({c: int(picks[c][k]) for c in picks}, float(trial_scales[k]))
+        if shared is not None:
+            guesses.insert(0, self._grid_theta(grid_a, grid_s, grid_eta, *shared))
+        return guesses
+
+    def _channel_log_likelihood(self, c, points, eta) -> np.ndarray:
+        """Log-likelihood of channel ``c`` alone at ``(ln sigma_a, ln sigma_s', ln scale)``."""
+        points = np.atleast_2d(points)
+        sigma_a = np.repeat(np.exp(points[:, :1]), 3, axis=1)
+        sigma_s = np.repeat(np.exp(points[:, 1:2]), 3, axis=1)
+        unit = self.unit_profiles(sigma_a, sigma_s, np.full(points.shape[0], eta))
+        predicted = self.profile.operator.predict(unit, channels=(c,))[c]
+        mean, stderr, dof = self._observations[c]
+        value = student_t_log_likelihood(mean - np.exp(points[:, 2:3]) * predicted, stderr, dof)
+        return np.where(np.isfinite(value), value, -1e300)
+
+    def _refined_channel_start(self, predicted, grid_a, grid_s, grid_eta):
+        """Refine each channel's best grid basins on their own, then join the channels.
+
+        The :data:`CHANNEL_CANDIDATES` best grid points of each channel (at least two grid
+        cells apart) are polished by L-BFGS-B in (ln sigma_a, ln sigma_s', ln exposure) of
+        that channel alone; the best of them is kept. The exposures are combined
+        geometrically.
+        """
+        from scipy import optimize
+
+        eta = float(np.median(grid_eta))
+        bounds = [(np.log(SIGMA_A_RANGE[0]), np.log(SIGMA_A_RANGE[1])),
+                  (np.log(SIGMA_S_PRIME_RANGE[0]), np.log(SIGMA_S_PRIME_RANGE[1])),
+                  (np.log(EXPOSURE_RANGE[0]), np.log(EXPOSURE_RANGE[1]))]
+        picks, scales = {}, []
+        cell = np.diff(np.unique(grid_a))[0] if np.unique(grid_a).size > 1 else 1.0
+        for c in self.channels:
+            mean, stderr, dof = self._observations[c]
+            u = predicted[c]
+            weights = 1.0 / stderr ** 2
+            with np.errstate(invalid="ignore", divide="ignore"):
+                scale = (u * mean * weights).sum(axis=1) / (u * u * weights).sum(axis=1)
+            if not self.fit_exposure:
+                scale = np.full_like(scale, self.spec.exposure)
+            good = np.isfinite(scale) & (scale > 0)
+            loglike = np.where(good, student_t_log_likelihood(
+                mean - np.where(good, scale, 1.0)[:, None] * u, stderr, dof), -np.inf)
+            chosen = []
+            for k in np.argsort(loglike)[::-1]:
+                if not np.isfinite(loglike[k]) or len(chosen) == CHANNEL_CANDIDATES:
+                    break
+                if all(max(abs(grid_a[k] - grid_a[j]), abs(grid_s[k] - grid_s[j])) > 2 * cell
+                       for j in chosen):
+                    chosen.append(k)
+            best = None
+            for k in chosen:
+                start = np.array([grid_a[k], grid_s[k], np.log(scale[k])])
+                fixed = not self.fit_exposure
+
+                def objective(x, c=c, fixed=fixed):
+                    point = np.array(x)
+                    if fixed:
+                        point[2] = np.log(self.spec.exposure)
+                    return -float(self._channel_log_likelihood(c, point, eta)[0])
+
+                result = optimize.minimize(objective, start, method="L-BFGS-B", bounds=bounds,
+                                           options={"maxiter": 200})
+                if best is None or result.fun < best.fun:
+                    best = result
+            if best is None:
+                return None
+            picks[c] = best.x
+            scales.append(best.x[2])
         theta = np.zeros(self.ndim)
-        fallback = best[self.channels[0]]
+        fallback = picks[self.channels[0]]
         for c in range(3):
-            a, s, _, _ = best.get(c, fallback)
-            theta[c], theta[3 + c] = a, s
+            theta[c], theta[3 + c] = picks.get(c, fallback)[:2]
         index = 6
         if self.fit_eta:
-            theta[index] = float(np.median([best[c][2] for c in best]))
+            theta[index] = eta
             index += 1
         if self.fit_exposure:
-            scales = np.array([best[c][3] for c in best], dtype=np.float64)
-            scales = scales[np.isfinite(scales) & (scales > 0)]
-            theta[index] = float(np.mean(np.log(scales))) if scales.size else 0.0
+            theta[index] = float(np.mean(scales))
+        return np.clip(theta, self.bounds[:, 0], self.bounds[:, 1])
+
+    def _grid_theta(self, grid_a, grid_s, grid_eta, picks, scale) -> np.ndarray:
+        """Return a parameter vector from per-channel grid indices and one exposure."""
+        theta = np.zeros(self.ndim)
+        fallback = picks[self.channels[0]]
+        for c in range(3):
+            k = picks.get(c, fallback)
+            theta[c], theta[3 + c] = grid_a[k], grid_s[k]
+        index = 6
+        if self.fit_eta:
+            theta[index] = float(np.median([grid_eta[k] for k in picks.values()]))
+            index += 1
+        if self.fit_exposure:
+            theta[index] = np.log(scale)
         return np.clip(theta, self.bounds[:, 0], self.bounds[:, 1])
 
     def material(self, values: dict[str, float]) -> dict:

@@ -15,7 +15,8 @@ Measurement (:func:`measure_profile`):
 5. Annuli are dropped (and counted) where the data are censored: any annulus holding a
    saturated pixel, and every annulus inside it; the first annulus whose below-black
    fraction exceeds :data:`BELOW_BLACK_FRACTION` (the noise floor), and every annulus
-   outside it; annuli with fewer than :data:`MIN_VALID_PIXELS` valid pixels.
+   outside it; annuli with fewer than :data:`MIN_VALID_PIXELS` valid pixels; on request,
+   annuli reaching inside ``r_min_mm``.
 
 Prediction (:class:`ProfileOperator`): the mean of annulus ``a`` in channel ``c`` is
 ``exposure * (M_c @ f(nodes))[a]`` for a radial exitance profile ``f`` (mm^-2), with
@@ -345,7 +346,7 @@ def _grid_spacing(mean, radius_mm, used, pixel_mm) -> float:
 
 
 def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
-                    refine_centre: bool = True) -> RadialProfile:
+                    r_min_mm: float = 0.0, refine_centre: bool = True) -> RadialProfile:
     """Measure the radial profile of every channel of ``capture`` (see the module docstring).
 
     Parameters
@@ -353,6 +354,9 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
     capture : Capture
     r_max_mm : float, optional
         Outermost radius to use, mm (default: the farthest image corner).
+    r_min_mm : float
+        Annuli reaching inside this radius are left out (counted as ``inside_r_min``): a
+        way to fit the dipole only where diffusion holds, a few transport lengths out.
     refine_centre : bool
         Refine ``incident_px`` to sub-pixel (default); False keeps the sidecar's point.
 
@@ -392,7 +396,11 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
     dof = np.zeros((n_annuli, 3), dtype=np.int64)
     radius_mean = np.full((n_annuli, 3), np.nan)
     used = np.zeros((n_annuli, 3), dtype=bool)
-    dropped = {"saturated": [0, 0, 0], "noise_floor": [0, 0, 0], "too_few_pixels": [0, 0, 0]}
+    dropped = {"saturated": [0, 0, 0], "noise_floor": [0, 0, 0], "too_few_pixels": [0, 0, 0],
+               "inside_r_min": [0, 0, 0]}
+    if not (np.isfinite(r_min_mm) and r_min_mm >= 0):
+        raise InputError("must be >= 0", field="r_min_mm", value=r_min_mm)
+    too_close = edges[:-1] * pixel < r_min_mm
     masked = {"nan": [0, 0, 0], "saturated": [0, 0, 0], "below_black": [0, 0, 0],
               "valid": [0, 0, 0]}
     for c in range(3):
@@ -437,6 +445,8 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
         dropped["saturated"][c] = int((has_pixels & clipped).sum())
         dropped["noise_floor"][c] = int((has_pixels & floor & ~clipped).sum())
         dropped["too_few_pixels"][c] = int((has_pixels & ~clipped & ~floor & ~keep).sum())
+        dropped["inside_r_min"][c] = int((keep & too_close).sum())
+        keep &= ~too_close
         used[:, c] = keep
     if (used.sum(axis=0) < 4).all():
         raise InputError("no channel has 4 usable annuli (saturated, below black or too "

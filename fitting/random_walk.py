@@ -144,13 +144,13 @@ def _scatter(rng, ux, uy, uz, g):
 
 
 def _walk_channel(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius, r_kill,
-                  edges, batches, film, rotations):
-    """One channel: returns (radial sums per side and batch, totals, lost, film sums)."""
+                  edges, film, rotations):
+    """Trace one batch of one channel: (radial sums per side, totals, lost, film sums)."""
     sigma_t = sigma_a + sigma_s
     albedo = sigma_s / sigma_t if sigma_t > 0 else 0.0
     n_bins = edges.size - 1
-    radial = np.zeros((2, batches, n_bins))
-    totals = np.zeros((2, batches))
+    radial = np.zeros((2, n_bins))
+    totals = np.zeros(2)
     lost = 0.0
     film_sum = None if film is None else np.zeros(film.shape[0] * film.shape[1])
     film_side = None if film is None else (0 if film.side == "reflection" else 1)
@@ -160,7 +160,6 @@ def _walk_channel(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius
     x, y, z = x0.copy(), y0.copy(), np.zeros(photons)
     ux, uy, uz = np.zeros(photons), np.zeros(photons), np.ones(photons)
     w = np.ones(photons)
-    batch = np.arange(photons) % batches
     depth = np.inf if thickness is None else thickness
 
     def score(side, mask, weight):
@@ -169,8 +168,8 @@ def _walk_channel(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius
         r = np.hypot(dx, dy)
         bins = np.searchsorted(edges, r, side="right") - 1
         inside = (bins >= 0) & (bins < n_bins)
-        np.add.at(radial[side], (batch[mask][inside], bins[inside]), weight[inside])
-        np.add.at(totals[side], batch[mask], weight)
+        radial[side] += np.bincount(bins[inside], weight[inside], minlength=n_bins)
+        totals[side] += weight.sum()
         if film_sum is not None and side == film_side:
             height, width = film.shape
             for _ in range(rotations):
@@ -225,7 +224,7 @@ def _walk_channel(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius
         keep = w > 0
         if not keep.all():
             x, y, z, ux, uy, uz, w = (a[keep] for a in (x, y, z, ux, uy, uz, w))
-            x0, y0, batch = x0[keep], y0[keep], batch[keep]
+            x0, y0 = x0[keep], y0[keep]
     return radial, totals, lost, film_sum
 
 
@@ -233,7 +232,8 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
                        thickness_mm: float | None = None, beam_radius_mm: float = 0.0,
                        radial_edges_mm=None, film: Film | None = None, rotations: int = 8,
                        batches: int = 10, r_kill_mm: float | None = None,
-                       seed: int | None = None, channels=(0, 1, 2)) -> WalkTally:
+                       seed: int | None = None, channels=(0, 1, 2),
+                       progress: bool = False) -> WalkTally:
     """Trace ``photons`` per channel through a slab of ``material`` (see the module docstring).
 
     Parameters
@@ -260,6 +260,8 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
     seed : int, optional
     channels : sequence of int
         Channels to trace (the others are left at zero).
+    progress : bool
+        Show a progress bar over channels and batches (on stderr).
 
     Returns
     -------
@@ -296,21 +298,43 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
     totals_se = np.zeros((2, 3))
     lost = np.zeros(3)
     film_image = None if film is None else np.zeros(film.shape + (3,))
-    per_batch = photons / batches
-    for c in channels:
-        radial, total, lost_c, film_sum = _walk_channel(
-            rng, photons, float(material.sigma_a[c]), float(material.sigma_s[c]),
-            float(material.g), float(material.eta), thickness_mm, float(beam_radius_mm),
-            float(r_kill_mm), edges, batches, film, int(rotations))
-        batch_profiles = radial / (per_batch * area)  # (side, batch, bin)
-        profiles[:, :, c] = batch_profiles.mean(axis=1)
-        profiles_se[:, :, c] = batch_profiles.std(axis=1, ddof=1) / np.sqrt(batches)
-        batch_totals = total / per_batch
-        totals[:, c] = batch_totals.mean(axis=1)
-        totals_se[:, c] = batch_totals.std(axis=1, ddof=1) / np.sqrt(batches)
-        lost[c] = lost_c / photons
-        if film is not None:
-            film_image[..., c] = film_sum.reshape(film.shape) / (photons * film.pixel_size_mm ** 2)
+    sizes = np.full(batches, photons // batches)
+    sizes[: photons % batches] += 1
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(channels) * batches, desc="photon random walk", unit="batch",
+                   leave=False)
+    try:
+        for c in channels:
+            radial = np.zeros((batches, 2, n_bins))
+            total = np.zeros((batches, 2))
+            lost_c = 0.0
+            film_sum = None if film is None else np.zeros(film.shape[0] * film.shape[1])
+            for b, size in enumerate(sizes):
+                radial[b], total[b], lost_b, film_b = _walk_channel(
+                    rng, int(size), float(material.sigma_a[c]), float(material.sigma_s[c]),
+                    float(material.g), float(material.eta), thickness_mm,
+                    float(beam_radius_mm), float(r_kill_mm), edges, film, int(rotations))
+                lost_c += lost_b
+                if film is not None:
+                    film_sum += film_b
+                if bar is not None:
+                    bar.update(1)
+            batch_profiles = radial / (sizes[:, None, None] * area)  # (batch, side, bin)
+            profiles[:, :, c] = batch_profiles.mean(axis=0)
+            profiles_se[:, :, c] = batch_profiles.std(axis=0, ddof=1) / np.sqrt(batches)
+            batch_totals = total / sizes[:, None]
+            totals[:, c] = batch_totals.mean(axis=0)
+            totals_se[:, c] = batch_totals.std(axis=0, ddof=1) / np.sqrt(batches)
+            lost[c] = lost_c / photons
+            if film is not None:
+                film_image[..., c] = film_sum.reshape(film.shape) / (
+                    photons * film.pixel_size_mm ** 2)
+    finally:
+        if bar is not None:
+            bar.close()
     return WalkTally(radial_edges_mm=edges, reflectance=profiles[0],
                      reflectance_se=profiles_se[0], transmittance=profiles[1],
                      transmittance_se=profiles_se[1], total_reflectance=totals[0],
@@ -322,13 +346,14 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
 def walk_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
                  pixel_size_mm: float = 0.1, incident_px=None, side: str = "reflection",
                  thickness_mm: float | None = None, beam_radius_mm: float = 0.0,
-                 photons: int = 1_000_000, rotations: int = 16, camera: Camera | None = None,
+                 photons: int = 200_000, rotations: int = 16, camera: Camera | None = None,
                  seed: int | None = None, image_name: str = "capture.exr",
-                 eta_known: bool = True):
+                 eta_known: bool = True, progress: bool = False):
     """Make a synthetic capture traced by :func:`photon_random_walk`, with camera defects.
 
     Parameters are those of :func:`~translucent.fitting.synthetic.dipole_capture`, plus
-    ``photons`` (per channel) and ``rotations`` (film scoring).
+    ``photons`` (per channel), ``rotations`` (film scoring) and ``progress`` (a progress
+    bar).
 
     Returns
     -------
@@ -346,7 +371,7 @@ def walk_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
     rng = np.random.default_rng(seed)
     tally = photon_random_walk(material, photons=photons, thickness_mm=thickness_mm,
                                beam_radius_mm=beam_radius_mm, film=film, rotations=rotations,
-                               seed=int(rng.integers(2**31)))
+                               seed=int(rng.integers(2**31)), progress=progress)
     stored, exposure = apply_camera(tally.film, camera, rng)
     spec = _capture_spec(material, camera, image_name=image_name, pixel_size_mm=pixel_size_mm,
                          incident_px=incident_px, side=side, thickness_mm=thickness_mm,

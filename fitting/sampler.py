@@ -56,12 +56,14 @@ def find_map(model, start=None, *, max_iterations: int = 500) -> tuple[np.ndarra
     """Maximum-a-posteriori point with L-BFGS-B inside the prior box.
 
     The gradient is a central difference evaluated in one vectorised call of the model.
+    Without ``start``, the search runs from every point of ``model.initial_guesses()``
+    (when the model offers several) and keeps the best.
 
     Parameters
     ----------
     model : ProfileModel
     start : ndarray, optional
-        Starting point (default: ``model.initial_guess()``).
+        Starting point (default: ``model.initial_guesses()`` or ``model.initial_guess()``).
     max_iterations : int
 
     Returns
@@ -74,9 +76,22 @@ def find_map(model, start=None, *, max_iterations: int = 500) -> tuple[np.ndarra
     InputError
         When the log-posterior is not finite at the starting point.
     """
+    if start is None and hasattr(model, "initial_guesses"):
+        starts = model.initial_guesses()
+    else:
+        starts = [model.initial_guess() if start is None else start]
+    best = None
+    for point in starts:
+        theta, value = _local_map(model, point, max_iterations)
+        if best is None or value > best[1]:
+            best = (theta, value)
+    return best
+
+
+def _local_map(model, start, max_iterations):
+    """L-BFGS-B from one starting point (see :func:`find_map`)."""
     bounds = model.bounds
-    theta0 = np.asarray(model.initial_guess() if start is None else start, dtype=np.float64)
-    theta0 = np.clip(theta0, bounds[:, 0], bounds[:, 1])
+    theta0 = np.clip(np.asarray(start, dtype=np.float64), bounds[:, 0], bounds[:, 1])
     value0 = float(model.log_probability(theta0)[0])
     if not np.isfinite(value0):
         raise InputError("the log-probability is not finite at the starting point; the "

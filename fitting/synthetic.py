@@ -38,6 +38,11 @@ __all__ = ["Camera", "apply_camera", "default_pixel_size", "dipole_capture", "ex
 SUPERSAMPLE = 6
 CENTRAL_SUPERSAMPLE = 64
 CENTRAL_PIXELS = 2.5
+#: Pixels within this many pixels of the incident point (and beyond the central ones) use
+#: :data:`NEAR_SUPERSAMPLE`: where the profile falls like 1/r^3, midpoint sampling errs by
+#: ~ (h / r)^2 / 2 relative, 1e-4 at 3 px with h = 1/24 px, below the noise of an annulus.
+NEAR_PIXELS = 12.0
+NEAR_SUPERSAMPLE = 24
 #: Polar quadrature of the beam convolution: Gauss-Legendre points in radius (over 0..3 w,
 #: beyond which the Gaussian beam holds 1.5e-8 of its power) and equally spaced angles.
 BEAM_RADIAL_POINTS = 96
@@ -216,13 +221,14 @@ def exitance_image(profile_fn, shape, pixel_size_mm, centre_px, beam_radius_mm=0
         dy = (ys - cy)[None, :, None]
         r = np.hypot(dx, dy) * pixel_size_mm
         image[row] = evaluate(r).mean(axis=(1, 2))
-    fine = (np.arange(CENTRAL_SUPERSAMPLE) + 0.5) / CENTRAL_SUPERSAMPLE
-    rows = range(max(0, int(cy - CENTRAL_PIXELS)), min(height, int(cy + CENTRAL_PIXELS) + 1))
-    cols = range(max(0, int(cx - CENTRAL_PIXELS)), min(width, int(cx + CENTRAL_PIXELS) + 1))
-    for row in rows:
-        for col in cols:
-            r = np.hypot(col + fine[None, :] - cx, row + fine[:, None] - cy) * pixel_size_mm
-            image[row, col] = evaluate(r).mean(axis=(0, 1))
+    for reach, count in ((NEAR_PIXELS, NEAR_SUPERSAMPLE), (CENTRAL_PIXELS, CENTRAL_SUPERSAMPLE)):
+        fine = (np.arange(count) + 0.5) / count
+        rows = range(max(0, int(cy - reach)), min(height, int(cy + reach) + 1))
+        cols = range(max(0, int(cx - reach)), min(width, int(cx + reach) + 1))
+        for row in rows:
+            for col in cols:
+                r = np.hypot(col + fine[None, :] - cx, row + fine[:, None] - cy) * pixel_size_mm
+                image[row, col] = evaluate(r).mean(axis=(0, 1))
     return image
 
 

@@ -15,9 +15,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..materials import Dipole, measured_medium, measured_medium_names
 from .capture import Capture
 from .fit import fit_dipole
+from .profile import measure_profile
 from .synthetic import Camera, default_pixel_size, dipole_capture
 
 __all__ = ["COVERAGE_TARGET", "BiasRow", "CoverageResult", "coverage_study", "model_bias_table",
@@ -115,6 +117,7 @@ class BiasRow:
     status: list
     converged: bool
     tau_max: float
+    r_min_mm: float
     pixel_size_mm: float
     photons: int
     seconds: float
@@ -126,7 +129,8 @@ class BiasRow:
 
 def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
                      rotations: int = 16, seed: int = 0, walkers: int | None = None,
-                     progress: bool = False, on_row=None) -> list[BiasRow]:
+                     r_min_transport_lengths=(0.0,), progress: bool = False,
+                     on_row=None) -> list[BiasRow]:
     """Fit random-walk captures of measured media with the dipole; recovered against true.
 
     Each capture: ``size`` x ``size`` pixels spanning ~12 diffusion lengths
@@ -141,6 +145,10 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
     photons : int
         Photons per channel.
     size, rotations, seed, walkers, progress
+    r_min_transport_lengths : sequence of float
+        Fit each capture once per entry, leaving out the annuli inside that many transport
+        lengths (1 / sigma_t' of the least scattering channel): 0 fits the whole profile,
+        3 only where diffusion holds.
     on_row : callable, optional
         Called with each :class:`BiasRow` as it is done (progress reports).
 
@@ -160,25 +168,50 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
         pixels, spec, _ = walk_capture(material, size=size, pixel_size_mm=pixel,
                                        photons=photons, rotations=rotations,
                                        seed=int(rng.integers(2**31)))
-        result = fit_dipole(Capture(spec, pixels), walkers=walkers,
-                            seed=int(rng.integers(2**31)), progress=progress)
-        get = result.parameter
-        row = BiasRow(
-            material=material.name, true_sigma_a=material.sigma_a.tolist(),
-            fit_sigma_a=[get(f"sigma_a[{c}]").median for c in "RGB"],
-            fit_sigma_a_68=[[get(f"sigma_a[{c}]").low68, get(f"sigma_a[{c}]").high68]
-                            for c in "RGB"],
-            true_sigma_s_prime=material.sigma_s_prime.tolist(),
-            fit_sigma_s_prime=[get(f"sigma_s_prime[{c}]").median for c in "RGB"],
-            fit_sigma_s_prime_68=[[get(f"sigma_s_prime[{c}]").low68,
-                                   get(f"sigma_s_prime[{c}]").high68] for c in "RGB"],
-            status=[s.status for s in result.parameters[:6]], converged=result.converged,
-            tau_max=float(result.chains[0].tau.max()), pixel_size_mm=pixel,
-            photons=int(photons), seconds=time.perf_counter() - began)
-        rows.append(row)
-        if on_row is not None:
-            on_row(row)
+        capture = Capture(spec, pixels)
+        for lengths in r_min_transport_lengths:
+            r_min = float(lengths * np.max(material.mean_free_path))
+            fit_seed = int(rng.integers(2**31))
+            try:
+                profile = measure_profile(capture, r_min_mm=r_min)
+            except InputError:  # nothing left outside r_min: a row that says so
+                row = _empty_row(material, r_min, pixel, photons, began)
+            else:
+                result = fit_dipole(capture, walkers=walkers, seed=fit_seed, progress=progress,
+                                    profile=profile)
+                row = _bias_row(material, result, r_min, pixel, photons, began)
+            rows.append(row)
+            if on_row is not None:
+                on_row(row)
     return rows
+
+
+def _bias_row(material, result, r_min, pixel, photons, began) -> BiasRow:
+    """One row of the bias table from a fit."""
+    get = result.parameter
+    return BiasRow(
+        material=material.name, true_sigma_a=material.sigma_a.tolist(),
+        fit_sigma_a=[get(f"sigma_a[{c}]").median for c in "RGB"],
+        fit_sigma_a_68=[[get(f"sigma_a[{c}]").low68, get(f"sigma_a[{c}]").high68]
+                        for c in "RGB"],
+        true_sigma_s_prime=material.sigma_s_prime.tolist(),
+        fit_sigma_s_prime=[get(f"sigma_s_prime[{c}]").median for c in "RGB"],
+        fit_sigma_s_prime_68=[[get(f"sigma_s_prime[{c}]").low68,
+                               get(f"sigma_s_prime[{c}]").high68] for c in "RGB"],
+        status=[s.status for s in result.parameters[:6]], converged=result.converged,
+        tau_max=float(result.chains[0].tau.max()), r_min_mm=r_min, pixel_size_mm=pixel,
+        photons=int(photons), seconds=time.perf_counter() - began)
+
+
+def _empty_row(material, r_min, pixel, photons, began) -> BiasRow:
+    """Return a row for a capture with no usable annulus outside ``r_min``."""
+    nan3 = [float("nan")] * 3
+    return BiasRow(material=material.name, true_sigma_a=material.sigma_a.tolist(),
+                   fit_sigma_a=nan3, fit_sigma_a_68=[nan3[:2]] * 3,
+                   true_sigma_s_prime=material.sigma_s_prime.tolist(), fit_sigma_s_prime=nan3,
+                   fit_sigma_s_prime_68=[nan3[:2]] * 3, status=["no usable annuli"] * 6,
+                   converged=False, tau_max=float("nan"), r_min_mm=r_min, pixel_size_mm=pixel,
+                   photons=int(photons), seconds=time.perf_counter() - began)
 
 
 def _ratios(fit, true, status) -> str:
@@ -192,11 +225,11 @@ def _ratios(fit, true, status) -> str:
 
 def bias_table_text(rows) -> str:
     """Format the bias table as Markdown: recovered / true per coefficient and channel."""
-    lines = ["| material | sigma_a fit/true R G B | sigma_s' fit/true R G B | converged |",
-             "| --- | --- | --- | --- |"]
+    lines = ["| material | r_min (mm) | sigma_a fit/true R G B | sigma_s' fit/true R G B | "
+             "converged |", "| --- | --- | --- | --- | --- |"]
     for row in rows:
         sigma_a = _ratios(row.fit_sigma_a, row.true_sigma_a, row.status[:3])
         sigma_s = _ratios(row.fit_sigma_s_prime, row.true_sigma_s_prime, row.status[3:])
-        lines.append(f"| {row.material} | {sigma_a} | {sigma_s} | "
+        lines.append(f"| {row.material} | {row.r_min_mm:.2g} | {sigma_a} | {sigma_s} | "
                      f"{'yes' if row.converged else 'no'} |")
     return "\n".join(lines)

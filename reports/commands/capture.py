@@ -39,8 +39,9 @@ def add_arguments(parser):
                         help="write eta as null (the fitter then fits it)")
     parser.add_argument("--incident", type=float, nargs=2, default=None, metavar=("X", "Y"),
                         help="incident point, pixels (default: the centre)")
-    parser.add_argument("--photons", type=float, default=1e6,
-                        help="photons per channel (walk generator)")
+    parser.add_argument("--photons", type=float, default=2e5,
+                        help="photons per channel (walk generator; about a minute per 1e5 "
+                             "for a high-albedo medium on two cores)")
     parser.add_argument("--rotations", type=int, default=16,
                         help="random rotations per exit on the film (walk generator)")
     parser.add_argument("--peak-signal", type=float, default=20000.0,
@@ -89,7 +90,7 @@ def run(args) -> int:
         from ...fitting.random_walk import walk_capture
 
         stored, spec, tally = walk_capture(material, photons=int(args.photons),
-                                           rotations=args.rotations, **options)
+                                           rotations=args.rotations, progress=True, **options)
         detail = (f"{int(args.photons)} photons per channel in {tally.seconds:.1f} s, "
                   f"total reflectance {tally.total_reflectance.round(4).tolist()}")
     else:

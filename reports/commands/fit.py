@@ -22,6 +22,9 @@ def add_arguments(parser):
                         help="profile model to fit (default: dipole)")
     parser.add_argument("--out", "-o", default=None,
                         help="output folder (default: <capture>_fit beside the sidecar)")
+    parser.add_argument("--r-min", type=float, default=0.0,
+                        help="leave out annuli inside this radius, mm (fit the dipole only "
+                             "where diffusion holds)")
     parser.add_argument("--fit-eta", action="store_true",
                         help="fit eta even when the sidecar gives it")
     parser.add_argument("--walkers", type=int, default=None,
@@ -46,7 +49,8 @@ def run(args) -> int:
     capture = Path(args.capture)
     out_dir = Path(args.out) if args.out else capture.with_name(f"{capture.stem}_fit")
     models = ("dipole", "subedit") if args.model == "both" else (args.model,)
-    options = {"segments": args.segments, "r_s_mm": args.r_s, "smoothness": args.smoothness}
+    options = {"segments": args.segments, "r_s_mm": args.r_s, "smoothness": args.smoothness,
+               "r_min_mm": args.r_min}
     if args.fit_eta:
         options["fit_eta"] = True
     if args.walkers is not None:
