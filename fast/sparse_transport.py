@@ -26,6 +26,7 @@ from ..errors import InputError
 
 __all__ = [
     "select_largest",
+    "select_largest_weighted",
     "nonlinear_approximation",
     "SparseRows",
     "QuantisedRows",
@@ -131,6 +132,24 @@ def select_largest(row, energy, max_terms, out_indices, out_values):  # pragma: 
     for j in range(count):
         out_indices[j] = chosen[j]
         out_values[j] = row[chosen[j]]
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
+def select_largest_weighted(row, weights, energy, max_terms, out_indices, out_values,
+                            scratch):  # pragma: no cover
+    """Select as :func:`select_largest` does, ranking ``|row * weights|``; keep ``row``'s values.
+
+    With ``weights`` the square root of each Haar function's support, this ranks a
+    coefficient by the largest error its removal can cause in a product with any vector
+    bounded by 1, instead of by its L2 size (which undervalues the coarse coefficients of
+    a peaked row). ``scratch`` is a float32 array of the row's length.
+    """
+    for i in range(row.shape[0]):
+        scratch[i] = row[i] * weights[i]
+    count = select_largest(scratch, energy, max_terms, out_indices, out_values)
+    for j in range(count):
+        out_values[j] = row[out_indices[j]]
     return count
 
 

@@ -36,6 +36,7 @@ __all__ = [
     "haar2d_forward",
     "haar2d_inverse",
     "haar2d_inplace",
+    "haar2d_support_weights",
     "balanced_split",
     "quadtree_layout",
     "SpatialWavelet",
@@ -175,6 +176,21 @@ def haar2d_inverse(coefficients) -> np.ndarray:
     ndarray, shape (..., S, S)
     """
     return _haar2d(coefficients, inverse=True)
+
+
+def haar2d_support_weights(parts: int, side: int) -> np.ndarray:
+    """Square root of the support (in pixels) of each coefficient of :func:`haar2d_forward`.
+
+    For ``parts`` squares of side ``side`` flattened row-major, shape ``(parts * side**2,)``,
+    float32: ``side`` for the scaling coefficient and the coarsest details, ``side / 2**j``
+    for the details of the block ``max(row, col) in [2**j, 2**(j + 1))``. A Haar function
+    with this support has an inner product of at most this times ``max|f|`` with any ``f``.
+    """
+    index = np.arange(side)
+    largest = np.maximum(index[:, None], index[None, :])
+    level = np.floor(np.log2(np.maximum(largest, 1))).astype(int)
+    weights = (side / 2.0**level).astype(np.float32)
+    return np.tile(weights.ravel(), parts)
 
 
 # ------------------------------------------------------------------- sample layout

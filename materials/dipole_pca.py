@@ -147,7 +147,7 @@ class ProfileSampling:
         object.__setattr__(self, "radius_max", radius_max)
 
     def radii_and_weights(self) -> tuple[np.ndarray, np.ndarray]:
-        r"""Return the distances :math:`r_j` (mm) and the weights :math:`w_j` of :math:`R_d(r_j)`."""
+        r"""Return the distances :math:`r_j` (mm) and weights :math:`w_j` of :math:`R_d(r_j)`."""
         n, radius = self.distance_samples, self.radius_max
         if self.distance_warp == "uniform":
             radii = np.linspace(0.0, radius, n)
@@ -303,12 +303,44 @@ class DipolePCABasis:
         InputError
             NaN/Inf or negative coefficients, eta outside [1, 3].
         """
+        return self.project_with_residual(sigma_a, sigma_s_prime, eta)[0]
+
+    def project_with_residual(self, sigma_a, sigma_s_prime, eta=None):
+        r"""Coefficients :math:`s_k(\sigma)` and the fraction of the profile the basis misses.
+
+        The projection is orthogonal in the sampling's weighted norm, so the residual is
+        :math:`\lVert w R_d - U s\rVert / \lVert w R_d\rVert =
+        (1 - \lVert s\rVert^2 / \lVert w R_d\rVert^2)^{1/2}` at no extra cost: near 0 for
+        profiles the basis represents, near 1 for those it cannot (a profile much narrower
+        than the sampled distances resolve: the opaque limit).
+
+        Returns
+        -------
+        coefficients : ndarray, shape ``broadcast shape + (K,)``
+            As :meth:`project`.
+        residual : ndarray, broadcast shape
+            Dimensionless, in [0, 1]; 0 for a zero profile.
+        """
         sigma_a = _check_coefficient(sigma_a, "sigma_a")
         sigma_s_prime = _check_coefficient(sigma_s_prime, "sigma_s_prime")
         eta = _check_eta(self.eta if eta is None else eta)
         profile = dipole_reflectance_profile(self.radii, sigma_a[..., None],
                                              sigma_s_prime[..., None], eta[..., None])
-        return profile @ self.projector.T
+        coefficients = profile @ self.projector.T
+        sampled = (profile * self.weights) ** 2
+        norm = sampled.sum(axis=-1)
+        missed = np.clip(norm - (coefficients**2).sum(axis=-1), 0.0, None)
+        residual = np.sqrt(np.divide(missed, norm, out=np.zeros_like(norm), where=norm > 0))
+        return coefficients, np.minimum(residual, 1.0)
+
+    @functools.cached_property
+    def area_moments(self) -> np.ndarray:
+        r"""Return :math:`m_k = 2\pi\int_0^R b_k(r)\,r\,dr`, shape (K,).
+
+        :math:`\sum_k s_k m_k` is the total diffuse reflectance of the K-term profile.
+        """
+        radii, measure = _fine_radii(self.sampling.radius_max)
+        return 2.0 * np.pi * (self.evaluate(radii) * measure[:, None]).sum(axis=0)
 
     def project_profile(self, profile) -> np.ndarray:
         r"""Coefficients :math:`s_k` of any profile (mm^-2) given at :attr:`radii` or as a callable.
