@@ -241,7 +241,7 @@ def _analysis(folder: Path) -> dict:
     return results
 
 
-def _interior(scene, image_shape) -> np.ndarray:
+def interior_pixels(scene) -> np.ndarray:
     """Return the pixels whose 3 x 3 neighbourhood sees one object.
 
     Edges are anti-aliased by the reference's pixel filter but not by the one-ray
@@ -251,7 +251,7 @@ def _interior(scene, image_shape) -> np.ndarray:
 
     ids = gbuffer(scene).object_id
     padded = np.pad(ids, 1, mode="edge")
-    same = np.ones(image_shape, dtype=bool)
+    same = np.ones(ids.shape, dtype=bool)
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             same &= padded[1 + dy:1 + dy + ids.shape[0], 1 + dx:1 + dx + ids.shape[1]] == ids
@@ -281,7 +281,7 @@ def _validate(args, folder: Path) -> dict:
         floor = AnalyticBRDF(model, low, **VALIDATION_FLOORS[model])
         scene = base.with_material("floor", floor)
         state = brdf_pca.precompute(scene, gather_samples=gathers)
-        mask = _interior(scene, (scene.camera.height, scene.camera.width))
+        mask = interior_pixels(scene)
         for gamma in (low, math.sqrt(low * high), high):
             edited = scene.with_material("floor", floor.with_gamma(gamma))
             test = state.edit("floor", gamma)
@@ -309,7 +309,7 @@ def _validate(args, folder: Path) -> dict:
     floor = AnalyticBRDF("blinn_phong", 300.0, **VALIDATION_FLOORS["blinn_phong"])
     scene = base.with_material("floor", floor)
     limit = render_lambertian_gather(scene, bounces=2, spp=spp, passes=4)
-    mask = _interior(scene, (scene.camera.height, scene.camera.width))
+    mask = interior_pixels(scene)
     subarea = {}
     for enabled in (False, True):
         image = brdf_pca.precompute(scene, gather_samples=gathers, subarea=enabled).render()

@@ -339,3 +339,48 @@ def test_bad_edits(state, scene):
         state.render(component="glossy")
     with pytest.raises(InputError, match=r"lights\[0\] = 'ConstantEnvironment': environment"):
         state.relight([ConstantEnvironment(1.0)])
+
+
+# -- against path-traced references (slow) -----------------------------------------------
+
+
+@pytest.mark.slow
+def test_converges_to_the_transport_it_approximates():
+    """More gather samples bring the image closer to the path-traced limit of the method's
+    own transport (the first surface glossy, every later one Lambertian, Sect. 5.2)."""
+    from translucent.reference.brdf_plugins import render_lambertian_gather
+    from translucent.reports.bench.brdf_pca import interior_pixels
+    from translucent.reports.metrics import relative_mse
+
+    scene = _tiny_scene(48, 36)
+    limit = render_lambertian_gather(scene, bounces=2, spp=128, passes=4)
+    mask = interior_pixels(scene)
+    errors = []
+    for gathers in (256, 2048):
+        image = bp.precompute(scene, gather_samples=gathers).render()
+        errors.append(relative_mse(limit.rgb[mask], image.rgb[mask],
+                                   reference_variance=limit.variance[mask]))
+    assert errors[1] < errors[0], errors
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gamma", [3.0, 300.0])
+def test_indirect_light_brings_it_closer_to_the_exact_reference(gamma):
+    """Against the exact-BRDF path tracer, the full image beats its own direct lighting:
+    the glossy and diffuse transfer carry real light (FLIP and relative MSE)."""
+    from translucent.reference import render
+    from translucent.reports.bench.brdf_pca import interior_pixels
+    from translucent.reports.metrics import evaluate, relative_mse
+
+    scene = _tiny_scene(48, 36)
+    scene = scene.with_material("floor", scene.object("floor").material.with_gamma(gamma))
+    exact = render(scene, spp=128, passes=4, progress=False)
+    state = bp.precompute(scene, gather_samples=2048)
+    full, direct = state.render(), state.render(component="direct")
+    mask = interior_pixels(scene)
+    error = {name: relative_mse(exact.rgb[mask], image.rgb[mask],
+                                reference_variance=exact.variance[mask])
+             for name, image in (("full", full), ("direct", direct))}
+    flip = {name: evaluate(exact, image).metrics.hdr_flip
+            for name, image in (("full", full), ("direct", direct))}
+    assert error["full"] < error["direct"] and flip["full"] < flip["direct"], (error, flip)
