@@ -27,7 +27,9 @@ The direct-to-indirect transfer of Hašan et al. 2006, extended as Nguyen et al.
 * Every row of :math:`T`, :math:`D` and :math:`M_s` is Haar-transformed over the gather
   samples (ordered along a Morton curve, so that neighbours in the order are neighbours on
   the surfaces) and only its largest coefficients are kept (Sect. 3.4); the budget of
-  basis :math:`j` in :math:`T` is proportional to its eigenvalue (Sect. 7.2).
+  basis :math:`j` in :math:`T` is proportional to its eigenvalue (Sect. 7.2). Rows are
+  stored row-indexed (Sect. 6.1) as 16-bit values with 16-bit indices
+  (:class:`~translucent.fast.sparse_transport.QuantisedRows`).
 * At run time (Eqs. 9 and 17): direct lighting :math:`L_d` on gather samples,
   :math:`L^w = \sum_{n=0}^{N} L_n^w` with :math:`L_n = \rho_d/\pi \odot M_s^w L_{n-1}^w`,
   then per pixel :math:`\rho_d/\pi\, D^w(x) L^w + \rho_s \sum_j c_j(\gamma) T_j^w(x) L^w`
@@ -41,10 +43,18 @@ The direct-to-indirect transfer of Hašan et al. 2006, extended as Nguyen et al.
 Objects without an analytic BRDF get no PCA transfer (only :math:`D`); the run says so in
 its :class:`~translucent.fast.base.StageLog`.
 
+The per-pair work of the precomputation (front-facing tests, shadow rays, the transfer
+with its sub-area disks, Haar transform and coefficient selection) runs in compiled,
+threaded kernels; shadow rays go through the scene's Mitsuba ray engine
+(:mod:`translucent.scenes.raycast`). The fixed terms and PCA variables of
+:mod:`translucent.materials.brdfs` are compiled again here, per pair, and tested equal.
+
 Limitations inherited from the paper (Table 1): gather samples reflect as Lambertian
-surfaces, so glossy-to-glossy paths (a glossy object seen in a glossy floor) carry only
-the diffuse part of the far surface; the camera is fixed. Environment lights are not
-supported.
+surfaces, so light reflected by a glossy surface after the first one (a glossy highlight
+seen in a glossy floor, the caustic a glossy floor throws on a wall) is missing; the
+camera is fixed. :func:`translucent.reference.brdf_plugins.render_lambertian_gather`
+path-traces exactly this transport, the limit the method converges to. Environment lights
+are not supported.
 
 References
 ----------
@@ -1452,7 +1462,8 @@ class BRDFPCAState:
         if editing is not None and editing not in self._members:
             raise InputError("not an object with an analytic BRDF; editable: "
                              f"{', '.join(self._members)}", field="editing", value=editing)
-        self.unfreeze(editing) if editing is not None else None
+        if editing is not None:
+            self.unfreeze(editing)
         for name, matrices in self._transfer.items():
             if name == editing or name in self.frozen:
                 continue
