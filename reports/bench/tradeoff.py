@@ -1,0 +1,590 @@
+"""Run time against error: each fast method's quality knobs and path tracing at growing spp.
+
+``translucent bench tradeoff [--scene S ...] [--methods m1,m2] [--scheduler ADDRESS |
+--serial] [--size PX] [--max-spp N] [--reference-spp N --reference-passes K] [--json FILE]
+[--plot FILE]``
+
+For each scene (default: ``sphere``, where PRT, translucent radiosity and splatting apply,
+and ``glossy``, where BRDF editing does), every built fast method that applies is run along
+its quality ladder (:data:`LADDERS`: a few knob settings from cheap to the method's
+defaults: PCA terms, wavelet terms, solver tolerance, splatting levels and irradiance
+resolution, gather samples), each against an empty cache so that its precomputation is
+timed in full. Mitsuba's volumetric path tracer renders the same scene at 1, 2, 4, ...
+``--max-spp`` samples per pixel (each timed after an untimed warm-up render that compiles
+its kernels). Every image is compared with a converged reference
+(``--reference-spp`` x ``--reference-passes``, from the reference cache); the error is the
+relative MSE with the reference's noise discounted (Rousselle et al.'s relMSE, see
+:func:`translucent.reports.metrics.relative_mse`).
+
+Times are given in seconds and as ratios to the 1-spp path-traced render of the same scene
+measured in the same run. For each method point, the path tracer's time at the same error is
+interpolated on its log-log curve (extrapolated along the fitted power law beyond the swept
+spp, and flagged so), giving the speedup at equal error: per frame (the interactive path,
+``state.render``) and for the first image (precomputation + frame).
+
+Every sweep point is an independent task (:func:`translucent.reports.distributed.run_tasks`):
+local processes by default, ``--scheduler`` for a Dask cluster, ``--serial`` in this process.
+Writes the figures as JSON (``--json``, default ``bench_tradeoff.json``) and the curves as
+one log-log PNG beside it (``--plot``, default the JSON's name with ``.png``).
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ...atomic import atomic_path, atomic_write_text
+from ...errors import InputError
+
+__all__ = ["LADDERS", "DEFAULT_SCENES", "add_arguments", "run", "sweep",
+           "path_tracing_point", "equal_error_seconds"]
+
+#: The scenes swept by default: between them every fast method applies to one.
+DEFAULT_SCENES = ("sphere", "glossy")
+
+#: Per method, named ladders of knob settings from cheap to the method's defaults (``{}``).
+#: Knobs a method does not have (any more) are dropped and the JSON says so.
+LADDERS: dict[str, dict[str, list[dict]]] = {
+    "prt": {
+        # illumination samples (parts x 4^n), PCA terms of the profile basis (Eq. 4) and
+        # Haar terms kept per transfer row (Eq. 8)
+        "samples, PCA and wavelet terms": [
+            {"samples": 1024, "basis_terms": 4, "terms": 32},
+            {"samples": 4096, "basis_terms": 8, "terms": 64},
+            {"samples": 16384, "basis_terms": 8, "terms": 128},
+            {},
+        ],
+    },
+    "radiosity": {
+        # samples of the scattering integral, the profile cut-off, form-factor rays and the
+        # solver's relative residual (Sheng et al. 2014, Sect. 5.2-5.3)
+        "scattering samples, cut-off, rays, solver tolerance": [
+            {"self_samples": 4, "profile_energy_cutoff": 0.1, "rays_per_patch": 32,
+             "tolerance": 0.05},
+            {"self_samples": 16, "profile_energy_cutoff": 0.03, "rays_per_patch": 64,
+             "tolerance": 0.02},
+            {"self_samples": 36, "profile_energy_cutoff": 0.01, "rays_per_patch": 128,
+             "tolerance": 0.01},
+            {},
+        ],
+    },
+    "splatting": {
+        # irradiance buffer side (Chen et al. 2012, Sect. 4) and mipmap levels (Sect. 5)
+        "irradiance resolution": [
+            {"irradiance_resolution": 64}, {"irradiance_resolution": 128},
+            {"irradiance_resolution": 256}, {},
+        ],
+        "levels": [{"levels": 5}, {"levels": 4}, {}, {"levels": 2}],
+    },
+    "brdf_pca": {
+        # gather samples (Sect. 5.1), PCA basis BRDFs (Sect. 4) and Haar coefficients kept
+        # per transfer row (Sect. 3.4)
+        "gather samples, PCA and wavelet terms": [
+            {"gather_samples": 1024, "n_basis": 1, "transfer_coefficients": 64},
+            {"gather_samples": 4096, "n_basis": 2, "transfer_coefficients": 128},
+            {"gather_samples": 8192, "n_basis": 4, "transfer_coefficients": 256},
+            {},
+        ],
+    },
+}
+
+#: Words in the name of an integer knob that sets quality, for a method without a ladder.
+QUALITY_WORDS = ("terms", "samples", "iterations", "levels", "resolution", "rays", "basis",
+                 "coefficients")
+
+#: Fractions of the default a generated ladder takes for such a knob.
+GENERATED_FRACTIONS = (0.125, 0.25, 0.5)
+
+#: Smallest relative MSE drawn on the log axis: a noise-discounted relMSE can come out at
+#: or below zero when an image is closer to the truth than the reference's noise resolves.
+PLOT_FLOOR = 1e-6
+
+
+def add_arguments(parser):
+    """Scenes, methods, where the tasks run, image size, spp range, reference, outputs."""
+    parser.add_argument("--scene", action="append", default=None, metavar="SCENE",
+                        help="built-in scene or scene file, repeatable (default: "
+                             f"{', '.join(DEFAULT_SCENES)})")
+    parser.add_argument("--methods", default=None, metavar="M1,M2",
+                        help="comma-separated fast methods (default: every built one)")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="Dask scheduler for the sweep points (default: local processes)")
+    where.add_argument("--serial", action="store_true",
+                       help="run every sweep point in this process")
+    parser.add_argument("--size", type=int, default=48,
+                        help="image width in pixels, the height following the scene's aspect "
+                             "(default 48; 0: the scene's own)")
+    parser.add_argument("--max-spp", type=int, default=64,
+                        help="largest spp of the path-tracing sweep, doubling from 1 "
+                             "(default 64)")
+    parser.add_argument("--reference-spp", type=int, default=256,
+                        help="spp per pass of the converged reference (default 256)")
+    parser.add_argument("--reference-passes", type=int, default=4,
+                        help="passes of the converged reference (default 4)")
+    parser.add_argument("--plot", default=None,
+                        help="PNG of the curves (default: beside the JSON, same name)")
+    parser.add_argument("--ladder-points", type=int, default=0,
+                        help="keep only the last N points of each ladder (0: all); for quick "
+                             "checks")
+
+
+# ====================================================================== tasks
+
+
+def path_tracing_point(scene, spp: int, seed: int = 1):
+    """Render ``scene`` with Mitsuba at ``spp`` and time it (a sweep task).
+
+    The estimator is the reference's (:func:`translucent.reference.render`): one RGB render,
+    or one render per channel where the conversion recommends it (chromatic media of high
+    albedo), so the path tracer is timed as the suite itself would run it. The scene is
+    converted and loaded first, then rendered once untimed (seed ``seed + 1``, which
+    compiles the kernels) and once timed (seed ``seed``).
+
+    Parameters
+    ----------
+    scene : Scene
+    spp : int
+        Samples per pixel (>= 1), per channel where rendered per channel.
+    seed : int
+        Seed of the timed render.
+
+    Returns
+    -------
+    dict
+        ``spp``, ``seconds``, ``per_channel`` and ``image`` (an
+        :class:`~translucent.image.Image`), or ``error`` (a string) when Mitsuba failed.
+    """
+    from ...backend import mitsuba
+    from ...image import Image
+    from ...reference import convert_scene
+
+    try:
+        mi = mitsuba()
+        conversion = convert_scene(scene, spp=spp)
+        per_channel = bool(conversion.per_channel_recommended)
+        channels = (0, 1, 2) if per_channel else (None,)
+        loaded = [mi.load_dict((convert_scene(scene, spp=spp, channel=channel) if per_channel
+                                else conversion).scene_dict) for channel in channels]
+
+        def render(render_seed):
+            rgb = np.empty((scene.camera.height, scene.camera.width, 3), dtype=np.float32)
+            for channel, mitsuba_scene in zip(channels, loaded, strict=True):
+                pixels = np.array(mi.render(mitsuba_scene, spp=spp, seed=render_seed))[..., :3]
+                if channel is None:
+                    rgb[...] = pixels
+                else:
+                    rgb[..., channel] = pixels[..., channel]
+            return rgb
+
+        render(seed + 1)
+        started = time.perf_counter()
+        rgb = render(seed)
+        seconds = time.perf_counter() - started
+    except Exception as error:  # reported in the JSON; the sweep goes on
+        return {"spp": spp, "error": f"{type(error).__name__}: {error}"}
+    return {"spp": spp, "seconds": seconds, "per_channel": per_channel,
+            "image": Image(rgb, metadata={"producer": "path tracing", "spp": spp,
+                                          "integrator": conversion.integrator,
+                                          "per_channel": per_channel})}
+
+
+def _task(kind: str, scene, *arguments):
+    """Run one sweep point: the converged reference, a path-traced render or a method run."""
+    from ..report import render_reference, run_method
+
+    if kind == "reference":
+        return render_reference(scene, *arguments)
+    if kind == "path tracing":
+        return path_tracing_point(scene, *arguments)
+    method_name, knobs = arguments
+    return run_method(method_name, scene, knobs, cold=True)
+
+
+# ====================================================================== ladders
+
+
+def _ladders(module, name: str) -> tuple[dict[str, list[dict]], list[str]]:
+    """Return the ladders of a method, restricted to its knobs, and notes on what was dropped."""
+    defaults = getattr(module, "DEFAULT_KNOBS", {}) or {}
+    notes = []
+    ladders = LADDERS.get(name)
+    if ladders is None:
+        ladders = {}
+        for knob, default in defaults.items():
+            if isinstance(default, bool) or not isinstance(default, int) or default < 8:
+                continue
+            if any(word in knob for word in QUALITY_WORDS):
+                ladders[knob] = [{knob: max(1, int(default * f))} for f in GENERATED_FRACTIONS]
+                ladders[knob].append({})
+        notes.append(f"no ladder for {name}: generated from its integer quality knobs "
+                     f"({', '.join(ladders) or 'none found'})")
+    kept: dict[str, list[dict]] = {}
+    for ladder, points in ladders.items():
+        cleaned = []
+        for knobs in points:
+            unknown = sorted(set(knobs) - set(defaults))
+            if unknown:
+                notes.append(f"{ladder}: knobs {', '.join(unknown)} are not knobs of {name} "
+                             "any more; dropped")
+            point = {k: v for k, v in knobs.items() if k in defaults}
+            if point not in cleaned:
+                cleaned.append(point)
+        kept[ladder] = cleaned
+    return kept, notes
+
+
+def _resized(scene, size: int):
+    from ...scenes import Camera
+
+    if not size:
+        return scene
+    camera = scene.camera
+    height = max(1, round(size * camera.height / camera.width))
+    return scene.with_camera(Camera(camera.origin, camera.target, camera.up, camera.fov, size,
+                                    height))
+
+
+# ====================================================================== equal error
+
+
+def equal_error_seconds(errors, seconds, error: float) -> tuple[float, bool]:
+    """Return the path tracer's time at ``error``, interpolated on its log-log curve.
+
+    Inside the range of measured errors: linear interpolation of log seconds against log
+    error between the two neighbouring points. Outside: the least-squares power law
+    ``seconds = a * error^b`` through all points (Monte Carlo error falls as 1/spp, so
+    b is near -1).
+
+    Parameters
+    ----------
+    errors, seconds : array_like
+        The path-tracing sweep: relative MSE and seconds per point (> 0).
+    error : float
+        The error to match (> 0).
+
+    Returns
+    -------
+    seconds : float
+        Path-tracing seconds at that error; NaN when it cannot be estimated.
+    extrapolated : bool
+        True when ``error`` lies outside the measured errors.
+    """
+    errors = np.asarray(errors, dtype=np.float64)
+    seconds = np.asarray(seconds, dtype=np.float64)
+    usable = np.isfinite(errors) & np.isfinite(seconds) & (errors > 0) & (seconds > 0)
+    errors, seconds = errors[usable], seconds[usable]
+    if not (math.isfinite(error) and error > 0) or len(np.unique(errors)) < 2:
+        return math.nan, True
+    log_e, log_t = np.log(errors), np.log(seconds)
+    order = np.argsort(log_e)
+    log_e, log_t = log_e[order], log_t[order]
+    target = math.log(error)
+    if log_e[0] <= target <= log_e[-1]:
+        return float(np.exp(np.interp(target, log_e, log_t))), False
+    slope, intercept = np.polyfit(log_e, log_t, 1)
+    return float(np.exp(intercept + slope * target)), True
+
+
+# ====================================================================== the sweep
+
+
+def _metrics(reference, image) -> dict:
+    from ..metrics import evaluate
+
+    try:
+        metrics = evaluate(reference, image).metrics
+    except (InputError, TypeError) as error:
+        return {"error": str(error)}
+    return {"relative_mse": metrics.relative_mse, "hdr_flip": metrics.hdr_flip,
+            "ssim": metrics.ssim}
+
+
+def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
+          max_spp: int = 64, reference_spp: int = 256, reference_passes: int = 4,
+          ladder_points: int = 0, progress: bool = True) -> dict:
+    """Run the sweep and return the figures (what the JSON holds).
+
+    Parameters
+    ----------
+    scenes : list of str or Scene
+        Built-in names, scene files or scenes.
+    methods : list of str, optional
+        Default every method of :data:`translucent.fast.base.METHODS` (unbuilt ones are
+        listed as such).
+    scheduler : str, optional
+        Dask scheduler address; None: local processes.
+    serial : bool
+        Run in this process.
+    size : int
+        Image width (0: the scene's own).
+    max_spp : int
+        Largest spp of the path-tracing sweep (1, 2, 4, ... up to it).
+    reference_spp, reference_passes : int
+        The converged reference.
+    ladder_points : int
+        Keep only the last N points of each ladder (0: all).
+    progress : bool
+        Progress bar over the tasks.
+
+    Returns
+    -------
+    dict
+        ``{"scenes": {name: {...}}, ...}``; see the module docstring.
+    """
+    from ...fast.base import METHODS, method
+    from ...scenes import Scene, load_scene
+    from ..distributed import run_tasks
+    from ..report import backend_versions
+
+    for value, name in ((max_spp, "--max-spp"), (reference_spp, "--reference-spp"),
+                        (reference_passes, "--reference-passes")):
+        if isinstance(value, bool) or int(value) != value or value < 1:
+            raise InputError("must be an integer >= 1", field=name, value=value)
+    if size < 0 or (0 < size < 11):
+        raise InputError("must be 0 (the scene's own) or >= 11 pixels (SSIM's window)",
+                         field="--size", value=size)
+    if ladder_points < 0:
+        raise InputError("must be >= 0", field="--ladder-points", value=ladder_points)
+    chosen = list(METHODS) if methods is None else list(methods)
+    for name in chosen:
+        if name not in METHODS:
+            raise InputError(f"unknown fast method; valid: {', '.join(METHODS)}",
+                             field="--methods", value=name)
+    loaded = [_resized(s if isinstance(s, Scene) else load_scene(s), size) for s in scenes]
+    spps = [2**k for k in range(int(math.log2(max_spp)) + 1)]
+
+    tasks, owners = [], []
+    results: dict = {}
+    for scene in loaded:
+        entry = results.setdefault(scene.name, {
+            "size": [scene.camera.width, scene.camera.height],
+            "reference": {"spp": reference_spp, "passes": reference_passes},
+            "path_tracing": [], "methods": {}})
+        tasks.append(("reference", scene, reference_spp, reference_passes))
+        owners.append((scene.name, "reference", None, None))
+        for spp in spps:
+            tasks.append(("path tracing", scene, spp))
+            owners.append((scene.name, "path tracing", None, None))
+        for name in chosen:
+            try:
+                module = method(name)
+            except InputError as error:
+                entry["methods"][name] = {"status": "not built", "reason": error.reason}
+                continue
+            reason = module.applies_to(scene)
+            if reason is not None:
+                entry["methods"][name] = {"status": "not applicable", "reason": str(reason)}
+                continue
+            ladders, notes = _ladders(module, name)
+            entry["methods"][name] = {"status": "ok", "notes": notes,
+                                      "ladders": {ladder: [] for ladder in ladders}}
+            for ladder, points in ladders.items():
+                for knobs in points[-ladder_points:] if ladder_points else points:
+                    tasks.append(("method", scene, name, knobs))
+                    owners.append((scene.name, "method", name, ladder))
+
+    answers = run_tasks(_task, tasks, scheduler=scheduler, local=serial, progress=progress)
+    references = {}
+    for (scene_name, kind, _, _), answer in zip(owners, answers, strict=True):
+        if kind == "reference":
+            references[scene_name] = answer
+    for (scene_name, kind, name, ladder), answer in zip(owners, answers, strict=True):
+        entry = results[scene_name]
+        reference = references[scene_name]
+        if kind == "reference":
+            if isinstance(answer, str):
+                entry["reference"]["error"] = answer
+            else:
+                entry["reference"]["seconds"] = answer.metadata.get("seconds")
+            continue
+        if kind == "path tracing":
+            point = {k: v for k, v in answer.items() if k != "image"}
+            if "image" in answer and not isinstance(reference, str):
+                point.update(_metrics(reference, answer["image"]))
+            entry["path_tracing"].append(point)
+            continue
+        point = {"knobs": answer.knobs, "status": answer.status}
+        if answer.status == "ok":
+            point.update(precompute_seconds=answer.precompute_seconds,
+                         frame_seconds=answer.frame_seconds,
+                         total_seconds=answer.precompute_seconds + answer.frame_seconds)
+            if not isinstance(reference, str):
+                point.update(_metrics(reference, answer.image))
+        else:
+            point["reason"] = answer.reason
+        entry["methods"][name]["ladders"][ladder].append(point)
+    for entry in results.values():
+        _ratios_and_speedups(entry)
+    return {"benchmark": "tradeoff",
+            "generated": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+            "cpu_count": os.cpu_count(), "versions": backend_versions(),
+            "where": "this process" if serial else (scheduler or "local processes"),
+            "error_metric": "relative MSE, reference noise discounted",
+            "time_baseline": "the 1-spp path-traced render of the same scene in this run",
+            "scenes": results}
+
+
+def _ratios_and_speedups(entry: dict) -> None:
+    """Add time ratios to the 1-spp render and speedups at equal error to one scene's entry."""
+    traced = [p for p in entry["path_tracing"] if "seconds" in p]
+    baseline = next((p["seconds"] for p in traced if p["spp"] == 1), None)
+    entry["baseline_seconds"] = baseline
+    errors = [p.get("relative_mse", math.nan) for p in traced]
+    seconds = [p["seconds"] for p in traced]
+    for point in traced:
+        point["ratio"] = point["seconds"] / baseline if baseline else None
+    for method_entry in entry["methods"].values():
+        for points in method_entry.get("ladders", {}).values():
+            for point in points:
+                if point.get("status") != "ok":
+                    continue
+                for key in ("frame", "total"):
+                    value = point[f"{key}_seconds"]
+                    point[f"{key}_ratio"] = value / baseline if baseline else None
+                error = point.get("relative_mse", math.nan)
+                traced_seconds, extrapolated = equal_error_seconds(errors, seconds, error)
+                point["path_tracing_seconds_at_equal_error"] = traced_seconds
+                point["equal_error_extrapolated"] = extrapolated
+                for key in ("frame", "total"):
+                    value = point[f"{key}_seconds"]
+                    point[f"speedup_{key}"] = (traced_seconds / value
+                                               if value > 0 and math.isfinite(traced_seconds)
+                                               else None)
+
+
+# ====================================================================== outputs
+
+
+def plot(figures: dict, path) -> Path:
+    """Draw every scene's run-time-versus-error curves, log-log, into one PNG (atomically).
+
+    Parameters
+    ----------
+    figures : dict
+        What :func:`sweep` returns.
+    path : str or PathLike
+        The PNG.
+
+    Returns
+    -------
+    Path
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot
+
+    scenes = figures["scenes"]
+    figure, axes = pyplot.subplots(1, max(1, len(scenes)), figsize=(6.5 * max(1, len(scenes)),
+                                                                    5.2), squeeze=False)
+    colours = pyplot.rcParams["axes.prop_cycle"].by_key()["color"]
+    for axis, (name, entry) in zip(axes[0], scenes.items(), strict=False):
+        baseline = entry.get("baseline_seconds") or 1.0
+        traced = [p for p in entry["path_tracing"] if "relative_mse" in p]
+        if traced:
+            x = [p["seconds"] / baseline for p in traced]
+            y = [max(p["relative_mse"], PLOT_FLOOR) for p in traced]
+            axis.plot(x, y, "k-o", label="path tracing (1, 2, 4, ... spp)")
+            for point, xi, yi in zip(traced, x, y, strict=True):
+                axis.annotate(str(point["spp"]), (xi, yi), textcoords="offset points",
+                              xytext=(4, 4), fontsize=7)
+        colour_index = 0
+        for method_name, method_entry in entry["methods"].items():
+            for ladder, points in method_entry.get("ladders", {}).items():
+                usable = [p for p in points if "relative_mse" in p]
+                if not usable:
+                    continue
+                colour = colours[colour_index % len(colours)]
+                colour_index += 1
+                y = [max(p["relative_mse"], PLOT_FLOOR) for p in usable]
+                axis.plot([p["frame_seconds"] / baseline for p in usable], y, "-o",
+                          color=colour, label=f"{method_name} ({ladder}): frame")
+                axis.plot([p["total_seconds"] / baseline for p in usable], y, "--",
+                          color=colour, marker="o", markerfacecolor="none",
+                          label=f"{method_name}: precomputation + frame")
+        axis.set_xscale("log")
+        axis.set_yscale("log")
+        axis.set_xlabel(f"time / 1-spp path-traced render ({baseline:.3g} s)")
+        axis.set_ylabel("relative MSE against the converged reference")
+        axis.set_title(f"{name} ({entry['size'][0]} x {entry['size'][1]})")
+        axis.grid(True, which="both", alpha=0.3)
+        axis.legend(fontsize=6.5, loc="best")
+    figure.tight_layout()
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        figure.savefig(tmp, format="png", dpi=110)
+    pyplot.close(figure)
+    return path
+
+
+def _print_table(figures: dict) -> None:
+    for name, entry in figures["scenes"].items():
+        baseline = entry.get("baseline_seconds")
+        print(f"{name}: {entry['size'][0]} x {entry['size'][1]}, 1-spp path-traced render "
+              f"{baseline:.3g} s" if baseline else f"{name}: no 1-spp baseline")
+        for point in entry["path_tracing"]:
+            if "seconds" in point:
+                print(f"  path tracing {point['spp']:>5} spp  {point['seconds']:8.3f} s  "
+                      f"x{point['ratio']:8.2f}  relMSE {point.get('relative_mse', math.nan):.4g}")
+            else:
+                print(f"  path tracing {point['spp']:>5} spp  {point.get('error')}")
+        for method_name, method_entry in entry["methods"].items():
+            if method_entry["status"] != "ok":
+                print(f"  {method_name}: {method_entry['status']}: {method_entry['reason']}")
+                continue
+            for ladder, points in method_entry["ladders"].items():
+                print(f"  {method_name} ({ladder})")
+                for point in points:
+                    knobs = ", ".join(f"{k}={v}" for k, v in point["knobs"].items()) or "defaults"
+                    if point["status"] != "ok":
+                        print(f"    {knobs}: {point['status']}: {point.get('reason', '')[:100]}")
+                        continue
+                    flag = " (extrapolated)" if point["equal_error_extrapolated"] else ""
+                    speedup = point.get("speedup_frame")
+                    total = point.get("speedup_total")
+                    print(f"    {knobs}: precompute {point['precompute_seconds']:.3g} s, frame "
+                          f"{point['frame_seconds']:.3g} s (x{point['frame_ratio']:.3g}), "
+                          f"relMSE {point.get('relative_mse', math.nan):.4g}, speedup at equal "
+                          f"error: frame {_times(speedup)}, first image {_times(total)}{flag}")
+
+
+def _times(value) -> str:
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.3g}x"
+
+
+def run(args) -> int:
+    """Run the sweep, print the table, write the JSON and the plot."""
+    methods = None
+    if args.methods is not None:
+        methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    figures = sweep(args.scene or list(DEFAULT_SCENES), methods=methods,
+                    scheduler=args.scheduler, serial=args.serial, size=args.size,
+                    max_spp=args.max_spp, reference_spp=args.reference_spp,
+                    reference_passes=args.reference_passes, ladder_points=args.ladder_points)
+    _print_table(figures)
+    json_path = Path(args.json or "bench_tradeoff.json")
+    plot_path = Path(args.plot) if args.plot else json_path.with_suffix(".png")
+    atomic_write_text(json_path, json.dumps(_finite(figures), indent=2, allow_nan=False))
+    plot(figures, plot_path)
+    print(f"wrote {json_path} and {plot_path}")
+    return 0
+
+
+def _finite(value):
+    """Replace NaN and infinities by None for strict JSON."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value

@@ -1,0 +1,62 @@
+"""The main job: every fast method against its reference on the built-in scenes, as HTML.
+
+``translucent report [SCENE ...] [--out DIR] [--methods m1,m2] [--update-baseline]
+[--baseline FILE] [--scheduler ADDRESS | --serial] [--spp N --passes K]``
+
+Writes ``DIR/index.html`` (images side by side, error maps, metrics, precomputation and
+frame times, what each method skipped and why) and ``DIR/metrics.json``. Exits 0 when no
+gated metric is worse than the baseline beyond its tolerance, 1 when one is (or a result
+the baseline expects is missing), 2 on bad input (an unknown scene or method, an ``--out``
+that cannot hold a report), leaving nothing half-written.
+"""
+
+from __future__ import annotations
+
+
+def add_arguments(parser):
+    """Scenes, output folder, methods, baseline, where tasks run, reference samples."""
+    from ..report import DEFAULT_PASSES, DEFAULT_SPP
+
+    parser.add_argument("scenes", nargs="*", metavar="SCENE",
+                        help="built-in scene names or scene TOML files (default: the built-in "
+                             "scenes, less the test scenes the page lists)")
+    parser.add_argument("--out", "-o", default="report",
+                        help="report folder (default ./report; a previous report there is "
+                             "replaced)")
+    parser.add_argument("--methods", default=None, metavar="M1,M2",
+                        help="comma-separated fast methods (default: all; those not built "
+                             "yet are listed as such)")
+    parser.add_argument("--baseline", default=None, metavar="FILE",
+                        help="baseline JSON (default: the committed reports/baseline/"
+                             "default.json)")
+    parser.add_argument("--update-baseline", action="store_true",
+                        help="write this run's metrics into the baseline and exit 0")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="Dask scheduler for the reference renders and method runs "
+                            "(default: local processes)")
+    where.add_argument("--serial", action="store_true",
+                       help="run every task in this process (no Dask)")
+    parser.add_argument("--spp", type=int, default=DEFAULT_SPP,
+                        help=f"reference samples per pixel per pass (default {DEFAULT_SPP})")
+    parser.add_argument("--passes", type=int, default=DEFAULT_PASSES,
+                        help=f"independent reference passes (default {DEFAULT_PASSES})")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run(args) -> int:
+    """Run the report; the exit code says whether a metric regressed."""
+    from ..report import make_report
+
+    methods = None
+    if args.methods is not None:
+        methods = [name for name in args.methods.split(",") if name.strip()]
+        if not methods:
+            from ...errors import InputError
+
+            raise InputError("give at least one method", field="--methods", value=args.methods)
+    result = make_report(args.scenes or None, args.out, methods=methods, baseline=args.baseline,
+                         update_baseline=args.update_baseline, scheduler=args.scheduler,
+                         serial=args.serial, spp=args.spp, passes=args.passes,
+                         progress=not args.no_progress)
+    return result.exit_code

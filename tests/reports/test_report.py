@@ -1,0 +1,430 @@
+"""The report: a tiny scene end to end, the baseline's regression logic, bad input."""
+
+import html
+import json
+import math
+import os
+import re
+import textwrap
+from pathlib import Path
+
+import pytest
+from translucent.errors import InputError
+from translucent.fast import base as fast_base
+from translucent.reports import report as report_module
+from translucent.reports.cli import main
+from translucent.reports.report import (
+    DEFAULT_BASELINE,
+    TOLERANCES,
+    Tolerance,
+    check_against_baseline,
+    default_scenes,
+    load_baseline,
+    make_report,
+    updated_baseline,
+)
+from translucent.scenes import builtin_scene_names, loads_scene
+
+#: The methods the quick tier runs: a stand-in that renders a flat image at once (so the
+#: report's own logic is tested in seconds, whatever the built methods cost: PRT's first
+#: run computes its dipole PCA basis, splatting compiles its kernels, each tens of seconds
+#: here), one that fails, one that is not built, and brdf_pca, which does not apply to a
+#: translucent sphere. Every built method runs on the tiny scene in the slow test below.
+QUICK_METHODS = ["flat", "failing", "unbuilt", "brdf_pca"]
+
+#: Reference samples of the tiny scene: enough for a finite, non-black reference.
+TINY_SPP, TINY_PASSES = 16, 2
+
+TINY_SCENE = textwrap.dedent("""
+    [scene]
+    name = "tiny_sphere"
+    description = "a 320-face skin sphere seen at 24 x 24 pixels"
+    mm_per_unit = 10.0
+
+    [camera]
+    origin = [0.0, 0.0, 5.0]
+    target = [0.0, 0.0, 0.0]
+    fov = 30.0
+    width = 24
+    height = 24
+
+    [[objects]]
+    name = "sphere"
+    mesh = { type = "icosphere", subdivisions = 2, radius = 1.0 }
+    material = { type = "measured", name = "Skin1" }
+
+    [[lights]]
+    type = "point"
+    position = [3.0, 4.0, 4.0]
+    intensity = 100.0
+""")
+
+
+def _tiny_scene(folder: Path) -> Path:
+    path = folder / "tiny_sphere.toml"
+    path.write_text(TINY_SCENE)
+    return path
+
+
+def _run(scene_path, out, baseline, *extra, methods=QUICK_METHODS):
+    return main(["report", str(scene_path), "--out", str(out), "--baseline", str(baseline),
+                 "--methods", ",".join(methods), "--serial", "--no-progress",
+                 "--spp", str(TINY_SPP), "--passes", str(TINY_PASSES), *extra])
+
+
+def _page_images(out: Path) -> list[str]:
+    return re.findall(r'<img src="([^"]+)"', (out / "index.html").read_text())
+
+
+def _check_page(out: Path) -> dict:
+    """Every image the page shows exists, and every PNG in the folder is shown."""
+    shown = set(_page_images(out))
+    assert shown, "the page shows no image"
+    for source in shown:
+        assert (out / source).is_file(), f"the page links a missing image {source}"
+    written = {p.relative_to(out).as_posix() for p in out.rglob("*.png")}
+    assert written == shown
+    return json.loads((out / "metrics.json").read_text())
+
+
+STAND_IN_METHODS = textwrap.dedent('''
+    """Stand-in fast methods for the report's tests."""
+    import numpy as np
+
+    from translucent.fast.base import StageLog
+    from translucent.image import Image
+
+    DEFAULT_KNOBS = {"grey": 0.05}
+
+
+    def applies_to(scene):
+        return None
+
+
+    class FlatState:
+        def __init__(self, scene, grey):
+            self.scene, self.grey = scene, grey
+            self.log = StageLog(skipped=["no transfer: a flat image needs none"],
+                                seconds={"nothing": 0.0})
+
+        def render(self, lights=None, material=None):
+            camera = self.scene.camera
+            return Image(np.full((camera.height, camera.width, 3), self.grey, np.float32),
+                         metadata={"producer": "flat"})
+
+
+    def precompute(scene, **knobs):
+        return FlatState(scene, {**DEFAULT_KNOBS, **knobs}["grey"])
+''')
+
+FAILING_METHOD = textwrap.dedent('''
+    """A method whose precomputation fails, for the report's tests."""
+    DEFAULT_KNOBS = {}
+
+
+    def applies_to(scene):
+        return None
+
+
+    def precompute(scene, **knobs):
+        raise RuntimeError("the transfer matrix has a NaN on purpose")
+''')
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """One report of the tiny scene with the stand-in methods, its baseline written.
+
+    The stand-ins are registered in ``fast.base.METHODS`` for the module; the source
+    fingerprint is held fixed, so that edits of the methods' files during the session cannot
+    make a second run miss the report cache.
+    """
+    folder = tmp_path_factory.mktemp("tiny_report")
+    (folder / "report_flat_method.py").write_text(STAND_IN_METHODS)
+    (folder / "report_failing_method.py").write_text(FAILING_METHOD)
+    with pytest.MonkeyPatch.context() as patch:
+        if not os.environ.get("TRANSLUCENT_CACHE"):
+            # the private cache of tests/conftest.py (set per test, after module fixtures)
+            patch.setenv("TRANSLUCENT_CACHE", str(tmp_path_factory.getbasetemp() / "cache"))
+        patch.syspath_prepend(str(folder))
+        patch.setitem(fast_base.METHODS, "flat", "report_flat_method")
+        patch.setitem(fast_base.METHODS, "failing", "report_failing_method")
+        patch.setitem(fast_base.METHODS, "unbuilt", "translucent.fast.no_such_method")
+        patch.setattr(report_module, "_source_fingerprint", lambda: "fixed for the tests")
+        scene_path = _tiny_scene(folder)
+        baseline = folder / "baseline.json"
+        code = _run(scene_path, folder / "report", baseline, "--update-baseline")
+        yield {"folder": folder, "scene": scene_path, "baseline": baseline, "code": code,
+               "out": folder / "report"}
+
+
+def _data(out: Path) -> dict:
+    return json.loads((out / "metrics.json").read_text())["scenes"]["tiny_sphere"]
+
+
+def _metrics(out: Path, method: str) -> dict:
+    return _data(out)["methods"][method]
+
+
+# ---------------------------------------------------------------------------- end to end
+
+
+def test_tiny_report_shows_every_image_it_wrote(tiny):
+    assert tiny["code"] == 0
+    data = _check_page(tiny["out"])
+    scene = data["scenes"]["tiny_sphere"]
+    assert scene["reference"]["spp"] == TINY_SPP and scene["reference"]["passes"] == TINY_PASSES
+    assert set(scene["methods"]) == set(QUICK_METHODS)
+    flat = scene["methods"]["flat"]
+    assert flat["status"] == "ok"
+    assert math.isfinite(flat["metrics"]["hdr_flip"])
+    assert flat["precompute_seconds"] >= 0 and flat["frame_seconds"] > 0
+    assert flat["skipped"] == ["no transfer: a flat image needs none"]
+    for map_name in ("flip", "relative_error", "ciede2000", "ssim"):
+        assert (tiny["out"] / flat["files"][f"map_{map_name}"]).is_file()
+    page = (tiny["out"] / "index.html").read_text()
+    assert "no transfer: a flat image needs none" in page
+    assert not list(tiny["folder"].glob(".report.*")), "a temporary folder was left behind"
+
+
+def test_failing_and_unbuilt_methods_are_shown_and_the_run_goes_on(tiny):
+    methods = _data(tiny["out"])["methods"]
+    assert methods["failing"]["status"] == "failed"
+    assert "NaN on purpose" in methods["failing"]["reason"]
+    assert methods["unbuilt"]["status"] == "not built"
+    page = (tiny["out"] / "index.html").read_text()
+    assert "The method failed: RuntimeError: the transfer matrix has a NaN on purpose" in page
+    assert "this fast method is not built yet" in page
+    if methods["brdf_pca"]["status"] == "not applicable":
+        assert html.escape(methods["brdf_pca"]["reason"]) in page
+    assert methods["flat"]["status"] == "ok"
+
+
+def test_baseline_written_from_the_run(tiny):
+    stored = load_baseline(tiny["baseline"], required=True)
+    entry = stored["entries"]["tiny_sphere"]
+    assert entry["reference"] == {"spp": TINY_SPP, "passes": TINY_PASSES}
+    assert set(entry["methods"]) == {"flat"}
+    assert entry["methods"]["flat"]["hdr_flip"] == _metrics(tiny["out"], "flat")["metrics"][
+        "hdr_flip"]
+
+
+def test_second_run_uses_the_cached_runs_and_passes(tiny, tmp_path):
+    assert _run(tiny["scene"], tmp_path / "again", tiny["baseline"]) == 0
+    entry = _metrics(tmp_path / "again", "flat")
+    assert entry["cached"] is True
+    assert entry["baseline"]["status"] == "ok"
+    assert _data(tmp_path / "again")["reference"]["cached"] is True
+    assert "(cached: nothing it depends on has changed since)" in (
+        tmp_path / "again" / "index.html").read_text()
+
+
+def _baseline_copy(tiny, tmp_path, change) -> Path:
+    stored = json.loads(tiny["baseline"].read_text())
+    change(stored["entries"]["tiny_sphere"]["methods"])
+    path = tmp_path / "baseline.json"
+    path.write_text(json.dumps(stored))
+    return path
+
+
+def _better_than_achieved(methods):
+    methods["flat"]["hdr_flip"] = 0.0
+    methods["flat"]["ssim"] = 1.0
+
+
+def test_a_worse_metric_exits_1_and_is_marked(tiny, tmp_path):
+    baseline = _baseline_copy(tiny, tmp_path, _better_than_achieved)
+    out = tmp_path / "report"
+    assert _run(tiny["scene"], out, baseline) == 1
+    data = _check_page(out)
+    assert [line.split(":")[0] for line in data["regressions"]] == ["tiny_sphere/flat"]
+    check = data["scenes"]["tiny_sphere"]["methods"]["flat"]["baseline"]
+    assert check["status"] == "regression"
+    assert check["metrics"]["hdr_flip"]["verdict"] == "worse"
+    assert check["metrics"]["ssim"]["verdict"] == "worse"
+    assert check["metrics"]["relative_mse"]["verdict"] == "ok"
+    page = (out / "index.html").read_text()
+    assert "1 regression(s) against the baseline" in page
+    assert '<tr class="bad"><td>HDR-FLIP</td>' in page
+    assert '<tr class="bad"><td>SSIM</td>' in page
+
+
+def test_update_baseline_rewrites_it_atomically(tiny, tmp_path):
+    baseline = _baseline_copy(tiny, tmp_path, _better_than_achieved)
+    out = tmp_path / "report"
+    assert _run(tiny["scene"], out, baseline, "--update-baseline") == 0
+    rewritten = load_baseline(baseline, required=True)
+    value = rewritten["entries"]["tiny_sphere"]["methods"]["flat"]["hdr_flip"]
+    assert value == _metrics(out, "flat")["metrics"]["hdr_flip"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["baseline.json", "report"]
+    assert _run(tiny["scene"], tmp_path / "after", baseline) == 0
+
+
+def test_a_missing_baseline_entry_is_reported_not_a_failure(tiny, tmp_path):
+    baseline = _baseline_copy(tiny, tmp_path, lambda methods: methods.clear())
+    out = tmp_path / "report"
+    assert _run(tiny["scene"], out, baseline) == 0
+    assert _metrics(out, "flat")["baseline"]["status"] == "no baseline"
+    assert "no baseline entry for this scene and method" in (out / "index.html").read_text()
+
+
+def test_a_baseline_entry_without_a_result_is_a_regression(tiny, tmp_path):
+    def expect_failing(methods):
+        methods["failing"] = dict(methods["flat"])
+
+    baseline = _baseline_copy(tiny, tmp_path, expect_failing)
+    out = tmp_path / "report"
+    assert _run(tiny["scene"], out, baseline) == 1
+    check = _metrics(out, "failing")["baseline"]
+    assert check["status"] == "regression"
+    assert "NaN on purpose" in check["message"]
+
+
+# ---------------------------------------------------------------------------- bad input
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["no_such_scene"], "no such built-in scene"),
+    (["sphere", "--methods", "prt,teleport"], "unknown fast method"),
+    (["sphere", "--spp", "0"], "--spp"),
+])
+def test_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, arguments, message):
+    out = tmp_path / "out" / "report"
+    assert main(["report", *arguments, "--out", str(out), "--serial", "--no-progress"]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_out_that_cannot_hold_a_report_exits_2(tmp_path, capsys):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("keep me")
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    (busy / "notes.txt").write_text("keep me too")
+    for out, message in ((a_file, "exists and is not a folder"),
+                         (a_file / "report", "is not a folder"),
+                         (busy, "a folder with other files in it")):
+        assert main(["report", "sphere", "--out", str(out), "--serial", "--no-progress"]) == 2
+        assert message in capsys.readouterr().err
+    assert a_file.read_text() == "keep me"
+    assert sorted(p.name for p in busy.iterdir()) == ["notes.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "busy"]
+
+
+def test_an_explicit_baseline_must_exist(tmp_path, capsys):
+    missing = tmp_path / "missing.json"
+    code = main(["report", "sphere", "--out", str(tmp_path / "r"), "--baseline", str(missing),
+                 "--serial", "--no-progress"])
+    assert code == 2
+    assert "no such baseline file" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
+def test_unreadable_baselines(tmp_path):
+    corrupt = tmp_path / "corrupt.json"
+    corrupt.write_text("{not json")
+    with pytest.raises(InputError, match="not a readable JSON baseline"):
+        load_baseline(corrupt)
+    foreign = tmp_path / "foreign.json"
+    foreign.write_text(json.dumps({"format": 99, "entries": {}}))
+    with pytest.raises(InputError, match="not a baseline of format 1"):
+        load_baseline(foreign)
+    assert load_baseline(tmp_path / "absent.json") == {"format": 1, "entries": {}}
+    with pytest.raises(InputError, match="no such baseline file"):
+        load_baseline(tmp_path / "absent.json", required=True)
+
+
+# ---------------------------------------------------------------------------- logic
+
+
+def test_tolerance_direction_and_nan():
+    error = Tolerance("hdr_flip", absolute=0.01, relative=0.1)
+    assert error.limit(0.2) == pytest.approx(0.23)
+    assert not error.is_worse(0.229, 0.2) and error.is_worse(0.231, 0.2)
+    assert error.is_better(0.169, 0.2) and not error.is_better(0.171, 0.2)
+    assert error.is_worse(float("nan"), 0.2)
+    similarity = Tolerance("ssim", absolute=0.01, relative=0.0, lower_is_better=False)
+    assert similarity.is_worse(0.889, 0.9) and not similarity.is_worse(0.891, 0.9)
+    assert similarity.is_better(0.911, 0.9)
+
+
+def _entry(scene_hash="h", spp=16, passes=2, **values):
+    metrics = {key: 0.1 for key in report_module.REPORTED_METRICS}
+    metrics["ssim"] = 0.9
+    metrics.update(values)
+    return {"entries": {"s": {"scene_hash": scene_hash, "reference": {"spp": spp,
+                                                                     "passes": passes},
+                              "methods": {"m": metrics}}}}
+
+
+def test_checks_compare_only_like_with_like():
+    reference = {"spp": 16, "passes": 2}
+    metrics = {key: 0.1 for key in report_module.REPORTED_METRICS} | {"ssim": 0.9}
+    assert check_against_baseline("s", "h", reference, "m", metrics, _entry()).status == "ok"
+    other_scene = check_against_baseline("s", "other", reference, "m", metrics, _entry())
+    assert other_scene.status == "not compared" and "content hash" in other_scene.message
+    other_reference = check_against_baseline("s", "h", {"spp": 64, "passes": 4}, "m", metrics,
+                                             _entry())
+    assert other_reference.status == "not compared"
+    assert "16 spp x 2 passes" in other_reference.message
+    assert check_against_baseline("s", "h", reference, "new", metrics,
+                                  _entry()).status == "no baseline"
+    worse = dict(metrics, relative_mse=0.5)
+    check = check_against_baseline("s", "h", reference, "m", worse, _entry())
+    assert check.status == "regression" and "relMSE" in check.message
+    better = dict(metrics, hdr_flip=0.01)
+    assert check_against_baseline("s", "h", reference, "m", better,
+                                  _entry()).status == "improved"
+
+
+def test_updating_keeps_other_scenes_and_drops_methods_that_stopped():
+    stored = _entry()
+    stored["entries"]["kept"] = {"scene_hash": "k", "reference": {}, "methods": {"x": {}}}
+    metrics = {key: 0.2 for key in report_module.REPORTED_METRICS}
+    new = updated_baseline(stored, [{"name": "s", "scene_hash": "h", "reference": {
+        "spp": 16, "passes": 2}, "metrics": {"n": metrics}, "methods_run": ["m", "n"]}], {})
+    assert new["entries"]["kept"] == stored["entries"]["kept"]
+    assert set(new["entries"]["s"]["methods"]) == {"n"}
+    assert set(new["tolerances"]) == set(TOLERANCES)
+
+
+# ---------------------------------------------------------------------------- defaults
+
+
+def test_default_scenes_leave_out_only_listed_scenes_with_reasons():
+    names, excluded = default_scenes()
+    assert set(names) | set(excluded) == set(builtin_scene_names())
+    assert not set(names) & set(excluded)
+    assert all(len(reason) > 40 for reason in excluded.values())
+
+
+def test_committed_baseline_covers_default_scenes_with_the_stated_tolerances():
+    stored = load_baseline(DEFAULT_BASELINE, required=True)
+    names, _ = default_scenes()
+    assert stored["entries"], "the committed baseline is empty"
+    assert set(stored["entries"]) <= set(names)
+    for name, tolerance in TOLERANCES.items():
+        assert stored["tolerances"][name] == {"absolute": tolerance.absolute,
+                                              "relative": tolerance.relative,
+                                              "lower_is_better": tolerance.lower_is_better}
+
+
+def test_scenes_given_as_objects(tmp_path):
+    scene = loads_scene(TINY_SCENE)
+    with pytest.raises(InputError, match="unknown fast method"):
+        make_report([scene], tmp_path / "r", methods=["nope"], serial=True, progress=False)
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.slow
+def test_every_built_method_on_the_tiny_scene(tmp_path):
+    scene_path = _tiny_scene(tmp_path)
+    out = tmp_path / "report"
+    code = _run(scene_path, out, tmp_path / "b.json", "--update-baseline",
+                methods=list(fast_base.METHODS))
+    assert code == 0
+    data = _check_page(out)
+    methods = data["scenes"]["tiny_sphere"]["methods"]
+    assert set(methods) == set(fast_base.METHODS)
+    for entry in methods.values():
+        assert entry["status"] == "ok" or entry["reason"]
