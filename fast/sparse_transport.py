@@ -62,7 +62,8 @@ SELECTION_BINS = 1 << (31 - SELECTION_SHIFT)
 def select_largest(row, energy, max_terms, out_indices, out_values):  # pragma: no cover
     """Keep the largest entries of a float32 ``row`` until ``energy`` of its squared norm.
 
-    At most ``max_terms`` entries; zeros are never kept. Compiled. Writes the kept column
+    At most ``max_terms`` entries; zeros and float32 subnormals (below 1.2e-38) count as
+    nothing and are never kept. Compiled. Writes the kept column
     indices (ascending) and values into the first ``count`` slots of ``out_indices`` /
     ``out_values`` and returns ``count``.
 
@@ -76,9 +77,11 @@ def select_largest(row, energy, max_terms, out_indices, out_values):  # pragma: 
     histogram = np.zeros(SELECTION_BINS, dtype=np.int64)
     total = 0.0
     for i in range(length):
-        value = float(row[i])
-        total += value * value
-        histogram[(bits[i] & 0x7FFFFFFF) >> SELECTION_SHIFT] += 1
+        key = (bits[i] & 0x7FFFFFFF) >> SELECTION_SHIFT
+        histogram[key] += 1
+        if key > 0:  # zeros and subnormals (below 1.2e-38) count as nothing
+            value = np.float64(row[i])
+            total += value * value
     if total == 0.0:
         return 0
     budget = min(max_terms, length)
@@ -95,7 +98,7 @@ def select_largest(row, energy, max_terms, out_indices, out_values):  # pragma: 
             found += 1
     magnitude = np.empty(found, dtype=np.float64)
     for j in range(found):
-        value = float(row[candidates[j]])
+        value = np.float64(row[candidates[j]])
         magnitude[j] = value * value
     if found > 2 * budget:
         # a crowded cutoff bin: keep exactly the `budget` largest before sorting
@@ -154,9 +157,12 @@ def select_largest_weighted(row, weights, energy, max_terms, out_indices, out_va
 
 
 @numba.njit(cache=True, parallel=True)
-def _select_rows(rows, energy, max_terms, out_indices, out_values, counts):  # pragma: no cover
+def _select_rows(rows, weights, energy, max_terms, out_indices, out_values,
+                 counts):  # pragma: no cover
     for r in numba.prange(rows.shape[0]):
-        counts[r] = select_largest(rows[r], energy, max_terms, out_indices[r], out_values[r])
+        scratch = np.empty(rows.shape[1], dtype=np.float32)
+        counts[r] = select_largest_weighted(rows[r], weights, energy, max_terms, out_indices[r],
+                                            out_values[r], scratch)
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,7 +224,8 @@ class SparseRows:
         return QuantisedRows.from_sparse(self)
 
 
-def nonlinear_approximation(rows, energy: float, max_terms: int) -> SparseRows:
+def nonlinear_approximation(rows, energy: float, max_terms: int, *,
+                            weights=None) -> SparseRows:
     """Keep the largest coefficients of each row (nonlinear wavelet approximation).
 
     Per row: the fewest largest-magnitude entries whose squared sum reaches ``energy``
@@ -233,6 +240,9 @@ def nonlinear_approximation(rows, energy: float, max_terms: int) -> SparseRows:
         Fraction of each row's energy to keep, in (0, 1].
     max_terms : int
         Term budget per row, >= 1.
+    weights : array_like, (N,), optional
+        Rank entries by ``|value * weight|`` (see :func:`select_largest_weighted`); by
+        magnitude when omitted.
 
     Returns
     -------
@@ -246,7 +256,12 @@ def nonlinear_approximation(rows, energy: float, max_terms: int) -> SparseRows:
     indices = np.zeros((rows.shape[0], budget), dtype=np.int32)
     values = np.zeros((rows.shape[0], budget), dtype=np.float32)
     counts = np.zeros(rows.shape[0], dtype=np.int64)
-    _select_rows(rows, energy, budget, indices, values, counts)
+    weights = np.ones(rows.shape[1], dtype=np.float32) if weights is None else \
+        np.ascontiguousarray(weights, dtype=np.float32)
+    if weights.shape != (rows.shape[1],):
+        raise InputError(f"must have one weight per column ({rows.shape[1]})",
+                         field="weights", value=weights.shape)
+    _select_rows(rows, weights, energy, budget, indices, values, counts)
     return SparseRows.from_slots(indices, values, counts, rows.shape[1])
 
 
@@ -272,12 +287,12 @@ def _quantise(indptr, indices, values, index_bits, value_max, packed, scales):  
         start, stop = indptr[r], indptr[r + 1]
         largest = 0.0
         for j in range(start, stop):
-            largest = max(largest, abs(float(values[j])))
+            largest = max(largest, abs(np.float64(values[j])))
         scale = largest / value_max if largest > 0 else 0.0
         scales[r] = scale
         inverse = 1.0 / scale if scale > 0 else 0.0
         for j in range(start, stop):
-            level = np.int32(np.rint(float(values[j]) * inverse))
+            level = np.int32(np.rint(np.float64(values[j]) * inverse))
             packed[j] = (level << index_bits) | np.int32(indices[j])
 
 
