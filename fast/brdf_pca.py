@@ -336,17 +336,23 @@ def _glossy_basis(model, cos_l, cos_v, l_dot_v, f0, c_xy, c_z, grid0, step, matr
 # pairs, rays and transfer rows (compiled)
 
 
+@numba.njit(cache=True, nogil=True)
+def _front_facing(x, n_x, positions, normals, b, g):  # pragma: no cover - compiled
+    """Whether view sample b and gather sample g are in front of each other."""
+    dx = positions[g, 0] - x[b, 0]
+    dy = positions[g, 1] - x[b, 1]
+    dz = positions[g, 2] - x[b, 2]
+    facing = dx * n_x[b, 0] + dy * n_x[b, 1] + dz * n_x[b, 2]
+    back = dx * normals[g, 0] + dy * normals[g, 1] + dz * normals[g, 2]
+    return facing > 0.0 and back < 0.0
+
+
 @numba.njit(cache=True, parallel=True)
 def _front_counts(x, n_x, positions, normals, counts):  # pragma: no cover - compiled
     for b in numba.prange(x.shape[0]):
         found = 0
         for g in range(positions.shape[0]):
-            dx = positions[g, 0] - x[b, 0]
-            dy = positions[g, 1] - x[b, 1]
-            dz = positions[g, 2] - x[b, 2]
-            facing = dx * n_x[b, 0] + dy * n_x[b, 1] + dz * n_x[b, 2]
-            back = dx * normals[g, 0] + dy * normals[g, 1] + dz * normals[g, 2]
-            if facing > 0.0 and back < 0.0:
+            if _front_facing(x, n_x, positions, normals, b, g):
                 found += 1
         counts[b] = found
 
@@ -362,12 +368,7 @@ def _front_rays(x, n_x, positions, normals, offset, starts, columns, origins, di
     for b in numba.prange(x.shape[0]):
         k = starts[b]
         for g in range(positions.shape[0]):
-            dx = positions[g, 0] - x[b, 0]
-            dy = positions[g, 1] - x[b, 1]
-            dz = positions[g, 2] - x[b, 2]
-            facing = dx * n_x[b, 0] + dy * n_x[b, 1] + dz * n_x[b, 2]
-            back = dx * normals[g, 0] + dy * normals[g, 1] + dz * normals[g, 2]
-            if not (facing > 0.0 and back < 0.0):
+            if not _front_facing(x, n_x, positions, normals, b, g):
                 continue
             ox = x[b, 0] + offset * n_x[b, 0]
             oy = x[b, 1] + offset * n_x[b, 1]

@@ -232,16 +232,21 @@ def _plugin_class(mi):
 
 
 @functools.lru_cache(maxsize=None)
-def _register(variant: str):
+def _register(kind: str, variant: str):
+    """Register the BSDF (``kind="bsdf"``) or the integrator once per variant."""
     mi = mitsuba()
-    plugin_class = _plugin_class(mi)
-    mi.register_bsdf(PLUGIN_NAME, lambda props: plugin_class(props))
+    if kind == "bsdf":
+        plugin_class = _plugin_class(mi)
+        mi.register_bsdf(PLUGIN_NAME, lambda props: plugin_class(props))
+    else:
+        plugin_class = _integrator_class(mi)
+        mi.register_integrator(INTEGRATOR_NAME, lambda props: plugin_class(props))
     return plugin_class
 
 
 def register_plugin():
     """Register ``translucent_analytic_brdf`` with Mitsuba (once per variant); return its class."""
-    return _register(mitsuba().variant())
+    return _register("bsdf", mitsuba().variant())
 
 
 def bsdf_dict(material: AnalyticBRDF) -> dict:
@@ -331,14 +336,6 @@ def _integrator_class(mi):
     return LambertianGatherIntegrator
 
 
-@functools.lru_cache(maxsize=None)
-def _register_integrator(variant: str):
-    mi = mitsuba()
-    integrator_class = _integrator_class(mi)
-    mi.register_integrator(INTEGRATOR_NAME, lambda props: integrator_class(props))
-    return integrator_class
-
-
 def render_lambertian_gather(scene, *, bounces: int = 2, spp: int = 64, passes: int = 4,
                              seed: int = 0):
     """Path-trace the transport the PCA method approximates (its converged limit).
@@ -376,7 +373,7 @@ def render_lambertian_gather(scene, *, bounces: int = 2, spp: int = 64, passes: 
             raise InputError(f"must be an integer >= {low}", field=name, value=value)
     mi = mitsuba()
     register_plugin()
-    _register_integrator(mi.variant())
+    _register("integrator", mi.variant())
     started = time.perf_counter()
     description = to_mitsuba_dict(scene, spp=spp)
     description["integrator"] = {"type": INTEGRATOR_NAME, "max_depth": int(bounces) + 2}
