@@ -67,7 +67,7 @@ def add_arguments(parser):
 
 
 def _cornell(wall: int, block: int, mm_per_unit: float, material):
-    """The built-in Cornell box with a translucent block, re-meshed and rescaled."""
+    """Build the Cornell box with the translucent block, re-meshed and rescaled."""
     path = builtin_scene_path("cornell_block")
     text = path.read_text()
     text = re.sub(r'(part = "[a-z_]+", size = 2\.0, subdivisions = )\d+', rf"\g<1>{wall}", text)
@@ -102,7 +102,7 @@ def _timed(function, frames: int):
 
 
 def _moved_lights(scene, count: int):
-    """The scene's area light slid across the ceiling: the relighting sequence."""
+    """Yield the scene's area light slid across the ceiling: the relighting sequence."""
     light = scene.lights[0]
     for k in range(count):
         offset = np.array([0.5 * (k / max(count - 1, 1) - 0.5), 0.0, 0.0])
