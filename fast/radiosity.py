@@ -142,7 +142,8 @@ DEFAULT_KNOBS: dict = {
     "solver": "jacobi",              # "jacobi", "gmres" or "bicgstab"
     "tolerance": 5e-3,               # relative residual (the paper's 0.5 %)
     "max_iterations": 2000,
-    "transfer_budget_mb": 512,       # precompute T when 3 P^2 float32 fit
+    "transfer": "auto",              # "auto": T at the first relighting when it fits; "never"
+    "transfer_budget_mb": 512,       # T fits when 3 P^2 float32 do (P <= 6,688 at 512 MB)
     "light_samples": 16,             # samples per area light / environment per point
     "seed": 0,
 }
@@ -1288,13 +1289,20 @@ class RadiosityState:
     def render(self, lights=None, material=None, component: str = "both") -> Image:
         """Render with new lights and/or material (None keeps the current ones).
 
-        A new material rebuilds S (the translucency change of Sect. 5.2); new lights
-        recompute E and solve (or multiply by T when it was precomputed).
+        A new material rebuilds S (the translucency change of Sect. 5.2) and drops T; new
+        lights recompute E and solve, or multiply by T (Sect. 6.4). With the knob
+        ``transfer="auto"`` the first relighting after a material change computes T when
+        it fits ``transfer_budget_mb`` (:meth:`transfer_fits`); translucency changes
+        always iterate, since T would have to be inverted again.
         """
         started = time.perf_counter()
         facts = {}
         if material is not None:
             facts["material_seconds"] = self.set_material(material)
+        if lights is not None and self.transfer is None and self.knobs["transfer"] == "auto" \
+                and component == "both" and self.transfer_fits():
+            # relighting: one O(P^3) solve now, one product per channel per frame after
+            facts["transfer_seconds"] = self.precompute_transfer()
         light_started = time.perf_counter()
         E = self.patch_irradiance(lights)
         facts["irradiance_seconds"] = time.perf_counter() - light_started
@@ -1355,6 +1363,8 @@ def _resolve_knobs(scene, knobs: dict) -> dict:
     if resolved["self_term"] not in ("polar", "samples"):
         raise InputError("must be 'polar' or 'samples'", field="self_term",
                          value=resolved["self_term"])
+    if resolved["transfer"] not in ("auto", "never"):
+        raise InputError("must be 'auto' or 'never'", field="transfer", value=resolved["transfer"])
     if resolved["solver"] not in SOLVERS:
         raise InputError(f"unknown solver; valid: {', '.join(SOLVERS)}", field="solver",
                          value=resolved["solver"])

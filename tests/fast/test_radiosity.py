@@ -341,6 +341,8 @@ def test_bad_knobs_are_reported():
         precompute(_block_scene(), rays=3)
     with pytest.raises(InputError, match="solver.*unknown solver"):
         precompute(_block_scene(), solver="newton")
+    with pytest.raises(InputError, match="transfer.*'auto' or 'never'"):
+        precompute(_block_scene(), transfer="always")
     with pytest.raises(InputError, match="self_term.*'polar' or 'samples'"):
         precompute(_block_scene(), self_term="exact")
     with pytest.raises(InputError, match="max_distance_mm.*must be > 0 mm"):
@@ -421,8 +423,12 @@ def test_render_and_bounce_decomposition():
 
 def test_relighting_with_new_lights_changes_only_the_lighting():
     state = _block_state()
+    state.set_material(measured_medium("Skin1"))
     dim = state.render(lights=[PointLight([1.0, 3.0, 1.0], 10.0)])
+    # the first relighting computed T (it fits the budget): later frames multiply by it
+    assert state.transfer is not None and dim.metadata["transfer_seconds"] > 0
     bright = state.render(lights=[PointLight([1.0, 3.0, 1.0], 20.0)])
+    assert bright.metadata["solver"] == "transfer"
     assert bright.rgb == pytest.approx(2.0 * dim.rgb, rel=1e-4, abs=1e-7)
 
 
