@@ -373,8 +373,13 @@ def test_applies_to_and_knob_errors(heterogeneous_scene):
         splatting.precompute(heterogeneous_scene, colour=1)
     with pytest.raises(InputError, match=r"levels = 0: must be an integer in \[1, 8192\]"):
         splatting.precompute(heterogeneous_scene, levels=0)
-    with pytest.raises(InputError, match="backend = 'cuda': must be 'numpy' or 'drjit'"):
+    with pytest.raises(InputError,
+                       match="backend = 'cuda': must be one of 'numba', 'drjit', 'numpy'"):
         splatting.precompute(heterogeneous_scene, backend="cuda")
+    with pytest.raises(InputError, match="buffers = 'gpu': must be 'raster' or 'mitsuba'"):
+        splatting.precompute(heterogeneous_scene, buffers="gpu")
+    with pytest.raises(InputError, match="sampling_range = 'red': must be one of 'shortest'"):
+        splatting.precompute(heterogeneous_scene, sampling_range="red")
 
 
 def test_approx_command_writes_an_exr(tmp_path):
