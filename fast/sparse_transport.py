@@ -316,6 +316,17 @@ def _product_rgb(indptr, packed, scales, index_bits, vector, out):  # pragma: no
         out[r, 2] = blue * scale
 
 
+@numba.njit(cache=True, parallel=True, fastmath=True)
+def _product_scalar(indptr, packed, scales, index_bits, vector, out):  # pragma: no cover
+    mask = (1 << index_bits) - 1
+    for r in numba.prange(len(indptr) - 1):
+        total = np.float32(0.0)
+        for j in range(indptr[r], indptr[r + 1]):
+            word = packed[j]
+            total += np.float32(word >> index_bits) * vector[word & mask]
+        out[r] = total * scales[r]
+
+
 @dataclass(frozen=True, eq=False)
 class QuantisedRows:
     """A sparse matrix with 16-bit values and 16-bit indices packed in int32 words.
@@ -375,23 +386,25 @@ class QuantisedRows:
         return SparseRows(self.indptr, columns, levels * row_scale, self.columns)
 
     def product(self, vector, out=None) -> np.ndarray:
-        r"""Matrix times an RGB vector: ``out[r] = sum_j value[r, j] vector[column_j]`` (Eq. 8).
+        r"""Matrix times a vector: ``out[r] = sum_j value[r, j] vector[column_j]`` (Eq. 8).
 
         Parameters
         ----------
-        vector : array_like, (columns, 3)
-            Cast to float32.
-        out : ndarray, (R, 3), float32, optional
+        vector : array_like, (columns, 3) or (columns,)
+            An RGB or a single-channel vector, cast to float32 (one channel reads the
+            matrix once for a third of the arithmetic).
+        out : ndarray, (R, 3) or (R,), float32, optional
 
         Returns
         -------
-        ndarray, (R, 3), float32
+        ndarray, (R, 3) or (R,), float32
         """
         vector = np.ascontiguousarray(vector, dtype=np.float32)
-        if vector.shape != (self.columns, 3):
-            raise InputError(f"must have shape ({self.columns}, 3)", field="vector",
-                             value=vector.shape)
+        if vector.shape not in ((self.columns, 3), (self.columns,)):
+            raise InputError(f"must have shape ({self.columns}, 3) or ({self.columns},)",
+                             field="vector", value=vector.shape)
         if out is None:
-            out = np.empty((self.rows, 3), dtype=np.float32)
-        _product_rgb(self.indptr, self.packed, self.scales, self.index_bits, vector, out)
+            out = np.empty((self.rows,) + vector.shape[1:], dtype=np.float32)
+        kernel = _product_rgb if vector.ndim == 2 else _product_scalar
+        kernel(self.indptr, self.packed, self.scales, self.index_bits, vector, out)
         return out
