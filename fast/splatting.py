@@ -541,10 +541,14 @@ def splat_level(samples: IrradianceSamples, bounds_low: np.ndarray, bounds_high:
     reach = bounds_high[index]
     focal = width / (2.0 * camera.tan_half_fov)
     limit = max(width, height)
+    # |d x_pixel| <= focal |delta| sqrt(1 + tan^2 of the sample's off-axis angles) / (z - R)
+    # for a point at 3D distance |delta| <= R from the sample (Cauchy-Schwarz), so this disc
+    # holds every pixel within R of it, off axis too
+    spread = np.sqrt(1.0 + ((x - 0.5 * width) / focal) ** 2 + ((y - 0.5 * height) / focal) ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        radius = np.where(z - reach > 1e-9 * np.abs(reach) + 1e-300,
-                          reach * focal / (z - reach), np.inf)
-    radius = np.minimum(np.ceil(radius) + 1.0, limit)
+        reach_pixels = np.where(z - reach > 1e-9 * np.abs(reach) + 1e-300,
+                                reach * focal * spread / (z - reach), np.inf)
+    radius = np.minimum(np.ceil(reach_pixels) + 1.0, limit)
     # a disc wholly off screen, or a sample behind the camera whose sphere misses it
     onscreen = (x + radius >= 0) & (x - radius < width) & (y + radius >= 0) & \
                (y - radius < height) & np.isfinite(x) & np.isfinite(y)
@@ -552,8 +556,10 @@ def splat_level(samples: IrradianceSamples, bounds_low: np.ndarray, bounds_high:
     centre_x = np.where(behind, 0.5 * width, x)
     centre_y = np.where(behind, 0.5 * height, y)
     radius = np.where(behind, limit, radius)
+    reach_pixels = np.where(behind, limit, np.minimum(reach_pixels, limit))
     keep = onscreen | behind
     index, centre_x, centre_y, radius = index[keep], centre_x[keep], centre_y[keep], radius[keep]
+    reach_pixels = reach_pixels[keep]
     if not len(index):
         return exitance.reshape(height, width, 3)
     scale = float(mm_per_unit) ** 2  # mm^-2 -> per scene unit squared
@@ -563,8 +569,8 @@ def splat_level(samples: IrradianceSamples, bounds_low: np.ndarray, bounds_high:
                          value=backend)
     if backend == "numba":
         exitance, pairs = _splat_numba(samples, bounds_low, bounds_high, level, level_texel,
-                                       material, mm_per_unit, scale, index,
-                                       np.floor(centre_x), np.floor(centre_y), radius)
+                                       material, mm_per_unit, scale, index, centre_x,
+                                       centre_y, reach_pixels)
         if stats is not None:
             stats["pairs"] = stats.get("pairs", 0) + pairs[0]
             stats["pairs in range"] = stats.get("pairs in range", 0) + pairs[1]
@@ -586,14 +592,15 @@ def splat_level(samples: IrradianceSamples, bounds_low: np.ndarray, bounds_high:
 
 
 def _splat_numba(samples, bounds_low, bounds_high, level, level_texel, material, mm_per_unit,
-                 scale, index, column, row, radius):
+                 scale, index, centre_x, centre_y, radius):
     """Run the compiled kernel of :func:`splat_level` (:func:`.splatting_kernels.splat_samples`)."""
     from . import splatting_kernels as kernels
 
     height, width = level.shape
     # spatially coherent order: neighbouring samples touch the same cached rows
-    order = np.lexsort((column, row // 8))
-    index, column, row, radius = index[order], column[order], row[order], radius[order]
+    order = np.lexsort((centre_x, np.floor(centre_y / 8)))
+    index, centre_x, centre_y, radius = (index[order], centre_x[order], centre_y[order],
+                                         radius[order])
     position = np.ascontiguousarray(np.moveaxis(level.position, -1, 0), dtype=np.float32)
     texel = np.where(level.valid, level_texel, -1).astype(np.int32)
     out = np.zeros((3, height, width), dtype=np.float32)
@@ -604,7 +611,11 @@ def _splat_numba(samples, bounds_low, bounds_high, level, level_texel, material,
         np.ascontiguousarray(samples.position[index].T, dtype=np.float32),
         samples.texel[index].astype(np.int32),
         np.ascontiguousarray(samples.flux[index] * scale, dtype=np.float32),
-        column.astype(np.int32), row.astype(np.int32), radius.astype(np.int32),
+        centre_x.astype(np.float32), centre_y.astype(np.float32),
+        # the surface point of a pixel of a coarser level is one of its finest children's:
+        # it projects inside the pixel, within sqrt(2)/2 of its centre; 1e-3 and 1e-5 cover
+        # the float32 rounding of the bound
+        (radius * (1.0 + 1e-5) + (0.5 * math.sqrt(2.0) + 1e-3)).astype(np.float32),
         np.square(bounds_low[index]).astype(np.float32),
         np.square(bounds_high[index]).astype(np.float32), kernels.STRIPES)
     return np.moveaxis(out, 0, -1).astype(np.float64), visited.sum(axis=0).tolist()
@@ -1029,11 +1040,15 @@ def gather_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list
 
 def _exitant_radiance(exitance, buffer: SurfaceBuffer, camera: CameraModel, eta: float):
     r"""Eq. 7 of Chen et al. 2012: :math:`L = F_t(\omega_o) B / \pi` at valid pixels."""
-    to_camera = camera.origin - np.where(buffer.valid[..., None], buffer.position, 0.0)
+    radiance = np.zeros(buffer.shape + (3,))
+    rows, cols = np.nonzero(buffer.valid)
+    to_camera = camera.origin - buffer.position[rows, cols]
     to_camera /= np.maximum(np.linalg.norm(to_camera, axis=-1, keepdims=True), 1e-300)
-    cosine = np.clip(np.abs(np.einsum("...k,...k->...", buffer.normal, to_camera)), 0.0, 1.0)
-    radiance = fresnel_transmittance(eta, np.nan_to_num(cosine))[..., None] * exitance / np.pi
-    return np.where(buffer.valid[..., None], np.nan_to_num(radiance), 0.0)
+    cosine = np.clip(np.abs(np.einsum("...k,...k->...", buffer.normal[rows, cols],
+                                      to_camera)), 0.0, 1.0)
+    radiance[rows, cols] = np.nan_to_num(fresnel_transmittance(eta, np.nan_to_num(cosine))[
+        ..., None] * exitance[rows, cols] / np.pi)
+    return radiance
 
 
 def as_subedit(material) -> SubEditProfiles:
@@ -1233,7 +1248,7 @@ def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None
         eye, orthographic = centre - forward * behind, True
     triangle, barycentric, depth = rasterize(
         vertices, faces, np.asarray(eye, np.float64), forward, left, up, tan_x, tan_y,
-        width, height, NEAR_CLIP, orthographic, 2)
+        width, height, NEAR_CLIP, orthographic)
     if orthographic:
         footprint = np.full((height, width), 2.0 * tan_x / width)
     else:

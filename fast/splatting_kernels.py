@@ -55,8 +55,10 @@ __all__ = [
     "STRIPES",
 ]
 
-#: Interleaved row stripes of a splat; one per thread is enough on this 2-core machine and
-#: more only add per-sample overhead. Results do not depend on it.
+#: Interleaved row stripes of a splat, run in parallel: one per core of this 2-core machine
+#: (more only add per-sample overhead). Results do not depend on it. The other kernels are
+#: serial: on this shared machine, threads cost more than they save on a few milliseconds
+#: of work (measured: the irradiance mipmap level takes 4x the CPU time with 2 threads).
 STRIPES = 2
 #: ln of the value given to a pair outside its range before the exponential: exp(-87) is
 #: below float32's smallest normal number times any flux, so the pair adds nothing.
@@ -158,8 +160,8 @@ def splat_samples(out, position, texel_out, bounds, table, step_inverse, sample_
                   stripes):
     r"""Eq. 12 of Chen et al. 2012: scatter samples into one splatting level, in place.
 
-    Sample ``s`` visits the pixels of the disc of ``radius[s]`` pixels around pixel
-    ``(centre_y[s], centre_x[s])`` and adds
+    Sample ``s`` visits the pixels whose centres lie within ``radius[s]`` pixels of its
+    projection ``(centre_x[s], centre_y[s])`` (continuous pixel coordinates) and adds
     :math:`\sqrt{P_{x_o}(d)P_{x_i}(d)}\,\Phi_s` to every valid pixel whose surface point
     lies at a squared distance :math:`d^2 \in` ``[low2[s], high2[s])`` and within the
     profiles' support. Runs of :data:`BLOCK` pixels whose bounding box (``bounds``) lies
@@ -183,7 +185,7 @@ def splat_samples(out, position, texel_out, bounds, table, step_inverse, sample_
     sample_texel : ndarray (N,) int32
     sample_flux : ndarray (N, 3) float32
         :math:`E\,\Delta A` times the unit conversion of the profile.
-    centre_x, centre_y, radius : ndarray (N,) int32
+    centre_x, centre_y, radius : ndarray (N,) float32
         The window of each sample, pixels.
     low2, high2 : ndarray (N,) float32
         Squared bounds of the effective rendering range, scene units squared.
@@ -206,16 +208,18 @@ def splat_samples(out, position, texel_out, bounds, table, step_inverse, sample_
         count = 0
         used = 0
         for s in range(sample_texel.shape[0]):
+            # pixel centres (x + 1/2, y + 1/2) within radius[s] of the projection
             r = radius[s]
-            y_first = max(centre_y[s] - r, 0)
-            y_last = min(centre_y[s] + r + 1, height)
+            y_first = max(int(math.ceil(centre_y[s] - r - 0.5)), 0)
+            y_last = min(int(math.floor(centre_y[s] + r - 0.5)) + 1, height)
             y_first += (stripe - y_first) % stripes
-            reach = (r + 0.75) ** 2  # the disc of _disc_offsets: (r + 3/4)^2
             for y in range(y_first, y_last, stripes):
-                dy = y - centre_y[s]
-                half = int(math.sqrt(max(reach - dy * dy, 0.0)))
-                x_left = max(centre_x[s] - half, 0)
-                x_right = min(centre_x[s] + half + 1, width)
+                dy = y + 0.5 - centre_y[s]
+                half = math.sqrt(max(r * r - dy * dy, 0.0))
+                x_left = max(int(math.ceil(centre_x[s] - half - 0.5)), 0)
+                x_right = min(int(math.floor(centre_x[s] + half - 0.5)) + 1, width)
+                if x_right <= x_left:
+                    continue
                 block = x_left // BLOCK
                 block_end = min((x_right + BLOCK - 1) // BLOCK, blocks)
                 while block < block_end:
@@ -242,7 +246,7 @@ def splat_samples(out, position, texel_out, bounds, table, step_inverse, sample_
 
 @numba.njit(inline="always", fastmath=True, cache=True)
 def _outside(bounds, y, block, sample_position, s, low2, high2):
-    """True when no point of the block's bounding box lies in [sqrt(low2), sqrt(high2))."""
+    """Return True when no point of the block's box lies in [sqrt(low2), sqrt(high2))."""
     fx = sample_position[0, s]
     fy = sample_position[1, s]
     fz = sample_position[2, s]
@@ -418,7 +422,7 @@ def _median_child(depth, valid, row, col):
     return order[(count - 1) // 2]
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(cache=True)
 def median_depth_level(position, normal, uv, depth, valid, footprint):
     """One level of the splatting buffer's mipmap: the median-depth texel of each 2 x 2 block.
 
@@ -439,7 +443,7 @@ def median_depth_level(position, normal, uv, depth, valid, footprint):
     out_depth = np.zeros((height, width), depth.dtype)
     out_valid = np.zeros((height, width), np.bool_)
     out_footprint = np.zeros((height, width), footprint.dtype)
-    for row in numba.prange(height):
+    for row in range(height):
         for col in range(width):
             child = _median_child(depth, valid, row, col)
             out_valid[row, col] = child >= 0
@@ -456,7 +460,7 @@ def median_depth_level(position, normal, uv, depth, valid, footprint):
     return out_position, out_normal, out_uv, out_depth, out_valid, out_footprint
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(cache=True)
 def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, depth_max,
                      valid):
     """One level of the irradiance buffer's mipmap (Sect. 4 of Chen et al. 2012).
@@ -481,7 +485,7 @@ def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, d
     out_min = np.full((height, width), np.inf)
     out_max = np.full((height, width), -np.inf)
     out_valid = np.zeros((height, width), np.bool_)
-    for row in numba.prange(height):
+    for row in range(height):
         for col in range(width):
             count = 0
             for child in range(4):
@@ -525,7 +529,7 @@ def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, d
 
 
 # ====================================================================== accumulation
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@numba.njit(fastmath=True, cache=True)
 def bilateral_upsample_level(coarse, coarse_depth, coarse_valid, coarse_range, fine_depth,
                              fine_valid, fine_range, depth_scale, range_scale):
     r"""Eq. 17 of Chen et al. 2012: bilateral upsampling of :math:`B^{k+1}` to level k.
@@ -542,7 +546,7 @@ def bilateral_upsample_level(coarse, coarse_depth, coarse_valid, coarse_range, f
     height, width = fine_valid.shape
     coarse_height, coarse_width = coarse_valid.shape
     out = np.zeros((height, width, 3))
-    for row in numba.prange(height):
+    for row in range(height):
         fy = (row + 0.5) / 2.0 - 0.5
         y0 = min(max(int(math.floor(fy)), 0), coarse_height - 1)
         y1 = min(y0 + 1, coarse_height - 1)
@@ -578,9 +582,9 @@ def bilateral_upsample_level(coarse, coarse_depth, coarse_valid, coarse_range, f
 
 
 # ====================================================================== G-buffers
-@numba.njit(parallel=True, cache=True)
+@numba.njit(cache=True)
 def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, height, near,
-              orthographic, stripes):
+              orthographic):
     r"""Find the first triangle seen through each pixel: a z-buffer with exact ray tests.
 
     For each triangle, the pixels of its projected bounding box are tested with the
@@ -603,103 +607,101 @@ def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, heig
     triangle = np.full((height, width), -1, np.int64)
     barycentric = np.zeros((height, width, 2))
     depth = np.full((height, width), np.inf)
-    for stripe in numba.prange(stripes):
-        for f in range(faces.shape[0]):
-            a = vertices[faces[f, 0]]
-            b = vertices[faces[f, 1]]
-            c = vertices[faces[f, 2]]
-            # the triangle's bounding box in pixels
-            col_low = 1e300
-            col_high = -1e300
-            row_low = 1e300
-            row_high = -1e300
-            clipped = False
-            for corner in range(3):
-                p = a if corner == 0 else (b if corner == 1 else c)
-                rx = p[0] - eye[0]
-                ry = p[1] - eye[1]
-                rz = p[2] - eye[2]
-                along = rx * forward[0] + ry * forward[1] + rz * forward[2]
-                across = rx * left[0] + ry * left[1] + rz * left[2]
-                upward = rx * up[0] + ry * up[1] + rz * up[2]
-                if not orthographic:
-                    if along <= near:
-                        clipped = True
-                        break
-                    across /= along
-                    upward /= along
-                col = (1.0 - across / tan_x) * 0.5 * width - 0.5
-                row = (1.0 - upward / tan_y) * 0.5 * height - 0.5
-                col_low = min(col_low, col)
-                col_high = max(col_high, col)
-                row_low = min(row_low, row)
-                row_high = max(row_high, row)
-            if clipped:
-                x_first, x_last, y_first, y_last = 0, width - 1, 0, height - 1
-            else:
-                if col_high < -1 or row_high < -1 or col_low > width or row_low > height:
+    for f in range(faces.shape[0]):
+        a = vertices[faces[f, 0]]
+        b = vertices[faces[f, 1]]
+        c = vertices[faces[f, 2]]
+        # the triangle's bounding box in pixels
+        col_low = 1e300
+        col_high = -1e300
+        row_low = 1e300
+        row_high = -1e300
+        clipped = False
+        for corner in range(3):
+            p = a if corner == 0 else (b if corner == 1 else c)
+            rx = p[0] - eye[0]
+            ry = p[1] - eye[1]
+            rz = p[2] - eye[2]
+            along = rx * forward[0] + ry * forward[1] + rz * forward[2]
+            across = rx * left[0] + ry * left[1] + rz * left[2]
+            upward = rx * up[0] + ry * up[1] + rz * up[2]
+            if not orthographic:
+                if along <= near:
+                    clipped = True
+                    break
+                across /= along
+                upward /= along
+            col = (1.0 - across / tan_x) * 0.5 * width - 0.5
+            row = (1.0 - upward / tan_y) * 0.5 * height - 0.5
+            col_low = min(col_low, col)
+            col_high = max(col_high, col)
+            row_low = min(row_low, row)
+            row_high = max(row_high, row)
+        if clipped:
+            x_first, x_last, y_first, y_last = 0, width - 1, 0, height - 1
+        else:
+            if col_high < -1 or row_high < -1 or col_low > width or row_low > height:
+                continue
+            x_first = max(int(math.floor(col_low)), 0)
+            x_last = min(int(math.ceil(col_high)), width - 1)
+            y_first = max(int(math.floor(row_low)), 0)
+            y_last = min(int(math.ceil(row_high)), height - 1)
+        e1x = b[0] - a[0]
+        e1y = b[1] - a[1]
+        e1z = b[2] - a[2]
+        e2x = c[0] - a[0]
+        e2y = c[1] - a[1]
+        e2z = c[2] - a[2]
+        for y in range(y_first, y_last + 1):
+            sy = tan_y * (1.0 - 2.0 * (y + 0.5) / height)
+            for x in range(x_first, x_last + 1):
+                sx = tan_x * (1.0 - 2.0 * (x + 0.5) / width)
+                if orthographic:
+                    ox = eye[0] + sx * left[0] + sy * up[0]
+                    oy = eye[1] + sx * left[1] + sy * up[1]
+                    oz = eye[2] + sx * left[2] + sy * up[2]
+                    dx, dy, dz = forward[0], forward[1], forward[2]
+                    start = 0.0
+                else:
+                    ox, oy, oz = eye[0], eye[1], eye[2]
+                    dx = forward[0] + sx * left[0] + sy * up[0]
+                    dy = forward[1] + sx * left[1] + sy * up[1]
+                    dz = forward[2] + sx * left[2] + sy * up[2]
+                    norm = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+                    dx *= norm
+                    dy *= norm
+                    dz *= norm
+                    start = near / (dx * forward[0] + dy * forward[1] + dz * forward[2])
+                px = dy * e2z - dz * e2y
+                py = dz * e2x - dx * e2z
+                pz = dx * e2y - dy * e2x
+                det = e1x * px + e1y * py + e1z * pz
+                if abs(det) < 1e-300:
                     continue
-                x_first = max(int(math.floor(col_low)), 0)
-                x_last = min(int(math.ceil(col_high)), width - 1)
-                y_first = max(int(math.floor(row_low)), 0)
-                y_last = min(int(math.ceil(row_high)), height - 1)
-            e1x = b[0] - a[0]
-            e1y = b[1] - a[1]
-            e1z = b[2] - a[2]
-            e2x = c[0] - a[0]
-            e2y = c[1] - a[1]
-            e2z = c[2] - a[2]
-            y_first += (stripe - y_first) % stripes
-            for y in range(y_first, y_last + 1, stripes):
-                sy = tan_y * (1.0 - 2.0 * (y + 0.5) / height)
-                for x in range(x_first, x_last + 1):
-                    sx = tan_x * (1.0 - 2.0 * (x + 0.5) / width)
-                    if orthographic:
-                        ox = eye[0] + sx * left[0] + sy * up[0]
-                        oy = eye[1] + sx * left[1] + sy * up[1]
-                        oz = eye[2] + sx * left[2] + sy * up[2]
-                        dx, dy, dz = forward[0], forward[1], forward[2]
-                        start = 0.0
-                    else:
-                        ox, oy, oz = eye[0], eye[1], eye[2]
-                        dx = forward[0] + sx * left[0] + sy * up[0]
-                        dy = forward[1] + sx * left[1] + sy * up[1]
-                        dz = forward[2] + sx * left[2] + sy * up[2]
-                        norm = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
-                        dx *= norm
-                        dy *= norm
-                        dz *= norm
-                        start = near / (dx * forward[0] + dy * forward[1] + dz * forward[2])
-                    px = dy * e2z - dz * e2y
-                    py = dz * e2x - dx * e2z
-                    pz = dx * e2y - dy * e2x
-                    det = e1x * px + e1y * py + e1z * pz
-                    if abs(det) < 1e-300:
-                        continue
-                    inverse = 1.0 / det
-                    tx = ox - a[0]
-                    ty = oy - a[1]
-                    tz = oz - a[2]
-                    u = (tx * px + ty * py + tz * pz) * inverse
-                    if u < 0.0 or u > 1.0:
-                        continue
-                    qx = ty * e1z - tz * e1y
-                    qy = tz * e1x - tx * e1z
-                    qz = tx * e1y - ty * e1x
-                    v = (dx * qx + dy * qy + dz * qz) * inverse
-                    if v < 0.0 or u + v > 1.0:
-                        continue
-                    t = (e2x * qx + e2y * qy + e2z * qz) * inverse
-                    if t < start or t >= depth[y, x]:
-                        continue
-                    depth[y, x] = t
-                    triangle[y, x] = f
-                    barycentric[y, x, 0] = u
-                    barycentric[y, x, 1] = v
+                inverse = 1.0 / det
+                tx = ox - a[0]
+                ty = oy - a[1]
+                tz = oz - a[2]
+                u = (tx * px + ty * py + tz * pz) * inverse
+                if u < 0.0 or u > 1.0:
+                    continue
+                qx = ty * e1z - tz * e1y
+                qy = tz * e1x - tx * e1z
+                qz = tx * e1y - ty * e1x
+                v = (dx * qx + dy * qy + dz * qz) * inverse
+                if v < 0.0 or u + v > 1.0:
+                    continue
+                t = (e2x * qx + e2y * qy + e2z * qz) * inverse
+                if t < start or t >= depth[y, x]:
+                    continue
+                depth[y, x] = t
+                triangle[y, x] = f
+                barycentric[y, x, 0] = u
+                barycentric[y, x, 1] = v
     return triangle, barycentric, depth
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(cache=True)
 def interpolate_surface(triangle, barycentric, first_face, last_face, vertices, faces,
                         normals, uv):
     """Surface attributes of the pixels whose triangle lies in ``[first_face, last_face)``.
@@ -719,7 +721,7 @@ def interpolate_surface(triangle, barycentric, first_face, last_face, vertices, 
     normal = np.zeros((height, width, 3))
     out_uv = np.zeros((height, width, 2))
     has_uv = uv.shape[0] == vertices.shape[0]
-    for y in numba.prange(height):
+    for y in range(height):
         for x in range(width):
             f = triangle[y, x]
             if f < first_face or f >= last_face:

@@ -2,6 +2,7 @@
 
 import math
 
+import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -21,6 +22,7 @@ from translucent.fast.splatting import (
     select_irradiance_samples,
     splat_frame,
 )
+from translucent.fast.splatting_kernels import exp32
 from translucent.materials import measured_medium
 from translucent.materials.subedit import SubEditProfiles, builtin_subedit, subedit_from_dipole
 from translucent.scenes import Camera, DirectionalLight, PointLight, load_scene
@@ -33,6 +35,16 @@ SPLAT_TOLERANCE = 0.06
 #: numpy (float64 accumulation) and Dr.Jit (float32 scatter-add) kernels: float32 sums of
 #: ~1e4 terms agree to ~1e-5 relative.
 BACKEND_RTOL = 1e-4
+#: Cephes' expf polynomial is accurate to about one float32 ulp (6e-8); two ulps of margin
+#: cover the rounding of the argument reduction.
+EXP32_RTOL = 2e-7
+#: Mitsuba intersects in float32 (relative error ~1e-7 of distances of order 5 scene units),
+#: amplified by 1/cos of the incidence angle, up to ~100 at the silhouettes of these
+#: buffers: 5e-5; then it interpolates in float64. The rasteriser works in float64.
+RAYCAST_ATOL = 1e-4
+#: Frames from rasterised and from ray-traced buffers may differ by at most this share of
+#: the method's own error against brute force.
+BUFFER_SHARE = 0.1
 #: Scene units to mm in the synthetic tests: a 2 x 2 plane is 40 mm across.
 MM_PER_UNIT = 20.0
 
@@ -117,12 +129,44 @@ def test_every_ablation_setting_matches_brute_force(setting, checker_setup, chec
     assert relative_error(image, checker_truth) < SPLAT_TOLERANCE
 
 
-def test_drjit_and_numpy_kernels_agree(checker_setup):
-    buffer, model, view, material = checker_setup
+@pytest.mark.parametrize("backend", ["numba", "drjit"])
+@pytest.mark.parametrize("plane", [{}, {"step_at": 0.0, "step_height": 0.8}],
+                         ids=["flat", "depth step"])
+def test_compiled_kernels_agree_with_numpy(backend, plane):
+    # the depth step makes the numba kernel skip whole blocks by their bounding boxes
+    buffer, model, view, material = small_setup(**plane)
     images = [splat_frame(buffer, model, [view], material, mm_per_unit=MM_PER_UNIT,
-                          sphere_radius=math.sqrt(2), knobs={"backend": backend})
-              for backend in ("numpy", "drjit")]
+                          sphere_radius=math.sqrt(2), knobs={"backend": name})
+              for name in ("numpy", backend)]
     assert np.allclose(images[0], images[1], rtol=BACKEND_RTOL, atol=BACKEND_RTOL * images[0].max())
+
+
+def test_compiled_brute_force_agrees_with_numpy(checker_setup):
+    buffer, model, view, material = checker_setup
+    samples = splatting.IrradianceSamples(
+        view.buffer.position.reshape(-1, 3), material.texel_index(view.buffer.uv).reshape(-1),
+        view.flux.reshape(-1, 3), np.zeros(view.buffer.valid.size, np.int64))
+    exitance = [splatting.brute_force_exitance(samples, buffer, material,
+                                               mm_per_unit=MM_PER_UNIT, backend=name)
+                for name in ("numpy", "numba")]
+    assert np.allclose(exitance[0], exitance[1], rtol=BACKEND_RTOL,
+                       atol=BACKEND_RTOL * exitance[0].max())
+
+
+@numba.njit
+def exp32_of_array(x):
+    out = np.empty_like(x)
+    for i in range(len(x)):
+        out[i] = exp32(x[i])
+    return out
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(min_value=-86.0, max_value=88.0), min_size=1, max_size=64))
+def test_exp32_is_exp_to_float32_precision(values):
+    x = np.asarray(values, dtype=np.float32)
+    exact = np.exp(x.astype(np.float64))
+    assert np.all(np.abs(exp32_of_array(x) / exact - 1.0) < EXP32_RTOL)
 
 
 def test_multiresolution_moves_pairs_to_coarse_levels(checker_setup, checker_truth):
@@ -234,6 +278,14 @@ def test_rendering_radius_table_is_monotone(decay):
     assert table.radii[0] > 0.5
     assert table.radii[-1] < table.radii[0]
     assert np.all(np.isfinite(table([np.nan, np.inf, 0.0, -1.0])))
+
+
+def test_rendering_radius_table_renders_a_linear_density_at_any_resolvable_level():
+    # P(r) = 2 makes P(r) r = 2r linear: sampling each cell at its centre is exact, so every
+    # level with at least MIN_LEVEL_RESOLUTION pixels across the range may render all of it
+    table = minimal_rendering_radius_table(lambda r: np.full_like(r, 2.0), 0.001)
+    resolvable = table.resolutions >= splatting.MIN_LEVEL_RESOLUTION
+    assert np.all(table.radii[resolvable] == 0) and np.all(table.radii[~resolvable] == 1)
 
 
 def test_rendering_radius_table_rejects_bad_epsilon():
@@ -392,3 +444,57 @@ def test_approx_command_writes_an_exr(tmp_path):
     assert code == 0
     image = read_exr(out)
     assert image.metadata["producer"] == "splatting" and image.rgb.sum() > 0
+
+
+@pytest.mark.parametrize("view", ["camera", "point light", "directional light"])
+def test_rasterized_buffers_match_ray_queries(heterogeneous_scene, view):
+    from translucent.scenes.raycast import gbuffer, gbuffer_from_point, gbuffer_orthographic
+
+    scene = heterogeneous_scene
+    mesh = scene.objects[0].mesh
+    if view == "camera":
+        raster = splatting.rasterize_view(scene, camera=scene.camera)
+        traced = gbuffer(scene)
+    elif view == "point light":
+        camera = Camera([-3.0, 3.0, 4.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 22.0, 40, 40)
+        raster = splatting.rasterize_view(scene, camera=camera)
+        traced = gbuffer_from_point(scene, camera.origin, camera.forward, camera.fov, 40)
+    else:
+        direction = np.array([0.3, -1.0, -0.2]) / np.linalg.norm([0.3, -1.0, -0.2])
+        raster = splatting.rasterize_view(scene, direction=direction, size=40,
+                                          centre=np.zeros(3), extent=1.1)
+        traced = gbuffer_orthographic(scene, direction, 40, center=np.zeros(3), extent=1.1)
+    ours = raster.surface(scene, 0)
+    assert np.array_equal(ours.valid, traced.mask(0))
+    hit = ours.valid
+    assert np.allclose(ours.position[hit], traced.position[hit], atol=RAYCAST_ATOL)
+    assert np.allclose(ours.normal[hit], traced.normal[hit], atol=RAYCAST_ATOL)
+    assert np.allclose(ours.uv[hit], traced.interpolate(0, mesh.uv)[hit], atol=RAYCAST_ATOL)
+    assert np.allclose(ours.depth[hit], traced.depth[hit], atol=RAYCAST_ATOL)
+
+
+def test_raster_and_ray_query_buffers_render_alike(heterogeneous_scene):
+    states = [splatting.precompute(heterogeneous_scene, irradiance_resolution=32,
+                                   buffers=buffers) for buffers in ("raster", "mitsuba")]
+    images = [state.render().rgb for state in states]
+    truth = states[0].render_ground_truth().rgb
+    # discrete choices (the median texel, a pair's level, a sample's level) may flip on the
+    # 1e-6 differences of the buffers, so the frames are not equal to rounding; they must
+    # differ far less than either differs from the truth
+    assert relative_error(images[0], images[1]) < BUFFER_SHARE * relative_error(images[0],
+                                                                                  truth)
+
+
+def test_sampling_ranges_are_ordered_and_thin_the_samples():
+    material = builtin_subedit("veined_marble", resolution=16)
+    shortest, luminance, longest = (splatting.sampling_range(material, name)
+                                    for name in splatting.SAMPLING_RANGES)
+    assert np.all(shortest <= luminance + 1e-12) and np.all(luminance <= longest + 1e-12)
+    view = light_view(plane_light_buffer(64), np.array([0, 0, 1.0]), np.ones(3), material.eta)
+    pyramid = irradiance_mipmap(view.buffer, view.flux, view.cosine, 3)
+    counts = [len(select_irradiance_samples(pyramid, material, mm_per_unit=MM_PER_UNIT,
+                                            z0=0.03, alpha=15.0, sampling=name))
+              for name in splatting.SAMPLING_RANGES]
+    assert counts[0] >= counts[1] >= counts[2]
+    with pytest.raises(InputError, match="sampling_range = 'max': must be one of"):
+        splatting.sampling_range(material, "max")
