@@ -165,8 +165,24 @@ def _select_rows(rows, weights, energy, max_terms, out_indices, out_values,
                                             out_values[r], scratch)
 
 
+class _RowPointers:
+    """Row count and stored entries of a matrix with CSR row pointers ``indptr``."""
+
+    indptr: np.ndarray
+
+    @property
+    def rows(self) -> int:
+        """Number of rows."""
+        return len(self.indptr) - 1
+
+    @property
+    def nnz(self) -> int:
+        """Stored entries."""
+        return int(self.indptr[-1])
+
+
 @dataclass(frozen=True, eq=False)
-class SparseRows:
+class SparseRows(_RowPointers):
     """A row-compressed sparse matrix with float32 values (CSR).
 
     Attributes
@@ -182,16 +198,6 @@ class SparseRows:
     indices: np.ndarray
     values: np.ndarray
     columns: int
-
-    @property
-    def rows(self) -> int:
-        """Number of rows."""
-        return len(self.indptr) - 1
-
-    @property
-    def nnz(self) -> int:
-        """Stored entries."""
-        return int(self.indptr[-1])
 
     @classmethod
     def from_slots(cls, indices, values, counts, columns: int) -> SparseRows:
@@ -328,7 +334,7 @@ def _product_scalar(indptr, packed, scales, index_bits, vector, out):  # pragma:
 
 
 @dataclass(frozen=True, eq=False)
-class QuantisedRows:
+class QuantisedRows(_RowPointers):
     """A sparse matrix with 16-bit values and 16-bit indices packed in int32 words.
 
     Word = ``(level << index_bits) | column``; the level is a signed integer of
@@ -362,16 +368,6 @@ class QuantisedRows:
         _quantise(sparse.indptr, sparse.indices, sparse.values, index_bits, value_max, packed,
                   scales)
         return cls(sparse.indptr, packed, scales, index_bits, sparse.columns)
-
-    @property
-    def rows(self) -> int:
-        """Number of rows."""
-        return len(self.indptr) - 1
-
-    @property
-    def nnz(self) -> int:
-        """Stored entries."""
-        return int(self.indptr[-1])
 
     @property
     def nbytes(self) -> int:
