@@ -328,16 +328,8 @@ class DipoleModel(ProfileModel):
         # each channel on its own: the weighted least-squares exposure of every grid point
         own = {}
         for c in self.channels:
-            mean, stderr, dof = self._observations[c]
-            u = predicted[c]
-            weights = 1.0 / stderr ** 2
-            with np.errstate(invalid="ignore", divide="ignore"):
-                scale = (u * mean * weights).sum(axis=1) / (u * u * weights).sum(axis=1)
-            if not self.fit_exposure:
-                scale = np.full_like(scale, self.spec.exposure)
-            scale = np.where(np.isfinite(scale) & (scale > 0), scale, np.nan)
-            loglike = student_t_log_likelihood(mean - scale[:, None] * u, stderr, dof)
-            k = int(np.argmax(np.where(np.isfinite(loglike), loglike, -np.inf)))
+            scale, loglike = self._profiled_exposure(c, predicted[c])
+            k = int(np.argmax(loglike))
             own[c] = (k, scale[k])
         scales = np.array([own[c][1] for c in own], dtype=np.float64)
         scales = scales[np.isfinite(scales) & (scales > 0)]
@@ -374,6 +366,24 @@ class DipoleModel(ProfileModel):
             guesses.insert(0, self._grid_theta(grid_a, grid_s, grid_eta, *shared))
         return guesses
 
+    def _profiled_exposure(self, c, unit_predictions):
+        """Best exposure of each grid point for channel ``c`` alone, and its log-likelihood.
+
+        The exposure is the weighted least-squares scale of the unit-exposure predictions
+        (the sidecar's, when known); points where it is not positive get -inf.
+        """
+        mean, stderr, dof = self._observations[c]
+        u = unit_predictions
+        weights = 1.0 / stderr ** 2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            scale = (u * mean * weights).sum(axis=1) / (u * u * weights).sum(axis=1)
+        if not self.fit_exposure:
+            scale = np.full_like(scale, self.spec.exposure)
+        good = np.isfinite(scale) & (scale > 0)
+        scale = np.where(good, scale, 1.0)
+        loglike = student_t_log_likelihood(mean - scale[:, None] * u, stderr, dof)
+        return scale, np.where(good & np.isfinite(loglike), loglike, -np.inf)
+
     def _channel_log_likelihood(self, c, points, eta) -> np.ndarray:
         """Log-likelihood of channel ``c`` alone at ``(ln sigma_a, ln sigma_s', ln scale)``."""
         points = np.atleast_2d(points)
@@ -402,16 +412,7 @@ class DipoleModel(ProfileModel):
         picks, scales = {}, []
         cell = np.diff(np.unique(grid_a))[0] if np.unique(grid_a).size > 1 else 1.0
         for c in self.channels:
-            mean, stderr, dof = self._observations[c]
-            u = predicted[c]
-            weights = 1.0 / stderr ** 2
-            with np.errstate(invalid="ignore", divide="ignore"):
-                scale = (u * mean * weights).sum(axis=1) / (u * u * weights).sum(axis=1)
-            if not self.fit_exposure:
-                scale = np.full_like(scale, self.spec.exposure)
-            good = np.isfinite(scale) & (scale > 0)
-            loglike = np.where(good, student_t_log_likelihood(
-                mean - np.where(good, scale, 1.0)[:, None] * u, stderr, dof), -np.inf)
+            scale, loglike = self._profiled_exposure(c, predicted[c])
             chosen = []
             for k in np.argsort(loglike)[::-1]:
                 if not np.isfinite(loglike[k]) or len(chosen) == CHANNEL_CANDIDATES:

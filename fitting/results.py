@@ -13,12 +13,12 @@ the priors of :mod:`translucent.fitting.models` are uniform):
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from ..atomic import atomic_write_text
+from ..tomlio import toml_value
 
 __all__ = ["ParameterSummary", "read_material", "summarise_posterior", "toml_text",
            "write_material"]
@@ -122,25 +122,6 @@ def summaries_to_json(summaries) -> list[dict]:
     return [asdict(s) for s in summaries]
 
 
-def _toml_value(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, (float, np.floating)):
-        value = float(value)
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise TypeError(f"cannot write {type(value).__name__} to TOML")
-
-
 def toml_text(table: dict, comments: list[str] = ()) -> str:
     """Write a flat TOML document: comment lines, then ``key = value`` lines.
 
@@ -152,7 +133,7 @@ def toml_text(table: dict, comments: list[str] = ()) -> str:
             value = [[float("nan") if v is None else v for v in item]
                      if isinstance(item, list) else (float("nan") if item is None else item)
                      for item in value]
-        lines.append(f"{key} = {_toml_value(value)}")
+        lines.append(f"{key} = {toml_value(value)}")
     return "\n".join(lines) + "\n"
 
 
