@@ -6,12 +6,24 @@ lookup table of Eq. 14, which depends on the material alone). Four steps (Sect. 
 
 1. *Buffer generation.* An irradiance buffer (G-buffer seen from the light, 512 x 512 by
    default) with a standard mipmap plus a min/max depth mipmap, and a splatting buffer (the
-   camera's G-buffer) with a median-depth mipmap. Both come from :mod:`translucent.scenes`
-   ray queries.
-2. *Adaptive irradiance sample selection* (Eq. 10-11, Algorithm 1).
+   camera's G-buffer) with a median-depth mipmap. Both are rasterised
+   (:func:`rasterize_view`: a z-buffer whose per-pixel test is the pixel's exact ray, so
+   the buffers are those of :mod:`translucent.scenes.raycast`'s ray queries, which the
+   knob ``buffers = "mitsuba"`` still uses).
+2. *Adaptive irradiance sample selection* (Eq. 10-11, Algorithm 1), with the RGB reading
+   of the per-point range chosen by ``sampling_range`` (:data:`SAMPLING_RANGES`).
 3. *Multiresolution splatting* (Eq. 12-14) with the minimal effective rendering radius
-   looked up in a table computed once per material (:func:`minimal_rendering_radius_table`).
+   looked up in a table computed once per material (:func:`minimal_rendering_radius_table`,
+   which samples each pixel cell at its centre: see there why).
 4. *Splat accumulation* by bilateral upsampling (Eq. 17), then :math:`F_t/\pi` (Eq. 7).
+
+The loops run compiled (:mod:`translucent.fast.splatting_kernels`, numba): each splat
+visits, row by row, the pixels of the disc that bounds its range's projection, skips runs
+of 16 pixels whose bounding box is out of range, and evaluates Eq. 8-9 in float32. Measured
+on this shared 2-core CPU (``translucent bench splatting``, heterogeneous scene, 800 x 600,
+512^2): about 2.5 CPU seconds a frame with both accelerations (about 200 million
+sample-pixel pairs visited), 5.7x less than without acceleration; the 10 frames per second
+of the paper's GPU are out of reach here.
 
 Units: positions in scene units, profiles in mm^-2 (``scene.mm_per_unit`` converts);
 radiance in the units of the lights per scene unit squared, as the reference renders.
@@ -60,6 +72,12 @@ __all__ = [
     "splat_frame",
     "light_view",
     "rendering_radius_table",
+    "rasterize_view",
+    "RasterView",
+    "sampling_range",
+    "SAMPLING_RANGES",
+    "BACKENDS",
+    "MIN_LEVEL_RESOLUTION",
 ]
 
 #: The knobs of the method and their defaults (Chen et al. 2012, Sect. 4 and 5).
@@ -1122,15 +1140,11 @@ def _check_knobs(knobs: dict) -> dict:
             raise InputError("must be a finite number >= 0 (epsilon > 0)", field=name,
                              value=merged[name])
         merged[name] = value
-    if merged["backend"] not in BACKENDS:
-        raise InputError(f"must be one of {', '.join(map(repr, BACKENDS))}", field="backend",
-                         value=merged["backend"])
-    if merged["sampling_range"] not in SAMPLING_RANGES:
-        raise InputError(f"must be one of {', '.join(map(repr, SAMPLING_RANGES))}",
-                         field="sampling_range", value=merged["sampling_range"])
-    if merged["buffers"] not in ("raster", "mitsuba"):
-        raise InputError("must be 'raster' or 'mitsuba'", field="buffers",
-                         value=merged["buffers"])
+    for name, choices in (("backend", BACKENDS), ("sampling_range", SAMPLING_RANGES),
+                          ("buffers", ("raster", "mitsuba"))):
+        if merged[name] not in choices:
+            raise InputError(f"must be one of {', '.join(map(repr, choices))}", field=name,
+                             value=merged[name])
     merged["multiresolution"] = bool(merged["multiresolution"])
     merged["adaptive"] = bool(merged["adaptive"])
     return merged

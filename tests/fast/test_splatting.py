@@ -428,7 +428,7 @@ def test_applies_to_and_knob_errors(heterogeneous_scene):
     with pytest.raises(InputError,
                        match="backend = 'cuda': must be one of 'numba', 'drjit', 'numpy'"):
         splatting.precompute(heterogeneous_scene, backend="cuda")
-    with pytest.raises(InputError, match="buffers = 'gpu': must be 'raster' or 'mitsuba'"):
+    with pytest.raises(InputError, match="buffers = 'gpu': must be one of 'raster', 'mitsuba'"):
         splatting.precompute(heterogeneous_scene, buffers="gpu")
     with pytest.raises(InputError, match="sampling_range = 'red': must be one of 'shortest'"):
         splatting.precompute(heterogeneous_scene, sampling_range="red")
