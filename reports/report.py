@@ -65,6 +65,7 @@ __all__ = [
     "DEFAULT_SPP",
     "backend_versions",
     "EXCLUDED_SCENES",
+    "SCENE_SPP",
     "TOLERANCES",
     "BaselineCheck",
     "MethodRun",
@@ -78,11 +79,17 @@ __all__ = [
     "updated_baseline",
 ]
 
-#: Samples per pixel of each reference pass. With :data:`DEFAULT_PASSES` the default
-#: scenes' references take about 2.5 CPU minutes together on this 2-core machine (the
-#: marble sphere and the Cornell box about 1 minute each), inside the 10-minute budget of
-#: a first run with the fast methods' precomputations.
-DEFAULT_SPP = 64
+#: Samples per pixel of each reference pass, for scenes not in :data:`SCENE_SPP`. Measured
+#: here, a sample per pixel (of one pass) costs the Cornell box about 0.7 CPU seconds (skim
+#: milk is rendered per channel, three renders a pass) and the marble sphere 0.23: 32 x 4
+#: passes keeps the default scenes' references near 2.3 CPU minutes in all, inside a first
+#: run's 10 minutes with the fast methods' precomputations (about 2 CPU minutes).
+DEFAULT_SPP = 32
+
+#: Samples per pixel per pass for scenes whose paths are cheap (measured here: the bowl
+#: 0.02 CPU seconds per spp, the glossy scene 0.003): more samples cost little there and
+#: keep their references' noise well below the methods' errors.
+SCENE_SPP: dict[str, int] = {"bowl": 256, "glossy": 256}
 
 #: Independent reference passes: 4 give the per-pixel variance the relative MSE discounts.
 DEFAULT_PASSES = 4
@@ -162,17 +169,29 @@ class Tolerance:
         return value < baseline - allowed if self.lower_is_better else value > baseline + allowed
 
 
-#: HDR-FLIP (0 to 1). MEASUREMENT PENDING: set from the spread a re-rendered reference causes.
-HDR_FLIP_TOLERANCE = Tolerance("hdr_flip", absolute=0.005, relative=0.05)
+# The tolerances are about twice the largest change that re-rendering the references alone
+# caused: the default scenes' references were rendered again with another seed (same spp
+# and passes) and every method's image compared with both (measured here, Mitsuba 3.9.1).
+# A regression must exceed what a new reference (another Mitsuba version, another seed)
+# could cause; the noisy references of the bowl and the Cornell box set the scale.
 
-#: Relative MSE (dimensionless). MEASUREMENT PENDING.
-RELATIVE_MSE_TOLERANCE = Tolerance("relative_mse", absolute=0.002, relative=0.10)
+#: HDR-FLIP (0 to 1): 0.005 absolute plus 3 % of the baseline. The largest change measured
+#: was 0.0046 (bowl, radiosity: 1.6 %); the largest relative one 2.5 % (sphere, PRT).
+HDR_FLIP_TOLERANCE = Tolerance("hdr_flip", absolute=0.005, relative=0.03)
 
-#: Mean CIEDE2000 (delta E; about 1 is just noticeable). MEASUREMENT PENDING.
-CIEDE2000_TOLERANCE = Tolerance("ciede2000", absolute=0.1, relative=0.05)
+#: Relative MSE (dimensionless): 0.001 absolute plus 30 %. The reference's noise is
+#: discounted from it, yet the largest change measured was 0.0033 (bowl, radiosity: 15 %);
+#: on the sphere 0.0004 (6 %).
+RELATIVE_MSE_TOLERANCE = Tolerance("relative_mse", absolute=0.001, relative=0.30)
 
-#: Mean SSIM (1 is identical). MEASUREMENT PENDING.
-SSIM_TOLERANCE = Tolerance("ssim", absolute=0.01, relative=0.0, lower_is_better=False)
+#: Mean CIEDE2000 (delta E; about 1 is just noticeable): 0.1 absolute plus 15 %. The largest
+#: change measured was 2.0 (Cornell box, PRT, whose walls are black: 7 %); radiosity on the
+#: Cornell box moved 0.28 (7 %).
+CIEDE2000_TOLERANCE = Tolerance("ciede2000", absolute=0.1, relative=0.15)
+
+#: Mean SSIM (1 is identical): 0.03 absolute, no relative part (it is bounded by 1). The
+#: largest change measured was 0.015 (Cornell box, radiosity): reference noise lowers SSIM.
+SSIM_TOLERANCE = Tolerance("ssim", absolute=0.03, relative=0.0, lower_is_better=False)
 
 #: The gated metrics, by :class:`Metrics` field.
 TOLERANCES: dict[str, Tolerance] = {t.field: t for t in (
@@ -199,8 +218,8 @@ class MethodRun:
     ----------
     method, scene : str
         Names.
-    status : {"ok", "failed", "not applicable", "not built"}
-        What happened.
+    status : {"ok", "failed", "not applicable", "not built", "not run"}
+        What happened ("not run": the scene has no reference to compare with).
     reason : str
         Why a method did not run, or the error it raised.
     image : Image, optional
@@ -474,6 +493,17 @@ def _reference_path(scene, spp: int, passes: int) -> Path:
     return Cache("reference").path(reference_key(scene, settings), ".exr")
 
 
+def _unconvertible(scene) -> str:
+    """Return why Mitsuba cannot take ``scene`` (no render needed to know), or ""."""
+    from ..reference import convert_scene
+
+    try:
+        convert_scene(scene)
+    except InputError as error:
+        return f"InputError: {error}"
+    return ""
+
+
 def _cached_reference(scene, spp: int, passes: int) -> Image | None:
     from ..image import read_exr
 
@@ -672,6 +702,7 @@ class SceneReport:
     slug: str
     scene: Any
     scene_hash: str
+    spp: int
     reference: Image | None = None
     reference_error: str = ""
     reference_cached: bool = False
@@ -763,7 +794,7 @@ def _slug(name: str, taken: set[str]) -> str:
 
 def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 update_baseline: bool = False, scheduler: str | None = None,
-                serial: bool = False, spp: int = DEFAULT_SPP, passes: int = DEFAULT_PASSES,
+                serial: bool = False, spp: int | None = None, passes: int = DEFAULT_PASSES,
                 progress: bool = True, stream=None) -> ReportResult:
     """Run the report: references, fast methods, metrics, error maps, baseline, HTML.
 
@@ -785,8 +816,11 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         Dask scheduler address for the tasks; None: a local process cluster.
     serial : bool
         Run every task in this process, without Dask.
-    spp, passes : int
-        Reference samples per pixel per pass and passes.
+    spp : int, optional
+        Reference samples per pixel per pass for every scene; default :data:`SCENE_SPP`
+        for the scenes it names, :data:`DEFAULT_SPP` for the others.
+    passes : int
+        Reference passes.
     progress : bool
         Progress bars (on stderr).
     stream : file, optional
@@ -811,7 +845,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
 
     stream = sys.stdout if stream is None else stream
     started = time.perf_counter()
-    spp, passes = _check_count(spp, "--spp"), _check_count(passes, "--passes")
+    spp = None if spp is None else _check_count(spp, "--spp")
+    passes = _check_count(passes, "--passes")
     chosen = _methods(methods)
     out = _check_out(out)
     baseline_path = Path(baseline) if baseline is not None else DEFAULT_BASELINE
@@ -825,23 +860,31 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     loaded = [name if isinstance(name, Scene) else load_scene(name) for name in names]
     versions = backend_versions()
     fingerprint = _source_fingerprint()
-    reference_settings = {"spp": spp, "passes": passes, "seed": 0}
+    reference_settings = {"spp": spp if spp is not None else
+                          {"default": DEFAULT_SPP, **SCENE_SPP}, "passes": passes, "seed": 0}
 
     taken: set[str] = set()
-    reports = [SceneReport(scene.name, _slug(scene.name, taken), scene, content_hash(scene))
+    reports = [SceneReport(scene.name, _slug(scene.name, taken), scene, content_hash(scene),
+                           spp if spp is not None else SCENE_SPP.get(scene.name, DEFAULT_SPP))
                for scene in loaded]
     run_cache = Cache("report")
     tasks: list[tuple] = []
     owners: list[tuple[SceneReport, str | None]] = []
     keys: dict[tuple[int, str], str] = {}
     for position, report in enumerate(reports):
-        report.reference = _cached_reference(report.scene, spp, passes)
+        report.reference = _cached_reference(report.scene, report.spp, passes)
         report.reference_cached = report.reference is not None
         portable = _portable(report.scene, report.scene_hash, scheduler is None)
         if report.reference is None:
-            tasks.append(("reference", portable, spp, passes))
+            report.reference_error = _unconvertible(report.scene)
+        if report.reference is None and not report.reference_error:
+            tasks.append(("reference", portable, report.spp, passes))
             owners.append((report, None))
         for name in chosen:
+            if report.reference_error:
+                report.runs[name] = MethodRun(name, report.name, "not run",
+                                              "the scene has no reference to compare with")
+                continue
             try:
                 module = method_module(name)
             except InputError as error:
@@ -894,7 +937,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
             _compare_and_write(report, staging)
         regressions = []
         for report in reports:
-            reference = {"spp": spp, "passes": passes}
+            reference = {"spp": report.spp, "passes": passes}
             for name in chosen:
                 run = report.runs.get(name)
                 metrics = report.metrics.get(name)
@@ -928,7 +971,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
 
     if update_baseline:
         results_for_baseline = [
-            {"name": r.name, "scene_hash": r.scene_hash, "reference": {"spp": spp,
+            {"name": r.name, "scene_hash": r.scene_hash, "reference": {"spp": r.spp,
                                                                       "passes": passes},
              "metrics": r.metrics, "methods_run": chosen}
             for r in reports if r.reference is not None]
@@ -1088,6 +1131,13 @@ def _print_summary(summary, regressions, out, seconds, updated, baseline_path, s
 # ====================================================================== the page
 
 
+def _spp_text(spp) -> str:
+    if isinstance(spp, dict):
+        others = ", ".join(f"{n} {v}" for n, v in spp.items() if n != "default")
+        return f"{spp['default']} spp ({others})" if others else f"{spp['default']} spp"
+    return f"{spp} spp"
+
+
 def _stylesheet() -> str:
     path = Path(__file__).resolve().parent / "templates" / "report.css"
     return path.read_text(encoding="utf-8") if path.is_file() else ""
@@ -1117,7 +1167,8 @@ def _html(reports: list[SceneReport], chosen: list[str], context: dict) -> str:
         "<h1>Fast methods against their references</h1>",
         f"<p class=meta>Generated {_e(context['generated'])}; Mitsuba {_e(versions['mitsuba'])} "
         f"({_e(versions['variant'])}), Dr.Jit {_e(versions['drjit'])}; references "
-        f"{context['reference']['spp']} spp x {context['reference']['passes']} passes; tasks "
+        f"{_spp_text(context['reference']['spp'])} x {context['reference']['passes']} passes; "
+        "tasks "
         f"on {_e(context['scheduler'])}; whole run {context['seconds']:.1f} s.</p>",
     ]
     regressions = context["regressions"]
@@ -1157,13 +1208,17 @@ def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
             if metrics is not None:
                 text = (f'<a href="#{_e(report.slug)}-{_e(name)}">FLIP '
                         f"{metrics['hdr_flip']:.3f}</a><br><small>{_e(check.status)}</small>")
-            elif run is not None and run.status in ("not applicable", "not built"):
+            elif run is not None and run.status in ("not applicable", "not built", "not run"):
                 text, css = f"<small>{_e(run.status)}</small>", "muted"
                 if check is not None and check.status == "regression":
                     text, css = f"<small>{_e(run.status)}; regression</small>", "bad"
             else:
-                text = (f"<small>{_e(run.status if run else 'not run')}"
-                        f"{'; ' + _e(check.status) if check else ''}</small>")
+                status = run.status if run else "not run"
+                if status == "ok":
+                    status = "no metrics"  # an image but no reference, or metrics failed
+                text = (f"<small>{_e(status)}"
+                        f"{'; regression' if check and check.status == 'regression' else ''}"
+                        "</small>")
                 css = "bad" if check is not None and check.status == "regression" else "fail"
             cells.append(f'<td class="{css}">{text}</td>')
         rows.append(f'<tr><th><a href="#{_e(report.slug)}">{_e(report.name)}</a></th>'
@@ -1200,7 +1255,7 @@ def _scene_section(report: SceneReport, chosen: list[str]) -> str:
     not_run = []
     for name in chosen:
         run = report.runs.get(name)
-        if run is None or run.status in ("not applicable", "not built"):
+        if run is None or run.status in ("not applicable", "not built", "not run"):
             reason = run.reason if run else "not run"
             status = run.status if run else "not run"
             extra = ""

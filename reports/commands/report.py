@@ -15,7 +15,7 @@ from __future__ import annotations
 
 def add_arguments(parser):
     """Scenes, output folder, methods, baseline, where tasks run, reference samples."""
-    from ..report import DEFAULT_PASSES, DEFAULT_SPP
+    from ..report import DEFAULT_PASSES, DEFAULT_SPP, SCENE_SPP
 
     parser.add_argument("scenes", nargs="*", metavar="SCENE",
                         help="built-in scene names or scene TOML files (default: the built-in "
@@ -37,8 +37,10 @@ def add_arguments(parser):
                             "(default: local processes)")
     where.add_argument("--serial", action="store_true",
                        help="run every task in this process (no Dask)")
-    parser.add_argument("--spp", type=int, default=DEFAULT_SPP,
-                        help=f"reference samples per pixel per pass (default {DEFAULT_SPP})")
+    cheap = ", ".join(f"{name} {spp}" for name, spp in SCENE_SPP.items())
+    parser.add_argument("--spp", type=int, default=None,
+                        help=f"reference samples per pixel per pass, every scene (default "
+                             f"{DEFAULT_SPP}; {cheap})")
     parser.add_argument("--passes", type=int, default=DEFAULT_PASSES,
                         help=f"independent reference passes (default {DEFAULT_PASSES})")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
