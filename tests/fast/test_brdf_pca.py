@@ -66,18 +66,32 @@ def state(scene, tmp_path_factory):
 # -- wavelets -----------------------------------------------------------------------------
 
 
-def test_haar_is_orthonormal_and_invertible(rng):
-    values = rng.normal(size=(5, 64))
-    coefficients = bp.haar_forward(values)
-    np.testing.assert_allclose(bp.haar_inverse(coefficients), values, atol=1e-12)
-    other = rng.normal(size=64)
-    np.testing.assert_allclose(coefficients @ bp.haar_forward(other), values @ other,
-                               rtol=1e-12)
-    constant = bp.haar_forward(np.ones(8))
-    np.testing.assert_allclose(constant, [math.sqrt(8)] + [0] * 7, atol=1e-12)
-    with pytest.raises(InputError, match=r"shape = \(6,\): the last axis must have a "
-                                         r"power-of-two length"):
-        bp.haar_forward(np.ones(6))
+def test_gather_wavelets_keep_inner_products(rng):
+    """Eq. 9 needs T . L = T^w . L^w: the 2D Haar over the gather square is orthonormal."""
+    from translucent.fast.wavelets import haar2d_inverse
+
+    rows = rng.normal(size=(5, 64)).astype(np.float32)
+    coefficients = bp._haar_rows(rows)
+    np.testing.assert_allclose(haar2d_inverse(coefficients.reshape(5, 8, 8)).reshape(5, 64),
+                               rows, atol=1e-5)
+    other = rng.normal(size=64).astype(np.float32)
+    np.testing.assert_allclose(coefficients @ bp._haar_rows(other[None])[0], rows @ other,
+                               rtol=1e-4, atol=1e-4)
+
+
+def test_weighted_selection_keeps_the_coarse_terms(rng):
+    """Selection by magnitude times sqrt(support) (Ng et al. 2003): a coarse coefficient
+    beats a fine one of the same magnitude, and the kept values are the row's own."""
+    weights = bp._support_weights(64)
+    row = np.zeros((1, 64), dtype=np.float32)
+    row[0, 0], row[0, 63] = 1.0, 2.0           # scaling coefficient, a finest detail
+    kept = bp._select(row, 1, weights)
+    assert kept.indices.tolist() == [0] and kept.values.tolist() == [1.0]
+    dense = rng.normal(size=(3, 64)).astype(np.float32)
+    kept = bp._select(dense, 10, weights)
+    assert np.all(np.diff(kept.indptr) == 10)
+    np.testing.assert_allclose(kept.to_dense()[kept.to_dense() != 0],
+                               dense[kept.to_dense() != 0], rtol=1e-6)
 
 
 # -- compiled BRDF terms against materials.brdfs -----------------------------------------
@@ -175,6 +189,13 @@ def test_precomputation_facts(state, scene):
     # one glossy gather sample to six diffuse ones (Sect. 5.1)
     assert notes["glossy_gather_samples"] == round(256 / 7)
     assert notes["columns"] == 256
+    side_by_side = state.data.gather_position.reshape(16, 16, 3)
+    # the quadtree keeps neighbours on the square close in space: horizontal neighbours
+    # are much closer than random pairs
+    steps = np.linalg.norm(np.diff(side_by_side, axis=1), axis=2).mean()
+    spread = np.linalg.norm(state.data.gather_position[:, None] - state.data.gather_position,
+                            axis=2).mean()
+    assert steps < 0.5 * spread
     assert any("back_wall" in s and "no PCA transfer" in s for s in state.log.skipped)
     assert sorted(state.glossy_objects) == ["box", "floor", "sphere"]
     total_area = sum(o.mesh.area for o in scene.objects)
@@ -305,8 +326,10 @@ def test_bad_knobs_and_scenes(scene):
                                          r"gather_samples"):
         bp.precompute(scene, gather=10)
     with pytest.raises(InputError, match=r"gather_samples = 8: must be an integer in "
-                                         r"\[16, 1048576\]"):
+                                         r"\[16, 4194304\]"):
         bp.precompute(scene, gather_samples=8)
+    with pytest.raises(InputError, match=r"gather_samples = 512: must be a power of 4"):
+        bp.precompute(scene, gather_samples=512)
     with pytest.raises(InputError, match=r"subarea = 'yes': must be true or false"):
         bp.precompute(scene, subarea="yes")
     with pytest.raises(InputError, match=r"glossy_ratio = 2.0: must be in \[0, 1\]"):
@@ -356,7 +379,7 @@ def test_converges_to_the_transport_it_approximates():
     limit = render_lambertian_gather(scene, bounces=2, spp=128, passes=4)
     mask = interior_pixels(scene)
     errors = []
-    for gathers in (256, 2048):
+    for gathers in (256, 4096):
         image = bp.precompute(scene, gather_samples=gathers).render()
         errors.append(relative_mse(limit.rgb[mask], image.rgb[mask],
                                    reference_variance=limit.variance[mask]))
@@ -375,7 +398,7 @@ def test_indirect_light_brings_it_closer_to_the_exact_reference(gamma):
     scene = _tiny_scene(48, 36)
     scene = scene.with_material("floor", scene.object("floor").material.with_gamma(gamma))
     exact = render(scene, spp=128, passes=4, progress=False)
-    state = bp.precompute(scene, gather_samples=2048)
+    state = bp.precompute(scene, gather_samples=4096)
     full, direct = state.render(), state.render(component="direct")
     mask = interior_pixels(scene)
     error = {name: relative_mse(exact.rgb[mask], image.rgb[mask],
