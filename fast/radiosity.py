@@ -109,6 +109,7 @@ __all__ = [
     "applies_to",
     "approx",
     "check_convergence",
+    "form_factor_bounds",
     "direct_irradiance",
     "form_factor_product",
     "precompute",
@@ -119,7 +120,7 @@ __all__ = [
 ]
 
 #: Version of the precomputed data layout (part of the cache key).
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 
 #: Knobs of :func:`precompute` and their defaults.
 DEFAULT_KNOBS: dict = {
@@ -142,11 +143,16 @@ DEFAULT_KNOBS: dict = {
     "solver": "jacobi",              # "jacobi", "gmres" or "bicgstab"
     "tolerance": 5e-3,               # relative residual (the paper's 0.5 %)
     "max_iterations": 2000,
+    "warm_start": True,              # start from the last frame's inter-reflection
     "transfer": "auto",              # "auto": T at the first relighting when it fits; "never"
     "transfer_budget_mb": 512,       # T fits when 3 P^2 float32 do (P <= 6,688 at 512 MB)
     "light_samples": 16,             # samples per area light / environment per point
     "seed": 0,
 }
+
+#: Knobs that only steer solving and lighting: not part of the precomputation's cache key.
+RUNTIME_KNOBS = ("solver", "tolerance", "max_iterations", "warm_start", "transfer",
+                 "transfer_budget_mb", "light_samples")
 
 #: The iterative solvers.
 SOLVERS = ("jacobi", "gmres", "bicgstab")
@@ -204,6 +210,11 @@ class ObjectScattering:
     self_cumulative, self_segment : scipy.sparse.csr_matrix, shape (patches, K)
         The polar self term: ``self_cumulative @ C + self_segment @ table`` with C the
         cumulative radial integral of the table (None when ``self_term="samples"``).
+        These three are kept for heterogeneous objects only (None otherwise).
+    operators : list of (str, csr_matrix, csr_matrix or None, csr_matrix or None)
+        Per block, ``(kind, samples, cumulative, segment)`` with their rows moved to the
+        positions of the entries in the data of S (shape nnz x K): a translucency change
+        is ``data += samples @ table + cumulative @ C + segment @ table``, no scatter.
     samples : dict or None
         Heterogeneous objects only: ``pair``, ``weight`` (mm^2), ``distance`` (mm), and
         ``fractions`` (pairs x materials), ``patch_label``.
@@ -214,11 +225,12 @@ class ObjectScattering:
     object_index: int
     patches: np.ndarray
     blocks: list
-    sample_operator: sparse.csr_matrix
+    sample_operator: sparse.csr_matrix | None
     self_cumulative: sparse.csr_matrix | None
     self_segment: sparse.csr_matrix | None
     samples: dict | None
     facts: dict = field(default_factory=dict)
+    operators: list = field(default_factory=list)
 
 
 @dataclass(eq=False)
@@ -260,7 +272,9 @@ class ScatteringGeometry:
         """Memory held by the cached operators and pattern."""
         total = self.indptr.nbytes + self.indices.nbytes + self.diagonal_position.nbytes
         for item in self.objects.values():
-            for matrix in (item.sample_operator, item.self_cumulative, item.self_segment):
+            matrices = [item.sample_operator, item.self_cumulative, item.self_segment]
+            matrices += [m for _, *ops in item.operators for m in ops]
+            for matrix in matrices:
                 if matrix is not None:
                     total += matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes
             total += sum(a.nbytes + b.nbytes for _, a, b in item.blocks)
@@ -340,6 +354,13 @@ def _self_operators(grid: RadialGrid, count: int, rows, rho, weight):
                                  (np.concatenate([rows, rows]), np.concatenate([k, k + 1]))),
                                 shape=shape).tocsr()
     return cumulative, segment
+
+
+def _at_positions(operator: sparse.csr_matrix, positions, size: int) -> sparse.csr_matrix:
+    """Move the rows of ``operator`` to ``positions`` of a (size x K) operator."""
+    coo = operator.tocoo()
+    return sparse.csr_matrix((coo.data, (np.asarray(positions)[coo.row], coo.col)),
+                             shape=(size, operator.shape[1]))
 
 
 def _pair_fractions(centroids_mm, face_centroids_mm, face_labels, exit_local, incident_local,
@@ -522,6 +543,7 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
     position[order] = np.arange(len(order))
     indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=len(patches)))])
     diagonal = position[:len(patches)]
+    geometry_size = len(order)
     objects = {}
     for index, members, _, operator, self_c, self_s, samples, facts in per_object:
         blocks = []
@@ -533,8 +555,14 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
             else:
                 own_position = position[own[0]:own[1]]
             blocks.append((kind, position[lo:hi], own_position))
+        operators = [(kind, _at_positions(operator, pairs, geometry_size),
+                      None if self_c is None else _at_positions(self_c, own, geometry_size),
+                      None if self_s is None else _at_positions(self_s, own, geometry_size))
+                     for kind, pairs, own in blocks]
+        if samples is None:  # the local operators serve the heterogeneous mixing only
+            operator = self_c = self_s = None
         objects[index] = ObjectScattering(index, members, blocks, operator, self_c, self_s,
-                                          samples, facts)
+                                          samples, facts, operators)
     return ScatteringGeometry(indptr.astype(np.int64), cols[order].astype(np.int32), diagonal,
                               grid, objects, tuple(sheets), sheet_thickness_mm)
 
@@ -629,22 +657,26 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
                              "were precomputed: precompute with it translucent",
                              field="material", value=getattr(material, "name", "") or
                              type(material).__name__)
+        if not isinstance(profile, MixedProfiles):
+            for kind, samples, cumulative_operator, segment_operator in item.operators:
+                table, cumulative = _object_profile_tables(profile, grid, kind)
+                data += samples @ table
+                if cumulative_operator is not None:
+                    data += cumulative_operator @ cumulative + segment_operator @ table
+            continue
+        if item.samples is None:
+            raise InputError(f"a heterogeneous material on '{obj.name}' needs its face labels "
+                             "at precomputation: precompute with the MixedProfiles material",
+                             field="material", value=profile.name)
         for kind, pair_position, own_position in item.blocks:
-            if isinstance(profile, MixedProfiles):
-                data[pair_position] += _mixed_values(item, profile, grid, kind)
-                labels = item.samples["patch_label"]
-                for label, homogeneous in enumerate(profile.profiles):
-                    table, cumulative = _object_profile_tables(homogeneous, grid, kind)
-                    mine = labels == label
-                    if item.self_cumulative is not None:
-                        values = item.self_cumulative @ cumulative + item.self_segment @ table
-                        data[own_position[mine]] += values[mine]
-                continue
-            table, cumulative = _object_profile_tables(profile, grid, kind)
-            data[pair_position] += item.sample_operator @ table
-            if item.self_cumulative is not None:
-                data[own_position] += (item.self_cumulative @ cumulative
-                                       + item.self_segment @ table)
+            data[pair_position] += _mixed_values(item, profile, grid, kind)
+            labels = item.samples["patch_label"]
+            for label, homogeneous in enumerate(profile.profiles):
+                table, cumulative = _object_profile_tables(homogeneous, grid, kind)
+                mine = labels == label
+                if item.self_cumulative is not None:
+                    values = item.self_cumulative @ cumulative + item.self_segment @ table
+                    data[own_position[mine]] += values[mine]
     return ScatteringMatrix(geometry.indptr, geometry.indices, data)
 
 
@@ -674,7 +706,7 @@ def _mixed_values(item: ObjectScattering, profile: MixedProfiles, grid: RadialGr
         k, f = grid.locate(fractions[:, m] * distance)
         at[:, m] = table[k] * (1.0 - f[:, None]) + table[k + 1] * f[:, None]
     values = mixed_profile(zero, at, fractions) * samples["weight"][:, None]
-    pairs = item.sample_operator.shape[0]
+    pairs = item.sample_operator.shape[0]  # kept for heterogeneous objects
     return np.stack([np.bincount(samples["pair"], values[:, c], minlength=pairs)
                      for c in range(3)], axis=1)
 
@@ -683,7 +715,17 @@ def _mixed_values(item: ObjectScattering, profile: MixedProfiles, grid: RadialGr
 # convergence and solving
 
 
-def check_convergence(S: ScatteringMatrix, F, patches: Patches) -> dict:
+def form_factor_bounds(F, patches: Patches) -> dict:
+    """Row sums and power-form column sums of F, the F half of the bound of Eq. 15."""
+    if F is None or F.nnz == 0:
+        return {"max_form_factor_row_sum": 0.0, "max_form_factor_power_column_sum": 0.0}
+    power = (F.T @ patches.area) / patches.area
+    return {"max_form_factor_row_sum": float(np.asarray(F.sum(axis=1)).max()),
+            "max_form_factor_power_column_sum": float(power.max())}
+
+
+def check_convergence(S: ScatteringMatrix, F, patches: Patches, *,
+                      form_factor_facts: dict | None = None) -> dict:
     r"""Check the convergence condition of Sheng et al. 2014, Eq. 15, before solving.
 
     :math:`\|S\|_1 < 1` in power form: the energy leaving every patch through the material
@@ -711,14 +753,9 @@ def check_convergence(S: ScatteringMatrix, F, patches: Patches) -> dict:
     object_name = patches.object_names[patches.object_of[patch]]
     report = {"max_scattering_column_sum": largest, "patch": int(patch),
               "object": object_name, "channel": "RGB"[channel]}
-    if F is not None and F.nnz:
-        report["max_form_factor_row_sum"] = float(np.asarray(F.sum(axis=1)).max())
-        power = (F.T @ patches.area) / patches.area
-        report["max_form_factor_power_column_sum"] = float(power.max())
-        report["spectral_radius_bound"] = largest * report["max_form_factor_power_column_sum"]
-    else:
-        report["max_form_factor_row_sum"] = 0.0
-        report["spectral_radius_bound"] = 0.0
+    report.update(form_factor_facts if form_factor_facts is not None
+                  else form_factor_bounds(F, patches))
+    report["spectral_radius_bound"] = largest * report["max_form_factor_power_column_sum"]
     if not largest < 1.0:
         raise InputError(
             f"the scattering factors break the convergence condition of Eq. 15 (Sheng et al. "
@@ -775,7 +812,8 @@ def _relative_residual(S: ScatteringMatrix, F, B, source) -> np.ndarray:
 
 
 def solve_radiosity(S: ScatteringMatrix, F, source, *, solver: str = "jacobi",
-                    tolerance: float = 5e-3, max_iterations: int = 2000) -> tuple[np.ndarray, dict]:
+                    tolerance: float = 5e-3, max_iterations: int = 2000,
+                    initial=None) -> tuple[np.ndarray, dict]:
     r"""Solve :math:`(I - SF)B = \text{source}` (Sheng et al. 2014, Eq. 14, Sect. 5.3).
 
     ``source`` is :math:`SE`, or any right-hand side (an emission L in the classical
@@ -794,6 +832,9 @@ def solve_radiosity(S: ScatteringMatrix, F, source, *, solver: str = "jacobi",
         Relative residual :math:`\|\text{source} - (I - SF)B\| / \|\text{source}\|` per
         channel (0.5 % in the paper).
     max_iterations : int
+    initial : ndarray, shape (P, 3), optional
+        Starting guess (default: the source, the first bounce). The stopping rule is the
+        residual of the iterate, so a good guess saves iterations and changes nothing else.
 
     Returns
     -------
@@ -814,16 +855,17 @@ def solve_radiosity(S: ScatteringMatrix, F, source, *, solver: str = "jacobi",
     source = np.asarray(source, dtype=np.float64)
     if F is None or F.nnz == 0:
         return source.copy(), {"iterations": 0, "residual": [0.0, 0.0, 0.0], "solver": solver}
+    start = source if initial is None else np.asarray(initial, dtype=np.float64)
     if solver == "jacobi":
-        B, iterations = _jacobi(S, F, source, tolerance, max_iterations)
+        B, iterations = _jacobi(S, F, source, tolerance, max_iterations, start)
     else:
-        B, iterations = _krylov(S, F, source, solver, tolerance, max_iterations)
+        B, iterations = _krylov(S, F, source, solver, tolerance, max_iterations, start)
     residual = _relative_residual(S, F, B, source)
     return B, {"iterations": int(iterations), "residual": residual.tolist(), "solver": solver}
 
 
-def _jacobi(S, F, source, tolerance, max_iterations):
-    B = source.copy()
+def _jacobi(S, F, source, tolerance, max_iterations, start):
+    B = start.copy()
     norm = np.linalg.norm(source, axis=0)
     norm = np.where(norm > 0, norm, 1.0)
     smallest = np.inf
@@ -848,7 +890,7 @@ def _jacobi(S, F, source, tolerance, max_iterations):
                            residual=history[-1], iterations=max_iterations)
 
 
-def _krylov(S, F, source, solver, tolerance, max_iterations):
+def _krylov(S, F, source, solver, tolerance, max_iterations, start):
     size = len(source)
     B = np.zeros_like(source)
     most = 0
@@ -864,7 +906,7 @@ def _krylov(S, F, source, solver, tolerance, max_iterations):
         operator = sparse_linalg.LinearOperator((size, size), matvec=matvec, dtype=np.float64)
         if not np.any(source[:, c]):
             continue
-        solution, status = method(operator, source[:, c], x0=source[:, c].copy(),
+        solution, status = method(operator, source[:, c], x0=start[:, c].copy(),
                                   rtol=tolerance, atol=0.0, maxiter=max_iterations)
         if status != 0 or not np.all(np.isfinite(solution)):
             residual = float(np.linalg.norm(source[:, c] - matvec(solution))
@@ -1142,7 +1184,10 @@ class RadiosityState:
         overrides = _materials_of(self.scene, material)
         self.materials = {**self.materials, **overrides}
         self.S = scattering_matrix(self.geometry, self.scene, self.patches, self.materials)
-        self.convergence = check_convergence(self.S, self.form_factors, self.patches)
+        if getattr(self, "_form_factor_facts", None) is None:
+            self._form_factor_facts = form_factor_bounds(self.form_factors, self.patches)
+        self.convergence = check_convergence(self.S, self.form_factors, self.patches,
+                                             form_factor_facts=self._form_factor_facts)
         self._energy_beyond_cutoff()
         self.transfer = None
         self._transfer_materials = None
@@ -1222,9 +1267,17 @@ class RadiosityState:
             B = np.stack([self.transfer[c] @ irradiance[:, c].astype(np.float32)
                           for c in range(3)], axis=1).astype(np.float64)
             return B, {"iterations": 0, "solver": "transfer"}
-        return solve_radiosity(self.S, F, source, solver=self.knobs["solver"],
-                               tolerance=self.knobs["tolerance"],
-                               max_iterations=self.knobs["max_iterations"])
+        # successive frames (a moving light, a translucency slider) change the
+        # inter-reflected part SFB little: start from the last one
+        previous = getattr(self, "_interreflected", None)
+        initial = source + previous if self.knobs["warm_start"] and previous is not None \
+            else None
+        B, info = solve_radiosity(self.S, F, source, solver=self.knobs["solver"],
+                                  tolerance=self.knobs["tolerance"],
+                                  max_iterations=self.knobs["max_iterations"], initial=initial)
+        self._interreflected = B - source
+        info["warm_start"] = initial is not None
+        return B, info
 
     # -- images ------------------------------------------------------------------------
 
@@ -1423,7 +1476,8 @@ def precompute(scene, **knobs) -> RadiosityState:
               if not closed_surface(scene.objects[i].mesh.faces, scene.objects[i].mesh.vertices)]
     labels = {scene.objects[i].name: scene.objects[i].material.face_labels
               for i in translucent if isinstance(scene.objects[i].material, MixedProfiles)}
-    key = content_hash("radiosity", FORMAT_VERSION, scene.geometry_key(), resolved,
+    geometry_knobs = {k: v for k, v in resolved.items() if k not in RUNTIME_KNOBS}
+    key = content_hash("radiosity", FORMAT_VERSION, scene.geometry_key(), geometry_knobs,
                        [scene.objects[i].name for i in translucent], labels)
     cache = Cache("radiosity")
     stored = cache.load_pickle(key)
