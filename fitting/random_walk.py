@@ -26,8 +26,8 @@ point: the pencil-beam profile :math:`R(r)` or :math:`T(r)` (mm^-2 per entering 
 with standard errors from independent batches. The film bins each exit onto the pixels of
 a capture (the beam-convolved exitance). Because the slab is invariant under rotation
 about the vertical through the entry point, each exit is scored at ``rotations``
-independent random rotations about its entry point with ``1/rotations`` of the weight: an
-unbiased variance reduction for the film.
+rotations about its entry point (equally spaced, from a random offset) with
+``1/rotations`` of the weight: an unbiased variance reduction for the film.
 """
 
 from __future__ import annotations
@@ -143,44 +143,83 @@ def _scatter(rng, ux, uy, uz, g):
     return new_x, new_y, new_z
 
 
+def score_exits(rng, side, dx, dy, x0, y0, weight, batch, edges, film, rotations, radial,
+                totals, film_sum) -> None:
+    """Add exits to the tallies, in place.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Draws the random offset of the film rotations.
+    side : int
+        0 for exits through the lit surface, 1 through the far one.
+    dx, dy : ndarray
+        Exit point minus entry point, mm.
+    x0, y0 : ndarray
+        Entry points, mm from the beam axis.
+    weight : ndarray
+        Weight leaving.
+    batch : ndarray of int
+        Batch of each exit's photon.
+    edges : ndarray
+        Radial bin edges, mm.
+    film : Film or None
+    rotations : int
+        Each exit lands on the film at this many rotations about its entry point, equally
+        spaced from a random offset (the slab is invariant under them), each with
+        ``weight / rotations``.
+    radial : ndarray, shape (2, batches, bins)
+    totals : ndarray, shape (2, batches)
+    film_sum : ndarray, shape (H * W,) or None
+    """
+    n_bins = edges.size - 1
+    r = np.hypot(dx, dy)
+    bins = np.searchsorted(edges, r, side="right") - 1
+    inside = (bins >= 0) & (bins < n_bins)
+    np.add.at(radial[side], (batch[inside], bins[inside]), weight[inside])
+    np.add.at(totals[side], batch, weight)
+    if film_sum is None or side != (0 if film.side == "reflection" else 1):
+        return
+    height, width = film.shape
+    offset = rng.random(r.size)
+    for k in range(rotations):
+        angle = 2.0 * np.pi * (offset + k / rotations)
+        c, s = np.cos(angle), np.sin(angle)
+        fx = film.centre_px[0] + (x0 + c * dx - s * dy) / film.pixel_size_mm
+        fy = film.centre_px[1] + (y0 + s * dx + c * dy) / film.pixel_size_mm
+        ix, iy = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
+        on = (ix >= 0) & (ix < width) & (iy >= 0) & (iy < height)
+        film_sum += np.bincount(iy[on] * width + ix[on], weight[on] / rotations,
+                                minlength=height * width)
+
+
 def _walk_channel(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius, r_kill,
-                  edges, film, rotations):
-    """Trace one batch of one channel: (radial sums per side, totals, lost, film sums)."""
+                  edges, batches, film, rotations):
+    """Trace one channel: (radial sums per side and batch, totals, lost, film sums).
+
+    All photons walk together (photon i belongs to batch i mod ``batches``): the cost of a
+    step is mostly numpy's per-call overhead once few photons are left, so one long array
+    is far cheaper than several short ones.
+    """
     sigma_t = sigma_a + sigma_s
     albedo = sigma_s / sigma_t if sigma_t > 0 else 0.0
     n_bins = edges.size - 1
-    radial = np.zeros((2, n_bins))
-    totals = np.zeros(2)
+    radial = np.zeros((2, batches, n_bins))
+    totals = np.zeros((2, batches))
     lost = 0.0
     film_sum = None if film is None else np.zeros(film.shape[0] * film.shape[1])
-    film_side = None if film is None else (0 if film.side == "reflection" else 1)
     sigma_beam = 0.5 * beam_radius
     x0 = rng.normal(0.0, sigma_beam, photons) if sigma_beam > 0 else np.zeros(photons)
     y0 = rng.normal(0.0, sigma_beam, photons) if sigma_beam > 0 else np.zeros(photons)
     x, y, z = x0.copy(), y0.copy(), np.zeros(photons)
     ux, uy, uz = np.zeros(photons), np.zeros(photons), np.ones(photons)
     w = np.ones(photons)
+    batch = np.arange(photons) % batches
     depth = np.inf if thickness is None else thickness
 
     def score(side, mask, weight):
-        nonlocal film_sum
-        dx, dy = x[mask] - x0[mask], y[mask] - y0[mask]
-        r = np.hypot(dx, dy)
-        bins = np.searchsorted(edges, r, side="right") - 1
-        inside = (bins >= 0) & (bins < n_bins)
-        radial[side] += np.bincount(bins[inside], weight[inside], minlength=n_bins)
-        totals[side] += weight.sum()
-        if film_sum is not None and side == film_side:
-            height, width = film.shape
-            for _ in range(rotations):
-                angle = 2.0 * np.pi * rng.random(r.size)
-                c, s = np.cos(angle), np.sin(angle)
-                fx = film.centre_px[0] + (x0[mask] + c * dx - s * dy) / film.pixel_size_mm
-                fy = film.centre_px[1] + (y0[mask] + s * dx + c * dy) / film.pixel_size_mm
-                ix, iy = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
-                on = (ix >= 0) & (ix < width) & (iy >= 0) & (iy < height)
-                film_sum += np.bincount(iy[on] * width + ix[on], weight[on] / rotations,
-                                        minlength=height * width)
+        score_exits(rng, side, x[mask] - x0[mask], y[mask] - y0[mask], x0[mask], y0[mask],
+                    weight, batch[mask], edges, film, rotations, radial, totals, film_sum)
 
     if sigma_t <= 0:  # nothing scatters: every photon crosses (or leaves) untouched
         return radial, totals, lost, film_sum
@@ -224,7 +263,7 @@ def _walk_channel(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius
         keep = w > 0
         if not keep.all():
             x, y, z, ux, uy, uz, w = (a[keep] for a in (x, y, z, ux, uy, uz, w))
-            x0, y0 = x0[keep], y0[keep]
+            x0, y0, batch = x0[keep], y0[keep], batch[keep]
     return radial, totals, lost, film_sum
 
 
@@ -233,7 +272,7 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
                        radial_edges_mm=None, film: Film | None = None, rotations: int = 8,
                        batches: int = 10, r_kill_mm: float | None = None,
                        seed: int | None = None, channels=(0, 1, 2),
-                       progress: bool = False) -> WalkTally:
+                       progress: bool = False, backend: str = "auto") -> WalkTally:
     """Trace ``photons`` per channel through a slab of ``material`` (see the module docstring).
 
     Parameters
@@ -261,7 +300,11 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
     channels : sequence of int
         Channels to trace (the others are left at zero).
     progress : bool
-        Show a progress bar over channels and batches (on stderr).
+        Show a progress bar over channels (on stderr).
+    backend : {"auto", "drjit", "numpy"}
+        ``"drjit"``: the compiled kernel of :mod:`translucent.fitting.walk_kernel`
+        (tens of times faster for high-albedo media); ``"numpy"``: the reference
+        implementation in this module; ``"auto"``: Dr.Jit when its LLVM backend works.
 
     Returns
     -------
@@ -298,40 +341,42 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
     totals_se = np.zeros((2, 3))
     lost = np.zeros(3)
     film_image = None if film is None else np.zeros(film.shape + (3,))
-    sizes = np.full(batches, photons // batches)
-    sizes[: photons % batches] += 1
+    if backend not in ("auto", "drjit", "numpy"):
+        raise InputError("must be 'auto', 'drjit' or 'numpy'", field="backend", value=backend)
+    if backend == "auto":
+        from .walk_kernel import drjit_available
+
+        backend = "drjit" if drjit_available() else "numpy"
+    sizes = np.bincount(np.arange(photons) % batches, minlength=batches).astype(np.float64)
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(channels) * batches, desc="photon random walk", unit="batch",
-                   leave=False)
+        bar = tqdm(total=len(channels), desc="photon random walk", unit="channel", leave=False)
     try:
         for c in channels:
-            radial = np.zeros((batches, 2, n_bins))
-            total = np.zeros((batches, 2))
-            lost_c = 0.0
-            film_sum = None if film is None else np.zeros(film.shape[0] * film.shape[1])
-            for b, size in enumerate(sizes):
-                radial[b], total[b], lost_b, film_b = _walk_channel(
-                    rng, int(size), float(material.sigma_a[c]), float(material.sigma_s[c]),
-                    float(material.g), float(material.eta), thickness_mm,
-                    float(beam_radius_mm), float(r_kill_mm), edges, film, int(rotations))
-                lost_c += lost_b
-                if film is not None:
-                    film_sum += film_b
-                if bar is not None:
-                    bar.update(1)
-            batch_profiles = radial / (sizes[:, None, None] * area)  # (batch, side, bin)
-            profiles[:, :, c] = batch_profiles.mean(axis=0)
-            profiles_se[:, :, c] = batch_profiles.std(axis=0, ddof=1) / np.sqrt(batches)
-            batch_totals = total / sizes[:, None]
-            totals[:, c] = batch_totals.mean(axis=0)
-            totals_se[:, c] = batch_totals.std(axis=0, ddof=1) / np.sqrt(batches)
+            arguments = (photons, float(material.sigma_a[c]), float(material.sigma_s[c]),
+                         float(material.g), float(material.eta), thickness_mm,
+                         float(beam_radius_mm), float(r_kill_mm), edges, batches, film,
+                         int(rotations))
+            if backend == "drjit":
+                from .walk_kernel import walk_channel_drjit
+
+                radial, total, lost_c, film_sum = walk_channel_drjit(rng, *arguments)
+            else:
+                radial, total, lost_c, film_sum = _walk_channel(rng, *arguments)
+            batch_profiles = radial / (sizes[None, :, None] * area)  # (side, batch, bin)
+            profiles[:, :, c] = batch_profiles.mean(axis=1)
+            profiles_se[:, :, c] = batch_profiles.std(axis=1, ddof=1) / np.sqrt(batches)
+            batch_totals = total / sizes[None, :]
+            totals[:, c] = batch_totals.mean(axis=1)
+            totals_se[:, c] = batch_totals.std(axis=1, ddof=1) / np.sqrt(batches)
             lost[c] = lost_c / photons
             if film is not None:
                 film_image[..., c] = film_sum.reshape(film.shape) / (
                     photons * film.pixel_size_mm ** 2)
+            if bar is not None:
+                bar.update(1)
     finally:
         if bar is not None:
             bar.close()
