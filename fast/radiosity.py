@@ -1228,10 +1228,12 @@ class RadiosityState:
     def precompute_transfer(self) -> float | None:
         """Compute T for the current materials when it fits; returns seconds (None: skipped)."""
         if not self.transfer_fits():
-            self.log.skip(f"no precomputed T: 3 x {len(self.patches)}^2 float32 = "
-                          f"{3 * len(self.patches) ** 2 * 4 / 2**20:.0f} MB exceeds "
-                          f"transfer_budget_mb = {self.knobs['transfer_budget_mb']}; relighting "
-                          "iterates instead")
+            sentence = (f"no precomputed T: 3 x {len(self.patches)}^2 float32 = "
+                        f"{3 * len(self.patches) ** 2 * 4 / 2**20:.0f} MB exceeds "
+                        f"transfer_budget_mb = {self.knobs['transfer_budget_mb']}; relighting "
+                        "iterates instead")
+            if sentence not in self.log.skipped:
+                self.log.skip(sentence)
             return None
         started = time.perf_counter()
         self.transfer = transfer_matrix(self.S, self.form_factors)
