@@ -23,7 +23,8 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["mitsuba", "variant", "find_libllvm", "configure_libllvm", "VARIANT_ORDER", "backend_facts"]
+__all__ = ["mitsuba", "variant", "find_libllvm", "configure_libllvm", "VARIANT_ORDER",
+           "backend_facts"]
 
 VARIANT_ORDER = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 
@@ -131,12 +132,12 @@ def mitsuba():
 
 
 def variant() -> str:
-    """The Mitsuba variant in use (imports Mitsuba on first call)."""
+    """Return the Mitsuba variant in use (imports Mitsuba on first call)."""
     return mitsuba().variant()
 
 
 def is_jit_variant() -> bool:
-    """True for the vectorised variants (llvm_*, cuda_*) that take wide arrays."""
+    """Tell whether the variant is vectorised (llvm_*, cuda_*) and takes wide arrays."""
     return not variant().startswith("scalar")
 
 

@@ -25,7 +25,7 @@ __all__ = ["cache_dir", "content_hash", "Cache"]
 
 
 def cache_dir() -> Path:
-    """The cache folder (created on first use)."""
+    """Return the cache folder (created on first use)."""
     given = os.environ.get("TRANSLUCENT_CACHE")
     if given:
         return Path(given).expanduser()
@@ -34,7 +34,7 @@ def cache_dir() -> Path:
 
 
 def _canonical(value: Any) -> Any:
-    """A JSON-able, order-independent form; arrays hash by dtype, shape and bytes."""
+    """Return a JSON-able, order-independent form; arrays hash by dtype, shape and bytes."""
     if isinstance(value, np.ndarray):
         return {"__ndarray__": hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest(),
                 "dtype": str(value.dtype), "shape": list(value.shape)}
@@ -81,7 +81,7 @@ class Cache:
         return self.folder / key[:2] / f"{key}{suffix}"
 
     def load_pickle(self, key: str):
-        """The pickled object stored under ``key``, or None when absent or unreadable."""
+        """Return the pickled object stored under ``key``, or None when absent or unreadable."""
         path = self.path(key, ".pkl")
         if not path.is_file():
             return None

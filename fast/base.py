@@ -60,7 +60,7 @@ class StageLog:
 
 
 def method(name: str):
-    """The module of the fast method called ``name``; an unknown name lists the valid ones."""
+    """Return the module of the fast method ``name``; an unknown name lists the valid ones."""
     if name not in METHODS:
         raise InputError(f"unknown fast method; valid: {', '.join(METHODS)}", field="method",
                          value=name)

@@ -34,12 +34,12 @@ MEASURED_MEDIA: dict[str, tuple[tuple[float, float, float], tuple[float, float, 
 
 
 def measured_medium_names() -> list[str]:
-    """The catalogue's names, in table order."""
+    """Return the catalogue's names, in table order."""
     return list(MEASURED_MEDIA)
 
 
 def measured_medium(name: str) -> Dipole:
-    """The measured medium called ``name`` (case-insensitive) as a :class:`Dipole`.
+    """Return the measured medium ``name`` (case-insensitive) as a :class:`Dipole`.
 
     Raises
     ------

@@ -47,7 +47,7 @@ def reduced_albedo(sigma_a, sigma_s_prime):
 
 
 def effective_transport_coefficient(sigma_a, sigma_s_prime):
-    r"""Effective transport (extinction) coefficient :math:`\sigma_{tr} = \sqrt{3\sigma_a\sigma'_t}`.
+    r"""Effective transport coefficient :math:`\sigma_{tr} = \sqrt{3\sigma_a\sigma'_t}`.
 
     Jensen et al. 2001; Wang et al. 2008, text after Eq. 2. In mm^-1.
     """
@@ -56,7 +56,7 @@ def effective_transport_coefficient(sigma_a, sigma_s_prime):
 
 
 def mean_free_path(sigma_a, sigma_s_prime):
-    r"""Reduced mean free path :math:`\ell = 1/\sigma'_t` in mm (inf where :math:`\sigma'_t = 0`)."""
+    r"""Reduced mean free path :math:`\ell = 1/\sigma'_t` in mm (inf where it is 0)."""
     sigma_t_prime = reduced_extinction(sigma_a, sigma_s_prime)
     with np.errstate(divide="ignore"):
         return 1.0 / sigma_t_prime
@@ -69,7 +69,7 @@ def dipole_boundary_factor(eta):
 
 
 def dipole_depths(sigma_a, sigma_s_prime, eta):
-    r"""Depths of the real and virtual sources, :math:`z_r = 1/\sigma'_t`, :math:`z_v = z_r(1 + 4A/3)`.
+    r"""Source depths :math:`z_r = 1/\sigma'_t` and :math:`z_v = z_r(1 + 4A/3)`.
 
     In mm (Wang et al. 2008, text after Eq. 2).
     """
@@ -153,4 +153,5 @@ def total_diffuse_reflectance(sigma_a, sigma_s_prime, eta):
         one_minus_albedo = np.where(sigma_t_prime > 0, sigma_a / sigma_t_prime, 1.0)
     root = np.sqrt(3.0 * one_minus_albedo)
     boundary = dipole_boundary_factor(np.asarray(eta, dtype))
-    return (0.5 * albedo * (1.0 + np.exp(-4.0 / 3.0 * boundary * root)) * np.exp(-root)).astype(dtype)
+    total = 0.5 * albedo * (1.0 + np.exp(-4.0 / 3.0 * boundary * root)) * np.exp(-root)
+    return total.astype(dtype)

@@ -236,7 +236,7 @@ def _plain(value):
 
 
 def _measured(name: str, eta: float | None = None) -> Dipole:
-    """A measured medium; ``eta`` replaces the table's index (1.0: an index-matched boundary)."""
+    """Build a measured medium; ``eta`` replaces the table's index (1.0: index-matched)."""
     try:
         medium = measured_medium(name)
     except InputError as error:

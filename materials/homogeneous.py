@@ -119,7 +119,7 @@ class Dipole:
         return total_diffuse_reflectance(self.sigma_a, self.sigma_s_prime, self.eta)
 
     def cache_key(self) -> dict:
-        """What identifies this material in content hashes."""
+        """Return what identifies this material in content hashes."""
         return {"type": "dipole", "sigma_a": self.sigma_a.tolist(),
                 "sigma_s_prime": self.sigma_s_prime.tolist(), "eta": self.eta, "g": self.g}
 
@@ -142,5 +142,5 @@ class Lambertian:
         object.__setattr__(self, "albedo", rgb_field(self.albedo, "albedo", maximum=1.0))
 
     def cache_key(self) -> dict:
-        """What identifies this material in content hashes."""
+        """Return what identifies this material in content hashes."""
         return {"type": "lambertian", "albedo": self.albedo.tolist()}

@@ -19,7 +19,7 @@ __all__ = ["run_tasks", "dask_client"]
 
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, *, workers: int = 2, threads_per_worker: int = 1):
-    """A ``dask.distributed.Client``: to ``scheduler`` if given, else a local process cluster.
+    """Yield a ``dask.distributed.Client``: to ``scheduler`` if given, else a local cluster.
 
     Parameters
     ----------

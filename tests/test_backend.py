@@ -1,7 +1,6 @@
 import os
 
 import pytest
-
 from translucent.backend import VARIANT_ORDER, backend_facts, find_libllvm, mitsuba
 from translucent.reports.cli import main
 

@@ -1,5 +1,4 @@
 import numpy as np
-
 from translucent.cache import Cache, cache_dir, content_hash
 from translucent.materials import Dipole, measured_medium
 

@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-
 from translucent.errors import InputError
 from translucent.image import Image, read_exr, write_exr
 

@@ -1,4 +1,8 @@
-"""Print the Python, Mitsuba and Dr.Jit versions, the variant chosen, the libLLVM path, whether a GPU is usable and the cache folder."""
+"""Print versions, the Mitsuba variant, the libLLVM path, GPU use and the cache folder.
+
+Python, Mitsuba and Dr.Jit versions, the variant chosen, the libLLVM path, whether a GPU
+is usable, and the cache folder.
+"""
 
 from __future__ import annotations
 

@@ -53,7 +53,8 @@ def dipole_profile_float32() -> StressResult:
     _count(p64, result)
     _count(p32, result)
     sigma_tr = np.sqrt(3 * sigma_a * (sigma_a + sigma_s_prime))
-    judged = (p64 > np.finfo(np.float32).tiny * 1e3) & (sigma_tr * np.hypot(r, 1 / (sigma_a + sigma_s_prime)) <= 80)
+    exponent = sigma_tr * np.hypot(r, 1 / (sigma_a + sigma_s_prime))
+    judged = (p64 > np.finfo(np.float32).tiny * 1e3) & (exponent <= 80)
     error = np.abs(p32.astype(np.float64) - p64) / np.where(judged, p64, 1.0)
     error = np.where(judged, error, 0.0)
     worst = np.unravel_index(np.argmax(error), error.shape)
@@ -109,7 +110,7 @@ def _mp_profile(mpmath, r, sigma_a, sigma_s_prime, eta):
 
 @stress_kernel("total diffuse reflectance")
 def total_reflectance() -> StressResult:
-    """The closed-form R_d in [0, 1] everywhere, float32 against float64."""
+    """Check the closed-form R_d in [0, 1] everywhere, float32 against float64."""
     sigma_a, sigma_s_prime, eta = np.meshgrid(SIGMAS, SIGMAS, ETAS, indexing="ij")
     sigma_a, sigma_s_prime, eta = (x.astype(np.float32) for x in (sigma_a, sigma_s_prime, eta))
     r64 = total_diffuse_reflectance(sigma_a.astype(np.float64), sigma_s_prime.astype(np.float64),

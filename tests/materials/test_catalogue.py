@@ -1,5 +1,4 @@
 import pytest
-
 from translucent.errors import InputError
 from translucent.materials import MEASURED_MEDIA, measured_medium, measured_medium_names
 

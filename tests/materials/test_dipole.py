@@ -3,7 +3,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
-
 from translucent.errors import InputError
 from translucent.materials import (
     Dipole,
@@ -41,7 +40,7 @@ def test_profile_integrates_to_the_closed_form_total_reflectance(name):
         sigma_tr = effective_transport_coefficient(sigma_a, sigma_s_prime)
         diffusion = 1.0 / sigma_tr if sigma_tr > 0 else 1e3 * z_r
         breaks = sorted({0.0, 10 * z_r, diffusion, 30 * max(diffusion, z_r)})
-        pieces = list(zip(breaks, breaks[1:])) + [(breaks[-1], np.inf)]
+        pieces = list(zip(breaks, breaks[1:], strict=False)) + [(breaks[-1], np.inf)]
         integral = sum(quad(integrand, a, b, limit=400)[0] for a, b in pieces)
         expected = total_diffuse_reflectance(sigma_a, sigma_s_prime, medium.eta)
         assert integral == pytest.approx(expected, rel=INTEGRAL_RTOL)

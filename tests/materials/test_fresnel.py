@@ -2,7 +2,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from translucent.materials import fresnel_reflectance, fresnel_transmittance
 
 

@@ -1,10 +1,8 @@
 import numpy as np
 import pytest
-
 from translucent.errors import InputError
 from translucent.materials import total_diffuse_reflectance
 from translucent.reports.distributed import dask_client, run_tasks
-
 
 # the workers import the task by name: it must live in the package, not in this file
 _sweep_point = total_diffuse_reflectance
