@@ -286,7 +286,8 @@ def test_scene_text_with_comments_is_documented_format():
     # the example in docs/scene-format.md loads as written
     from pathlib import Path
 
-    docs = Path(scene_file_module.__file__).parents[1] / "docs" / "scene-format.md"
+    # docs/ lives in the repository beside tests/, not in the installed package
+    docs = Path(__file__).resolve().parents[2] / "docs" / "scene-format.md"
     text = docs.read_text()
     example = text.split("```toml", 1)[1].split("```", 1)[0]
     scene = loads_scene(textwrap.dedent(example))
