@@ -225,7 +225,10 @@ class MethodRun:
     image : Image, optional
         The rendered image (status "ok").
     precompute_seconds, frame_seconds : float, optional
-        Wall-clock seconds of ``precompute`` and of ``state.render()``.
+        Wall-clock seconds of ``precompute`` and of a frame (``state.render()``; see
+        :func:`run_method` for relit frames).
+    first_frame_seconds : float, optional
+        Seconds of the first frame after ``precompute``.
     skipped : list of str
         The method's own sentences on what it skipped for the scene and why.
     stage_seconds : dict
@@ -249,6 +252,7 @@ class MethodRun:
     image: Image | None = None
     precompute_seconds: float | None = None
     frame_seconds: float | None = None
+    first_frame_seconds: float | None = None
     skipped: list[str] = field(default_factory=list)
     stage_seconds: dict[str, float] = field(default_factory=dict)
     notes: dict[str, Any] = field(default_factory=dict)
@@ -261,7 +265,8 @@ class MethodRun:
         """Return everything but the image, JSON-safe."""
         return {"method": self.method, "status": self.status, "reason": self.reason,
                 "precompute_seconds": self.precompute_seconds,
-                "frame_seconds": self.frame_seconds, "skipped": list(self.skipped),
+                "frame_seconds": self.frame_seconds,
+                "first_frame_seconds": self.first_frame_seconds, "skipped": list(self.skipped),
                 "stage_seconds": _plain(self.stage_seconds), "notes": _plain(self.notes),
                 "knobs": _plain(self.knobs), "measured_at": self.measured_at,
                 "cached": self.cached}
@@ -320,7 +325,7 @@ def _quiet_knobs(module, knobs: dict) -> dict:
 
 
 def run_method(method_name: str, scene, knobs: dict | None = None, *,
-               cold: bool = False) -> MethodRun:
+               cold: bool = False, relight_frames: int = 0) -> MethodRun:
     """Precompute and render ``scene`` with a fast method, timing both; never raises.
 
     Parameters
@@ -334,6 +339,12 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
     cold : bool
         Run against an empty temporary cache, so that the method's own precomputation
         cache cannot make it look fast (the benchmarks use this).
+    relight_frames : int
+        After the first frame, render this many more with the scene's lights given again
+        (``state.render(lights=scene.lights)``: the relighting path, nothing reused from the
+        first frame's lighting); ``frame_seconds`` is then their median and
+        ``first_frame_seconds`` the first frame's, which can include first-call costs
+        (compiled kernels loading). 0: ``frame_seconds`` is the first frame.
 
     Returns
     -------
@@ -360,6 +371,11 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
             precomputed = time.perf_counter()
             image = state.render()
             finished = time.perf_counter()
+            relit = []
+            for _ in range(relight_frames):
+                relight_started = time.perf_counter()
+                state.render(lights=scene.lights)
+                relit.append(time.perf_counter() - relight_started)
     except Exception as error:  # a failing method is shown in the page; the run goes on
         return MethodRun(status="failed", reason=f"{type(error).__name__}: {error}",
                          details=traceback.format_exc(), **base)
@@ -370,8 +386,10 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
     for sentence in image.metadata.get("skipped", []) or []:
         if sentence not in skipped:
             skipped.append(str(sentence))
+    first_frame = finished - precomputed
     return MethodRun(status="ok", image=image, precompute_seconds=precomputed - started,
-                     frame_seconds=finished - precomputed, skipped=skipped,
+                     frame_seconds=float(np.median(relit)) if relit else first_frame,
+                     first_frame_seconds=first_frame, skipped=skipped,
                      stage_seconds={str(k): float(v) for k, v in stage_seconds.items()},
                      notes=_plain(notes), **base)
 
@@ -1308,7 +1326,8 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         from_cache = (" The method loaded its precomputation from its own cache; the stage "
                       "times below are those of the run that computed it." if cache_note == "hit"
                       else "")
-        parts.append(f"<p>Precomputation {_seconds(run.precompute_seconds)}, frame "
+        parts.append(f"<p>Precomputation {_seconds(run.precompute_seconds)}, first frame "
+                     f"(the first <code>state.render()</code>, first-call costs included) "
                      f"{_seconds(run.frame_seconds)}.{cached}{from_cache}</p>")
         if run.stage_seconds:
             parts.append("<details><summary>stage times</summary><table class=small>" + "".join(

@@ -9,11 +9,15 @@ and ``glossy``, where BRDF editing does), every built fast method that applies i
 its quality ladder (:data:`LADDERS`: a few knob settings from cheap to the method's
 defaults: PCA terms, wavelet terms, solver tolerance, splatting levels and irradiance
 resolution, gather samples), each against an empty cache so that its precomputation is
-timed in full. Mitsuba's volumetric path tracer renders the same scene at 1, 2, 4, ...
-``--max-spp`` samples per pixel (each timed after an untimed warm-up render that compiles
-its kernels). Every image is compared with a converged reference
+timed in full, then renders its first frame and :data:`RELIGHT_FRAMES` relit ones (the
+scene's lights given again: the interactive relighting path); the frame time is their
+median, the first image's time the precomputation plus the first frame. Mitsuba's
+volumetric path tracer renders the same scene at 1, 2, 4, ... ``--max-spp`` samples per
+pixel (:data:`PATH_TRACING_REPEATS` timed renders each, after an untimed one that compiles
+its kernels: the median time, the mean error). Every image is compared with a converged
+reference
 (``--reference-spp`` x ``--reference-passes``, from the reference cache); the error is the
-relative MSE with the reference's noise discounted (Rousselle et al.'s relMSE, see
+relative MSE with the reference's noise discounted (see
 :func:`translucent.reports.metrics.relative_mse`).
 
 Times are given in seconds and as ratios to the 1-spp path-traced render of the same scene
@@ -101,6 +105,14 @@ QUALITY_WORDS = ("terms", "samples", "iterations", "levels", "resolution", "rays
 #: Fractions of the default a generated ladder takes for such a knob.
 GENERATED_FRACTIONS = (0.125, 0.25, 0.5)
 
+#: Timed renders per path-tracing point: the median time and the mean error over them (a
+#: 1-spp render of a small image lasts tens of milliseconds, where one timing is noisy, and
+#: one low-spp render's error depends much on its fireflies).
+PATH_TRACING_REPEATS = 3
+
+#: Relit frames per method point after the first frame: the median is the frame time.
+RELIGHT_FRAMES = 3
+
 #: Smallest relative MSE drawn on the log axis: a noise-discounted relMSE can come out at
 #: or below zero when an image is closer to the truth than the reference's noise resolves.
 PLOT_FLOOR = 1e-6
@@ -138,14 +150,14 @@ def add_arguments(parser):
 # ====================================================================== tasks
 
 
-def path_tracing_point(scene, spp: int, seed: int = 1):
+def path_tracing_point(scene, spp: int, seed: int = 1, repeats: int = PATH_TRACING_REPEATS):
     """Render ``scene`` with Mitsuba at ``spp`` and time it (a sweep task).
 
     The estimator is the reference's (:func:`translucent.reference.render`): one RGB render,
     or one render per channel where the conversion recommends it (chromatic media of high
     albedo), so the path tracer is timed as the suite itself would run it. The scene is
-    converted and loaded first, then rendered once untimed (seed ``seed + 1``, which
-    compiles the kernels) and once timed (seed ``seed``).
+    converted and loaded first and rendered once untimed (which compiles the kernels), then
+    ``repeats`` times with the seeds ``seed, seed + 1, ...``, each timed.
 
     Parameters
     ----------
@@ -153,13 +165,16 @@ def path_tracing_point(scene, spp: int, seed: int = 1):
     spp : int
         Samples per pixel (>= 1), per channel where rendered per channel.
     seed : int
-        Seed of the timed render.
+        Seed of the first timed render (the untimed one uses ``seed + repeats``).
+    repeats : int
+        Timed renders.
 
     Returns
     -------
     dict
-        ``spp``, ``seconds``, ``per_channel`` and ``image`` (an
-        :class:`~translucent.image.Image`), or ``error`` (a string) when Mitsuba failed.
+        ``spp``, ``seconds`` (the median of the timed renders), ``per_channel`` and
+        ``images`` (one :class:`~translucent.image.Image` per timed render), or ``error`` (a
+        string) when Mitsuba failed.
     """
     from ...backend import mitsuba
     from ...image import Image
@@ -183,16 +198,19 @@ def path_tracing_point(scene, spp: int, seed: int = 1):
                     rgb[..., channel] = pixels[..., channel]
             return rgb
 
-        render(seed + 1)
-        started = time.perf_counter()
-        rgb = render(seed)
-        seconds = time.perf_counter() - started
+        render(seed + repeats)
+        timings, images = [], []
+        for k in range(repeats):
+            started = time.perf_counter()
+            rgb = render(seed + k)
+            timings.append(time.perf_counter() - started)
+            images.append(Image(rgb, metadata={"producer": "path tracing", "spp": spp,
+                                               "seed": seed + k, "per_channel": per_channel,
+                                               "integrator": conversion.integrator}))
     except Exception as error:  # reported in the JSON; the sweep goes on
         return {"spp": spp, "error": f"{type(error).__name__}: {error}"}
-    return {"spp": spp, "seconds": seconds, "per_channel": per_channel,
-            "image": Image(rgb, metadata={"producer": "path tracing", "spp": spp,
-                                          "integrator": conversion.integrator,
-                                          "per_channel": per_channel})}
+    return {"spp": spp, "seconds": float(np.median(timings)), "per_channel": per_channel,
+            "images": images}
 
 
 def _task(kind: str, scene, *arguments):
@@ -204,7 +222,7 @@ def _task(kind: str, scene, *arguments):
     if kind == "path tracing":
         return path_tracing_point(scene, *arguments)
     method_name, knobs = arguments
-    return run_method(method_name, scene, knobs, cold=True)
+    return run_method(method_name, scene, knobs, cold=True, relight_frames=RELIGHT_FRAMES)
 
 
 # ====================================================================== ladders
@@ -306,6 +324,15 @@ def _metrics(reference, image) -> dict:
             "ssim": metrics.ssim}
 
 
+def _mean_metrics(reference, images) -> dict:
+    """Return the metrics of each image averaged over the images (errors are kept)."""
+    each = [_metrics(reference, image) for image in images]
+    failed = [m["error"] for m in each if "error" in m]
+    if failed:
+        return {"error": failed[0]}
+    return {key: float(np.mean([m[key] for m in each])) for key in each[0]}
+
+
 def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
           max_spp: int = 64, reference_spp: int = 256, reference_passes: int = 4,
           ladder_points: int = 0, progress: bool = True) -> dict:
@@ -405,16 +432,17 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
                 entry["reference"]["seconds"] = answer.metadata.get("seconds")
             continue
         if kind == "path tracing":
-            point = {k: v for k, v in answer.items() if k != "image"}
-            if "image" in answer and not isinstance(reference, str):
-                point.update(_metrics(reference, answer["image"]))
+            point = {k: v for k, v in answer.items() if k != "images"}
+            if "images" in answer and not isinstance(reference, str):
+                point.update(_mean_metrics(reference, answer["images"]))
             entry["path_tracing"].append(point)
             continue
         point = {"knobs": answer.knobs, "status": answer.status}
         if answer.status == "ok":
+            first_frame = answer.first_frame_seconds or answer.frame_seconds
             point.update(precompute_seconds=answer.precompute_seconds,
-                         frame_seconds=answer.frame_seconds,
-                         total_seconds=answer.precompute_seconds + answer.frame_seconds)
+                         first_frame_seconds=first_frame, frame_seconds=answer.frame_seconds,
+                         total_seconds=answer.precompute_seconds + first_frame)
             if not isinstance(reference, str):
                 point.update(_metrics(reference, answer.image))
         else:

@@ -114,7 +114,7 @@ def test_a_tiny_sweep(tmp_path, monkeypatch):
     for point in points:
         assert point["status"] == "ok", point.get("reason")
         assert point["total_seconds"] == pytest.approx(point["precompute_seconds"]
-                                                       + point["frame_seconds"])
+                                                       + point["first_frame_seconds"])
         assert point["frame_ratio"] == pytest.approx(point["frame_seconds"]
                                                      / entry["baseline_seconds"])
         expected, _ = equal_error_seconds([p["relative_mse"] for p in traced],
