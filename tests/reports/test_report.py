@@ -136,7 +136,7 @@ def tiny(tmp_path_factory):
     """One report of the tiny scene with the stand-in methods, its baseline written.
 
     The stand-ins are registered in ``fast.base.METHODS`` for the module; the source
-    fingerprint is held fixed, so that edits of the methods' files during the session cannot
+    fingerprint is held fixed, so that edits of the methods' files during the test run cannot
     make a second run miss the report cache.
     """
     folder = tmp_path_factory.mktemp("tiny_report")
