@@ -24,7 +24,7 @@ from typing import Any, Protocol
 from ..errors import InputError
 from ..image import Image
 
-__all__ = ["METHODS", "PrecomputedState", "method", "StageLog"]
+__all__ = ["METHODS", "PrecomputedState", "method", "StageLog", "with_defaults"]
 
 #: method name -> module under translucent.fast
 METHODS: dict[str, str] = {
@@ -71,3 +71,18 @@ def method(name: str):
             raise InputError("this fast method is not built yet", field="method",
                              value=name) from error
         raise
+
+
+def with_defaults(knobs: dict, defaults: dict) -> dict:
+    """Return ``defaults`` updated with ``knobs``; an unknown knob lists the valid ones.
+
+    Raises
+    ------
+    InputError
+        When ``knobs`` names a knob that ``defaults`` does not have.
+    """
+    unknown = sorted(set(knobs) - set(defaults))
+    if unknown:
+        raise InputError(f"unknown knob; valid: {', '.join(defaults)}", field="knobs",
+                         value=unknown)
+    return {**defaults, **knobs}

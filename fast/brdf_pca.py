@@ -99,7 +99,7 @@ from ..scenes.scene import (
     SphereAreaLight,
     SpotLight,
 )
-from .base import StageLog
+from .base import StageLog, with_defaults
 from .sparse_transport import QuantisedRows, SparseRows, _product_rgb, nonlinear_approximation
 from .wavelets import haar2d_forward, haar2d_support_weights, quadtree_layout
 
@@ -771,11 +771,7 @@ _REAL_KNOBS = {"glossy_ratio": (0.0, 1.0), "glossy_exponent": (1.0, 1e5),
 
 
 def _resolve_knobs(knobs: dict) -> dict:
-    unknown = sorted(set(knobs) - set(DEFAULT_KNOBS))
-    if unknown:
-        raise InputError(f"unknown knob; valid: {', '.join(DEFAULT_KNOBS)}", field="knobs",
-                         value=unknown)
-    resolved = {**DEFAULT_KNOBS, **knobs}
+    resolved = with_defaults(knobs, DEFAULT_KNOBS)
     for name, (low, high) in _INTEGER_KNOBS.items():
         value = resolved[name]
         if isinstance(value, bool) or not isinstance(value, (int, np.integer, float)) \

@@ -76,7 +76,7 @@ from ..scenes.scene import (
     SphereAreaLight,
     SpotLight,
 )
-from .base import StageLog
+from .base import StageLog, with_defaults
 from .sparse_transport import (
     QuantisedRows,
     SparseRows,
@@ -175,11 +175,7 @@ FRESNEL_RANK = 4
 
 
 def _check_knobs(knobs: dict) -> dict:
-    unknown = sorted(set(knobs) - set(DEFAULT_KNOBS))
-    if unknown:
-        raise InputError(f"unknown knob; valid: {', '.join(DEFAULT_KNOBS)}", field="knobs",
-                         value=unknown)
-    merged = {**DEFAULT_KNOBS, **knobs}
+    merged = with_defaults(knobs, DEFAULT_KNOBS)
     integers = {"samples": (1, 1 << 18), "parts": (1, 4096), "basis_terms": (1, 32),
                 "terms": (1, 1 << 18), "spatial_min_vertices": (0, 10**9),
                 "spatial_first_terms": (1, 1 << 18), "spatial_terms": (1, 1 << 18),

@@ -87,7 +87,7 @@ from ..scenes.scene import (
     SphereAreaLight,
     SpotLight,
 )
-from .base import StageLog
+from .base import StageLog, with_defaults
 from .form_factors import Patches, build_patches, form_factors, needs_form_factors
 from .optical_distance import (
     closed_surface,
@@ -1410,11 +1410,7 @@ def applies_to(scene) -> str | None:
 
 
 def _resolve_knobs(scene, knobs: dict) -> dict:
-    unknown = sorted(set(knobs) - set(DEFAULT_KNOBS))
-    if unknown:
-        raise InputError(f"unknown knob; valid: {', '.join(DEFAULT_KNOBS)}", field="knobs",
-                         value=unknown)
-    resolved = {**DEFAULT_KNOBS, **knobs}
+    resolved = with_defaults(knobs, DEFAULT_KNOBS)
     if resolved["self_term"] not in ("polar", "samples"):
         raise InputError("must be 'polar' or 'samples'", field="self_term",
                          value=resolved["self_term"])

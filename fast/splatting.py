@@ -50,7 +50,7 @@ from ..materials.fresnel import fresnel_transmittance
 from ..materials.homogeneous import Dipole
 from ..materials.subedit import SubEditProfiles, subedit_from_dipole
 from ..scenes.scene import DirectionalLight, PointLight
-from .base import StageLog
+from .base import StageLog, with_defaults
 
 __all__ = [
     "DEFAULT_KNOBS",
@@ -1122,11 +1122,7 @@ def applies_to(scene) -> str | None:
 
 
 def _check_knobs(knobs: dict) -> dict:
-    unknown = sorted(set(knobs) - set(DEFAULT_KNOBS))
-    if unknown:
-        raise InputError(f"unknown knob; valid: {', '.join(DEFAULT_KNOBS)}", field="knobs",
-                         value=unknown)
-    merged = {**DEFAULT_KNOBS, **knobs}
+    merged = with_defaults(knobs, DEFAULT_KNOBS)
     for name in ("irradiance_resolution", "levels"):
         value = merged[name]
         if isinstance(value, bool) or int(value) != value or not 1 <= int(value) <= 8192:
