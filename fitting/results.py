@@ -167,11 +167,10 @@ def read_material(name_or_path):
     """
     from pathlib import Path
 
-    import tomllib
-
     from ..errors import InputError
     from ..materials import Dipole, measured_medium
     from ..materials.factory import material_from_dict
+    from ..tomlio import tomllib
 
     path = Path(str(name_or_path))
     if path.suffix.lower() != ".toml":
