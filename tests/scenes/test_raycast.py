@@ -13,6 +13,7 @@ from translucent.scenes.meshes import box, icosphere, plane
 from translucent.scenes.raycast import (
     NEAR_CLIP,
     camera_rays,
+    embree_available,
     gbuffer,
     gbuffer_from_point,
     gbuffer_orthographic,
@@ -368,3 +369,60 @@ def test_engine_is_shared_by_geometry_and_rebuilt_for_new_meshes(sphere_scene):
     # the deformed sphere is hit earlier along the axis
     origin = mesh.vertices.mean(axis=0) + [0.0, 0.0, 5.0]
     assert trace(moved, origin, [0, 0, -1]).t[0] < trace(sphere_scene, origin, [0, 0, -1]).t[0]
+
+
+# --- the two engines ----------------------------------------------------------------------
+
+#: A ray may hit or miss differently in the two engines only when it passes within float32
+#: resolution of an edge: its hit point's smallest barycentric is then below a few float32
+#: ulps of the coordinates over the edge length (scenes here span ~2 units, edges ~0.1).
+EDGE_BARYCENTRIC = 1e-4
+
+
+def two_object_scene():
+    return Scene((SceneObject("ball", icosphere(3, radius=0.6, center=(0.3, 0.2, 0.0)), GREY),
+                  SceneObject("crate", box((1.0, 0.8, 1.2), center=(-0.6, -0.3, 0.2)), GREY)),
+                 (PointLight([0, 5, 5], 1.0),),
+                 Camera([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], fov=40.0, width=8, height=8))
+
+
+@pytest.mark.skipif(not embree_available(), reason="embreex is not installed")
+def test_embree_and_mitsuba_engines_agree_on_random_rays(rng):
+    scene = two_object_scene()
+    embree, mitsuba = ray_engine(scene, "embree"), ray_engine(scene, "mitsuba")
+    assert (embree.engine, mitsuba.engine) == ("embree", "mitsuba")
+    origins = rng.uniform(-2.0, 2.0, size=(20000, 3))
+    directions = rng.uniform(-1.0, 1.0, size=(20000, 3)) - origins  # towards the objects
+    tmax = rng.uniform(0.5, 4.0, size=20000)
+    first, second = embree.trace(origins, directions, tmax), mitsuba.trace(origins, directions,
+                                                                          tmax)
+    assert 0.2 < first.hit.mean() < 0.8
+    differ = (first.hit != second.hit) | (first.triangle_id != second.triangle_id) \
+        | (first.object_id != second.object_id)
+    # the rays that differ graze an edge in whichever engine hit something
+    for hits in (first, second):
+        grazing = differ & hits.hit
+        assert (hits.barycentrics[grazing].min(axis=1) < EDGE_BARYCENTRIC).all()
+    assert differ.mean() < 1e-3
+    both = first.hit & second.hit & ~differ
+    np.testing.assert_allclose(first.t[both], second.t[both], rtol=FLOAT32, atol=FLOAT32)
+    np.testing.assert_allclose(first.barycentrics[both], second.barycentrics[both],
+                               atol=EDGE_BARYCENTRIC)
+    # shadow rays (any hit before tmax): the same answers as each other and as the closest
+    # hit, up to grazing rays (the closest-hit query retries misses tilted, see trace)
+    blocked = embree.occluded(origins, directions, tmax)
+    assert (blocked != mitsuba.occluded(origins, directions, tmax)).mean() < 1e-3
+    assert (blocked != first.hit).mean() < 1e-3
+
+
+def test_engine_choice_and_its_errors(monkeypatch, sphere_scene):
+    assert ray_engine(sphere_scene, "mitsuba").engine == "mitsuba"
+    assert ray_engine(sphere_scene, "auto").engine == ("embree" if embree_available()
+                                                       else "mitsuba")
+    with pytest.raises(InputError, match=r"unknown ray engine; valid: auto, embree, mitsuba"):
+        ray_engine(sphere_scene, "optix")
+    monkeypatch.setenv("TRANSLUCENT_RAY_ENGINE", "mitsuba")
+    assert ray_engine(sphere_scene).engine == "mitsuba"
+    monkeypatch.setenv("TRANSLUCENT_RAY_ENGINE", "cuda")
+    with pytest.raises(InputError, match=r"TRANSLUCENT_RAY_ENGINE.*unknown ray engine"):
+        ray_engine(sphere_scene)
