@@ -13,7 +13,7 @@ import pkgutil
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
-__all__ = ["StressResult", "stress_kernel", "all_kernels"]
+__all__ = ["StressResult", "stress_kernel", "all_kernels", "count_nonfinite"]
 
 
 @dataclass
@@ -27,7 +27,10 @@ class StressResult:
     nan, inf : int
         Non-finite values where the model is finite.
     negative : int
-        Negative values where the model is non-negative.
+        Negative values where the model is non-negative, and more generally values outside
+        the model's range or breaking a stated invariant (a total reflectance above 1, a
+        projection with more energy than its profile, a result returned where the method
+        must refuse).
     worst_relative_error : float
         Largest relative error against the more precise evaluation named in ``against``.
     bound : float
@@ -38,6 +41,9 @@ class StressResult:
         The inputs where the worst error occurred.
     notes : str
         Where the bound comes from.
+    details : list of dict
+        Per-case numbers of the sweep (what converged, what was refused and how), written
+        into the JSON beside the summary.
     """
 
     evaluations: int
@@ -49,16 +55,28 @@ class StressResult:
     against: str = ""
     worst_at: dict = field(default_factory=dict)
     notes: str = ""
+    details: list = field(default_factory=list)
 
     @property
     def passed(self) -> bool:
         """No NaN, Inf or negative value and the worst error within the bound."""
-        return (self.nan == 0 and self.inf == 0 and self.negative == 0
-                and self.worst_relative_error <= self.bound)
+        return bool(self.nan == 0 and self.inf == 0 and self.negative == 0
+                    and self.worst_relative_error <= self.bound)
 
     def as_dict(self) -> dict:
         """JSON-able form with ``passed``."""
         return {**asdict(self), "passed": self.passed}
+
+
+def count_nonfinite(values, result: StressResult, *, negative: bool = True) -> None:
+    """Add the NaN, Inf (and, if ``negative``, negative) entries of ``values`` to ``result``."""
+    import numpy as np
+
+    values = np.asarray(values)
+    result.nan += int(np.isnan(values).sum())
+    result.inf += int(np.isinf(values).sum())
+    if negative:
+        result.negative += int((values < 0).sum())
 
 
 _KERNELS: dict[str, Callable[[], StressResult]] = {}
