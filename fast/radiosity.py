@@ -847,7 +847,10 @@ def solve_radiosity(S: ScatteringMatrix, F, source, *, solver: str = "jacobi",
     ------
     ConvergenceError
         When the residual does not reach ``tolerance`` in ``max_iterations``, becomes
-        non-finite or grows by :data:`DIVERGENCE_FACTOR`: no garbage is returned.
+        non-finite or grows by :data:`DIVERGENCE_FACTOR`, or when a non-negative source
+        gives a negative radiosity (a Krylov solver converges to the solution of
+        :math:`(I - SF)B = \text{source}` even where the series of Eq. 14 diverges,
+        spectral radius of SF >= 1): no garbage is returned.
     """
     if solver not in SOLVERS:
         raise InputError(f"unknown solver; valid: {', '.join(SOLVERS)}", field="solver",
@@ -861,6 +864,10 @@ def solve_radiosity(S: ScatteringMatrix, F, source, *, solver: str = "jacobi",
     else:
         B, iterations = _krylov(S, F, source, solver, tolerance, max_iterations, start)
     residual = _relative_residual(S, F, B, source)
+    if (source >= 0).all() and (B < -tolerance * np.abs(B).max(axis=0)).any():
+        raise ConvergenceError(f"{solver} returned a negative radiosity for a non-negative source:"
+                               " the series of Eq. 14 diverges (spectral radius of SF >= 1)",
+                               residual=float(residual.max()), iterations=int(iterations))
     return B, {"iterations": int(iterations), "residual": residual.tolist(), "solver": solver}
 
 
