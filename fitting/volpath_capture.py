@@ -1,0 +1,584 @@
+r"""Synthetic slab captures rendered by Mitsuba 3 volumetric path tracing (``volpath``).
+
+Why the obvious set-up fails: a delta light (point, directional) behind a ``dielectric``
+boundary cannot be reached by next-event estimation (the shadow ray stops at the
+boundary), and a pencil beam is a source of measure zero that no camera path can hit.
+The set-up here converges, for any eta:
+
+* **Slab**: a box (Mitsuba ``cube``), top face at z = 0, lateral half-size far beyond
+  the field of view, thickness ``thickness_mm`` or, for "semi-infinite", many transport
+  lengths (:func:`semi_infinite_depth`). Its surface is a smooth ``dielectric`` of
+  ``int_ior = eta`` (``null`` when eta = 1: index-matched); inside, a ``homogeneous``
+  medium with :math:`\sigma_t = \sigma_a + \sigma'_s`, albedo :math:`\sigma'_s/\sigma_t`
+  and an isotropic phase function per RGB channel (the similarity relation: the dipole's
+  reduced coefficients). Scene units are mm.
+* **Beam** (:class:`SlabBeam`, a Python ``mi.Emitter``): a collimated Gaussian beam that
+  *starts just inside the medium*, on the plane :data:`BEAM_DEPTH_MM` below the top face,
+  travelling straight down. It is delta in direction (like ``directional``) but has a
+  finite origin plane: for a point p below the plane it returns the direction straight
+  up, the sample point p projected onto the plane (so the shadow ray stops before the
+  dielectric and sees only the medium's transmittance) and the weight
+  :math:`E(\rho) = P_{in}\,\frac{2}{\pi w^2}\,e^{-2\rho^2/w^2}` with :math:`P_{in} = 1`:
+  unit power *entering* the slab. The external beam's Fresnel loss at normal incidence
+  is taken out exactly (a normal-incidence collimated beam is not refracted). Points
+  above the plane get nothing. Volpath's next-event estimation at each scattering
+  vertex then adds :math:`E(\rho)\,e^{-\sigma_t d}\,p(\omega)`: the single-scattering
+  source of the collimated beam, every order of scattering following from there.
+  A finite beam radius ``w`` is required: camera paths cannot find a pencil.
+* **Sensor** (:class:`SlabExitanceSensor`, a Python ``mi.Sensor``): a film lying on the
+  slab face the camera sees (the top for ``reflection``, the bottom for
+  ``transmission``), ``pixel_size_mm`` per pixel, box filter. In the default
+  ``"exitance"`` mode each sample starts at a uniform point of its pixel and looks into
+  the slab along a cosine-distributed direction with weight :math:`\pi`, so a pixel
+  holds :math:`\int L\cos\theta\,d\omega` averaged over its area: the radiant
+  exitance ``E`` of the capture format (mm^-2 per unit entering power), exactly what the
+  fitter's forward model and the photon random walk describe, with no angular
+  assumption. In ``"normal radiance"`` mode it looks straight along the normal (what an
+  orthographic camera on the axis sees) and converts the radiance ``L`` with
+  :func:`exitance_per_normal_radiance`, which is exact only where the radiance inside
+  is isotropic (see that function for how far from it real profiles are).
+* **Integrator**: ``volpath`` with unlimited depth (high-albedo media need thousands of
+  bounces; Russian roulette from ``rr_depth`` keeps it unbiased and finite).
+
+The image is rendered in passes of at most ``pass_spp`` samples per pixel (independent
+seeds), so that 10^4 spp fit in memory on a GPU; the mean is the capture and the spread
+of the passes gives each pixel's standard error. The Python plugins run in any JIT
+variant (``llvm_ad_rgb`` here, ``cuda_ad_rgb`` on a GPU; ``TRANSLUCENT_VARIANT``
+chooses). The exitance then passes through the same camera defects as the other
+generators (:func:`~translucent.fitting.synthetic.apply_camera`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..materials import Dipole
+from ..materials.fresnel import fresnel_reflectance
+from .synthetic import Camera, _capture_spec, apply_camera
+
+__all__ = ["BEAM_DEPTH_MM", "DEFAULT_BEAM_FRACTION", "VolpathRender", "exitance_per_normal_radiance",
+           "register_plugins", "render_exitance", "semi_infinite_depth", "slab_scene_dict",
+           "volpath_capture"]
+
+#: Depth of the beam's origin plane below the top face, mm: far below any mean free path
+#: of the catalogue (the shortest is Spectralon's 0.05 mm), so the light scattered in the
+#: layer above it is negligible, yet many float32 steps away from the face at z = 0.
+BEAM_DEPTH_MM = 1e-4
+#: Height of the sensor plane off the slab face, mm (rays start there, outside the medium).
+SENSOR_OFFSET_MM = 1e-3
+#: Default 1/e^2 beam radius as a fraction of the field's width: 4.8 pixels on a 96-pixel
+#: image, wide enough for camera paths to find the beam, narrow next to the ~12 diffusion
+#: lengths the default field spans.
+DEFAULT_BEAM_FRACTION = 0.05
+#: A semi-infinite slab is this many diffusion lengths 1 / sigma_tr deep (the light left
+#: at that depth is e^-20 of the entering power) and at least :data:`DEPTH_MIN_MFP`
+#: reduced mean free paths; but at most :data:`DEPTH_MAX_MFP` of them (a medium with
+#: little absorption has an enormous diffusion length; a non-absorbing slab of optical
+#: thickness tau' transmits about 4 / (3 tau'), 0.7 % at 200).
+DEPTH_DIFFUSION_LENGTHS = 20.0
+DEPTH_MIN_MFP = 30.0
+DEPTH_MAX_MFP = 200.0
+#: Lateral half-size of the slab beyond the field's half-diagonal, in units of the slab
+#: depth: paths that leave through the side faces are lost, so the sides stay as far away
+#: as the bottom.
+LATERAL_MARGIN_DEPTHS = 1.0
+#: Most samples per pixel in one pass (one Mitsuba render call): 96 x 96 x 1024 lanes is
+#: about 10^7 paths in flight, well within a GPU's memory and a CPU's.
+DEFAULT_PASS_SPP = 1024
+#: Unlimited path depth (Mitsuba's -1): Russian roulette ends the paths.
+MAX_DEPTH = -1
+
+SENSOR_MODES = ("exitance", "normal radiance")
+BEAM_PLUGIN = "translucent_slab_beam"
+SENSOR_PLUGIN = "translucent_slab_exitance"
+
+
+def exitance_per_normal_radiance(eta: float) -> float:
+    r"""Factor from radiance seen along the normal outside to exitance, isotropic inside.
+
+    Where the radiance :math:`L_i` inside the slab is isotropic, the exitance is
+    :math:`E = \pi L_i (1 - F^{int}_{dr})` and the radiance leaving along the normal is
+    :math:`L = L_i (1 - R(0)) / \eta^2`, so
+
+    .. math:: E = \pi L \frac{1 - F^{ext}_{dr}(\eta)}{1 - R(0)},\qquad
+        R(0) = \left(\frac{\eta - 1}{\eta + 1}\right)^2,
+
+    using :math:`1 - F^{int}_{dr} = (1 - F^{ext}_{dr})/\eta^2`.
+    :math:`F^{ext}_{dr} = \int_0^1 2\mu F_r(\eta, \mu)\,d\mu` is the diffuse Fresnel
+    reflectance of light from outside, integrated here from the exact Fresnel term. (The
+    polynomial of Jensen et al. 2001, :func:`~translucent.materials.fresnel.diffuse_fresnel_reflectance`,
+    is the *internal* one, 0.44 at eta = 1.3 against 0.066 outside.)
+
+    The radiance at the boundary is never isotropic, even deep in the diffusion regime
+    (at eta = 1 the Milne problem's exit distribution gives :math:`E/L \approx 2.5`,
+    not :math:`\pi`), so this factor is an approximation whose error the fitter absorbs
+    into the exposure only where it is the same at every radius; it is not (see
+    docs/capture-format.md for the measured ratio).
+
+    Parameters
+    ----------
+    eta : float
+        Relative index of refraction, >= 1.
+
+    Returns
+    -------
+    float
+        :math:`E / L`, sr (pi at eta = 1).
+    """
+    mu, weights = np.polynomial.legendre.leggauss(64)
+    mu = 0.5 * (mu + 1.0)
+    f_dr_external = float(np.sum(0.5 * weights * 2.0 * mu * fresnel_reflectance(eta, mu)))
+    r_normal = ((eta - 1.0) / (eta + 1.0)) ** 2
+    return math.pi * (1.0 - f_dr_external) / (1.0 - r_normal)
+
+
+def semi_infinite_depth(material: Dipole) -> float:
+    """Depth (mm) of the box that stands for a semi-infinite slab (see the constants)."""
+    sigma_t_prime = material.sigma_a + material.sigma_s_prime
+    mfp = 1.0 / np.maximum(sigma_t_prime, 1e-12)
+    with np.errstate(divide="ignore"):
+        diffusion = np.where(material.sigma_tr > 0,
+                             DEPTH_DIFFUSION_LENGTHS / np.maximum(material.sigma_tr, 1e-300),
+                             np.inf)
+    depth = np.minimum(np.maximum(diffusion, DEPTH_MIN_MFP * mfp), DEPTH_MAX_MFP * mfp)
+    return float(np.max(depth))
+
+
+@functools.lru_cache(maxsize=None)
+def _plugin_classes(variant: str):
+    """Define the beam and sensor plugins for the active variant (once per variant)."""
+    from ..backend import mitsuba
+
+    mi = mitsuba()
+    import drjit as dr
+
+    class SlabBeam(mi.Emitter):
+        """Collimated Gaussian beam starting on a plane inside the medium, going down (-z).
+
+        ============ ===== ======= ===========================================
+        parameter    type  default meaning
+        ============ ===== ======= ===========================================
+        plane_z      float -1e-4   z of the origin plane, mm
+        beam_radius  float         1/e^2 radius w of the irradiance, mm, > 0
+        centre_x/y   float 0       beam axis, mm
+        power        float 1       power crossing the plane
+        ============ ===== ======= ===========================================
+        """
+
+        def __init__(self, props):
+            super().__init__(props)
+            self.plane_z = props.get("plane_z", -BEAM_DEPTH_MM)
+            self.beam_radius = props.get("beam_radius")
+            self.centre_x = props.get("centre_x", 0.0)
+            self.centre_y = props.get("centre_y", 0.0)
+            self.power = props.get("power", 1.0)
+            self.m_flags = mi.EmitterFlags.DeltaDirection
+
+        def irradiance(self, x, y):
+            """Irradiance on the origin plane, power per mm^2."""
+            w2 = self.beam_radius * self.beam_radius
+            rho2 = dr.square(x - self.centre_x) + dr.square(y - self.centre_y)
+            return self.power * 2.0 / (dr.pi * w2) * dr.exp(-2.0 * rho2 / w2)
+
+        def sample_direction(self, it, sample, active=True):
+            distance = self.plane_z - it.p.z
+            below = active & (distance > 0.0)
+            ds = dr.zeros(mi.DirectionSample3f)
+            ds.p = mi.Point3f(it.p.x, it.p.y, self.plane_z)
+            ds.n = mi.Normal3f(0.0, 0.0, -1.0)
+            ds.d = mi.Vector3f(0.0, 0.0, 1.0)
+            ds.dist = dr.select(below, distance, 0.0)
+            ds.pdf = dr.select(below, 1.0, 0.0)
+            ds.delta = mi.Bool(True)
+            ds.time = it.time
+            weight = dr.select(below, self.irradiance(it.p.x, it.p.y), 0.0)
+            return ds, mi.Spectrum(weight)
+
+        def pdf_direction(self, it, ds, active=True):
+            return mi.Float(0.0)  # delta in direction: never hit by a sampled direction
+
+        def eval_direction(self, it, ds, active=True):
+            return mi.Spectrum(0.0)
+
+        def eval(self, si, active=True):
+            return mi.Spectrum(0.0)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            raise NotImplementedError("the slab beam is only sampled from the camera side")
+
+        def sample_position(self, time, sample, active=True):
+            raise NotImplementedError("the slab beam is only sampled from the camera side")
+
+        def bbox(self):
+            return mi.ScalarBoundingBox3f()
+
+        def traverse(self, callback):
+            pass
+
+        def parameters_changed(self, keys):
+            pass
+
+        def to_string(self):
+            return f"SlabBeam[w = {self.beam_radius} mm, plane z = {self.plane_z} mm]"
+
+    class SlabExitanceSensor(mi.Sensor):
+        """A film lying on a slab face: exitance (cosine-weighted) or normal radiance.
+
+        ============ ====== ========== ==========================================
+        parameter    type   default    meaning
+        ============ ====== ========== ==========================================
+        width_mm     float             film width on the slab, mm
+        height_mm    float             film height, mm
+        plane_z      float             z of the film plane (outside the slab), mm
+        facing_up    bool   false      look up (+z) into the slab (transmission)
+        exitance     bool   true       cosine-weighted directions, weight pi
+        ============ ====== ========== ==========================================
+
+        Film x maps to +x and film rows to +y, both centred on the origin.
+        """
+
+        def __init__(self, props):
+            super().__init__(props)
+            self.width_mm = props.get("width_mm")
+            self.height_mm = props.get("height_mm")
+            self.plane_z = props.get("plane_z")
+            self.direction_sign = 1.0 if props.get("facing_up", False) else -1.0
+            self.exitance = props.get("exitance", True)
+            self.m_needs_sample_3 = self.exitance
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            origin = mi.Point3f((sample2.x - 0.5) * self.width_mm,
+                                (sample2.y - 0.5) * self.height_mm, self.plane_z)
+            if self.exitance:
+                local = mi.warp.square_to_cosine_hemisphere(sample3)
+                direction = mi.Vector3f(local.x, local.y, self.direction_sign * local.z)
+                weight = dr.pi  # E = integral of L cos over the hemisphere = pi E_cos[L]
+            else:
+                direction = mi.Vector3f(0.0, 0.0, self.direction_sign)
+                weight = 1.0
+            ray = mi.Ray3f(origin, direction, time, dr.zeros(mi.Color0f))
+            return ray, mi.Spectrum(weight)
+
+        def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
+            ray, weight = self.sample_ray(time, sample1, sample2, sample3, active)
+            return mi.RayDifferential3f(ray), weight
+
+        def bbox(self):
+            return mi.ScalarBoundingBox3f()
+
+        def traverse(self, callback):
+            pass
+
+        def parameters_changed(self, keys):
+            pass
+
+        def to_string(self):
+            return f"SlabExitanceSensor[{self.width_mm} x {self.height_mm} mm]"
+
+    mi.register_emitter(BEAM_PLUGIN, lambda props: SlabBeam(props))
+    mi.register_sensor(SENSOR_PLUGIN, lambda props: SlabExitanceSensor(props))
+    return SlabBeam, SlabExitanceSensor
+
+
+def register_plugins():
+    """Register the beam and sensor plugins with Mitsuba; return their classes."""
+    from ..backend import mitsuba
+
+    return _plugin_classes(mitsuba().variant())
+
+
+def _rgb_texture(values) -> tuple[dict, float]:
+    """An RGB texture of values that may exceed 1, and the scale that goes with it."""
+    values = np.asarray(values, dtype=np.float64)
+    scale = float(values.max())
+    normalised = values / scale if scale > 0 else values
+    return {"type": "rgb", "value": [float(v) for v in normalised]}, scale
+
+
+def slab_scene_dict(material: Dipole, *, shape, pixel_size_mm, incident_px, side,
+                    thickness_mm, beam_radius_mm, pass_spp, sensor="exitance") -> dict:
+    """Return the Mitsuba ``load_dict`` description of the capture (see the module docstring).
+
+    Parameters
+    ----------
+    material : Dipole
+        sigma_a and sigma_s' (mm^-1) per channel and eta; rendered with the reduced
+        coefficients and an isotropic phase function.
+    shape : (int, int)
+        ``(H, W)``, pixels.
+    pixel_size_mm : float
+    incident_px : (float, float)
+        Beam axis ``(x, y)``, pixels (top-left corner of the image at 0, 0).
+    side : {"reflection", "transmission"}
+    thickness_mm : float or None
+        None: :func:`semi_infinite_depth`.
+    beam_radius_mm : float
+        1/e^2 radius, mm, > 0.
+    pass_spp : int
+        Samples per pixel of one render call.
+    sensor : {"exitance", "normal radiance"}
+
+    Returns
+    -------
+    dict
+    """
+    from ..backend import mitsuba
+
+    mi = mitsuba()
+    register_plugins()
+    height, width = shape
+    depth = semi_infinite_depth(material) if thickness_mm is None else float(thickness_mm)
+    width_mm, height_mm = width * pixel_size_mm, height * pixel_size_mm
+    lateral = 0.5 * math.hypot(width_mm, height_mm) + LATERAL_MARGIN_DEPTHS * depth
+    transform = mi.ScalarTransform4f
+    sigma_t_prime = material.sigma_a + material.sigma_s_prime
+    albedo = np.where(sigma_t_prime > 0, material.sigma_s_prime / np.maximum(sigma_t_prime, 1e-300),
+                      0.0)
+    sigma_t_texture, sigma_t_scale = _rgb_texture(sigma_t_prime)
+    boundary = {"type": "null"} if material.eta == 1.0 else \
+        {"type": "dielectric", "int_ior": float(material.eta), "ext_ior": 1.0}
+    plane_z = SENSOR_OFFSET_MM if side == "reflection" else -depth - SENSOR_OFFSET_MM
+    return {
+        "type": "scene",
+        "integrator": {"type": "volpath", "max_depth": MAX_DEPTH},
+        "sensor": {"type": SENSOR_PLUGIN, "width_mm": width_mm, "height_mm": height_mm,
+                   "plane_z": plane_z, "facing_up": side == "transmission",
+                   "exitance": sensor == "exitance",
+                   "film": {"type": "hdrfilm", "width": int(width), "height": int(height),
+                            "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+                   "sampler": {"type": "independent", "sample_count": int(pass_spp)}},
+        "slab": {"type": "cube",
+                 "to_world": transform().translate([0.0, 0.0, -0.5 * depth])
+                 @ transform().scale([lateral, lateral, 0.5 * depth]),
+                 "bsdf": boundary,
+                 "interior": {"type": "homogeneous", "sigma_t": sigma_t_texture,
+                              "scale": sigma_t_scale,
+                              "albedo": {"type": "rgb", "value": [float(a) for a in albedo]},
+                              "phase": {"type": "isotropic"}}},
+        "beam": {"type": BEAM_PLUGIN, "beam_radius": float(beam_radius_mm),
+                 "plane_z": -BEAM_DEPTH_MM,
+                 "centre_x": (incident_px[0] - 0.5 * width) * pixel_size_mm,
+                 "centre_y": (incident_px[1] - 0.5 * height) * pixel_size_mm},
+    }
+
+
+@dataclass
+class VolpathRender:
+    """A volpath exitance image and what it took.
+
+    Attributes
+    ----------
+    exitance : ndarray, shape (H, W, 3)
+        Mean over the passes, mm^-2 per unit entering power.
+    standard_error : ndarray, shape (H, W, 3)
+        Per pixel, from the spread of the passes.
+    spp : int
+        Samples per pixel in all (passes x pass_spp).
+    passes : int
+    pass_spp : int
+    depth_mm : float
+        Slab thickness rendered.
+    pixel_size_mm : float
+    sensor : str
+    variant : str
+    seconds : float
+    """
+
+    exitance: np.ndarray
+    standard_error: np.ndarray
+    spp: int
+    passes: int
+    pass_spp: int
+    depth_mm: float
+    pixel_size_mm: float
+    sensor: str
+    variant: str
+    seconds: float
+
+    @property
+    def total(self) -> np.ndarray:
+        """Power leaving through the film per unit entering power, per channel."""
+        return self.exitance.sum(axis=(0, 1)) * self.pixel_area
+
+    @property
+    def pixel_area(self) -> float:
+        """Pixel area, mm^2."""
+        return self.pixel_size_mm ** 2
+
+    def relative_standard_error(self) -> np.ndarray:
+        """Relative standard error of the film's total exitance, per channel."""
+        total_se = np.sqrt((self.standard_error ** 2).sum(axis=(0, 1))) * self.pixel_area
+        total = self.total
+        return np.where(total > 0, total_se / np.where(total > 0, total, 1.0), np.inf)
+
+    def median_pixel_relative_error(self) -> np.ndarray:
+        """Median over pixels of the per-pixel relative standard error, per channel."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            relative = self.standard_error / self.exitance
+        relative = np.where(self.exitance > 0, relative, np.inf)
+        return np.median(relative.reshape(-1, 3), axis=0)
+
+
+def _check_inputs(material, *, shape, pixel_size_mm, incident_px, side, thickness_mm,
+                  beam_radius_mm, spp, pass_spp, sensor):
+    """Validate the arguments shared by :func:`render_exitance` and :func:`volpath_capture`."""
+    if not isinstance(material, Dipole):
+        raise InputError("must be a Dipole (sigma_a, sigma_s', eta)", field="material",
+                         value=type(material).__name__)
+    height, width = shape
+    if int(height) < 1 or int(width) < 1:
+        raise InputError("must be at least 1 x 1 pixels", field="size", value=shape)
+    if not (np.isfinite(pixel_size_mm) and pixel_size_mm > 0):
+        raise InputError("must be > 0", field="pixel_size_mm", value=pixel_size_mm)
+    if not (0.0 <= incident_px[0] <= width and 0.0 <= incident_px[1] <= height):
+        raise InputError(f"must lie inside the {width} x {height} image", field="incident_px",
+                         value=tuple(incident_px))
+    if side not in ("reflection", "transmission"):
+        raise InputError("must be 'reflection' or 'transmission'", field="side", value=side)
+    if thickness_mm is not None and not (np.isfinite(thickness_mm) and thickness_mm > 0):
+        raise InputError("must be > 0 or None (semi-infinite)", field="thickness_mm",
+                         value=thickness_mm)
+    if side == "transmission" and thickness_mm is None:
+        raise InputError("transmission needs a finite thickness", field="thickness_mm",
+                         value=None)
+    if not (np.isfinite(beam_radius_mm) and beam_radius_mm > 0):
+        raise InputError("must be > 0 for volpath captures: camera paths cannot find a "
+                         "pencil beam (use the walk or dipole generator for one)",
+                         field="beam_radius_mm", value=beam_radius_mm)
+    if int(spp) < 2 or int(spp) != spp:
+        raise InputError("must be an integer >= 2 (two passes at least, for the standard "
+                         "error)", field="spp", value=spp)
+    if int(pass_spp) < 1 or int(pass_spp) != pass_spp:
+        raise InputError("must be an integer >= 1", field="pass_spp", value=pass_spp)
+    if sensor not in SENSOR_MODES:
+        raise InputError(f"must be one of {', '.join(SENSOR_MODES)}", field="sensor",
+                         value=sensor)
+
+
+def render_exitance(material: Dipole, *, shape=(96, 96), pixel_size_mm: float = 0.1,
+                    incident_px=None, side: str = "reflection",
+                    thickness_mm: float | None = None, beam_radius_mm: float | None = None,
+                    spp: int = 256, pass_spp: int = DEFAULT_PASS_SPP, sensor: str = "exitance",
+                    seed: int | None = None, progress: bool = False) -> VolpathRender:
+    """Render the exitance image of a beam-lit slab with Mitsuba ``volpath``, in passes.
+
+    Parameters
+    ----------
+    material : Dipole
+    shape : (int, int)
+        ``(H, W)``.
+    pixel_size_mm : float
+    incident_px : (float, float), optional
+        Beam axis, pixels (default: the image centre).
+    side : {"reflection", "transmission"}
+    thickness_mm : float or None
+    beam_radius_mm : float, optional
+        1/e^2 radius, mm, > 0 (default: :data:`DEFAULT_BEAM_FRACTION` of the field width).
+    spp : int
+        Samples per pixel in all, >= 2; split into ``ceil(spp / pass_spp)`` passes (at
+        least 2) of equal size, so slightly more may be rendered.
+    pass_spp : int
+        Most samples per pixel in one pass.
+    sensor : {"exitance", "normal radiance"}
+        ``"normal radiance"`` converts with :func:`exitance_per_normal_radiance`.
+    seed : int, optional
+    progress : bool
+        A progress bar over the passes (stderr).
+
+    Returns
+    -------
+    VolpathRender
+    """
+    from ..backend import mitsuba
+
+    height, width = shape
+    if incident_px is None:
+        incident_px = (width / 2.0, height / 2.0)
+    if beam_radius_mm is None:
+        beam_radius_mm = DEFAULT_BEAM_FRACTION * width * pixel_size_mm
+    _check_inputs(material, shape=shape, pixel_size_mm=pixel_size_mm, incident_px=incident_px,
+                  side=side, thickness_mm=thickness_mm, beam_radius_mm=beam_radius_mm,
+                  spp=spp, pass_spp=pass_spp, sensor=sensor)
+    began = time.perf_counter()
+    passes = max(2, math.ceil(int(spp) / int(pass_spp)))
+    per_pass = math.ceil(int(spp) / passes)
+    mi = mitsuba()
+    scene = mi.load_dict(slab_scene_dict(
+        material, shape=(height, width), pixel_size_mm=pixel_size_mm, incident_px=incident_px,
+        side=side, thickness_mm=thickness_mm, beam_radius_mm=beam_radius_mm,
+        pass_spp=per_pass, sensor=sensor))
+    rng = np.random.default_rng(seed)
+    seeds = rng.integers(0, 2**31, size=passes)
+    scale = 1.0 if sensor == "exitance" else exitance_per_normal_radiance(material.eta)
+    images = np.zeros((passes, height, width, 3))
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=passes, desc=f"volpath {per_pass} spp/pass", unit="pass", leave=False)
+    try:
+        for index, pass_seed in enumerate(seeds):
+            image = mi.render(scene, spp=per_pass, seed=int(pass_seed))
+            images[index] = scale * np.asarray(image, dtype=np.float64)[..., :3]
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    return VolpathRender(
+        exitance=images.mean(axis=0),
+        standard_error=images.std(axis=0, ddof=1) / math.sqrt(passes),
+        spp=passes * per_pass, passes=passes, pass_spp=per_pass,
+        depth_mm=semi_infinite_depth(material) if thickness_mm is None else float(thickness_mm),
+        pixel_size_mm=float(pixel_size_mm), sensor=sensor, variant=mi.variant(),
+        seconds=time.perf_counter() - began)
+
+
+def volpath_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
+                    pixel_size_mm: float = 0.1, incident_px=None, side: str = "reflection",
+                    thickness_mm: float | None = None, beam_radius_mm: float | None = None,
+                    spp: int = 256, pass_spp: int = DEFAULT_PASS_SPP, sensor: str = "exitance",
+                    camera: Camera | None = None, seed: int | None = None,
+                    image_name: str = "capture.exr", eta_known: bool = True,
+                    progress: bool = False):
+    """Make a synthetic capture rendered by Mitsuba ``volpath``, with camera defects.
+
+    Parameters are those of :func:`~translucent.fitting.synthetic.dipole_capture`, plus
+    ``spp``, ``pass_spp``, ``sensor`` and ``progress`` (see :func:`render_exitance`);
+    ``beam_radius_mm`` must be > 0 (default: :data:`DEFAULT_BEAM_FRACTION` of the field).
+
+    Returns
+    -------
+    (ndarray, CaptureSpec, VolpathRender)
+        Stored values, the sidecar (truth under ``synthetic``, with generator
+        ``"mitsuba volpath"``, spp and variant) and the render.
+    """
+    camera = Camera() if camera is None else camera
+    height, width = (size, size) if np.isscalar(size) else size
+    if incident_px is None:
+        incident_px = (width / 2.0, height / 2.0)
+    if beam_radius_mm is None:
+        beam_radius_mm = DEFAULT_BEAM_FRACTION * width * pixel_size_mm
+    rng = np.random.default_rng(seed)
+    render = render_exitance(material, shape=(height, width), pixel_size_mm=pixel_size_mm,
+                             incident_px=incident_px, side=side, thickness_mm=thickness_mm,
+                             beam_radius_mm=beam_radius_mm, spp=spp, pass_spp=pass_spp,
+                             sensor=sensor, seed=int(rng.integers(2**31)), progress=progress)
+    stored, exposure = apply_camera(render.exitance, camera, rng)
+    spec = _capture_spec(material, camera, image_name=image_name, pixel_size_mm=pixel_size_mm,
+                         incident_px=incident_px, side=side, thickness_mm=thickness_mm,
+                         beam_radius_mm=beam_radius_mm, exposure=exposure, eta_known=eta_known,
+                         generator="mitsuba volpath",
+                         extra={"spp": int(render.spp), "passes": int(render.passes),
+                                "variant": render.variant, "sensor": render.sensor,
+                                "depth_mm": render.depth_mm,
+                                "relative_standard_error":
+                                    render.relative_standard_error().tolist(),
+                                "seconds": render.seconds})
+    return stored, spec, render
