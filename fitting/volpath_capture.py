@@ -62,9 +62,9 @@ from ..materials import Dipole
 from ..materials.fresnel import fresnel_reflectance
 from .synthetic import Camera, _capture_spec, apply_camera
 
-__all__ = ["BEAM_DEPTH_MM", "DEFAULT_BEAM_FRACTION", "VolpathRender", "exitance_per_normal_radiance",
-           "register_plugins", "render_exitance", "semi_infinite_depth", "slab_scene_dict",
-           "volpath_capture"]
+__all__ = ["BEAM_DEPTH_MM", "DEFAULT_BEAM_FRACTION", "VolpathRender",
+           "exitance_per_normal_radiance", "register_plugins", "render_exitance",
+           "semi_infinite_depth", "slab_scene_dict", "volpath_capture"]
 
 #: Depth of the beam's origin plane below the top face, mm: far below any mean free path
 #: of the catalogue (the shortest is Spectralon's 0.05 mm), so the light scattered in the
@@ -112,8 +112,9 @@ def exitance_per_normal_radiance(eta: float) -> float:
     using :math:`1 - F^{int}_{dr} = (1 - F^{ext}_{dr})/\eta^2`.
     :math:`F^{ext}_{dr} = \int_0^1 2\mu F_r(\eta, \mu)\,d\mu` is the diffuse Fresnel
     reflectance of light from outside, integrated here from the exact Fresnel term. (The
-    polynomial of Jensen et al. 2001, :func:`~translucent.materials.fresnel.diffuse_fresnel_reflectance`,
-    is the *internal* one, 0.44 at eta = 1.3 against 0.066 outside.)
+    polynomial of Jensen et al. 2001,
+    :func:`~translucent.materials.fresnel.diffuse_fresnel_reflectance`, is the *internal*
+    one: 0.445 at eta = 1.3, against 0.061 from outside.)
 
     The radiance at the boundary is never isotropic, even deep in the diffusion regime
     (at eta = 1 the Milne problem's exit distribution gives :math:`E/L \approx 2.5`,
@@ -294,7 +295,7 @@ def register_plugins():
 
 
 def _rgb_texture(values) -> tuple[dict, float]:
-    """An RGB texture of values that may exceed 1, and the scale that goes with it."""
+    """Return an RGB texture of values that may exceed 1, and the scale that goes with it."""
     values = np.asarray(values, dtype=np.float64)
     scale = float(values.max())
     normalised = values / scale if scale > 0 else values

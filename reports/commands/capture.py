@@ -3,11 +3,13 @@
 MATERIAL is a measured medium (``marble``, ``skin1``, ...) or a material TOML file with a
 dipole table (``type = "dipole"``, as ``translucent fit`` writes). The generator is the
 photon random walk (``--generator walk``, the default: traced from the light, exact Fresnel
-boundaries, Henyey-Greenstein scattering) or the exact dipole / multipole model
-(``--generator dipole``). The camera adds shot and read noise, a black level, clipping at
-the saturation level (``--peak-signal`` above it saturates the centre) and, unless
-``--known-exposure``, leaves the exposure unknown. The truth goes into the sidecar's
-``synthetic`` object. See docs/capture-format.md.
+boundaries, Henyey-Greenstein scattering), Mitsuba 3 volumetric path tracing
+(``--generator volpath``: a Gaussian beam starting just inside the medium, the exitance
+measured on the slab face, ``--spp`` samples per pixel in passes of ``--pass-spp``) or the
+exact dipole / multipole model (``--generator dipole``). The camera adds shot and read
+noise, a black level, clipping at the saturation level (``--peak-signal`` above it
+saturates the centre) and, unless ``--known-exposure``, leaves the exposure unknown. The
+truth goes into the sidecar's ``synthetic`` object. See docs/capture-format.md.
 """
 
 from __future__ import annotations
@@ -18,8 +20,9 @@ from pathlib import Path
 def add_arguments(parser):
     """Options of ``translucent capture``."""
     parser.add_argument("material", help="measured medium name or material TOML file")
-    parser.add_argument("--generator", choices=("walk", "dipole"), default="walk",
-                        help="photon random walk (default) or the exact dipole model")
+    parser.add_argument("--generator", choices=("walk", "volpath", "dipole"), default="walk",
+                        help="photon random walk (default), Mitsuba volumetric path tracing "
+                             "or the exact dipole model")
     parser.add_argument("--out", "-o", default=None,
                         help="sidecar path (default: <material>_capture.json)")
     parser.add_argument("--format", choices=("exr", "png", "tiff"), default="exr",
@@ -32,8 +35,9 @@ def add_arguments(parser):
     parser.add_argument("--side", choices=("reflection", "transmission"), default="reflection")
     parser.add_argument("--thickness", type=float, default=None,
                         help="slab thickness, mm (default: semi-infinite)")
-    parser.add_argument("--beam-radius", type=float, default=0.0,
-                        help="1/e^2 radius of the Gaussian beam, mm")
+    parser.add_argument("--beam-radius", type=float, default=None,
+                        help="1/e^2 radius of the Gaussian beam, mm (default: 0, a pencil; "
+                             "volpath needs > 0 and defaults to 5 %% of the field width)")
     parser.add_argument("--eta", type=float, default=None, help="override the material's eta")
     parser.add_argument("--unknown-eta", action="store_true",
                         help="write eta as null (the fitter then fits it)")
@@ -44,6 +48,15 @@ def add_arguments(parser):
                              "for a high-albedo medium on two cores)")
     parser.add_argument("--rotations", type=int, default=16,
                         help="random rotations per exit on the film (walk generator)")
+    parser.add_argument("--spp", type=int, default=1024,
+                        help="samples per pixel in all (volpath generator)")
+    parser.add_argument("--pass-spp", type=int, default=None,
+                        help="most samples per pixel in one render pass (volpath; default "
+                             "1024; the spread of the passes gives the standard error)")
+    parser.add_argument("--sensor", choices=("exitance", "normal-radiance"),
+                        default="exitance",
+                        help="volpath: measure the exitance on the slab face (default) or the "
+                             "radiance along the normal converted by the diffusion factor")
     parser.add_argument("--peak-signal", type=float, default=20000.0,
                         help="stored value above black of the brightest pixel before "
                              "clipping (sets the exposure)")
@@ -82,11 +95,24 @@ def run(args) -> int:
         default_pixel_size(material, args.size)
     if not pixel > 0:
         raise InputError("must be > 0", field="--pixel-size", value=pixel)
+    beam = args.beam_radius
+    if beam is None and args.generator != "volpath":
+        beam = 0.0
     options = dict(size=args.size, pixel_size_mm=pixel, incident_px=args.incident,
                    side=args.side, thickness_mm=args.thickness,
-                   beam_radius_mm=args.beam_radius, camera=camera, seed=args.seed,
+                   beam_radius_mm=beam, camera=camera, seed=args.seed,
                    image_name=out.with_suffix(suffix).name, eta_known=not args.unknown_eta)
-    if args.generator == "walk":
+    if args.generator == "volpath":
+        from ...fitting.volpath_capture import DEFAULT_PASS_SPP, volpath_capture
+
+        stored, spec, render = volpath_capture(
+            material, spp=args.spp, pass_spp=args.pass_spp or DEFAULT_PASS_SPP,
+            sensor=args.sensor.replace("-", " "), progress=True, **options)
+        detail = (f"volpath {render.spp} spp in {render.passes} passes on {render.variant}, "
+                  f"{render.seconds:.1f} s, total exitance {render.total.round(4).tolist()}, "
+                  f"relative standard error "
+                  f"{render.relative_standard_error().round(4).tolist()}")
+    elif args.generator == "walk":
         from ...fitting.random_walk import walk_capture
 
         stored, spec, tally = walk_capture(material, photons=int(args.photons),
