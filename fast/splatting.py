@@ -611,32 +611,33 @@ def splat_level(samples: IrradianceSamples, bounds_low: np.ndarray, bounds_high:
 
 def _splat_numba(samples, bounds_low, bounds_high, level, level_texel, material, mm_per_unit,
                  scale, index, centre_x, centre_y, radius):
-    """Run the compiled kernel of :func:`splat_level` (:func:`.splatting_kernels.splat_samples`)."""
+    """Run the compiled kernel of :func:`splat_level` (:func:`.splatting_kernels.splat_tiles`)."""
     from . import splatting_kernels as kernels
 
     height, width = level.shape
-    # spatially coherent order: neighbouring samples touch the same cached rows
-    order = np.lexsort((centre_x, np.floor(centre_y / 8)))
-    index, centre_x, centre_y, radius = (index[order], centre_x[order], centre_y[order],
-                                         radius[order])
-    position = np.ascontiguousarray(np.moveaxis(level.position, -1, 0), dtype=np.float32)
-    texel = np.where(level.valid, level_texel, -1).astype(np.int32)
-    out = np.zeros((3, height, width), dtype=np.float32)
-    visited = kernels.splat_samples(
-        out, position, texel, kernels.block_bounds(position, level.valid),
-        _segment_table(material), np.float32(
-            material.segments / (material.r_s / mm_per_unit)),
-        np.ascontiguousarray(samples.position[index].T, dtype=np.float32),
-        samples.texel[index].astype(np.int32),
-        np.ascontiguousarray(samples.flux[index] * scale, dtype=np.float32),
-        centre_x.astype(np.float32), centre_y.astype(np.float32),
+    position, texel, tile_bounds, tiles_y, tiles_x = kernels.tile_layout(
+        np.moveaxis(level.position, -1, 0), level_texel, level.valid)
+    sample_position = np.ascontiguousarray(samples.position[index].T, dtype=np.float32)
+    low2 = np.square(bounds_low[index]).astype(np.float32)
+    high2 = np.square(bounds_high[index]).astype(np.float32)
+    start, members = kernels.bin_samples(
+        tile_bounds, tiles_y, tiles_x, sample_position, centre_x.astype(np.float32),
+        centre_y.astype(np.float32),
         # the surface point of a pixel of a coarser level is one of its finest children's:
         # it projects inside the pixel, within sqrt(2)/2 of its centre; 1e-3 and 1e-5 cover
         # the float32 rounding of the bound
         (radius * (1.0 + 1e-5) + (0.5 * math.sqrt(2.0) + 1e-3)).astype(np.float32),
-        np.square(bounds_low[index]).astype(np.float32),
-        np.square(bounds_high[index]).astype(np.float32), kernels.STRIPES)
-    return np.moveaxis(out, 0, -1).astype(np.float64), visited.sum(axis=0).tolist()
+        low2, high2)
+    out = np.empty(position.shape, dtype=np.float32)
+    used = kernels.splat_tiles(
+        out, position, texel, _segment_table(material),
+        np.float32(material.segments / (material.r_s / mm_per_unit)), sample_position,
+        samples.texel[index].astype(np.int32),
+        np.ascontiguousarray(samples.flux[index] * scale, dtype=np.float32), low2, high2,
+        start, members)
+    visited = len(members) * kernels.TILE ** 2
+    return (kernels.untile(out, tiles_y, tiles_x, height, width).astype(np.float64),
+            [visited, int(used.sum())])
 
 
 @functools.lru_cache(maxsize=16)
