@@ -104,7 +104,8 @@ def refine_incident_point(signal, start_xy, *, saturated=None, search_radius_px=
     The weights are :math:`\max(v - t, 0)` with :math:`t` = :data:`CENTROID_THRESHOLD`
     times the peak, over a disc that is recentred on each new estimate. Any radially
     symmetric profile is a fixed point at its true centre; saturated pixels keep the peak
-    value (a symmetric plateau), NaN pixels weigh nothing.
+    value (a symmetric plateau), NaN pixels weigh nothing. Where the bright core reaches the
+    image border the centroid is biased, and ``start_xy`` is returned unchanged.
 
     Parameters
     ----------
@@ -160,6 +161,10 @@ def refine_incident_point(signal, start_xy, *, saturated=None, search_radius_px=
         core = window & (signal >= threshold)
         if moved < CENTROID_TOLERANCE_PX:
             break
+    if core[0].any() or core[-1].any() or core[:, 0].any() or core[:, -1].any():
+        # a core cut by the image border pulls the centroid inwards (0.5 px for a beam on
+        # the border, enough to bias a fit beyond its 95 % intervals): keep the given point
+        return float(start_xy[0]), float(start_xy[1])
     return x, y
 
 
