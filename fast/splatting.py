@@ -64,6 +64,7 @@ __all__ = [
     "irradiance_mipmap",
     "median_depth_mipmap",
     "select_irradiance_samples",
+    "level_sample_masks",
     "effective_rendering_ranges",
     "splat_level",
     "bilateral_upsample",
@@ -94,6 +95,7 @@ DEFAULT_KNOBS: dict = {
     "backend": "numba",             # splatting kernel, one of BACKENDS
     "buffers": "raster",            # G-buffers: "raster" (z-buffer) or "mitsuba" (ray queries)
     "sampling_range": "shortest",   # RGB reading of Eq. 11's range, one of SAMPLING_RANGES
+    "level_sampling": 0.0,          # > 0: coarser samples for coarse splatting levels (pixels)
 }
 #: The splatting kernels: compiled loops (numba, the default: measured fastest on the CPU,
 #: see reports/bench/splatting.py), Dr.Jit (LLVM on the CPU, CUDA where a GPU is there) and
@@ -276,8 +278,8 @@ def sampling_range(material: SubEditProfiles, sampling: str = "shortest") -> np.
 
 def select_irradiance_samples(pyramid: list[IrradianceLevel], material: SubEditProfiles, *,
                               mm_per_unit: float, z0: float, alpha: float,
-                              adaptive: bool = True,
-                              sampling: str = "shortest") -> IrradianceSamples:
+                              adaptive: bool = True, sampling: str = "shortest",
+                              coarse_enough: list | None = None) -> IrradianceSamples:
     r"""Adaptive irradiance sample selection (Eq. 10-11 and Algorithm 1 of Chen et al. 2012).
 
     A texel at level :math:`k \ge 1` passes when
@@ -305,6 +307,10 @@ def select_irradiance_samples(pyramid: list[IrradianceLevel], material: SubEditP
         False selects every valid level-0 texel (the ablation without adaptive sampling).
     sampling : str
         Which per-texel range sets the rate: see :data:`SAMPLING_RANGES`.
+    coarse_enough : list of ndarray (H_k, W_k) of bool, optional
+        Per level, texels that pass the rate test whatever Eq. 11 says (they still need
+        the depth test): the samples of one coarse splatting level
+        (:func:`level_sample_masks`).
     """
     ranges = sampling_range(material, sampling).reshape(-1) / mm_per_unit
     parts = []
@@ -319,6 +325,8 @@ def select_irradiance_samples(pyramid: list[IrradianceLevel], material: SubEditP
             with np.errstate(invalid="ignore"):  # inf - inf on invalid texels
                 smooth = (level.depth_max - level.depth_min) < z0
             fine_enough = alpha * level.footprint < ranges[texel] * np.abs(level.cosine)
+            if coarse_enough is not None:
+                fine_enough |= coarse_enough[k]
             passes = level.valid & smooth & fine_enough
         if covered is not None:
             covered = _upsample_mask(covered, passes.shape)
@@ -334,6 +342,33 @@ def select_irradiance_samples(pyramid: list[IrradianceLevel], material: SubEditP
                                            level.flux[rows, cols],
                                            np.full(len(rows), k, np.int64)))
     return IrradianceSamples.concatenate(parts)
+
+
+def level_sample_masks(pyramid: list[IrradianceLevel], camera: CameraModel, level: int,
+                       pitch: float) -> list[np.ndarray]:
+    r"""Irradiance texels fine enough for splatting level ``level``: the masks of ``coarse_enough``.
+
+    A texel of irradiance level :math:`l` passes when its spacing on the surface,
+    :math:`s_l/|n\cdot L|` (footprint over the cosine, its longer side), is at most
+    ``pitch`` times the width of one pixel of splatting level :math:`k` at the texel's
+    camera depth, :math:`2^k\,2\tan(\mathrm{fov}/2)\,z/W`. Level :math:`k` renders only
+    distances of at least :math:`R^k_{min}`, where Eq. 14 found the profile's integral
+    sampled well enough on a grid of its pixels; sampling the irradiance on a grid no
+    coarser is the same quadrature from the other end of each pair. Not in Chen et al.
+    2012, whose one selection (Eq. 10-11) serves every level; see the module docstring.
+
+    Returns
+    -------
+    list of ndarray (H_l, W_l) of bool
+    """
+    masks = []
+    pixel = (1 << level) * 2.0 * camera.tan_half_fov / camera.width
+    for irradiance in pyramid:
+        depth = (np.nan_to_num(irradiance.position) - camera.origin) @ camera.forward
+        with np.errstate(divide="ignore", invalid="ignore"):
+            spacing = irradiance.footprint / np.abs(irradiance.cosine)
+        masks.append(irradiance.valid & (depth > 0) & (spacing <= pitch * pixel * depth))
+    return masks
 
 
 # ====================================================================== Eq. 14 lookup table
@@ -991,31 +1026,45 @@ def splat_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list[
     texels = [material.texel_index(level.uv) for level in pyramid]
     ranges_mm = material.effective_scattering_range.reshape(-1)
     lap("splatting buffer mipmap")
-    parts = []
-    for view in lights:
-        irradiance = irradiance_mipmap(view.buffer, view.flux, view.cosine,
-                                       levels if knobs["adaptive"] else 1)
-        parts.append(select_irradiance_samples(
-            irradiance, material, mm_per_unit=mm_per_unit, z0=knobs["z0"] * sphere_radius,
-            alpha=knobs["alpha"], adaptive=knobs["adaptive"],
-            sampling=knobs["sampling_range"]))
-    samples = IrradianceSamples.concatenate(parts)
+    pyramids = [irradiance_mipmap(view.buffer, view.flux, view.cosine,
+                                  levels if knobs["adaptive"] else 1) for view in lights]
+
+    def select(coarse_enough=None):
+        return IrradianceSamples.concatenate(
+            select_irradiance_samples(
+                irradiance, material, mm_per_unit=mm_per_unit,
+                z0=knobs["z0"] * sphere_radius, alpha=knobs["alpha"],
+                adaptive=knobs["adaptive"], sampling=knobs["sampling_range"],
+                coarse_enough=None if coarse_enough is None else coarse_enough(irradiance))
+            for irradiance in pyramids)
+
+    samples = select()
     log.notes["samples"] = len(samples)
     log.notes["samples per level"] = np.bincount(samples.level, minlength=levels).tolist()
+    per_level = knobs["level_sampling"] > 0 and knobs["adaptive"] and splat_levels > 1
+    level_samples = [samples] + [
+        select(functools.partial(level_sample_masks, camera=camera, level=k,
+                                 pitch=knobs["level_sampling"])) if per_level else samples
+        for k in range(1, splat_levels)]
+    if per_level:
+        log.notes["samples per splatting level"] = [len(s) for s in level_samples]
     lap("irradiance mipmap and selection")
     table = rendering_radius_table(material, knobs["epsilon"])
-    bounds = effective_rendering_ranges(samples, material, table, camera,
-                                        mm_per_unit=mm_per_unit, levels=splat_levels,
-                                        multiresolution=knobs["multiresolution"])
+    bounds = [effective_rendering_ranges(s, material, table, camera, mm_per_unit=mm_per_unit,
+                                         levels=splat_levels,
+                                         multiresolution=knobs["multiresolution"])
+              for s in (level_samples if per_level else level_samples[:1])]
     lap("effective rendering ranges")
     exitance = []
     pairs = []
     in_range = []
     for k, level in enumerate(pyramid):
         stats = {}
-        exitance.append(splat_level(samples, bounds[:, k], bounds[:, k + 1], level, texels[k],
-                                    material, camera, mm_per_unit=mm_per_unit,
-                                    backend=knobs["backend"], stats=stats))
+        level_bounds = bounds[k] if per_level else bounds[0]
+        exitance.append(splat_level(level_samples[k], level_bounds[:, k], level_bounds[:, k + 1],
+                                    level, texels[k], material, camera,
+                                    mm_per_unit=mm_per_unit, backend=knobs["backend"],
+                                    stats=stats))
         pairs.append(stats.get("pairs", 0))
         in_range.append(stats.get("pairs in range"))
         lap(f"splat level {k}")
@@ -1131,7 +1180,7 @@ def _check_knobs(knobs: dict) -> dict:
         merged[name] = int(value)
     if merged["levels"] > 12:
         raise InputError("must be <= 12", field="levels", value=merged["levels"])
-    for name in ("z0", "alpha", "epsilon", "lambda_z", "lambda_m"):
+    for name in ("z0", "alpha", "epsilon", "lambda_z", "lambda_m", "level_sampling"):
         value = float(merged[name])
         if not np.isfinite(value) or value < 0 or (name == "epsilon" and value == 0):
             raise InputError("must be a finite number >= 0 (epsilon > 0)", field=name,
@@ -1449,6 +1498,11 @@ def add_approx_arguments(parser) -> None:
                         help="use every irradiance sample of the finest level (ablation)")
     parser.add_argument("--backend", choices=BACKENDS,
                         default=DEFAULT_KNOBS["backend"], help="splatting kernel")
+    parser.add_argument("--level-sampling", type=float,
+                        default=DEFAULT_KNOBS["level_sampling"],
+                        help="coarse splatting levels take irradiance samples as sparse as "
+                             "this many of their pixels (default 0: the paper's one "
+                             "selection for every level)")
     parser.add_argument("--material", default=None,
                         help="replace the translucent material: a built-in SubEdit name "
                              "(checker, veined_marble, wax_gradient) or a SubEdit .npz file")
@@ -1460,7 +1514,7 @@ def approx(scene, args) -> Image:
 
     knobs = {"irradiance_resolution": args.irradiance_resolution, "levels": args.levels,
              "multiresolution": not args.no_multiresolution, "adaptive": not args.no_adaptive,
-             "backend": args.backend}
+             "backend": args.backend, "level_sampling": args.level_sampling}
     material = None
     if args.material:
         material = builtin_subedit(args.material) if args.material in BUILTIN_SUBEDIT \
