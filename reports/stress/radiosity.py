@@ -9,8 +9,10 @@ and :math:`a` a row of F (for a uniform source, :math:`B = s / (1 - \rho)`), the
 answer each solver is compared with. Albedos approach and pass 1 (0.9 .. 1.01): below 1 a
 solver must reach its tolerance or refuse with :class:`~translucent.fast.radiosity.
 ConvergenceError`; at and above 1 :func:`~translucent.fast.radiosity.check_convergence`
-must refuse with :class:`~translucent.errors.InputError` and the solvers, called directly,
-must refuse as well. No NaN, no Inf and no result where a refusal is due.
+must refuse with :class:`~translucent.errors.InputError`, and the solvers, called directly,
+must refuse wherever the spectral radius of SF (:math:`\rho\sum a`, which the float32
+rounding of F moves by ~1e-8) reaches 1. No NaN, no Inf and no result where a refusal is
+due.
 """
 
 from __future__ import annotations
@@ -91,7 +93,9 @@ def _outcome(result: StressResult, rho, solver, tolerance, form_factors, row, so
     result.evaluations += radiosity.size
     count_nonfinite(radiosity, result)
     case.update(outcome="solved", iterations=info["iterations"], residual=max(info["residual"]))
-    if rho >= 1.0:
+    # rho sum(a) is the spectral radius of SF here: float32 form factors whose rows sum to
+    # just below 1 keep the series convergent even at rho = 1 (B is then ~1e8 s, but right)
+    if np.longdouble(rho) * row.astype(np.longdouble).sum() >= 1:
         # a result where the series of Eq. 14 diverges is garbage whatever its residual
         result.negative += 1
         case["garbage"] = True
