@@ -17,13 +17,22 @@ error tolerances (``--epsilons``), and prints for each:
   ``--validation-irradiance``), as a check of the silhouettes at low resolution.
 
 Error is the relative L1 difference ``sum |test - truth| / sum truth`` over the pixels'
-RGB values. "At equal error" is read as: the relative error of "both" at most
-:data:`EQUAL_ERROR_RATIO` times that of no acceleration.
+RGB values. Most of it is common to every setting: each profile is splatted only up to its
+effective range (95 % of its energy, Eq. 13), about 2.4 % of the frame on the
+heterogeneous scene; the accelerations add to it. The comparison "at equal error" is
+therefore made over a sweep of the accelerated method's accuracy knobs (``--epsilons``,
+Eq. 14's tolerance, and ``--level-samplings``, the per-level irradiance sampling of
+:func:`translucent.fast.splatting.level_sample_masks`): among the rows with both
+accelerations, the fastest whose error is at most :data:`EQUAL_ERROR_RATIO` times that of
+no acceleration is compared with no acceleration, in CPU seconds per frame (the steadier
+figure on a shared machine) and in wall seconds. The load average is printed with the
+results, since other work on the machine slows the wall clock.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import time
 
 import numpy as np
@@ -42,10 +51,10 @@ SETTINGS = {
 #: Targets of the task: frames per second with both accelerations, speed-up over none.
 TARGET_FPS = 10.0
 TARGET_SPEEDUP = 5.0
-#: "Equal error": the accelerated frame may have at most 10 % more relative error than the
-#: frame without acceleration, whose own error (about 2.4 % on the heterogeneous scene) is
-#: the truncation of every profile at its effective range (Eq. 13).
-EQUAL_ERROR_RATIO = 1.10
+#: "Equal error": the accelerated frame may have no more relative error against brute force
+#: than the frame without acceleration (the errors are deterministic, so no allowance for
+#: noise is needed; the strided pixels are the same for every row).
+EQUAL_ERROR_RATIO = 1.0
 
 
 def add_arguments(parser):
@@ -69,9 +78,13 @@ def add_arguments(parser):
                         help="irradiance buffer side of the small frame (default 96)")
     parser.add_argument("--settings", default=",".join(SETTINGS),
                         help="comma-separated subset of the settings")
-    parser.add_argument("--epsilons", default="0.00025",
+    parser.add_argument("--epsilons", default="0.0005,0.00025,0.0001",
                         help="extra 'both' rows at these Eq. 14 tolerances (comma-separated; "
                              "empty for none)")
+    parser.add_argument("--level-samplings", default="1",
+                        help="extra 'both' rows with per-level irradiance sampling at these "
+                             "pitches in pixels, at every epsilon (comma-separated; empty "
+                             "for none)")
 
 
 def _with_size(scene, width: int, height: int):
@@ -92,11 +105,29 @@ def _strided(buffer: splatting.SurfaceBuffer, stride: int) -> splatting.SurfaceB
         "position", "normal", "uv", "depth", "valid", "footprint")))
 
 
-def _rows(names, epsilons):
+def _rows(names, epsilons, pitches):
     rows = {name: dict(SETTINGS[name]) for name in names}
-    for epsilon in epsilons:
-        rows[f"both, epsilon {epsilon:g}"] = {**SETTINGS["both"], "epsilon": epsilon}
+    for pitch in [0.0] + pitches:
+        for epsilon in [None] + epsilons:
+            if pitch == 0.0 and epsilon is None:
+                continue
+            label = ", ".join(part for part in (
+                "both", None if epsilon is None else f"epsilon {epsilon:g}",
+                None if pitch == 0.0 else f"level sampling {pitch:g}") if part)
+            knobs = {**SETTINGS["both"], "level_sampling": pitch}
+            if epsilon is not None:
+                knobs["epsilon"] = epsilon
+            rows[label] = knobs
     return rows
+
+
+def _numbers(text: str, flag: str) -> list[float]:
+    from ...errors import InputError
+
+    try:
+        return [float(value) for value in text.split(",") if value.strip()]
+    except ValueError:
+        raise InputError("must be comma-separated numbers", field=flag, value=text) from None
 
 
 def _time_frames(state, frames: int):
@@ -118,11 +149,8 @@ def run(args) -> int:
     if unknown:
         raise InputError(f"unknown setting; valid: {', '.join(SETTINGS)}", field="--settings",
                          value=unknown)
-    try:
-        epsilons = [float(value) for value in args.epsilons.split(",") if value.strip()]
-    except ValueError:
-        raise InputError("must be comma-separated numbers", field="--epsilons",
-                         value=args.epsilons) from None
+    epsilons = _numbers(args.epsilons, "--epsilons")
+    pitches = _numbers(args.level_samplings, "--level-samplings")
     if args.validation_stride < 1:
         raise InputError("must be >= 1", field="--validation-stride",
                          value=args.validation_stride)
@@ -143,7 +171,8 @@ def run(args) -> int:
     small_truth = splatting.precompute(small, **small_common).render_ground_truth().rgb
     results = {}
     warm = False
-    for name, knobs in _rows(names, epsilons).items():
+    load_before = os.getloadavg()
+    for name, knobs in _rows(names, epsilons, pitches).items():
         state = splatting.precompute(full, **common, **knobs)
         # Eq. 14's table depends on the material alone: the paper precomputes it
         splatting.rendering_radius_table(material, state.knobs["epsilon"])
@@ -166,11 +195,13 @@ def run(args) -> int:
             "knobs": knobs}
         print(f"{name:26s} {1 / wall:8.3f} fps  {cpu:7.2f} CPU s/frame  error "
               f"{results[name]['relative error']:.4f}", flush=True)
-    _report(args, results, truth, truth_seconds, camera_buffer.valid.sum(), small)
+    load = {"before": list(load_before), "after": list(os.getloadavg())}
+    _report(args, results, truth, truth_seconds, camera_buffer.valid.sum(), small, load)
     out = args.json or "bench_splatting.json"
     atomic_write_text(out, json.dumps({
         "scene": base.name, "width": args.width, "height": args.height,
         "irradiance_resolution": args.irradiance_resolution, "backend": args.backend,
+        "load average (1, 5, 15 min)": load, "equal error ratio": EQUAL_ERROR_RATIO,
         "validation": {"stride": args.validation_stride,
                        "pixels": int(validation.valid.sum()),
                        "brute force seconds": truth_seconds,
@@ -181,16 +212,18 @@ def run(args) -> int:
     return 0
 
 
-def _report(args, results, truth, truth_seconds, pixels, small) -> None:
+def _report(args, results, truth, truth_seconds, pixels, small, load) -> None:
     baseline = results.get("no acceleration")
     print(f"\nsplatting: {args.width} x {args.height} ({pixels} object pixels), irradiance "
           f"{args.irradiance_resolution}^2, backend {args.backend}; error vs brute force "
           f"(Eq. 5) on every {args.validation_stride}th pixel of the timed frame "
           f"({truth_seconds:.0f} s) and on a whole {small.camera.width} x "
-          f"{small.camera.height} frame (irradiance {args.validation_irradiance}^2)")
-    print(f"{'setting':26s} {'fps':>7s} {'s/frame':>8s} {'CPU s':>7s} {'speed-up':>8s} "
+          f"{small.camera.height} frame (irradiance {args.validation_irradiance}^2); load "
+          f"average {load['before'][0]:.1f} before, {load['after'][0]:.1f} after "
+          f"({os.cpu_count()} CPUs)")
+    print(f"{'setting':44s} {'fps':>7s} {'s/frame':>8s} {'CPU s':>7s} {'speed-up':>8s} "
           f"{'CPU x':>6s} {'samples':>8s} {'pairs':>8s} {'in range':>8s} {'error':>7s} "
-          f"{'R, G, B':>20s} {'small':>7s}")
+          f"{'err x':>6s} {'R, G, B':>20s} {'small':>7s}")
     for name, result in results.items():
         if baseline:
             result["speed-up over no acceleration"] = (baseline["seconds per frame"]
@@ -200,14 +233,15 @@ def _report(args, results, truth, truth_seconds, pixels, small) -> None:
             result["error ratio to no acceleration"] = (result["relative error"]
                                                         / baseline["relative error"])
         channels = ", ".join(f"{value:.4f}" for value in result["relative error per channel"])
-        print(f"{name:26s} {result['fps']:7.3f} {result['seconds per frame']:8.2f} "
+        print(f"{name:44s} {result['fps']:7.3f} {result['seconds per frame']:8.2f} "
               f"{result['cpu seconds per frame']:7.2f} "
               f"{result.get('speed-up over no acceleration', float('nan')):8.2f} "
               f"{result.get('CPU speed-up over no acceleration', float('nan')):6.2f} "
               f"{result['samples']:8d} {sum(result['pairs per level']) / 1e6:7.1f}M "
               f"{sum(result['pairs in range per level']) / 1e6:7.1f}M "
-              f"{result['relative error']:7.4f} {channels:>20s} "
-              f"{result['relative error, small frame']:7.4f}")
+              f"{result['relative error']:7.4f} "
+              f"{result.get('error ratio to no acceleration', float('nan')):6.3f} "
+              f"{channels:>20s} {result['relative error, small frame']:7.4f}")
     print("\ntime per stage (share of a frame, the paper's Table 2):")
     for name, result in results.items():
         stages = result["stage seconds"]
@@ -217,20 +251,34 @@ def _report(args, results, truth, truth_seconds, pixels, small) -> None:
         print(f"  {name}: {shares}")
     print(f"\ntargets (heterogeneous scene, {args.width} x {args.height}, "
           f"{args.irradiance_resolution}^2):")
-    for name, result in results.items():
-        if not name.startswith("both"):
-            continue
+    accelerated = {name: result for name, result in results.items()
+                   if name.startswith("both")}
+    for name, result in accelerated.items():
         verdict = "reached" if result["fps"] >= TARGET_FPS else "NOT reached"
         print(f"  {name}: >= {TARGET_FPS:g} fps {verdict} ({result['fps']:.3f} fps wall, "
               f"{1 / result['cpu seconds per frame']:.3f} frames per CPU second)")
-        if baseline:
-            ratio = result["error ratio to no acceleration"]
-            equal = ratio <= EQUAL_ERROR_RATIO
-            fast = min(result["speed-up over no acceleration"],
-                       result["CPU speed-up over no acceleration"]) >= TARGET_SPEEDUP
-            verdict = "reached" if fast and equal else "NOT reached"
-            print(f"  {name}: >= {TARGET_SPEEDUP:g}x over no acceleration at equal error "
-                  f"{verdict} ({result['speed-up over no acceleration']:.2f}x wall, "
-                  f"{result['CPU speed-up over no acceleration']:.2f}x CPU; error "
-                  f"{ratio:.2f}x that of no acceleration, equal means <= "
-                  f"{EQUAL_ERROR_RATIO:g}x)")
+    if not baseline or not accelerated:
+        return
+    equal = {name: result for name, result in accelerated.items()
+             if result["error ratio to no acceleration"] <= EQUAL_ERROR_RATIO}
+    if not equal:
+        closest = min(accelerated, key=lambda name: accelerated[name][
+            "error ratio to no acceleration"])
+        result = accelerated[closest]
+        print(f"  >= {TARGET_SPEEDUP:g}x over no acceleration at equal error NOT reached: no "
+              f"row with both accelerations has at most {EQUAL_ERROR_RATIO:g}x the error of "
+              f"no acceleration; the closest, '{closest}', has "
+              f"{result['error ratio to no acceleration']:.3f}x at "
+              f"{result['CPU speed-up over no acceleration']:.2f}x CPU "
+              f"({result['speed-up over no acceleration']:.2f}x wall)")
+        return
+    fastest = min(equal, key=lambda name: equal[name]["cpu seconds per frame"])
+    result = equal[fastest]
+    fast = min(result["speed-up over no acceleration"],
+               result["CPU speed-up over no acceleration"]) >= TARGET_SPEEDUP
+    print(f"  >= {TARGET_SPEEDUP:g}x over no acceleration at equal error "
+          f"{'reached' if fast else 'NOT reached'}: the fastest row with both accelerations "
+          f"and at most {EQUAL_ERROR_RATIO:g}x the error of no acceleration, '{fastest}' "
+          f"({result['error ratio to no acceleration']:.3f}x), is "
+          f"{result['CPU speed-up over no acceleration']:.2f}x faster in CPU time and "
+          f"{result['speed-up over no acceleration']:.2f}x in wall time")
