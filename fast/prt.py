@@ -79,6 +79,7 @@ from ..scenes.scene import (
 from .base import StageLog, with_defaults
 from .sparse_transport import (
     QuantisedRows,
+    SharedColumnBlocks,
     SparseRows,
     check_approximation,
     nonlinear_approximation,
@@ -122,6 +123,10 @@ DEFAULT_KNOBS: dict = {
     # rank the coefficients of the basis rows by magnitude (the paper) or by magnitude x
     # sqrt(support) (the local kernel row is always ranked by support)
     "selection": "magnitude",
+    # storage of the first pass: "shared" (the K + 1 rows of a vertex keep the union of
+    # their kept columns, so a relighting product gathers each column once) or "rows" (each
+    # row its own columns, the paper's layout; always so after the spatial pass)
+    "layout": "shared",
     # pass 2: CDF 9/7 spatial compression: "auto" (geometry images above
     # spatial_min_vertices), "on" (any geometry image) or "off"
     "spatial": "auto",
@@ -144,7 +149,7 @@ DEFAULT_KNOBS: dict = {
 EXECUTION_KNOBS = ("workers", "progress")
 
 #: Bump when the precomputed data change meaning, so that old cache entries miss.
-PRT_VERSION = 6
+PRT_VERSION = 7
 
 #: Vertices per block of the first pass (one progress-bar step; memory ~ K x block x terms).
 VERTICES_PER_BLOCK = 256
@@ -200,6 +205,8 @@ def _check_knobs(knobs: dict) -> dict:
     if merged["basis"] not in PARAMETERISATIONS:
         raise InputError(f"unknown basis; valid: {', '.join(PARAMETERISATIONS)}",
                          field="basis", value=merged["basis"])
+    if merged["layout"] not in ("shared", "rows"):
+        raise InputError("must be 'shared' or 'rows'", field="layout", value=merged["layout"])
     if merged["selection"] not in ("magnitude", "support"):
         raise InputError("must be 'magnitude' or 'support'", field="selection",
                          value=merged["selection"])
@@ -308,14 +315,18 @@ def illumination_samples(mesh, count: int, parts: int, *, mm_per_unit: float = 1
 @numba.njit(cache=True, parallel=True)
 def _transfer_rows(vertices, samples, area, table, sqrt_warp, radius_max, local_width, parts,
                    side, selection_weights, local_weights, energy, terms, out_indices,
-                   out_values, counts):  # pragma: no cover
+                   out_values, counts, shared, union_indices, union_values,
+                   union_counts):  # pragma: no cover
     """Rows of T_k (Eq. 7) for a block of vertices, Haar-transformed and cut (Eq. 8).
 
     ``vertices`` (Vb, 3) and ``samples`` (N, 3) in mm; ``table`` (n + 1, K) holds the basis
     at its sample distances with a zero row past the last. Row K is the local kernel:
     Gaussian weights of width ``local_width`` (mm), normalised to sum 1. Coefficients are
     ranked by ``|value| * selection_weights`` (``local_weights`` for the kernel row; see
-    :func:`select_largest_weighted`). Writes slots ``(K + 1, Vb, terms)``.
+    :func:`select_largest_weighted`). Writes slots ``(K + 1, Vb, terms)``; with ``shared``
+    also the union of the K + 1 kept column sets of each vertex (ascending, slots
+    ``(Vb, (K + 1) terms)``) and every row's coefficients at those columns
+    (``(K + 1, Vb, (K + 1) terms)``).
     """
     count = samples.shape[0]
     n_radii = table.shape[0] - 1
@@ -360,6 +371,19 @@ def _transfer_rows(vertices, samples, area, table, sqrt_warp, radius_max, local_
             counts[k, v] = select_largest_weighted(rows[k], ranking, energy, terms,
                                                    out_indices[k, v], out_values[k, v],
                                                    weighted)
+        if shared:
+            marked = np.zeros(count, dtype=np.uint8)
+            for k in range(basis_terms + 1):
+                for j in range(counts[k, v]):
+                    marked[out_indices[k, v, j]] = 1
+            found = 0
+            for i in range(count):
+                if marked[i]:
+                    union_indices[v, found] = i
+                    for k in range(basis_terms + 1):
+                        union_values[k, v, found] = rows[k, i]
+                    found += 1
+            union_counts[v] = found
 
 
 @contextlib.contextmanager
@@ -381,12 +405,18 @@ def _progress(total: int, description: str, enabled: bool):
 
 def _first_pass(vertices_mm, samples: IlluminationSamples, samples_mm, basis: DipolePCABasis,
                 energy: float, terms: int, selection: str, workers: int, progress: bool,
-                label: str) -> list[SparseRows]:
-    """Per basis function k (and the local kernel last), Haar-compressed rows for every vertex."""
+                label: str, shared: bool = False):
+    """Per basis function k (and the local kernel last), Haar-compressed rows for every vertex.
+
+    Returns a list of K + 1 :class:`SparseRows` (one per block), or with ``shared`` one
+    :class:`SharedColumnBlocks`: every row of a vertex keeps the union of the columns the
+    K + 1 selections kept (a superset of each), so that a product gathers each column once.
+    """
     table = np.ascontiguousarray(basis.table, dtype=np.float32)
     sqrt_warp = basis.sampling.distance_warp == "sqrt"
     budget = min(terms, len(samples))
     rows_per_vertex = basis.terms + 1
+    union_budget = min(rows_per_vertex * budget, len(samples)) if shared else 1
     local_width = LOCAL_KERNEL_WIDTH * math.sqrt(samples.area)
     # the peaked local kernel is ranked by support always: by magnitude it keeps its fine
     # details and drops the coarse terms that meet the bulk of a smooth irradiance (measured:
@@ -394,7 +424,7 @@ def _first_pass(vertices_mm, samples: IlluminationSamples, samples_mm, basis: Di
     local_weights = haar2d_support_weights(samples.parts, samples.side)
     selection_weights = local_weights if selection == "support" \
         else np.ones(len(samples), dtype=np.float32)
-    pieces: list[list[SparseRows]] = [[] for _ in range(rows_per_vertex)]
+    pieces: list[list] = [[] for _ in range(rows_per_vertex)]
     with _threads(workers), _progress(len(vertices_mm), f"prt transfer {label}",
                                       progress) as bar:
         for start in range(0, len(vertices_mm), VERTICES_PER_BLOCK):
@@ -402,14 +432,25 @@ def _first_pass(vertices_mm, samples: IlluminationSamples, samples_mm, basis: Di
             indices = np.zeros((rows_per_vertex, len(block), budget), dtype=np.int32)
             values = np.zeros((rows_per_vertex, len(block), budget), dtype=np.float32)
             counts = np.zeros((rows_per_vertex, len(block)), dtype=np.int64)
+            union_shape = (len(block), union_budget) if shared else (1, 1)
+            union_indices = np.zeros(union_shape, dtype=np.int32)
+            union_values = np.zeros((rows_per_vertex,) + union_shape, dtype=np.float32)
+            union_counts = np.zeros(union_shape[0], dtype=np.int64)
             _transfer_rows(block, samples_mm, np.float32(samples.area), table, sqrt_warp,
                            float(basis.sampling.radius_max), local_width, samples.parts,
                            samples.side, selection_weights, local_weights, energy, budget,
-                           indices, values, counts)
-            for k in range(rows_per_vertex):
-                pieces[k].append(SparseRows.from_slots(indices[k], values[k], counts[k],
-                                                       len(samples)))
+                           indices, values, counts, shared, union_indices, union_values,
+                           union_counts)
+            if shared:
+                pieces[0].append(SharedColumnBlocks.from_slots(union_indices, union_values,
+                                                               union_counts, len(samples)))
+            else:
+                for k in range(rows_per_vertex):
+                    pieces[k].append(SparseRows.from_slots(indices[k], values[k], counts[k],
+                                                           len(samples)))
             bar.update(len(block))
+    if shared:
+        return SharedColumnBlocks.concatenate(pieces[0])
     return [SparseRows.concatenate(parts) for parts in pieces]
 
 
@@ -499,7 +540,7 @@ class ObjectTransfer:
     name : str
         The object's name in the scene.
     samples : IlluminationSamples
-    transfer : QuantisedRows
+    transfer : SharedColumnBlocks or QuantisedRows
         All K matrices and the local kernel stacked: row ``k * R + r`` is row ``r`` of
         :math:`{}^wT_k^w` (R = vertices, or spatial coefficients when ``spatial_shape`` is
         set), block K the local kernel; columns are the Haar coefficients of the samples.
@@ -511,7 +552,7 @@ class ObjectTransfer:
 
     name: str
     samples: IlluminationSamples
-    transfer: QuantisedRows
+    transfer: SharedColumnBlocks | QuantisedRows
     spatial_shape: tuple[int, int] | None
     statistics: dict
 
@@ -562,14 +603,21 @@ def _precompute_object(scene_object, mm_per_unit: float, knobs: dict,
     samples_mm = np.ascontiguousarray(samples.positions * mm_per_unit)
     vertices_mm = np.ascontiguousarray(mesh.vertices * mm_per_unit)
     first_terms = knobs["spatial_first_terms"] if spatial else knobs["terms"]
+    # the spatial pass transforms each T_k along the vertices on its own, so its rows cannot
+    # share columns: the shared layout is for the first pass alone
+    shared = knobs["layout"] == "shared" and not spatial
+    if knobs["layout"] == "shared" and spatial:
+        log.notes.setdefault("layout", {})[scene_object.name] = (
+            "rows layout: the spatial pass keeps each T_k's own coefficients")
     matrices = _first_pass(vertices_mm, samples, samples_mm, basis, knobs["energy"],
                            first_terms, knobs["selection"], knobs["workers"],
-                           knobs["progress"], scene_object.name)
+                           knobs["progress"], scene_object.name, shared=shared)
     first_seconds = time.perf_counter() - start
     statistics = {"vertices": len(mesh.vertices), "samples": len(samples),
                   "basis_terms": basis.terms, "pass1_seconds": first_seconds,
-                  "pass1_nnz": int(sum(m.nnz for m in matrices)),
-                  "dense_entries": len(mesh.vertices) * len(samples) * basis.terms}
+                  "pass1_nnz": matrices.nnz if shared else int(sum(m.nnz for m in matrices)),
+                  "dense_entries": len(mesh.vertices) * len(samples) * basis.terms,
+                  "layout": "shared" if shared else "rows"}
     spatial_shape = None
     if spatial:
         start = time.perf_counter()
@@ -586,9 +634,15 @@ def _precompute_object(scene_object, mm_per_unit: float, knobs: dict,
         statistics.update(pass2_seconds=time.perf_counter() - start,
                           pass2_nnz=int(sum(m.nnz for m in matrices)),
                           pass2_energy_kept=[float(k) for k in kept])
-    transfer = SparseRows.concatenate(matrices).quantised()
-    statistics.update(nnz=transfer.nnz, megabytes=transfer.nbytes / 2**20,
-                      index_bits=transfer.index_bits)
+    if shared:
+        transfer = matrices
+        statistics.update(nnz=transfer.nnz, megabytes=transfer.nbytes / 2**20,
+                          index_bits=8 * transfer.indices.itemsize,
+                          shared_columns=len(transfer.indices))
+    else:
+        transfer = SparseRows.concatenate(matrices).quantised()
+        statistics.update(nnz=transfer.nnz, megabytes=transfer.nbytes / 2**20,
+                          index_bits=transfer.index_bits)
     return ObjectTransfer(scene_object.name, samples, transfer, spatial_shape, statistics)
 
 
@@ -596,16 +650,38 @@ def _translucent_objects(scene) -> list[int]:
     return [i for i, item in enumerate(scene.objects) if isinstance(item.material, Dipole)]
 
 
+def _other_objects_in_view(scene) -> list[str]:
+    """Names of the objects that are not homogeneous translucent and that the camera sees."""
+    translucent = set(_translucent_objects(scene))
+    if len(translucent) == len(scene.objects):
+        return []
+    from ..scenes.raycast import gbuffer
+
+    seen = set(np.unique(gbuffer(scene).object_id).tolist()) - {-1}
+    return [scene.objects[i].name for i in sorted(seen - translucent)]
+
+
 def applies_to(scene) -> str | None:
     """None when the method renders ``scene``; otherwise why not.
 
     It needs a homogeneous translucent object (a :class:`~translucent.materials.Dipole`
-    material) and at least one light.
+    material), at least one light, and no other object in the camera's view: the method
+    (Wang et al. 2008) computes the multiple scattering of homogeneous translucent objects
+    only, so any other surface the camera sees would be black (its direct light alone would
+    still miss the light it receives from the other objects). Other objects outside the
+    view are fine: they cast shadows through the ray queries.
     """
     if not _translucent_objects(scene):
         return "no homogeneous translucent object (Dipole material) in the scene"
     if not scene.lights:
         return "the scene has no light"
+    others = _other_objects_in_view(scene)
+    if others:
+        kinds = ", ".join(f"'{name}' ({type(scene.object(name).material).__name__})"
+                          for name in others)
+        return (f"objects that are not homogeneous translucent are visible in the camera: "
+                f"{kinds}; the method renders only homogeneous translucent objects and would "
+                f"leave them black")
     return None
 
 
@@ -658,8 +734,8 @@ def precompute(scene, **knobs) -> PRTState:
         transfers.append(transfer)
     others = [o.name for o in scene.objects if not isinstance(o.material, Dipole)]
     if others:
-        log.skip(f"objects {', '.join(others)} are not homogeneous translucent: not drawn "
-                 f"by this method (black)")
+        log.skip(f"objects {', '.join(others)} are not homogeneous translucent and outside "
+                 f"the camera's view: they only cast shadows")
     log.seconds["precompute"] = time.perf_counter() - start
     return PRTState(scene, knobs, transfers, log)
 
@@ -779,7 +855,6 @@ def sample_irradiance(scene, samples: IlluminationSamples, lights, eta: float, *
         W per scene unit squared (the lights' units).
     """
     irradiance = np.zeros((len(samples), 3))
-    far = 10.0 * max(1.0, float(np.ptp(samples.positions, axis=0).max()))
     for light_index, light in enumerate(lights):
         if isinstance(light, (PointLight, SpotLight)):
             falloff = _spot_falloff(light) if isinstance(light, SpotLight) else None
@@ -790,6 +865,7 @@ def sample_irradiance(scene, samples: IlluminationSamples, lights, eta: float, *
             cosine = samples.normals @ -light.direction
             weight = np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0, 1))
                               * cosine, 0.0)
+            far = 10.0 * max(1.0, float(np.ptp(samples.positions, axis=0).max()))
             _shadow(scene, samples, weight, samples.positions - far * light.direction, None)
             irradiance += weight[:, None] * light.irradiance
         elif isinstance(light, RectangularAreaLight):
@@ -1057,6 +1133,8 @@ class PRTState:
     def __post_init__(self):
         self.basis = _basis(self.knobs)
         self._lighting: dict = {}
+        self._vertex_vectors: dict = {}
+        self._frames_lit: dict = {}
         self._pixels: dict | None = None
         self._environment: dict = {}
         self._wavelets = {t.name: SpatialWavelet(t.spatial_shape) for t in self.transfers
@@ -1120,6 +1198,30 @@ class PRTState:
         self.log.seconds["irradiance"] = middle - start
         self.log.seconds["transfer product"] = time.perf_counter() - middle
         self._lighting[transfer.name] = (lights, float(eta), vectors)
+        self._vertex_vectors.pop(transfer.name, None)
+        self._frames_lit[transfer.name] = 0
+
+    def _spatial_vertex_vectors(self, transfer: ObjectTransfer) -> np.ndarray | None:
+        r"""Per-basis vectors in vertex space, or None while only one frame used this light.
+
+        The inverse CDF 9/7 is linear, so :math:`W^{-1} \sum_k s_k v_k = \sum_k s_k
+        W^{-1} v_k`: once a second frame (an edit) uses the same lighting, every basis
+        vector is transformed back once and each further edit is a plain weighted sum (no
+        transfer product and no inverse transform redone; Sect. 3.3 of Wang et al. 2008).
+        The first frame after a relighting transforms the 3 combined channels instead (13x
+        cheaper), so relighting frames do not pay for it.
+        """
+        cached = self._vertex_vectors.get(transfer.name)
+        if cached is None and self._frames_lit.get(transfer.name, 0) >= 1:
+            _, _, vectors = self._lighting[transfer.name]
+            channels, blocks, rows = vectors.shape
+            coefficients = np.moveaxis(vectors, 2, 0).reshape(rows, channels * blocks)
+            values = self._wavelets[transfer.name].inverse(coefficients)
+            cached = np.ascontiguousarray(np.moveaxis(values.reshape(rows, channels, blocks),
+                                                      0, 2))
+            self._vertex_vectors[transfer.name] = cached
+        self._frames_lit[transfer.name] = self._frames_lit.get(transfer.name, 0) + 1
+        return cached
 
     def vertex_radiance(self, transfer: ObjectTransfer, material: Dipole) -> np.ndarray:
         r"""Per-vertex :math:`\sum_k s_k(\sigma) v_k` (Eq. 7/10), before :math:`F_t/\pi`, (V, 3).
@@ -1127,10 +1229,13 @@ class PRTState:
         Uses the per-basis vectors of the object's last :meth:`relight`.
         """
         _, _, vectors = self._lighting[transfer.name]
-        combined = np.empty((3, transfer.row_count), dtype=np.float32)
-        _combine(vectors, self.coefficients(material), combined)
+        spatial = transfer.spatial_shape is not None
+        in_vertex_space = self._spatial_vertex_vectors(transfer) if spatial else vectors
+        source = vectors if in_vertex_space is None else in_vertex_space
+        combined = np.empty((3, source.shape[2]), dtype=np.float32)
+        _combine(source, self.coefficients(material), combined)
         combined = combined.T
-        if transfer.spatial_shape is not None:
+        if in_vertex_space is None:
             combined = self._wavelets[transfer.name].inverse(combined)
         return combined
 

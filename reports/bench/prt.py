@@ -13,7 +13,11 @@ scripted session: a sweep of point-light positions (relighting) and a sweep of m
   the same run (a large numpy copy and a large numpy sum): the product's rate as a ratio to
   the bandwidth bound;
 * the error against Eq. 1 evaluated directly (exact R_d, same samples) on a random subset
-  of vertices.
+  of vertices;
+* the cost of the shadow rays of one relighting frame: milliseconds per batch of 16k and
+  64k shadow rays (illumination samples towards the light) through each ray engine of
+  :mod:`translucent.scenes.raycast` (Embree through ``embreex``, and Mitsuba);
+* the load average of the machine beside every figure (the machine is shared).
 
 Wall-clock figures are shared-machine figures; each is printed beside the process CPU time,
 which other jobs on the machine disturb less. ``--sweep`` adds the error against the number
@@ -104,7 +108,7 @@ def memory_bandwidth(megabytes: int = 256, repeats: int = 5) -> dict:
     size = source.nbytes / 1e9
     return {"copy_gb_per_s": 2 * size / copy_wall, "copy_gb_per_s_cpu": 2 * size / copy_cpu,
             "read_gb_per_s": size / read_wall, "read_gb_per_s_cpu": size / read_cpu,
-            "megabytes": megabytes}
+            "megabytes": megabytes, "load_average": os.getloadavg()[0]}
 
 
 def bench_scene(mesh, size: int, material=None) -> Scene:
@@ -162,6 +166,46 @@ def _private_cache():
                 os.environ["TRANSLUCENT_CACHE"] = previous
 
 
+@contextlib.contextmanager
+def _ray_engine(name: str):
+    """Route the scene's ray queries through the engine ``name`` for the block."""
+    previous = os.environ.get("TRANSLUCENT_RAY_ENGINE")
+    os.environ["TRANSLUCENT_RAY_ENGINE"] = name
+    try:
+        yield
+    finally:
+        if previous is None:
+            os.environ.pop("TRANSLUCENT_RAY_ENGINE", None)
+        else:
+            os.environ["TRANSLUCENT_RAY_ENGINE"] = previous
+
+
+def shadow_ray_timings(mesh, counts=(16384, 65536), repeats: int = 5) -> list[dict]:
+    """Milliseconds per batch of shadow rays through each available ray engine.
+
+    The rays of a relighting frame: from ``count`` illumination samples on the bench sphere
+    towards its point light (:func:`translucent.scenes.visible`'s rays, any-hit queries).
+    Best wall-clock and process-CPU time of ``repeats`` batches after one warm-up.
+    """
+    from ...scenes.raycast import embree_available, ray_engine, visible
+
+    scene = bench_scene(mesh, 8)
+    light = scene.lights[0].position
+    rows = []
+    for count in counts:
+        samples = prt.illumination_samples(mesh, count, 4, mm_per_unit=RADIUS_MM)
+        for name in ("embree", "mitsuba") if embree_available() else ("mitsuba",):
+            engine = ray_engine(scene, name)
+            with _ray_engine(name):
+                seen = visible(scene, samples.positions, light, normals_a=samples.normals)
+                wall, cpu = _timed(lambda samples=samples: visible(
+                    scene, samples.positions, light, normals_a=samples.normals), repeats)
+            rows.append({"engine": engine.engine, "rays": count, "ms": 1e3 * wall,
+                         "cpu_ms": 1e3 * cpu, "visible_fraction": float(seen.mean()),
+                         "load_average": os.getloadavg()[0]})
+    return rows
+
+
 def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -> dict:
     """Precompute, relight and edit one mesh at one sample count; every figure as a dict."""
     scene = bench_scene(mesh, args.size)
@@ -173,6 +217,7 @@ def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -
     transfer = state.transfers[0]
     statistics = transfer.statistics
     state.render()  # warm-up: G-buffer, compiled kernels, ray engine
+    load_before = os.getloadavg()[0]
     relight_times, relight_cpu_times, stages = [], [], []
     for lights in _light_sweep(args.frames):
         start_wall, start_cpu = time.perf_counter(), time.process_time()
@@ -198,8 +243,12 @@ def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -
         state.render(material=material)
     edit_cpu = (time.process_time() - start_cpu) / min(50, len(materials))
     edit_wall = float(np.median(edit_times))
-    frame_bytes = transfer.transfer.nbytes + len(transfer.samples) * 3 * 4 + \
-        transfer.transfer.rows * 4
+    # what the product reads and writes: the stored matrix, E^w (one channel for one-colour
+    # lights, as the bench's, else three) and the per-basis vectors, float32
+    channels = 1 if prt._single_colour(transfer.samples.to_wavelets(irradiance)) is not None \
+        else 3
+    frame_bytes = transfer.transfer.nbytes + 4 * channels * (len(transfer.samples)
+                                                             + transfer.transfer.rows)
     bound_seconds = frame_bytes / (bandwidth["read_gb_per_s"] * 1e9)
     errors = {name: brute_force_error(state, measured_medium(name), args.error_vertices)
               for name in ("Skin1", "Marble")}
@@ -224,6 +273,8 @@ def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -
         / product_cpu,
         "edit_over_relight_speed": relight_wall / edit_wall,
         "relative_l2_vs_brute_force": errors,
+        "layout": statistics.get("layout", "rows"), "product_channels": channels,
+        "load_average": [load_before, os.getloadavg()[0]],
     }
 
 
@@ -330,10 +381,16 @@ def run(args) -> int:
     counts = [int(c) for c in str(args.samples).split(",") if c.strip()]
     bandwidth = memory_bandwidth()
     print(f"memory bandwidth: copy {bandwidth['copy_gb_per_s']:.1f} GB/s, read "
-          f"{bandwidth['read_gb_per_s']:.1f} GB/s (CPU time: {bandwidth['read_gb_per_s_cpu']:.1f})")
+          f"{bandwidth['read_gb_per_s']:.1f} GB/s (CPU time: "
+          f"{bandwidth['read_gb_per_s_cpu']:.1f}); load average "
+          f"{bandwidth['load_average']:.1f} on {os.cpu_count()} cores")
     from ...scenes import mesh_with_vertices
 
     mesh = mesh_with_vertices("icosphere", args.vertices)
+    rays = shadow_ray_timings(mesh)
+    for row in rays:
+        print(f"shadow rays: {row['engine']:<8} {row['rays']:>6} rays {row['ms']:8.1f} ms "
+              f"(CPU {row['cpu_ms']:.1f} ms; load average {row['load_average']:.1f})")
     results = []
     for samples in counts:
         results.append(bench_configuration(mesh, samples, args, bandwidth,
@@ -354,6 +411,14 @@ def run(args) -> int:
     print("fps: frames per second, wall clock on a shared machine (CPU-time figures in the "
           "JSON); bw frac: product rate / (bytes per frame / read bandwidth)")
     for r in results:
+        stage = r["relight_stage_seconds"]
+        print(f"{r['label']} / {r['samples']}: layout {r['layout']}, relight frame: irradiance "
+              f"{1e3 * stage['irradiance']:.1f} ms, product {1e3 * stage['transfer product']:.1f}"
+              f" ms; {r['bytes_per_relight_frame'] / 1e6:.0f} MB per frame; CPU-time relight "
+              f"{r['relight_fps_cpu']:.1f} fps, product {r['product_fps_cpu']:.1f} fps, bw frac "
+              f"{r['bandwidth_fraction_cpu']:.2f}; load average {r['load_average'][0]:.1f} -> "
+              f"{r['load_average'][1]:.1f}")
+    for r in results:
         print(f"{r['label']} / {r['samples']}: editing {r['edit_fps']:.0f} fps "
               f"({_status(r['edit_fps'], TARGET_EDIT_FPS)} {TARGET_EDIT_FPS:.0f}), "
               f"relighting {r['relight_fps']:.1f} fps "
@@ -361,7 +426,7 @@ def run(args) -> int:
               f"bandwidth fraction {r['bandwidth_fraction']:.2f} "
               f"({_status(r['bandwidth_fraction'], TARGET_BANDWIDTH_FRACTION)} "
               f"{TARGET_BANDWIDTH_FRACTION})")
-    output = {"bandwidth": bandwidth, "configurations": results,
+    output = {"bandwidth": bandwidth, "configurations": results, "shadow_rays": rays,
               "targets": {"edit_fps": TARGET_EDIT_FPS, "relight_fps": TARGET_RELIGHT_FPS,
                           "bandwidth_fraction": TARGET_BANDWIDTH_FRACTION}}
     if args.sweep:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from translucent.errors import InputError
 from translucent.fast import prt
-from translucent.fast.sparse_transport import QuantisedRows
+from translucent.fast.sparse_transport import SharedColumnBlocks
 from translucent.image import Image
 from translucent.materials import Dipole, Lambertian, measured_medium, measured_medium_names
 from translucent.materials.dipole import total_diffuse_reflectance
@@ -22,6 +22,7 @@ from translucent.scenes import (
     SpotLight,
     geometry_image,
     icosphere,
+    load_scene,
 )
 
 #: The issue's accuracy target: PRT against Eq. 1 evaluated directly with the exact R_d on
@@ -123,11 +124,39 @@ def test_samples_are_uniform_and_laid_out_on_squares(state):
 def test_transfer_is_compressed_and_quantised(state):
     transfer = state.transfers[0]
     statistics = transfer.statistics
-    assert transfer.transfer.index_bits == 16 and transfer.transfer.packed.dtype == np.int32
-    assert transfer.basis_terms == 12 and transfer.row_count == 642
-    assert statistics["nnz"] <= 13 * 642 * 256
-    assert statistics["megabytes"] == pytest.approx(transfer.transfer.nbytes / 2**20)
+    matrix = transfer.transfer
+    assert isinstance(matrix, SharedColumnBlocks) and statistics["layout"] == "shared"
+    assert matrix.indices.dtype == np.uint16 and matrix.levels.dtype == np.int16
+    assert transfer.basis_terms == 12 and transfer.row_count == 642 and matrix.blocks == 13
+    # each vertex keeps the union of 13 selections of at most 256 terms
+    assert matrix.width <= 13 * 256 and statistics["nnz"] == 13 * len(matrix.indices)
+    assert statistics["megabytes"] == pytest.approx(matrix.nbytes / 2**20)
     assert "not a geometry image" in " ".join(state.log.skipped)
+
+
+#: Two 16-bit quantisations of the same coefficient (per-row scales that may differ):
+#: half a level of each row's largest entry, 0.5 / 32767 each, plus float32 round-off.
+TWO_HALF_LEVELS = 1.0 / 32767 + 1e-6
+
+
+def test_shared_layout_keeps_every_row_selection_and_more(state):
+    rows = prt.precompute(sphere_scene(), samples=SAMPLES, layout="rows", progress=False)
+    separate = rows.transfers[0].transfer.dequantised()
+    shared = state.transfers[0].transfer.dequantised()
+    assert rows.transfers[0].statistics["layout"] == "rows"
+    assert separate.rows == shared.rows and shared.nnz > separate.nnz
+    dense_shared = shared.to_dense()
+    row_of = np.repeat(np.arange(separate.rows), np.diff(separate.indptr))
+    kept = dense_shared[row_of, separate.indices]
+    largest = np.abs(dense_shared).max(axis=1)[row_of]
+    # every coefficient a row kept on its own is there, with its value
+    assert np.all(np.abs(kept - separate.values) <= TWO_HALF_LEVELS * largest)
+    # and the extra coefficients bring the products closer to the brute force
+    material = measured_medium("Marble")
+    error_rows = relative_error(vertex_radiance(rows, material), brute_force(rows, material))
+    error_shared = relative_error(vertex_radiance(state, material),
+                                  brute_force(state, material))
+    assert error_shared <= error_rows
 
 
 def test_linear_in_the_lights(state):
@@ -144,13 +173,14 @@ def test_linear_in_the_lights(state):
 
 def test_editing_only_reweights_the_cached_vectors(state, monkeypatch):
     calls = []
-    product = QuantisedRows.product
+    kind = type(state.transfers[0].transfer)
+    product = kind.product
 
     def counting(self, vector, out=None):
         calls.append(1)
         return product(self, vector, out)
 
-    monkeypatch.setattr(QuantisedRows, "product", counting)
+    monkeypatch.setattr(kind, "product", counting)
     state.render(lights=[LIGHT], material=measured_medium("Skin1"))
     calls.clear()
     for name in ("Skin2", "Potato", "Apple"):
@@ -300,6 +330,18 @@ def test_spatial_compression_on_a_geometry_image():
     assert error < SPATIAL_TARGET
     image = spatial.render(material=material)
     assert np.isfinite(image.rgb).all() and image.rgb.max() > 0
+    assert spatial.transfers[0].statistics["layout"] == "rows"  # no shared columns here
+    # the first frame after relighting inverts the combined channels; later edits re-weight
+    # the inverse-transformed basis vectors (the transform is linear): the same radiance
+    lights = (PointLight([-3.0, 2.0, 4.0], 80.0),)
+    for name in ("Marble", "Ketchup"):
+        edited = measured_medium(name)
+        spatial.relight(transfer, lights, edited.eta)
+        first = spatial.vertex_radiance(transfer, edited)
+        assert transfer.name not in spatial._vertex_vectors
+        again = spatial.vertex_radiance(transfer, edited)
+        assert spatial._vertex_vectors[transfer.name].shape == (3, 13, 289)
+        assert np.abs(again - first).max() <= ROUND_OFF_32 * np.abs(first).max()
 
 
 def test_approx_command_writes_an_exr(tmp_path, capsys):
@@ -332,6 +374,7 @@ def test_approx_command_rejects_half_a_material(tmp_path, capsys):
     ({"basis": "fourier"}, "basis.*valid: paper, area_normalised"),
     ({"spatial": "yes"}, "spatial.*'auto', 'on' or 'off'"),
     ({"selection": "random"}, "selection"),
+    ({"layout": "columns"}, "layout.*'shared' or 'rows'"),
     ({"environment_resolution": 12}, "power of two"),
     ({"colour": "red"}, "unknown knob"),
 ])
@@ -346,6 +389,21 @@ def test_scenes_it_cannot_render():
     with pytest.raises(InputError, match="prt method cannot render"):
         prt.precompute(opaque)
     assert "no light" in prt.applies_to(sphere_scene(lights=()))
+
+
+def test_other_objects_in_view_are_named_and_refused():
+    for name, others in (("bowl", ("'ball' (Lambertian)", "'floor' (Lambertian)")),
+                         ("cornell_block", ("'floor' (Lambertian)", "'back_wall'"))):
+        reason = prt.applies_to(load_scene(name))
+        assert reason is not None and "visible in the camera" in reason
+        assert all(other in reason for other in others), reason
+    # a diffuse object behind the camera only casts shadows: the method applies
+    behind = SceneObject("wall", icosphere(1, radius=0.5, center=(0.0, 0.0, 9.0)),
+                         Lambertian(0.5))
+    scene = sphere_scene()
+    scene = Scene(list(scene.objects) + [behind], list(scene.lights), scene.camera,
+                  mm_per_unit=MM_PER_UNIT)
+    assert prt.applies_to(scene) is None
 
 
 def test_bad_materials_are_rejected(state):

@@ -7,6 +7,7 @@ from translucent.errors import InputError
 from translucent.fast.sparse_transport import (
     MAX_COLUMNS,
     QuantisedRows,
+    SharedColumnBlocks,
     SparseRows,
     index_bits_for,
     nonlinear_approximation,
@@ -134,3 +135,80 @@ def test_bad_shapes():
     quantised = nonlinear_approximation(np.ones((2, 4)), 1.0, 4).quantised()
     with pytest.raises(InputError, match=r"vector.*\(4, 3\)"):
         quantised.product(np.ones((5, 3)))
+
+
+# --- shared column blocks ---------------------------------------------------------------
+
+
+def random_blocks(rng, rows=40, slots=30, blocks=5, columns=200):
+    indices = np.array([np.sort(rng.choice(columns, slots, replace=False)) for _ in range(rows)])
+    values = rng.normal(size=(blocks, rows, slots)).astype(np.float32)
+    counts = rng.integers(0, slots + 1, rows)
+    counts[0] = 0  # an empty row
+    dense = np.zeros((blocks * rows, columns))
+    for k in range(blocks):
+        for r in range(rows):
+            dense[k * rows + r, indices[r, :counts[r]]] = values[k, r, :counts[r]]
+    return SharedColumnBlocks.from_slots(indices, values, counts, columns), dense
+
+
+def test_shared_blocks_store_each_block_at_16_bits(rng):
+    matrix, dense = random_blocks(rng)
+    assert matrix.rows == 200 and matrix.blocks == 5 and matrix.nnz == 5 * len(matrix.indices)
+    assert matrix.indices.dtype == np.uint16 and matrix.levels.dtype == np.int16
+    stored = matrix.dequantised().to_dense()
+    largest = np.abs(dense).max(axis=1, keepdims=True)
+    assert np.all(np.abs(stored - dense) <= HALF_LEVEL_16 * largest)
+    assert matrix.nbytes == matrix.levels.nbytes + matrix.indices.nbytes + \
+        matrix.indptr.nbytes + matrix.scales.nbytes
+
+
+@pytest.mark.parametrize("channels", [(3,), ()])
+def test_shared_blocks_product_equals_the_dense_product(rng, channels):
+    matrix, _ = random_blocks(rng)
+    vector = rng.normal(size=(200,) + channels).astype(np.float32)
+    expected = matrix.dequantised().to_dense().astype(np.float64) @ vector
+    result = matrix.product(vector)
+    assert result.shape == (200,) + channels and result.dtype == np.float32
+    assert np.abs(result - expected).max() < ROUND_OFF_32 * np.abs(expected).max()
+    out = np.empty_like(result)
+    assert matrix.product(vector, out=out) is out
+    np.testing.assert_array_equal(out, result)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), parts=st.integers(1, 4))
+def test_shared_blocks_concatenate_stacks_rows_within_every_block(seed, parts):
+    rng = np.random.default_rng(seed)
+    pieces = [random_blocks(rng, rows=int(rng.integers(1, 8)), slots=6, blocks=3, columns=20)
+              for _ in range(parts)]
+    stacked = SharedColumnBlocks.concatenate([matrix for matrix, _ in pieces])
+    dense = np.concatenate([matrix.dequantised().to_dense().reshape(3, -1, 20)
+                            for matrix, _ in pieces], axis=1).reshape(-1, 20)
+    np.testing.assert_array_equal(stacked.dequantised().to_dense(), dense)
+    vector = rng.normal(size=20).astype(np.float32)
+    assert np.allclose(stacked.product(vector), dense @ vector, atol=1e-5)
+
+
+def test_shared_blocks_beyond_16_bit_columns_use_32_bit_indices():
+    columns = (1 << 16) + 4
+    matrix = SharedColumnBlocks.from_slots([[3, columns - 1]], np.ones((2, 1, 2)), [2],
+                                           columns)
+    assert matrix.indices.dtype == np.int32 and matrix.indices.tolist() == [3, columns - 1]
+    vector = np.zeros(columns, dtype=np.float32)
+    vector[columns - 1] = 2.0
+    assert matrix.product(vector).tolist() == [2.0, 2.0]
+
+
+def test_shared_blocks_bad_input(rng):
+    with pytest.raises(InputError, match=r"values.*indices \(R, S\), values \(B, R, S\)"):
+        SharedColumnBlocks.from_slots(np.zeros((4, 3)), np.zeros((2, 4, 5)), np.zeros(4), 10)
+    with pytest.raises(InputError, match=r"counts.*\[0, 3\]"):
+        SharedColumnBlocks.from_slots(np.zeros((4, 3)), np.zeros((2, 4, 3)), [0, 4, 1, 1], 10)
+    with pytest.raises(InputError, match="columns.*18 index bits"):
+        SharedColumnBlocks.from_slots(np.zeros((1, 1)), np.zeros((1, 1, 1)), [1], MAX_COLUMNS + 1)
+    matrix, _ = random_blocks(rng)
+    with pytest.raises(InputError, match=r"vector.*\(200, 3\)"):
+        matrix.product(np.ones((199, 3)))
+    with pytest.raises(InputError, match=r"out.*contiguous float32.*\(200, 3\)"):
+        matrix.product(np.ones((200, 3)), out=np.empty((200, 3), dtype=np.float64))
