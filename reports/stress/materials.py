@@ -10,7 +10,7 @@ import numpy as np
 
 from ...materials.dipole import dipole_reflectance_profile, total_diffuse_reflectance
 from ...materials.fresnel import fresnel_transmittance
-from . import StressResult, stress_kernel
+from . import StressResult, count_nonfinite, stress_kernel
 
 SIGMAS = np.geomspace(1e-6, 1e3, 19)
 DISTANCES = np.concatenate([[0.0], np.geomspace(1e-4, 1e3, 29)])
@@ -29,12 +29,6 @@ MPMATH_BOUND = 1e-12
 FRESNEL_FLOAT32_BOUND = 1e-3
 
 
-def _count(values: np.ndarray, result: StressResult) -> None:
-    result.nan += int(np.isnan(values).sum())
-    result.inf += int(np.isinf(values).sum())
-    result.negative += int((values < 0).sum())
-
-
 def _profile_grid(dtype):
     # inputs rounded to float32 first, so both precisions see the same numbers
     r, sigma_a, sigma_s_prime, eta = (x.astype(np.float32).astype(np.float64) for x in
@@ -50,8 +44,8 @@ def dipole_profile_float32() -> StressResult:
     _, p32 = _profile_grid(np.float32)
     result = StressResult(evaluations=2 * p64.size, bound=FLOAT32_BOUND, against="float64",
                           notes="float32 roundoff amplified by sigma_tr d <= 80")
-    _count(p64, result)
-    _count(p32, result)
+    count_nonfinite(p64, result)
+    count_nonfinite(p32, result)
     sigma_tr = np.sqrt(3 * sigma_a * (sigma_a + sigma_s_prime))
     exponent = sigma_tr * np.hypot(r, 1 / (sigma_a + sigma_s_prime))
     judged = (p64 > np.finfo(np.float32).tiny * 1e3) & (exponent <= 80)
@@ -80,7 +74,7 @@ def dipole_profile_mpmath() -> StressResult:
                     value = float(dipole_reflectance_profile(r, sigma_a, sigma_s_prime, eta))
                     exact = _mp_profile(mpmath, r, sigma_a, sigma_s_prime, eta)
                     result.evaluations += 1
-                    _count(np.array([value]), result)
+                    count_nonfinite(np.array([value]), result)
                     if exact > 1e-300:
                         error = abs(value - float(exact)) / float(exact)
                         if error > worst:
@@ -118,8 +112,8 @@ def total_reflectance() -> StressResult:
     r32 = total_diffuse_reflectance(sigma_a, sigma_s_prime, eta)
     result = StressResult(evaluations=2 * r64.size, bound=FLOAT32_BOUND, against="float64",
                           notes="float32 roundoff in exp(-sqrt(3(1 - albedo))) near albedo 1")
-    _count(r64, result)
-    _count(r32, result)
+    count_nonfinite(r64, result)
+    count_nonfinite(r32, result)
     result.negative += int((r64 > 1).sum())  # counted as out of range with the negatives
     judged = r64 > 1e-30
     error = np.where(judged, np.abs(r32 - r64) / np.where(judged, r64, 1), 0)
@@ -139,8 +133,8 @@ def fresnel() -> StressResult:
                           against="float64 at the same inputs",
                           notes="absolute error; float32 roundoff in cos_t near the critical "
                                 "angle, where F_t has an infinite slope")
-    _count(t64, result)
-    _count(t32, result)
+    count_nonfinite(t64, result)
+    count_nonfinite(t32, result)
     result.negative += int((t64 > 1).sum())
     result.worst_relative_error = float(np.abs(t32 - t64).max())
     return result
