@@ -6,7 +6,7 @@ from translucent.errors import InputError
 from translucent.fast import prt
 from translucent.fast.sparse_transport import SharedColumnBlocks
 from translucent.image import Image
-from translucent.materials import Dipole, Lambertian, measured_medium, measured_medium_names
+from translucent.materials import Dipole, Lambertian, measured_medium
 from translucent.materials.dipole import total_diffuse_reflectance
 from translucent.materials.fresnel import fresnel_transmittance
 from translucent.reports.cli import main
@@ -412,17 +412,3 @@ def test_bad_materials_are_rejected(state):
     with pytest.raises(InputError, match="sigma_a"):
         Dipole(-1.0, 1.0, 1.3)
 
-
-@pytest.mark.slow
-def test_model_error_table_against_mitsuba():
-    """FLIP and relative MSE against volumetric path tracing for the 12 measured media.
-
-    This measures the dipole model, not the method; it is reported, not bounded.
-    """
-    from translucent.reports.bench.prt import model_error_table
-
-    table = model_error_table(spp=16, passes=2, samples=4096)
-    assert [row["material"] for row in table] == list(measured_medium_names())
-    for row in table:
-        assert np.isfinite(row["hdr_flip"]) and 0 <= row["hdr_flip"] <= 1
-        assert np.isfinite(row["relative_mse"]) and row["relative_mse"] >= 0
