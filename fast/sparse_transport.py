@@ -438,6 +438,8 @@ def _blocks_product_scalar(indptr, indices, levels, scales, vector, scratch,
                            out):  # pragma: no cover
     """``out[k, r] = scales[r, k] sum_j levels[k, r, j] vector[indices[r, j]]`` (Eq. 8).
 
+    ``vector`` (columns,), ``out`` (blocks, rows).
+
     One pass over the stored words: per row, the vector entries of its columns are gathered
     once into the calling thread's ``scratch`` row, then each block's levels (contiguous
     int16) meet them in a dense dot product (vectorised: no gather per block).
@@ -447,15 +449,17 @@ def _blocks_product_scalar(indptr, indices, levels, scales, vector, scratch,
         buffer = scratch[numba.get_thread_id(), 0]
         start = indptr[r]
         count = indptr[r + 1] - start
+        # slices, not offsets: the compiler then vectorises the loops (measured 4x)
+        columns = indices[start:start + count]
         for j in range(count):
-            buffer[j] = vector[indices[start + j], 0]
+            buffer[j] = vector[columns[j]]
         for k in range(blocks):
             first = blocks * start + k * count
             row = levels[first:first + count]
             total = np.float32(0.0)
             for j in range(count):
                 total += np.float32(row[j]) * buffer[j]
-            out[k, r, 0] = total * scales[r, k]
+            out[k, r] = total * scales[r, k]
 
 
 @numba.njit(cache=True, parallel=True, fastmath=True)
@@ -468,8 +472,9 @@ def _blocks_product_rgb(indptr, indices, levels, scales, vector, scratch,
         red, green, blue = scratch[thread, 0], scratch[thread, 1], scratch[thread, 2]
         start = indptr[r]
         count = indptr[r + 1] - start
+        columns = indices[start:start + count]
         for j in range(count):
-            column = indices[start + j]
+            column = columns[j]
             red[j] = vector[column, 0]
             green[j] = vector[column, 1]
             blue[j] = vector[column, 2]
@@ -657,8 +662,12 @@ class SharedColumnBlocks:
             raise InputError(f"must be a contiguous float32 array of shape "
                              f"{(self.rows,) + vector.shape[1:]}", field="out", value=out.shape)
         matrix = np.ascontiguousarray(vector, dtype=np.float32).reshape(self.columns, channels)
-        kernel = _blocks_product_rgb if channels == 3 else _blocks_product_scalar
-        kernel(self.indptr, self.indices, self.levels, self.scales, matrix,
-               _workspace(channels, self.width),
-               out.reshape(self.blocks, len(self.indptr) - 1, channels))
+        shape = (self.blocks, len(self.indptr) - 1)
+        if channels == 3:
+            _blocks_product_rgb(self.indptr, self.indices, self.levels, self.scales, matrix,
+                                _workspace(3, self.width), out.reshape(shape + (3,)))
+        else:
+            _blocks_product_scalar(self.indptr, self.indices, self.levels, self.scales,
+                                   matrix.reshape(-1), _workspace(1, self.width),
+                                   out.reshape(shape))
         return out
