@@ -470,26 +470,26 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
             if voxels is not None else None
         pair_rows, pair_faces = patches.faces_of(members[incident_local])
         pair_m = m[pair_rows]
-        sample_pair, sample_weight, sample_distance = [], [], []
+        sample_points, sample_pair, sample_weight = [], [], []
         for value in np.unique(pair_m):
             chosen = np.flatnonzero(pair_m == value)
             barycentric = subdivision_barycentrics(int(value))
             corners = patches.triangles[pair_faces[chosen]] * mm
-            points = np.einsum("sk,nkd->nsd", barycentric, corners).reshape(-1, 3)
-            owners = np.repeat(pair_rows[chosen], len(barycentric))
-            starts = centroids[exit_local[owners]]
-            distance = optical_distances(voxels, starts, points, max_distance_mm,
-                                         inside=None if voxels is None
-                                         else pair_inside[owners])
-            weight = np.repeat(patches.triangle_area[pair_faces[chosen]] * mm * mm / value**2,
-                               len(barycentric))
-            inside = np.isfinite(distance)
-            sample_pair.append(owners[inside])
-            sample_weight.append(weight[inside])
-            sample_distance.append(distance[inside])
+            sample_points.append(np.einsum("sk,nkd->nsd", barycentric, corners).reshape(-1, 3))
+            sample_pair.append(np.repeat(pair_rows[chosen], len(barycentric)))
+            sample_weight.append(np.repeat(patches.triangle_area[pair_faces[chosen]] * mm * mm
+                                           / value**2, len(barycentric)))
         sample_pair = np.concatenate(sample_pair) if sample_pair else np.zeros(0, np.int64)
         sample_weight = np.concatenate(sample_weight) if sample_weight else np.zeros(0)
-        sample_distance = np.concatenate(sample_distance) if sample_distance else np.zeros(0)
+        # one call for every sample: each exit voxel's Dijkstra search runs once, not once
+        # per sample count
+        sample_distance = optical_distances(
+            voxels, centroids[exit_local[sample_pair]],
+            np.concatenate(sample_points) if sample_points else np.zeros((0, 3)),
+            max_distance_mm, inside=None if voxels is None else pair_inside[sample_pair])
+        inside = np.isfinite(sample_distance)
+        sample_pair, sample_weight = sample_pair[inside], sample_weight[inside]
+        sample_distance = sample_distance[inside]
         k, f = grid.locate(sample_distance)
         f = f.astype(np.float64)
         operator = sparse.coo_matrix(
@@ -594,9 +594,18 @@ class ScatteringMatrix:
                                  shape=(size, size))
 
     def dot(self, vectors) -> np.ndarray:
-        """``S_c @ vectors[:, c]`` for c = R, G, B; shape (P, 3)."""
+        """``S_c @ vectors[:, c]`` for c = R, G, B; shape (P, 3).
+
+        Large matrices take one compiled pass over the shared pattern for the three
+        channels (a Jacobi sweep multiplies by S once per iteration, Sect. 5.3).
+        """
         vectors = np.asarray(vectors)
-        return np.stack([self.channel(c) @ vectors[:, c] for c in range(3)], axis=1)
+        if len(self.indices) < COMPILED_PRODUCT_ENTRIES:
+            return np.stack([self.channel(c) @ vectors[:, c] for c in range(3)], axis=1)
+        out = np.empty((len(self.indptr) - 1, 3))
+        _compiled_channel_product()(self.indptr, self.indices, self.data,
+                                    np.ascontiguousarray(vectors, np.float64), out)
+        return out
 
     def power_column_sums(self, area) -> np.ndarray:
         r""":math:`\sum_j A_j S_{ji} / A_i` per patch and channel, shape (P, 3) (Eq. 15)."""
@@ -788,6 +797,24 @@ def _compiled_rgb_product():
     return product
 
 
+@functools.lru_cache(maxsize=1)
+def _compiled_channel_product():
+    import numba
+
+    @numba.njit(parallel=True, fastmath=True, cache=True)
+    def product(indptr, indices, data, x, out):  # pragma: no cover - compiled
+        for row in numba.prange(len(indptr) - 1):
+            red = green = blue = 0.0
+            for k in range(indptr[row], indptr[row + 1]):
+                column = indices[k]
+                red += data[k, 0] * x[column, 0]
+                green += data[k, 1] * x[column, 1]
+                blue += data[k, 2] * x[column, 2]
+            out[row, 0], out[row, 1], out[row, 2] = red, green, blue
+
+    return product
+
+
 def form_factor_product(F, B) -> np.ndarray:
     """``F @ B`` for the three channels of B (P, 3) in one pass over F.
 
@@ -804,11 +831,12 @@ def form_factor_product(F, B) -> np.ndarray:
     return out
 
 
-def _relative_residual(S: ScatteringMatrix, F, B, source) -> np.ndarray:
-    residual = source - B + S.dot(form_factor_product(F, B)) if F is not None \
-        else source - B
+def _relative_residual(S: ScatteringMatrix, F, B, source):
+    """Relative residual per channel of B and the product F B it needed (None without F)."""
+    global_irradiance = form_factor_product(F, B) if F is not None else None
+    residual = source - B + S.dot(global_irradiance) if F is not None else source - B
     norm = np.linalg.norm(source, axis=0)
-    return np.linalg.norm(residual, axis=0) / np.where(norm > 0, norm, 1.0)
+    return np.linalg.norm(residual, axis=0) / np.where(norm > 0, norm, 1.0), global_irradiance
 
 
 def solve_radiosity(S: ScatteringMatrix, F, source, *, solver: str = "jacobi",
@@ -860,41 +888,50 @@ def solve_radiosity(S: ScatteringMatrix, F, source, *, solver: str = "jacobi",
         return source.copy(), {"iterations": 0, "residual": [0.0, 0.0, 0.0], "solver": solver}
     start = source if initial is None else np.asarray(initial, dtype=np.float64)
     if solver == "jacobi":
-        B, iterations = _jacobi(S, F, source, tolerance, max_iterations, start)
+        B, iterations, residual, global_irradiance = _jacobi(S, F, source, tolerance,
+                                                             max_iterations, start)
     else:
         B, iterations = _krylov(S, F, source, solver, tolerance, max_iterations, start)
-    residual = _relative_residual(S, F, B, source)
+        residual, global_irradiance = _relative_residual(S, F, B, source)
     if (source >= 0).all() and (B < -tolerance * np.abs(B).max(axis=0)).any():
         raise ConvergenceError(f"{solver} returned a negative radiosity for a non-negative source:"
                                " the series of Eq. 14 diverges (spectral radius of SF >= 1)",
                                residual=float(residual.max()), iterations=int(iterations))
-    return B, {"iterations": int(iterations), "residual": residual.tolist(), "solver": solver}
+    return B, {"iterations": int(iterations), "residual": residual.tolist(), "solver": solver,
+               "global_irradiance": global_irradiance}
 
 
 def _jacobi(S, F, source, tolerance, max_iterations, start):
+    r"""Jacobi sweeps; return B, the products of SF, the residual and F B of that B.
+
+    The sweep from :math:`B_k` computes :math:`B_{k+1} = \text{source} + SFB_k`, whose
+    change :math:`B_{k+1} - B_k` is exactly the residual of :math:`B_k`: the iterate that
+    passes the test is returned with its :math:`FB_k` (the image's inter-reflected
+    irradiance), so no product is spent on checking or on the image.
+    """
     B = start.copy()
     norm = np.linalg.norm(source, axis=0)
     norm = np.where(norm > 0, norm, 1.0)
     smallest = np.inf
-    history = []
+    largest = np.inf
     for iteration in range(1, max_iterations + 1):
-        updated = source + S.dot(form_factor_product(F, B))
-        # the change of one Jacobi step is the residual of the previous iterate
-        residual = float((np.linalg.norm(updated - B, axis=0) / norm).max())
-        history.append(residual)
-        B = updated
-        if not np.isfinite(residual) or residual > DIVERGENCE_FACTOR * smallest:
-            raise ConvergenceError(f"Jacobi iteration diverges: relative residual {residual:.3g}"
+        global_irradiance = form_factor_product(F, B)
+        updated = source + S.dot(global_irradiance)
+        residual = np.linalg.norm(updated - B, axis=0) / norm
+        largest = float(residual.max())
+        if not np.isfinite(largest) or largest > DIVERGENCE_FACTOR * smallest:
+            raise ConvergenceError(f"Jacobi iteration diverges: relative residual {largest:.3g}"
                                    f" after {iteration} iterations (smallest {smallest:.3g})",
-                                   residual=residual, iterations=iteration)
-        smallest = min(smallest, residual)
-        if residual <= tolerance:
-            return B, iteration
-    raise ConvergenceError(f"Jacobi iteration reached a relative residual of {history[-1]:.3g}"
+                                   residual=largest, iterations=iteration)
+        if largest <= tolerance:
+            return B, iteration, residual, global_irradiance
+        smallest = min(smallest, largest)
+        B = updated
+    raise ConvergenceError(f"Jacobi iteration reached a relative residual of {largest:.3g}"
                            f" after {max_iterations} iterations, above the tolerance "
                            f"{tolerance:g}: the spectral radius of SF is close to 1 (albedo near "
                            "1); raise max_iterations or use solver='gmres'",
-                           residual=history[-1], iterations=max_iterations)
+                           residual=largest, iterations=max_iterations)
 
 
 def _krylov(S, F, source, solver, tolerance, max_iterations, start):
@@ -1052,25 +1089,24 @@ def direct_irradiance(scene, points, normals, *, lights=None, samples: int = 16,
 
 
 def _area_light_irradiance(scene, light, points, normals, samples, rng, visible):
+    """Stratified samples on the rectangle, every shadow ray of the light in one query."""
     side = int(np.ceil(np.sqrt(samples)))
     cells = np.arange(side * side)[:samples]
     u = (cells % side + rng.random(samples)) / side * 2.0 - 1.0
     v = (cells // side + rng.random(samples)) / side * 2.0 - 1.0
     positions = light.center + u[:, None] * light.u_axis + v[:, None] * light.v_axis
-    result = np.zeros((len(points), 3))
-    for position in positions:
-        to_light = position - points
-        distance2 = np.einsum("ij,ij->i", to_light, to_light)
-        direction = to_light / np.sqrt(distance2)[:, None]
-        cos_point = np.clip(np.einsum("ij,ij->i", normals, direction), 0.0, None)
-        cos_light = np.clip(-(direction @ light.normal), 0.0, None)
-        strength = cos_point * cos_light / distance2
-        lit = strength > 0
-        if lit.any():
-            seen = visible(scene, points[lit], position, normals_a=normals[lit])
-            strength[np.flatnonzero(lit)[~seen]] = 0.0
-        result += strength[:, None]
-    return result * light.radiance * light.area / len(positions)
+    to_light = positions[None, :, :] - points[:, None, :]          # (N, samples, 3)
+    distance2 = np.einsum("nsd,nsd->ns", to_light, to_light)
+    direction = to_light / np.sqrt(distance2)[..., None]
+    cos_point = np.clip(np.einsum("nd,nsd->ns", normals, direction), 0.0, None)
+    cos_light = np.clip(-(direction @ light.normal), 0.0, None)
+    strength = cos_point * cos_light / distance2
+    point, sample = np.nonzero(strength > 0)
+    if len(point):
+        # one batch per frame and light: the ray engine's per-call cost is paid once
+        seen = visible(scene, points[point], positions[sample], normals_a=normals[point])
+        strength[point[~seen], sample[~seen]] = 0.0
+    return strength.sum(axis=1)[:, None] * light.radiance * light.area / len(positions)
 
 
 def _sphere_light_irradiance(scene, light, points, normals, samples, rng, trace):
@@ -1177,6 +1213,7 @@ class RadiosityState:
         self.log = log
         self.materials: dict = {}
         self.transfer = None
+        self._solved = None
         self.set_material(None)
 
     # -- materials ---------------------------------------------------------------------
@@ -1258,7 +1295,6 @@ class RadiosityState:
         if component not in COMPONENTS:
             raise InputError(f"unknown component; valid: {', '.join(COMPONENTS)}",
                              field="component", value=component)
-        F = self.form_factors
         if component in ("direct", "interreflection"):
             local = self.S.power_column_sums(self.patches.area)
             diagonal = ScatteringMatrix(np.arange(len(local) + 1), np.arange(len(local)),
@@ -1266,9 +1302,7 @@ class RadiosityState:
             source = local * irradiance
             if component == "direct":
                 return source, {"iterations": 0, "solver": "none"}
-            return solve_radiosity(diagonal, F, source, solver=self.knobs["solver"],
-                                   tolerance=self.knobs["tolerance"],
-                                   max_iterations=self.knobs["max_iterations"])
+            return self._solve(diagonal, source)
         source = self.S.dot(irradiance)
         if component == "subsurface":
             return source, {"iterations": 0, "solver": "none"}
@@ -1281,11 +1315,18 @@ class RadiosityState:
         previous = getattr(self, "_interreflected", None)
         initial = source + previous if self.knobs["warm_start"] and previous is not None \
             else None
-        B, info = solve_radiosity(self.S, F, source, solver=self.knobs["solver"],
-                                  tolerance=self.knobs["tolerance"],
-                                  max_iterations=self.knobs["max_iterations"], initial=initial)
+        B, info = self._solve(self.S, source, initial)
         self._interreflected = B - source
         info["warm_start"] = initial is not None
+        return B, info
+
+    def _solve(self, S, source, initial=None):
+        """Solve with the knobs; keep F B of the result for :meth:`image`."""
+        B, info = solve_radiosity(S, self.form_factors, source, solver=self.knobs["solver"],
+                                  tolerance=self.knobs["tolerance"],
+                                  max_iterations=self.knobs["max_iterations"], initial=initial)
+        global_irradiance = info.pop("global_irradiance", None)
+        self._solved = (B, global_irradiance) if global_irradiance is not None else None
         return B, info
 
     # -- images ------------------------------------------------------------------------
@@ -1306,10 +1347,13 @@ class RadiosityState:
         gb = self._gbuffer()
         scene = self._scene_with_materials()
         rgb = np.zeros(gb.shape + (3,))
-        global_irradiance = (form_factor_product(self.form_factors, B)
-                             if self.form_factors is not None
-                             and component in ("interreflection", "both")
-                             else np.zeros_like(B))
+        if self.form_factors is None or component not in ("interreflection", "both"):
+            global_irradiance = np.zeros_like(B)
+        elif self._solved is not None and self._solved[0] is B:
+            # the solver's last product: F B of exactly this B
+            global_irradiance = self._solved[1]
+        else:
+            global_irradiance = form_factor_product(self.form_factors, B)
         diffuse_pixels = np.zeros(gb.shape, dtype=bool)
         for index, obj in enumerate(scene.objects):
             mask = gb.mask(index)
@@ -1371,7 +1415,9 @@ class RadiosityState:
         solve_started = time.perf_counter()
         B, info = self.solve(E, component)
         facts["solve_seconds"] = time.perf_counter() - solve_started
+        image_started = time.perf_counter()
         rgb = self.image(B, lights, component)
+        facts["image_seconds"] = time.perf_counter() - image_started
         seconds = time.perf_counter() - started
         return Image(rgb.astype(np.float32), metadata={
             "producer": "radiosity", "component": component,

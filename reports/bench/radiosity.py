@@ -46,6 +46,15 @@ PAPER = {"relighting fps": 14.0, "translucency change fps": 4.0,
 #: Bytes copied for the bandwidth baseline.
 BASELINE_BYTES = 256 * 2**20
 
+#: The timed parts of a relighting frame (``RadiosityState.render`` metadata).
+FRAME_PARTS = ("irradiance", "solve", "image")
+
+#: Tolerance of the converged solutions the low-rank operators are judged against.
+LOW_RANK_REFERENCE_TOLERANCE = 1e-6
+
+#: Columns added to the rank of the randomized range finder (Halko et al. 2011, Sect. 4).
+LOW_RANK_OVERSAMPLING = 10
+
 
 def add_arguments(parser):
     """Options of ``translucent bench radiosity``."""
@@ -62,6 +71,9 @@ def add_arguments(parser):
     parser.add_argument("--frames", type=int, default=4, help="timed frames per measurement")
     parser.add_argument("--transfer-patches", type=int, default=6000,
                         help="about this many patches for the T measurement (budget 512 MB)")
+    parser.add_argument("--low-rank", default="32,128",
+                        help="ranks of the low-rank relighting operator to measure (comma "
+                             "separated; empty: skip)")
     parser.add_argument("--skip-sampling", action="store_true",
                         help="skip the sampling-knob comparison on the flat sheet")
 
@@ -189,17 +201,23 @@ def _relighting(state, args, baseline, bandwidth, out):
     print(f"  {fastest}, started from the previous frame's inter-reflection: "
           f"{1 / warm_seconds:.2f} fps, {info['iterations']} iterations")
     frame = iter(range(10**9))
+    parts = []
 
-    def whole(state=state, frame=frame):
-        return state.render(lights=lights[next(frame) % len(lights)])
+    def whole(state=state, frame=frame, parts=parts):
+        image = state.render(lights=lights[next(frame) % len(lights)])
+        parts.append([image.metadata[f"{part}_seconds"] for part in FRAME_PARTS])
+        return image
 
     seconds, image = _timed(whole, max(1, args.frames - 1))
+    split = dict(zip(FRAME_PARTS, np.mean(parts[1:], axis=0).tolist(), strict=True))
     out["relighting"] = {"solvers": solvers, "fastest": fastest,
                          "irradiance seconds": irradiance_seconds,
                          "frame seconds": seconds, "frame fps": 1.0 / seconds,
-                         "image": list(image.shape)}
+                         "frame parts seconds": split, "image": list(image.shape)}
     print(f"  whole frame ({fastest}, {image.shape[1]} x {image.shape[0]}): "
-          f"{1 / seconds:.2f} fps ({seconds:.2f} s: irradiance, solve, per-pixel direct light)")
+          f"{1 / seconds:.2f} fps ({seconds:.3f} s: patch irradiance with shadow rays "
+          f"{split['irradiance']:.3f} s, solve {split['solve']:.3f} s, image with per-pixel "
+          f"direct light {split['image']:.3f} s)")
 
 
 def _translucency(state, args, baseline, out):
@@ -285,6 +303,82 @@ def _transfer(args, baseline, out):
           f"(iterative {state.knobs['solver']} at that size: {1 / iterative:.1f} fps)")
 
 
+def _block_jacobi(A, B, rhs, tolerance):
+    """Solve X = rhs + A (B X) for a block of columns (both sparse factors given)."""
+    X = rhs.copy()
+    norm = np.linalg.norm(rhs)
+    while True:
+        updated = rhs + A @ (B @ X)
+        change = np.linalg.norm(updated - X) / norm
+        X = updated
+        if change < tolerance:
+            return X
+
+
+def low_rank_global_operator(S_c, F, rank: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    r"""Randomized rank-``rank`` factors U, V of :math:`G = F(I - S_cF)^{-1}S_c` (one channel).
+
+    G takes the patch irradiance E to the inter-reflected irradiance FB of Eq. 14 (Sheng et
+    al. 2014); with it :math:`B = S_c(E + GE)`. Two passes of the randomized range finder
+    (Halko, Martinsson, Tropp 2011, Alg. 4.1 and 5.1): :math:`Y = G\Omega`, Q = qr(Y),
+    :math:`W = G^TQ = S_c^T(I - F^TS_c^T)^{-1}F^TQ`, G ~ Q W^T truncated by an SVD.
+    """
+    size = F.shape[0]
+    columns = rank + LOW_RANK_OVERSAMPLING
+    omega = rng.standard_normal((size, columns))
+    Y = F @ _block_jacobi(S_c, F, S_c @ omega, 1e-3)
+    Q, _ = np.linalg.qr(Y)
+    F_T, S_T = F.T.tocsr(), S_c.T.tocsr()
+    W = S_T @ _block_jacobi(F_T, S_T, F_T @ Q, 1e-3)
+    left, singular, right = np.linalg.svd(W.T, full_matrices=False)
+    return ((Q @ left[:, :rank]) * singular[:rank]).astype(np.float32), \
+        right[:rank].T.astype(np.float32).copy()
+
+
+def _low_rank(state, args, out):
+    """Measure a low-rank relighting operator instead of T: error, speed, as a starting guess."""
+    ranks = [int(r) for r in args.low_rank.split(",") if r.strip()]
+    if not ranks:
+        return
+    F = state.form_factors.astype(np.float64)
+    channels = [state.S.channel(c) for c in range(3)]
+    lights = list(_moved_lights(state.scene, 3))
+    irradiances = [state.patch_irradiance(light) for light in lights]
+    tolerance = state.knobs["tolerance"]
+    exact = [radiosity.solve_radiosity(state.S, state.form_factors, state.S.dot(E),
+                                       tolerance=LOW_RANK_REFERENCE_TOLERANCE)
+             for E in irradiances]
+    rows = {}
+    print(f"low-rank inter-reflection operator G = F (I - SF)^-1 S (instead of T; B = S(E + GE)), "
+          f"against solutions to {LOW_RANK_REFERENCE_TOLERANCE:g}:")
+    for rank in ranks:
+        rng = np.random.default_rng(0)
+        started = time.perf_counter()
+        factors = [low_rank_global_operator(S_c, F, rank, rng) for S_c in channels]
+        build = time.perf_counter() - started
+        errors, guesses, seconds = [], [], []
+        for E, (B_exact, _) in zip(irradiances, exact, strict=True):
+            started = time.perf_counter()
+            global_irradiance = np.stack([U @ (V.T @ E[:, c].astype(np.float32))
+                                          for c, (U, V) in enumerate(factors)], axis=1)
+            B = state.S.dot(E + global_irradiance)
+            seconds.append(time.perf_counter() - started)
+            errors.append(float((np.linalg.norm(B - B_exact, axis=0)
+                                 / np.linalg.norm(B_exact, axis=0)).max()))
+            _, guessed = radiosity.solve_radiosity(state.S, state.form_factors,
+                                                   state.S.dot(E), tolerance=tolerance,
+                                                   initial=B)
+            guesses.append(guessed["iterations"])
+        rows[str(rank)] = {"build seconds": build, "frame seconds": float(np.mean(seconds)),
+                           "relative error of B": max(errors),
+                           "MB": sum(U.nbytes + V.nbytes for U, V in factors) / 2**20,
+                           "Jacobi products from it": guesses}
+        print(f"  rank {rank:4d}: build {build:6.1f} s, {np.mean(seconds) * 1e3:6.1f} ms/frame, "
+              f"{rows[str(rank)]['MB']:6.0f} MB, error of B {max(errors):.3f}; Jacobi from it "
+              f"to {tolerance:g}: {guesses} products")
+    out["low rank"] = rows
+
+
 def _sampling(out):
     from ...fast.form_factors import build_patches
     from ...materials.profiles import DipoleProfile
@@ -328,6 +422,7 @@ def run(args) -> int:
     _relighting(state, args, baseline, bandwidth, out)
     _translucency(state, args, baseline, out)
     _thresholds(state, out)
+    _low_rank(state, args, out)
     del state
     _transfer(args, baseline, out)
     if not args.skip_sampling:
