@@ -38,7 +38,10 @@ The set-up here converges, for any eta:
   :func:`exitance_per_normal_radiance`, which is exact only where the radiance inside
   is isotropic (see that function for how far from it real profiles are).
 * **Integrator**: ``volpath`` with unlimited depth (high-albedo media need thousands of
-  bounces; Russian roulette from ``rr_depth`` keeps it unbiased and finite).
+  bounces) and Russian roulette only once the throughput has fallen to
+  :data:`ROULETTE_THROUGHPUT` (:func:`roulette_depth`): volpath's default (from the
+  fifth bounce, survival capped at 0.95) makes the far field of a high-albedo medium an
+  estimate that is unbiased in theory and almost always far too low in practice.
 
 The image is rendered in passes of at most ``pass_spp`` samples per pixel (independent
 seeds), so that 10^4 spp fit in memory on a GPU; the mean is the capture and the spread
@@ -62,9 +65,10 @@ from ..materials import Dipole
 from ..materials.fresnel import fresnel_reflectance
 from .synthetic import Camera, _capture_spec, apply_camera
 
-__all__ = ["BEAM_DEPTH_MM", "DEFAULT_BEAM_FRACTION", "VolpathRender",
-           "exitance_per_normal_radiance", "register_plugins", "render_exitance",
-           "semi_infinite_depth", "slab_scene_dict", "volpath_capture"]
+__all__ = ["BEAM_DEPTH_MM", "DEFAULT_BEAM_FRACTION", "VolpathRender", "beam_pixel_image",
+           "collimated_powers", "exitance_per_normal_radiance", "register_plugins",
+           "render_exitance", "roulette_depth", "semi_infinite_depth", "slab_scene_dict",
+           "volpath_capture"]
 
 #: Depth of the beam's origin plane below the top face, mm: far below any mean free path
 #: of the catalogue (the shortest is Spectralon's 0.05 mm), so the light scattered in the
@@ -93,6 +97,18 @@ LATERAL_MARGIN_DEPTHS = 1.0
 DEFAULT_PASS_SPP = 1024
 #: Unlimited path depth (Mitsuba's -1): Russian roulette ends the paths.
 MAX_DEPTH = -1
+#: Russian roulette starts once the throughput of every channel has fallen below this
+#: (albedo^n): volpath survives a roulette with probability min(throughput eta^2, 0.95)
+#: and divides by it, so roulette on a throughput near 1 (a high-albedo medium) multiplies
+#: a survivor by 1.05 a bounce: a camera path that needs 2500 bounces to reach a beam
+#: 50 mean free paths away then carries 1e53 with probability 1e-56, an unbiased but
+#: never-converging estimate (measured: 0.80 +- 0.02 of the light found on a
+#: non-absorbing slab where the walk finds 0.97, at 4096 spp with volpath's default
+#: rr_depth of 5).
+ROULETTE_THROUGHPUT = 1e-4
+#: Most bounces before roulette (a non-absorbing medium never reaches the throughput;
+#: its paths end by leaving the slab).
+MAX_ROULETTE_DEPTH = 10**7
 
 SENSOR_MODES = ("exitance", "normal radiance")
 BEAM_PLUGIN = "translucent_slab_beam"
@@ -151,6 +167,70 @@ def semi_infinite_depth(material: Dipole) -> float:
     return float(np.max(depth))
 
 
+def roulette_depth(material: Dipole) -> int:
+    r"""Bounces before volpath's Russian roulette (see :data:`ROULETTE_THROUGHPUT`).
+
+    The throughput after ``n`` scatterings is ``albedo^n`` (reduced albedo
+    :math:`\sigma'_s / (\sigma_a + \sigma'_s)`, the highest channel).
+    """
+    sigma_t_prime = material.sigma_a + material.sigma_s_prime
+    albedo = float(np.max(np.where(sigma_t_prime > 0, material.sigma_s_prime
+                                   / np.maximum(sigma_t_prime, 1e-300), 0.0)))
+    if albedo >= 1.0:
+        return MAX_ROULETTE_DEPTH
+    if albedo <= ROULETTE_THROUGHPUT:
+        return 1
+    return int(min(math.ceil(math.log(ROULETTE_THROUGHPUT) / math.log(albedo)),
+                   MAX_ROULETTE_DEPTH))
+
+
+def collimated_powers(material: Dipole, depth_mm: float) -> dict[str, np.ndarray]:
+    r"""Powers of the unscattered (collimated) beam in a slab, per channel.
+
+    The beam enters with unit power and crosses the slab with transmittance
+    :math:`e^{-\tau}`, :math:`\tau = \sigma'_t d`; at each face a fraction
+    :math:`R(0) = ((\eta - 1)/(\eta + 1))^2` is reflected back. Summing the bounces:
+
+    .. math::
+        D = \frac{1}{1 - R(0)^2 e^{-2\tau}},\quad U = R(0)\,e^{-\tau} D,\quad
+        T_b = (1 - R(0))\,e^{-\tau} D,\quad R_b = (1 - R(0))\,e^{-\tau} U.
+
+    Parameters
+    ----------
+    material : Dipole
+    depth_mm : float
+        Slab thickness, mm.
+
+    Returns
+    -------
+    dict
+        ``down`` (D: downward power at the top, all bounces), ``up`` (U: upward power at
+        the bottom), ``transmitted`` (T_b) and ``reflected`` (R_b): the unscattered
+        power leaving through the bottom and the top; arrays of shape (3,).
+    """
+    r_normal = ((material.eta - 1.0) / (material.eta + 1.0)) ** 2
+    crossing = np.exp(-(material.sigma_a + material.sigma_s_prime) * depth_mm)
+    down = 1.0 / (1.0 - r_normal ** 2 * crossing ** 2)
+    up = r_normal * crossing * down
+    return {"down": down, "up": up, "transmitted": (1.0 - r_normal) * crossing * down,
+            "reflected": (1.0 - r_normal) * crossing * up}
+
+
+def beam_pixel_image(shape, pixel_size_mm, incident_px, beam_radius_mm) -> np.ndarray:
+    """Gaussian beam irradiance of unit power averaged over each pixel, mm^-2, (H, W).
+
+    The 1/e^2 radius ``w`` is twice the standard deviation; the pixel average is a product
+    of error-function differences, exact.
+    """
+    from scipy.special import ndtr
+
+    height, width = shape
+    sigma_px = 0.5 * beam_radius_mm / pixel_size_mm
+    x_edges = ndtr((np.arange(width + 1) - incident_px[0]) / sigma_px)
+    y_edges = ndtr((np.arange(height + 1) - incident_px[1]) / sigma_px)
+    return np.outer(np.diff(y_edges), np.diff(x_edges)) / pixel_size_mm ** 2
+
+
 @functools.lru_cache(maxsize=None)
 def _plugin_classes(variant: str):
     """Define the beam and sensor plugins for the active variant (once per variant)."""
@@ -162,14 +242,22 @@ def _plugin_classes(variant: str):
     class SlabBeam(mi.Emitter):
         """Collimated Gaussian beam starting on a plane inside the medium, going down (-z).
 
-        ============ ===== ======= ===========================================
-        parameter    type  default meaning
-        ============ ===== ======= ===========================================
-        plane_z      float -1e-4   z of the origin plane, mm
-        beam_radius  float         1/e^2 radius w of the irradiance, mm, > 0
-        centre_x/y   float 0       beam axis, mm
-        power        float 1       power crossing the plane
-        ============ ===== ======= ===========================================
+        In a slab of finite thickness with a dielectric boundary the unscattered beam is
+        partly reflected at the bottom face (and again at the top): those collimated
+        beams light the medium too. They are a second delta direction, straight down to
+        the ``return_plane_z`` plane just above the bottom face, chosen with probability
+        proportional to its power.
+
+        ================ ===== ======= ===========================================
+        parameter        type  default meaning
+        ================ ===== ======= ===========================================
+        plane_z          float -1e-4   z of the origin plane, mm
+        beam_radius      float         1/e^2 radius w of the irradiance, mm, > 0
+        centre_x/y       float 0       beam axis, mm
+        power_0/1/2      float 1       downward power per channel (all the bounces)
+        return_plane_z   float -inf    z of the upward beam's origin plane, mm
+        return_power_0.. float 0       upward power per channel at that plane
+        ================ ===== ======= ===========================================
         """
 
         def __init__(self, props):
@@ -178,28 +266,39 @@ def _plugin_classes(variant: str):
             self.beam_radius = props.get("beam_radius")
             self.centre_x = props.get("centre_x", 0.0)
             self.centre_y = props.get("centre_y", 0.0)
-            self.power = props.get("power", 1.0)
+            self.power = [props.get(f"power_{c}", 1.0) for c in range(3)]
+            self.return_plane_z = props.get("return_plane_z", -math.inf)
+            self.return_power = [props.get(f"return_power_{c}", 0.0) for c in range(3)]
+            down, up = sum(self.power), sum(self.return_power)
+            self.down_probability = down / (down + up) if up > 0 else 1.0
             self.m_flags = mi.EmitterFlags.DeltaDirection
 
         def irradiance(self, x, y):
-            """Irradiance on the origin plane, power per mm^2."""
+            """Irradiance of unit power on an origin plane, per mm^2."""
             w2 = self.beam_radius * self.beam_radius
             rho2 = dr.square(x - self.centre_x) + dr.square(y - self.centre_y)
-            return self.power * 2.0 / (dr.pi * w2) * dr.exp(-2.0 * rho2 / w2)
+            return 2.0 / (dr.pi * w2) * dr.exp(-2.0 * rho2 / w2)
 
         def sample_direction(self, it, sample, active=True):
-            distance = self.plane_z - it.p.z
-            below = active & (distance > 0.0)
+            # the downward beam is seen looking up, the returning one looking down
+            look_up = sample.x < self.down_probability
+            plane = dr.select(look_up, self.plane_z, self.return_plane_z)
+            distance = dr.select(look_up, self.plane_z - it.p.z, it.p.z - self.return_plane_z)
+            lit = active & (distance > 0.0)
+            choice = dr.select(look_up, self.down_probability, 1.0 - self.down_probability)
+            up_sign = dr.select(look_up, 1.0, -1.0)
             ds = dr.zeros(mi.DirectionSample3f)
-            ds.p = mi.Point3f(it.p.x, it.p.y, self.plane_z)
-            ds.n = mi.Normal3f(0.0, 0.0, -1.0)
-            ds.d = mi.Vector3f(0.0, 0.0, 1.0)
-            ds.dist = dr.select(below, distance, 0.0)
-            ds.pdf = dr.select(below, 1.0, 0.0)
+            ds.p = mi.Point3f(it.p.x, it.p.y, plane)
+            ds.n = mi.Normal3f(0.0, 0.0, -up_sign)
+            ds.d = mi.Vector3f(0.0, 0.0, up_sign)
+            ds.dist = dr.select(lit, distance, 0.0)
+            ds.pdf = dr.select(lit, choice, 0.0)
             ds.delta = mi.Bool(True)
             ds.time = it.time
-            weight = dr.select(below, self.irradiance(it.p.x, it.p.y), 0.0)
-            return ds, mi.Spectrum(weight)
+            power = mi.Spectrum(*[dr.select(look_up, down, up) for down, up
+                                  in zip(self.power, self.return_power, strict=True)])
+            weight = dr.select(lit, self.irradiance(it.p.x, it.p.y) / choice, 0.0)
+            return ds, power * weight
 
         def pdf_direction(self, it, ds, active=True):
             return mi.Float(0.0)  # delta in direction: never hit by a sampled direction
@@ -344,10 +443,12 @@ def slab_scene_dict(material: Dipole, *, shape, pixel_size_mm, incident_px, side
     sigma_t_texture, sigma_t_scale = _rgb_texture(sigma_t_prime)
     boundary = {"type": "null"} if material.eta == 1.0 else \
         {"type": "dielectric", "int_ior": float(material.eta), "ext_ior": 1.0}
+    collimated = collimated_powers(material, depth)
     plane_z = SENSOR_OFFSET_MM if side == "reflection" else -depth - SENSOR_OFFSET_MM
     return {
         "type": "scene",
-        "integrator": {"type": "volpath", "max_depth": MAX_DEPTH},
+        "integrator": {"type": "volpath", "max_depth": MAX_DEPTH,
+                       "rr_depth": roulette_depth(material)},
         "sensor": {"type": SENSOR_PLUGIN, "width_mm": width_mm, "height_mm": height_mm,
                    "plane_z": plane_z, "facing_up": side == "transmission",
                    "exitance": sensor == "exitance",
@@ -363,9 +464,11 @@ def slab_scene_dict(material: Dipole, *, shape, pixel_size_mm, incident_px, side
                               "albedo": {"type": "rgb", "value": [float(a) for a in albedo]},
                               "phase": {"type": "isotropic"}}},
         "beam": {"type": BEAM_PLUGIN, "beam_radius": float(beam_radius_mm),
-                 "plane_z": -BEAM_DEPTH_MM,
+                 "plane_z": -BEAM_DEPTH_MM, "return_plane_z": -depth + BEAM_DEPTH_MM,
                  "centre_x": (incident_px[0] - 0.5 * width) * pixel_size_mm,
-                 "centre_y": (incident_px[1] - 0.5 * height) * pixel_size_mm},
+                 "centre_y": (incident_px[1] - 0.5 * height) * pixel_size_mm,
+                 **{f"power_{c}": float(collimated["down"][c]) for c in range(3)},
+                 **{f"return_power_{c}": float(collimated["up"][c]) for c in range(3)}},
     }
 
 
@@ -385,6 +488,9 @@ class VolpathRender:
     pass_spp : int
     depth_mm : float
         Slab thickness rendered.
+    unscattered : ndarray, shape (3,)
+        Power of the unscattered beam leaving through the imaged face, per unit entering
+        power (:func:`collimated_powers`), added to ``exitance`` over the beam's footprint.
     pixel_size_mm : float
     sensor : str
     variant : str
@@ -397,6 +503,7 @@ class VolpathRender:
     passes: int
     pass_spp: int
     depth_mm: float
+    unscattered: np.ndarray
     pixel_size_mm: float
     sensor: str
     variant: str
@@ -532,13 +639,18 @@ def render_exitance(material: Dipole, *, shape=(96, 96), pixel_size_mm: float = 
     finally:
         if bar is not None:
             bar.close()
+    depth = semi_infinite_depth(material) if thickness_mm is None else float(thickness_mm)
+    # camera paths cannot see a collimated beam: its unscattered light leaving the face
+    # is added in closed form
+    unscattered = collimated_powers(material, depth)[
+        "reflected" if side == "reflection" else "transmitted"]
+    footprint = beam_pixel_image((height, width), pixel_size_mm, incident_px, beam_radius_mm)
     return VolpathRender(
-        exitance=images.mean(axis=0),
+        exitance=images.mean(axis=0) + footprint[..., None] * unscattered,
         standard_error=images.std(axis=0, ddof=1) / math.sqrt(passes),
         spp=passes * per_pass, passes=passes, pass_spp=per_pass,
-        depth_mm=semi_infinite_depth(material) if thickness_mm is None else float(thickness_mm),
-        pixel_size_mm=float(pixel_size_mm), sensor=sensor, variant=mi.variant(),
-        seconds=time.perf_counter() - began)
+        depth_mm=depth, unscattered=unscattered, pixel_size_mm=float(pixel_size_mm),
+        sensor=sensor, variant=mi.variant(), seconds=time.perf_counter() - began)
 
 
 def volpath_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
