@@ -52,16 +52,19 @@ def _critical(count, dof):
     return stats.t.ppf(1.0 - per_test / 2.0, dof)
 
 
-@pytest.mark.parametrize("eta", [1.0, 1.3])
-def test_agrees_with_the_photon_random_walk_in_annuli(eta):
+@pytest.mark.parametrize(("eta", "side", "thickness_mm"), [
+    (1.0, "reflection", None), (1.3, "reflection", None), (1.3, "transmission", 1.0)])
+def test_agrees_with_the_photon_random_walk_in_annuli(eta, side, thickness_mm):
     medium = Dipole(eta=eta, **SHORT_PATHS)
     shape, pixel, centre, beam = (24, 24), 0.25, (14.0, 11.0), 0.5
     render = render_exitance(medium, shape=shape, pixel_size_mm=pixel, incident_px=centre,
-                             beam_radius_mm=beam, spp=PASSES * 64, pass_spp=64, seed=11)
+                             beam_radius_mm=beam, spp=PASSES * 64, pass_spp=64, seed=11,
+                             side=side, thickness_mm=thickness_mm)
     assert render.passes == PASSES
-    film = Film(shape, pixel, centre)
+    film = Film(shape, pixel, centre, side)
     walks = np.stack([photon_random_walk(medium, photons=40000, beam_radius_mm=beam,
                                          film=film, rotations=8, seed=seed,
+                                         thickness_mm=thickness_mm,
                                          channels=(0,)).film[..., 0]
                       for seed in range(PASSES)])
     edges = np.array([0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0])
