@@ -152,32 +152,30 @@ def brute_force_error(state, material, vertex_count: int, seed: int = 0) -> floa
 
 
 @contextlib.contextmanager
-def _private_cache():
-    """Precompute into a temporary cache: the bench measures the work, not a cache hit."""
-    previous = os.environ.get("TRANSLUCENT_CACHE")
-    with tempfile.TemporaryDirectory(prefix="bench_prt_") as folder:
-        os.environ["TRANSLUCENT_CACHE"] = folder
-        try:
-            yield
-        finally:
-            if previous is None:
-                os.environ.pop("TRANSLUCENT_CACHE", None)
-            else:
-                os.environ["TRANSLUCENT_CACHE"] = previous
-
-
-@contextlib.contextmanager
-def _ray_engine(name: str):
-    """Route the scene's ray queries through the engine ``name`` for the block."""
-    previous = os.environ.get("TRANSLUCENT_RAY_ENGINE")
-    os.environ["TRANSLUCENT_RAY_ENGINE"] = name
+def _environment(name: str, value: str):
+    """Set the environment variable ``name`` to ``value`` for the block."""
+    previous = os.environ.get(name)
+    os.environ[name] = value
     try:
         yield
     finally:
         if previous is None:
-            os.environ.pop("TRANSLUCENT_RAY_ENGINE", None)
+            os.environ.pop(name, None)
         else:
-            os.environ["TRANSLUCENT_RAY_ENGINE"] = previous
+            os.environ[name] = previous
+
+
+@contextlib.contextmanager
+def _private_cache():
+    """Precompute into a temporary cache: the bench measures the work, not a cache hit."""
+    with tempfile.TemporaryDirectory(prefix="bench_prt_") as folder, \
+            _environment("TRANSLUCENT_CACHE", folder):
+        yield
+
+
+def _ray_engine(name: str):
+    """Route the scene's ray queries through the engine ``name`` for the block."""
+    return _environment("TRANSLUCENT_RAY_ENGINE", name)
 
 
 def shadow_ray_timings(mesh, counts=(16384, 65536), repeats: int = 5) -> list[dict]:
@@ -185,7 +183,9 @@ def shadow_ray_timings(mesh, counts=(16384, 65536), repeats: int = 5) -> list[di
 
     The rays of a relighting frame: from ``count`` illumination samples on the bench sphere
     towards its point light (:func:`translucent.scenes.visible`'s rays, any-hit queries).
-    Best wall-clock and process-CPU time of ``repeats`` batches after one warm-up.
+    Best wall-clock and process-CPU time of ``repeats`` batches after one warm-up, and the
+    wall-clock time of that first batch (Mitsuba traces and compiles its kernel then, or
+    finds it in Dr.Jit's kernel cache).
     """
     from ...scenes.raycast import embree_available, ray_engine, visible
 
@@ -197,11 +197,14 @@ def shadow_ray_timings(mesh, counts=(16384, 65536), repeats: int = 5) -> list[di
         for name in ("embree", "mitsuba") if embree_available() else ("mitsuba",):
             engine = ray_engine(scene, name)
             with _ray_engine(name):
+                start = time.perf_counter()
                 seen = visible(scene, samples.positions, light, normals_a=samples.normals)
+                first = time.perf_counter() - start
                 wall, cpu = _timed(lambda samples=samples: visible(
                     scene, samples.positions, light, normals_a=samples.normals), repeats)
             rows.append({"engine": engine.engine, "rays": count, "ms": 1e3 * wall,
-                         "cpu_ms": 1e3 * cpu, "visible_fraction": float(seen.mean()),
+                         "cpu_ms": 1e3 * cpu, "first_call_ms": 1e3 * first,
+                         "visible_fraction": float(seen.mean()),
                          "load_average": os.getloadavg()[0]})
     return rows
 
@@ -390,7 +393,8 @@ def run(args) -> int:
     rays = shadow_ray_timings(mesh)
     for row in rays:
         print(f"shadow rays: {row['engine']:<8} {row['rays']:>6} rays {row['ms']:8.1f} ms "
-              f"(CPU {row['cpu_ms']:.1f} ms; load average {row['load_average']:.1f})")
+              f"(CPU {row['cpu_ms']:.1f} ms; first call {row['first_call_ms']:.1f} ms; load "
+              f"average {row['load_average']:.1f})")
     results = []
     for samples in counts:
         results.append(bench_configuration(mesh, samples, args, bandwidth,
