@@ -23,6 +23,7 @@ All lengths in this module are in mm.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -181,21 +182,50 @@ class VoxelGrid:
         return nodes
 
     def segment_inside(self, starts, ends) -> np.ndarray:
-        """Return True where every voxel along the segment ``start -> end`` (mm) is occupied."""
-        starts = np.asarray(starts, dtype=np.float64)
-        ends = np.asarray(ends, dtype=np.float64)
-        length = np.linalg.norm(ends - starts, axis=1)
-        steps = np.ceil(length / self.voxel_size * SEGMENT_POINTS_PER_VOXEL).astype(np.int64)
+        """Return True where every voxel along the segment ``start -> end`` (mm) is occupied.
+
+        The segment is tested at :data:`SEGMENT_POINTS_PER_VOXEL` points per voxel edge
+        (both ends included), each point in its voxel clipped to the grid; a compiled loop
+        stops at the first empty voxel (most segments between the sides of a concave
+        object leave it within a few voxels). The bowl's 5.3 million pairs took 80 s as one
+        vectorised test of every point, most of the scattering step.
+        """
+        starts = np.ascontiguousarray(starts, dtype=np.float64).reshape(-1, 3)
+        ends = np.ascontiguousarray(ends, dtype=np.float64).reshape(-1, 3)
         inside = np.ones(len(starts), dtype=bool)
-        # segments grouped by their number of steps: one vectorised test per group
-        for count in np.unique(steps):
-            rows = np.flatnonzero(steps == count)
-            t = np.linspace(0.0, 1.0, int(count) + 1)
-            points = starts[rows, None] + t[None, :, None] * (ends[rows] - starts[rows])[:, None]
-            ijk = self.voxel_index(points.reshape(-1, 3))
-            occupied = self.node_of[ijk[:, 0], ijk[:, 1], ijk[:, 2]] >= 0
-            inside[rows] = occupied.reshape(len(rows), -1).all(axis=1)
+        if len(starts):
+            _compiled_segment_test()(starts, ends, np.asarray(self.origin, dtype=np.float64),
+                                     float(self.voxel_size), self.node_of,
+                                     float(SEGMENT_POINTS_PER_VOXEL), inside)
         return inside
+
+
+@functools.lru_cache(maxsize=1)
+def _compiled_segment_test():
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def segment_test(starts, ends, origin, size, node_of, per_voxel,
+                     inside):  # pragma: no cover - compiled
+        nx, ny, nz = node_of.shape
+        for row in numba.prange(len(starts)):
+            dx = ends[row, 0] - starts[row, 0]
+            dy = ends[row, 1] - starts[row, 1]
+            dz = ends[row, 2] - starts[row, 2]
+            steps = int(np.ceil(np.sqrt(dx * dx + dy * dy + dz * dz) / size * per_voxel))
+            for step in range(steps + 1):
+                t = step / steps if steps > 0 else 0.0
+                i = min(max(int(np.floor((starts[row, 0] + t * dx - origin[0]) / size)), 0),
+                        nx - 1)
+                j = min(max(int(np.floor((starts[row, 1] + t * dy - origin[1]) / size)), 0),
+                        ny - 1)
+                k = min(max(int(np.floor((starts[row, 2] + t * dz - origin[2]) / size)), 0),
+                        nz - 1)
+                if node_of[i, j, k] < 0:
+                    inside[row] = False
+                    break
+
+    return segment_test
 
 
 def voxelize(triangles, voxel_size: float, *, fill: bool = True) -> VoxelGrid:

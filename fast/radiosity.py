@@ -1089,24 +1089,31 @@ def direct_irradiance(scene, points, normals, *, lights=None, samples: int = 16,
 
 
 def _area_light_irradiance(scene, light, points, normals, samples, rng, visible):
-    """Stratified samples on the rectangle, every shadow ray of the light in one query."""
+    """Stratified samples on the rectangle, one visibility query per sample position.
+
+    One query for all samples at once was measured no faster on 25,080 patches x 16
+    samples (0.51-0.95 s against 0.47-0.51 s, the same run): its temporaries outweigh the
+    per-call cost of the ray engine.
+    """
     side = int(np.ceil(np.sqrt(samples)))
     cells = np.arange(side * side)[:samples]
     u = (cells % side + rng.random(samples)) / side * 2.0 - 1.0
     v = (cells // side + rng.random(samples)) / side * 2.0 - 1.0
     positions = light.center + u[:, None] * light.u_axis + v[:, None] * light.v_axis
-    to_light = positions[None, :, :] - points[:, None, :]          # (N, samples, 3)
-    distance2 = np.einsum("nsd,nsd->ns", to_light, to_light)
-    direction = to_light / np.sqrt(distance2)[..., None]
-    cos_point = np.clip(np.einsum("nd,nsd->ns", normals, direction), 0.0, None)
-    cos_light = np.clip(-(direction @ light.normal), 0.0, None)
-    strength = cos_point * cos_light / distance2
-    point, sample = np.nonzero(strength > 0)
-    if len(point):
-        # one batch per frame and light: the ray engine's per-call cost is paid once
-        seen = visible(scene, points[point], positions[sample], normals_a=normals[point])
-        strength[point[~seen], sample[~seen]] = 0.0
-    return strength.sum(axis=1)[:, None] * light.radiance * light.area / len(positions)
+    result = np.zeros((len(points), 3))
+    for position in positions:
+        to_light = position - points
+        distance2 = np.einsum("ij,ij->i", to_light, to_light)
+        direction = to_light / np.sqrt(distance2)[:, None]
+        cos_point = np.clip(np.einsum("ij,ij->i", normals, direction), 0.0, None)
+        cos_light = np.clip(-(direction @ light.normal), 0.0, None)
+        strength = cos_point * cos_light / distance2
+        lit = strength > 0
+        if lit.any():
+            seen = visible(scene, points[lit], position, normals_a=normals[lit])
+            strength[np.flatnonzero(lit)[~seen]] = 0.0
+        result += strength[:, None]
+    return result * light.radiance * light.area / len(positions)
 
 
 def _sphere_light_irradiance(scene, light, points, normals, samples, rng, trace):

@@ -135,3 +135,32 @@ def test_voxelize_rejects_bad_size():
     cube = box()
     with pytest.raises(InputError, match="voxel_size.*must be > 0 mm"):
         voxelize(cube.vertices[cube.faces], 0.0)
+
+
+def _segment_inside_point_by_point(grid, start, end):
+    """The definition: every test point of the segment lies in an occupied voxel."""
+    from translucent.fast.optical_distance import SEGMENT_POINTS_PER_VOXEL
+
+    steps = int(np.ceil(np.linalg.norm(end - start) / grid.voxel_size
+                        * SEGMENT_POINTS_PER_VOXEL))
+    t = np.arange(steps + 1) / max(steps, 1)
+    points = start + t[:, None] * (end - start)
+    ijk = grid.voxel_index(points)
+    return bool((grid.node_of[ijk[:, 0], ijk[:, 1], ijk[:, 2]] >= 0).all())
+
+
+@given(seed=st.integers(min_value=0, max_value=2**31 - 1))
+@settings(max_examples=10, deadline=None)
+def test_compiled_segment_test_agrees_with_the_point_by_point_definition(seed):
+    rng = np.random.default_rng(seed)
+    mesh = torus(10.0, 3.0, subdivisions=16)
+    grid = voxelize(mesh.vertices[mesh.faces], 1.0)
+    # ends on the surface and in the hole, so both answers occur; one zero-length segment
+    starts = mesh.vertices[rng.integers(0, len(mesh.vertices), 200)]
+    ends = np.concatenate([mesh.vertices[rng.integers(0, len(mesh.vertices), 199)],
+                           starts[:1]])
+    inside = grid.segment_inside(starts, ends)
+    expected = [_segment_inside_point_by_point(grid, a, b)
+                for a, b in zip(starts, ends, strict=True)]
+    assert inside.tolist() == expected
+    assert inside.any() and not inside.all()
