@@ -8,6 +8,7 @@ float32, mpmath against float64), and the bound that error must stay within.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import pkgutil
 from collections.abc import Callable
@@ -83,10 +84,22 @@ _KERNELS: dict[str, Callable[[], StressResult]] = {}
 
 
 def stress_kernel(name: str):
-    """Register the decorated zero-argument function as the stress kernel ``name``."""
+    """Register the decorated zero-argument function as the stress kernel ``name``.
+
+    A kernel that raises is registered as failing, not as a crash of the whole run: its
+    result has ``negative = 1`` and the exception in ``notes``.
+    """
 
     def register(function: Callable[[], StressResult]):
-        _KERNELS[name] = function
+        @functools.wraps(function)
+        def guarded() -> StressResult:
+            try:
+                return function()
+            except Exception as error:  # noqa: BLE001 - a failing kernel is a result
+                return StressResult(evaluations=0, negative=1, bound=0.0, against="",
+                                    notes=f"the kernel raised {type(error).__name__}: {error}")
+
+        _KERNELS[name] = guarded
         return function
 
     return register

@@ -11,6 +11,7 @@ import types
 
 import numpy as np
 import pytest
+from translucent.fast.wavelets import SpatialWavelet
 from translucent.fitting.results import ParameterSummary
 from translucent.materials.dipole_pca import DipolePCABasis
 from translucent.reports import stress
@@ -33,6 +34,8 @@ TINY = {
         functools.partial(wavelets.wavelet_compression, sides=(8,)),
     "fits on degenerate captures":
         functools.partial(fits.degenerate_fits, cases=fits.EMPTY_CASES),
+    "spatial CDF 9/7 compression at extreme ratios":
+        functools.partial(wavelets.spatial_compression, grids=((9, 10),)),
 }
 
 
@@ -132,6 +135,8 @@ BREAKS = {
     "wavelet compression at extreme ratios":
         (wavelets, "haar2d_inverse", _nan_like_first(wavelets.haar2d_inverse)),
     "fits on degenerate captures": (fits, "fit_dipole", _nan_fit),
+    "spatial CDF 9/7 compression at extreme ratios":
+        (SpatialWavelet, "forward", _nan_like_first(SpatialWavelet.forward)),
 }
 
 
@@ -146,6 +151,27 @@ def test_a_kernel_whose_method_returns_nan_makes_the_command_exit_1(name, monkey
     written = json.loads(out.read_text())[name]
     assert written["nan"] > 0 and not written["passed"]
     assert isinstance(written["details"], list)
+
+
+def test_a_kernel_that_raises_is_a_failure_not_a_crash(monkeypatch, tmp_path):
+    def broken():
+        raise ZeroDivisionError("deliberately")
+
+    stress.stress_kernel("raises (test)")(broken)
+    try:
+        assert main(["stress", "--only", "raises (test)", "--json",
+                     str(tmp_path / "s.json")]) == 1
+        written = json.loads((tmp_path / "s.json").read_text())["raises (test)"]
+        assert "ZeroDivisionError: deliberately" in written["notes"]
+    finally:
+        stress._KERNELS.pop("raises (test)")
+
+
+def test_spatial_float32_bound_grows_with_the_levels():
+    assert wavelets.lifting_rounding_bound(2) == pytest.approx(
+        2 * wavelets.lifting_rounding_bound(1))
+    # a few thousand float32 roundoffs per level: crude, but far below any compression error
+    assert 1e-5 < wavelets.lifting_rounding_bound(1) < 1e-3
 
 
 @pytest.mark.slow
