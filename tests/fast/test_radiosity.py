@@ -465,6 +465,27 @@ def test_relighting_with_new_lights_changes_only_the_lighting():
     assert bright.rgb == pytest.approx(2.0 * dim.rgb, rel=1e-4, abs=1e-7)
 
 
+def test_warm_start_projects_on_earlier_frames_and_is_dropped_with_the_material():
+    state = precompute(_block_scene(), rays_per_patch=64, transfer="never")
+    first = state.patch_irradiance([PointLight([1.0, 3.0, 1.0], 20.0)])
+    second = state.patch_irradiance([PointLight([-1.0, 2.0, 0.5], 20.0)])
+    B_first, cold = state.solve(first)
+    B_second, _ = state.solve(second)
+    # a combination of earlier lights is answered by the earlier solutions: the first
+    # product already passes the residual test
+    B, info = state.solve(2.0 * first + 3.0 * second)
+    assert info["warm_start"] and info["iterations"] == 1 < cold["iterations"]
+    assert max(info["residual"]) <= state.knobs["tolerance"]
+    # the guess passed unchanged: exactly the combination of the earlier solutions
+    assert np.abs(B - (2.0 * B_first + 3.0 * B_second)).max() <= \
+        RECOMPUTED_RTOL * np.abs(B).max()
+    state.set_material(measured_medium("Skin2"))
+    assert state._frames == []
+    state.forget_frames()
+    _, info = state.solve(first)
+    assert not info["warm_start"] and info["iterations"] == cold["iterations"]
+
+
 def test_approx_command_writes_an_exr(tmp_path):
     from translucent.image import read_exr
     from translucent.reports.cli import main
