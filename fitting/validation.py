@@ -3,9 +3,11 @@
 * :func:`coverage_study` fits dipole-forward captures of random true parameters and counts
   how often the truth lies inside the 95 % credible interval. A calibrated posterior puts
   it there 95 % of the time; the suite asks for at least :data:`COVERAGE_TARGET`.
-* :func:`model_bias_table` fits photon-random-walk captures of the measured media of
-  Jensen et al. 2001 with the dipole and tabulates recovered against true coefficients:
-  the dipole's own bias, since the walk solves the transport the dipole approximates.
+* :func:`model_bias_table` fits captures of the measured media of Jensen et al. 2001 made
+  by a transport solver (the photon random walk, ``generator="walk"``, or Mitsuba 3
+  volumetric path tracing, ``generator="volpath"``) with the dipole and tabulates
+  recovered against true coefficients: the dipole's own bias, since both generators solve
+  the transport the dipole approximates.
 """
 
 from __future__ import annotations
@@ -22,8 +24,8 @@ from .fit import fit_dipole
 from .profile import measure_profile
 from .synthetic import Camera, default_pixel_size, dipole_capture
 
-__all__ = ["COVERAGE_TARGET", "BiasRow", "CoverageResult", "coverage_study", "model_bias_table",
-           "bias_table_text"]
+__all__ = ["BIAS_GENERATORS", "COVERAGE_TARGET", "BiasRow", "CoverageResult", "coverage_study",
+           "model_bias_table", "bias_table_text"]
 
 #: Fraction of parameters whose truth must lie inside its 95 % interval.
 COVERAGE_TARGET = 0.90
@@ -31,6 +33,8 @@ COVERAGE_TARGET = 0.90
 #: the measured media without the extremes (Spectralon, Ketchup blue).
 TRUTH_SIGMA_A = (0.003, 0.5)
 TRUTH_SIGMA_S_PRIME = (0.3, 5.0)
+#: Transport solvers :func:`model_bias_table` can make its captures with.
+BIAS_GENERATORS = ("walk", "volpath")
 
 
 @dataclass
@@ -121,6 +125,10 @@ class BiasRow:
     pixel_size_mm: float
     photons: int
     seconds: float
+    generator: str = "photon random walk"
+    spp: int = 0
+    beam_radius_mm: float = 0.0
+    relative_standard_error: list | None = None
 
     def to_json(self) -> dict:
         """JSON-able dict."""
@@ -130,34 +138,51 @@ class BiasRow:
 def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
                      rotations: int = 16, seed: int = 0, walkers: int | None = None,
                      r_min_transport_lengths=(0.0,), progress: bool = False,
-                     on_row=None) -> list[BiasRow]:
-    """Fit random-walk captures of measured media with the dipole; recovered against true.
+                     on_row=None, generator: str = "walk", spp: int = 4096,
+                     pass_spp: int | None = None,
+                     beam_radius_fraction: float | None = None) -> list[BiasRow]:
+    """Fit transport-solver captures of measured media with the dipole; recovered against true.
 
     Each capture: ``size`` x ``size`` pixels spanning ~12 diffusion lengths
     (:func:`~translucent.fitting.synthetic.default_pixel_size`), eta known, exposure
-    unknown, a pencil beam, the default camera. The walk and the dipole share the boundary
-    (eta), the coefficients and g = 0; what differs is transport against diffusion.
+    unknown, the default camera; a pencil beam for the walk, a Gaussian beam of
+    ``beam_radius_fraction`` of the field for volpath (which needs one; the fitter
+    convolves its model with it). The solver and the dipole share the boundary (eta), the
+    coefficients and g = 0; what differs is transport against diffusion.
 
     Parameters
     ----------
     materials : sequence of str, optional
         Catalogue names (default: all twelve).
     photons : int
-        Photons per channel.
+        Photons per channel (walk).
     size, rotations, seed, walkers, progress
     r_min_transport_lengths : sequence of float
         Fit each capture once per entry, leaving out the annuli inside that many transport
         lengths (1 / sigma_t' of the least scattering channel): 0 fits the whole profile,
         3 only where diffusion holds.
     on_row : callable, optional
-        Called with each :class:`BiasRow` as it is done (progress reports).
+        Called with each :class:`BiasRow` as it is done (progress reports, incremental
+        output).
+    generator : {"walk", "volpath"}
+        The photon random walk (:func:`~translucent.fitting.random_walk.walk_capture`) or
+        Mitsuba volpath (:func:`~translucent.fitting.volpath_capture.volpath_capture`).
+    spp : int
+        Samples per pixel (volpath).
+    pass_spp : int, optional
+        Samples per pixel of one render pass (volpath; default
+        :data:`~translucent.fitting.volpath_capture.DEFAULT_PASS_SPP`).
+    beam_radius_fraction : float, optional
+        Beam 1/e^2 radius as a fraction of the field width (volpath; default
+        :data:`~translucent.fitting.volpath_capture.DEFAULT_BEAM_FRACTION`).
 
     Returns
     -------
     list of BiasRow
     """
-    from .random_walk import walk_capture
-
+    if generator not in BIAS_GENERATORS:
+        raise InputError(f"must be one of {', '.join(BIAS_GENERATORS)}", field="generator",
+                         value=generator)
     names = measured_medium_names() if materials is None else list(materials)
     rng = np.random.default_rng(seed)
     rows = []
@@ -165,9 +190,11 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
         began = time.perf_counter()
         material = measured_medium(name)
         pixel = default_pixel_size(material, size)
-        pixels, spec, _ = walk_capture(material, size=size, pixel_size_mm=pixel,
-                                       photons=photons, rotations=rotations,
-                                       seed=int(rng.integers(2**31)))
+        pixels, spec, extra = _solver_capture(generator, material, size=size, pixel=pixel,
+                                              photons=photons, rotations=rotations, spp=spp,
+                                              pass_spp=pass_spp,
+                                              beam_radius_fraction=beam_radius_fraction,
+                                              seed=int(rng.integers(2**31)), progress=progress)
         capture = Capture(spec, pixels)
         for lengths in r_min_transport_lengths:
             r_min = float(lengths * np.max(material.mean_free_path))
@@ -175,18 +202,39 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
             try:
                 profile = measure_profile(capture, r_min_mm=r_min)
             except InputError:  # nothing left outside r_min: a row that says so
-                row = _empty_row(material, r_min, pixel, photons, began)
+                row = _empty_row(material, r_min, pixel, photons, began, extra)
             else:
                 result = fit_dipole(capture, walkers=walkers, seed=fit_seed, progress=progress,
                                     profile=profile)
-                row = _bias_row(material, result, r_min, pixel, photons, began)
+                row = _bias_row(material, result, r_min, pixel, photons, began, extra)
             rows.append(row)
             if on_row is not None:
                 on_row(row)
     return rows
 
 
-def _bias_row(material, result, r_min, pixel, photons, began) -> BiasRow:
+def _solver_capture(generator, material, *, size, pixel, photons, rotations, spp, pass_spp,
+                    beam_radius_fraction, seed, progress):
+    """Make one capture for the bias table: (pixels, spec, BiasRow fields of the solver)."""
+    if generator == "walk":
+        from .random_walk import walk_capture
+
+        pixels, spec, _ = walk_capture(material, size=size, pixel_size_mm=pixel,
+                                       photons=photons, rotations=rotations, seed=seed)
+        return pixels, spec, {"photons": int(photons)}
+    from .volpath_capture import DEFAULT_BEAM_FRACTION, DEFAULT_PASS_SPP, volpath_capture
+
+    fraction = DEFAULT_BEAM_FRACTION if beam_radius_fraction is None else beam_radius_fraction
+    beam = fraction * size * pixel
+    pixels, spec, render = volpath_capture(material, size=size, pixel_size_mm=pixel, spp=spp,
+                                           pass_spp=pass_spp or DEFAULT_PASS_SPP,
+                                           beam_radius_mm=beam, seed=seed, progress=progress)
+    return pixels, spec, {"photons": 0, "generator": "mitsuba volpath", "spp": render.spp,
+                          "beam_radius_mm": beam,
+                          "relative_standard_error": render.relative_standard_error().tolist()}
+
+
+def _bias_row(material, result, r_min, pixel, photons, began, extra=None) -> BiasRow:
     """One row of the bias table from a fit."""
     get = result.parameter
     return BiasRow(
@@ -200,10 +248,10 @@ def _bias_row(material, result, r_min, pixel, photons, began) -> BiasRow:
                                get(f"sigma_s_prime[{c}]").high68] for c in "RGB"],
         status=[s.status for s in result.parameters[:6]], converged=result.converged,
         tau_max=float(result.chains[0].tau.max()), r_min_mm=r_min, pixel_size_mm=pixel,
-        photons=int(photons), seconds=time.perf_counter() - began)
+        **{"photons": int(photons), **(extra or {})}, seconds=time.perf_counter() - began)
 
 
-def _empty_row(material, r_min, pixel, photons, began) -> BiasRow:
+def _empty_row(material, r_min, pixel, photons, began, extra=None) -> BiasRow:
     """Return a row for a capture with no usable annulus outside ``r_min``."""
     nan3 = [float("nan")] * 3
     return BiasRow(material=material.name, true_sigma_a=material.sigma_a.tolist(),
@@ -211,7 +259,8 @@ def _empty_row(material, r_min, pixel, photons, began) -> BiasRow:
                    true_sigma_s_prime=material.sigma_s_prime.tolist(), fit_sigma_s_prime=nan3,
                    fit_sigma_s_prime_68=[nan3[:2]] * 3, status=["no usable annuli"] * 6,
                    converged=False, tau_max=float("nan"), r_min_mm=r_min, pixel_size_mm=pixel,
-                   photons=int(photons), seconds=time.perf_counter() - began)
+                   **{"photons": int(photons), **(extra or {})},
+                   seconds=time.perf_counter() - began)
 
 
 def _ratios(fit, true, status) -> str:
