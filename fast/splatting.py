@@ -17,13 +17,43 @@ lookup table of Eq. 14, which depends on the material alone). Four steps (Sect. 
    which samples each pixel cell at its centre: see there why).
 4. *Splat accumulation* by bilateral upsampling (Eq. 17), then :math:`F_t/\pi` (Eq. 7).
 
-The loops run compiled (:mod:`translucent.fast.splatting_kernels`, numba): each splat
-visits, row by row, the pixels of the disc that bounds its range's projection, skips runs
-of 16 pixels whose bounding box is out of range, and evaluates Eq. 8-9 in float32. Measured
-on this shared 2-core CPU (``translucent bench splatting``, heterogeneous scene, 800 x 600,
-512^2): about 2.5 CPU seconds a frame with both accelerations (about 200 million
-sample-pixel pairs visited), 5.7x less than without acceleration; the 10 frames per second
-of the paper's GPU are out of reach here.
+Where a frame's sample-pixel pairs come from (heterogeneous scene, 800 x 600, 512^2
+irradiance buffer, epsilon = 0.001). Eq. 13 gives every sample one annulus
+:math:`[R^k_{min}, R^k_{max})` at *every* level, the annuli disjoint ("different
+nonoverlapping scattering ranges", Sect. 4), so a sample is splatted at all three levels,
+not at one chosen per sample. Its range :math:`R_P` (8.8-10.6 mm here, 0.22-0.26 of the
+bounding-sphere radius) spans a median 79 pixels at level 0, so :math:`T^1 \approx 39` and
+:math:`T^2 \approx 20` pixels, where Eq. 14's table gives :math:`\bar R = 0.10` and
+:math:`0.21`. Per level (median projected radii, pairs in range per sample, 158 k samples):
+level 0 renders 0-8 pixels (94 pairs), level 1 4-8 of its pixels (61), level 2 4-20 of its
+pixels (546): level 2 holds 96 % of each disc's area, hence three quarters of the pairs,
+although it has 16 times fewer pixels than level 0. This is the paper's method (its
+Table 2 gives level 2 two thirds of the time for its longest ranges, the Bird). Read with
+the left-end sums of the paper's notation instead of cell centres, Eq. 14 would keep the
+coarse levels unused below about 70 pixels across the range (see
+:func:`minimal_rendering_radius_table`), and every pair would be splatted at level 0.
+
+Departures from the paper, each a knob or documented where it is made:
+
+* Eq. 14's sums sample each cell at its centre (:func:`minimal_rendering_radius_table`);
+  no level renders a range narrower than :data:`MIN_LEVEL_RESOLUTION` of its pixels.
+* Eq. 11 with a perspective (point-light) irradiance buffer is tested per texel with its
+  footprint (:func:`select_irradiance_samples`); its RGB range is read as ``sampling_range``
+  says (:data:`SAMPLING_RANGES`), and splats stop at the longest channel's range so that
+  every channel keeps 95 % of its energy.
+* Eq. 17's material weight measures :math:`|R_{P_o} - R_{P_j}|` in units of :math:`R_w`,
+  like the depth weight, so that :math:`\lambda_m` is unit-free.
+* Optional, off by default (``level_sampling``, :func:`level_sample_masks`): each coarse
+  splatting level may take irradiance samples as sparse as its own pixels. The paper
+  selects once for all levels, though it mentions running the selection "several times
+  ... to generate splatting kernels for each scale".
+
+The loops run compiled (:mod:`translucent.fast.splatting_kernels`, numba): each level is
+cut into tiles of 8 x 8 pixels, each sample is binned to the tiles its range can reach
+(the disc bounding its projection, less tiles whose bounding box lies out of range), and
+each tile evaluates Eq. 8-9 in float32 for its samples, tiles in parallel. Measured on this
+shared 2-core CPU: see ``translucent bench splatting`` (reports/bench/splatting.py) and
+MEASURED below.
 
 Units: positions in scene units, profiles in mm^-2 (``scene.mm_per_unit`` converts);
 radiance in the units of the lights per scene unit squared, as the reference renders.

@@ -313,7 +313,7 @@ def splat_tiles(out, position, texel, table, step_inverse, sample_position, samp
         at = np.empty(lanes, np.float32)
         inside = np.empty(lanes, np.int32)
         lane = np.empty(lanes, np.int32)
-        value = np.empty((3, lanes), np.float32)
+        value = np.zeros((3, lanes), np.float32)
         pairs = 0
         for j in range(start[tile], start[tile + 1]):
             s = members[j]
@@ -349,9 +349,12 @@ def splat_tiles(out, position, texel, table, step_inverse, sample_position, samp
                     w * (flat[a + np.uint64(4)] + flat[b + np.uint64(4)])
                 value[2, m] = (flat[a + np.uint64(2)] + flat[b + np.uint64(2)]) + \
                     w * (flat[a + np.uint64(5)] + flat[b + np.uint64(5)])
+            # whole vectors of 16 (past n: stale values, never accumulated), so that short
+            # lists do not fall to the compiler's scalar remainder loop
+            padded = min((n + 15) & ~15, lanes)
             for c in range(3):  # vectorised: exponentials
                 flux = sample_flux[s, c]
-                for m in range(n):
+                for m in range(padded):
                     value[c, m] = exp32(value[c, m]) * flux
             for m in range(n):
                 i = lane[m]
