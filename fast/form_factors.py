@@ -17,6 +17,7 @@ Entries below a threshold are dropped (the paper thresholds small fractions too,
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +39,11 @@ __all__ = [
 #: angle and each lies within this fraction of the patch size off the other's plane.
 COPLANAR_DEGREES = 0.5
 COPLANAR_OFFSET = 1e-6
+
+#: Fraction of the form-factor energy (mean row sum) a threshold may drop before
+#: :func:`form_factors` warns: the inter-reflected light changes by about as much, ten times
+#: the radiosity solver's 0.5 % tolerance (a choice, not a measurement).
+DROPPED_ENERGY_WARNING = 0.05
 
 #: Ray origins are moved this fraction of the patch size along the normal, so that a ray
 #: does not hit the patch it starts on through round-off.
@@ -366,7 +372,13 @@ def form_factors(scene, patches: Patches, *, rays_per_patch: int = 256,
     rays_per_patch : int
         Rays from each patch, >= 1; the smallest non-zero entry is ``1 / rays_per_patch``.
     threshold : float
-        Entries below it are set to 0 (the paper's thresholding of small fractions).
+        Entries below it are set to 0 (the paper's thresholding of small fractions). A
+        ray-cast entry is a count of rays times ``1 / rays_per_patch``, and most of a row's
+        energy sits in entries hit by one or two rays: on the 25,080-patch Cornell box (256
+        rays) a threshold of 1.5 / 256 keeps 3 % of the entries and changes B by 47 %
+        (``translucent bench radiosity``). Unlike the paper's hemicube factors, small
+        ray-cast entries are not small transport; a threshold that drops more than
+        :data:`DROPPED_ENERGY_WARNING` of the energy warns.
     seed : int
         Seed of the ray directions and origins.
     batch : int
@@ -421,6 +433,13 @@ def form_factors(scene, patches: Patches, *, rays_per_patch: int = 256,
              "dropped_energy": float(np.mean(row_sum_before - row_sum_after)),
              "max_row_sum": float(row_sum_after.max()) if count else 0.0,
              "bytes": int(matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes)}
+    lost = facts["dropped_energy"] / max(float(np.mean(row_sum_before)), 1e-300)
+    if threshold > 0 and lost > DROPPED_ENERGY_WARNING:
+        warnings.warn(f"form_factor_threshold = {threshold:g} drops {lost:.1%} of the "
+                      f"form-factor energy (mean row sum): ray-cast entries are multiples of "
+                      f"1 / rays_per_patch = {1.0 / rays:.4g}, and the far field is carried by "
+                      "single-ray entries; lower the threshold or cast more rays",
+                      stacklevel=2)
     return matrix, facts
 
 

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 from translucent.errors import InputError
 from translucent.fast.form_factors import (
+    DROPPED_ENERGY_WARNING,
     build_patches,
     form_factors,
     needs_form_factors,
@@ -144,12 +145,24 @@ def test_threshold_drops_small_entries_and_reports_the_energy():
     scene = _inside_sphere(1)
     patches = build_patches(scene)
     full, _ = form_factors(scene, patches, rays_per_patch=256, seed=2)
-    cut, facts = form_factors(scene, patches, rays_per_patch=256, seed=2, threshold=0.02)
+    # every entry of an 80-patch sphere is near 1 / 80, below 0.02: most energy goes
+    with pytest.warns(UserWarning, match="form_factor_threshold = 0.02 drops"):
+        cut, facts = form_factors(scene, patches, rays_per_patch=256, seed=2, threshold=0.02)
     assert cut.nnz < full.nnz
     assert cut.data.min() >= 0.02
     lost = full.sum() / len(patches) - cut.sum() / len(patches)
     assert facts["dropped_energy"] == pytest.approx(lost, rel=1e-5)
     assert facts["dropped_entries"] == full.nnz - cut.nnz
+
+
+def test_a_threshold_above_one_ray_drops_the_far_field_and_warns():
+    # 1,280 patches, 64 rays each: nearly every entry is a single ray's 1 / 64
+    scene = _inside_sphere(3)
+    patches = build_patches(scene)
+    with pytest.warns(UserWarning, match="drops .*% of the form-factor energy.*1 / "
+                                         "rays_per_patch = 0.01562"):
+        _, facts = form_factors(scene, patches, rays_per_patch=64, seed=1, threshold=1.5 / 64)
+    assert facts["dropped_energy"] > DROPPED_ENERGY_WARNING
 
 
 def test_form_factor_knobs_are_checked():
