@@ -39,9 +39,23 @@ Solving (Sect. 5.3): Jacobi iteration :math:`B \leftarrow SE + SFB` (the paper's
 GMRES / BiCGSTAB from :mod:`scipy.sparse.linalg`, to a relative residual
 :math:`\|SE - (I - SF)B\| / \|SE\|` of 0.5 %. Before any iteration the condition of Eq. 15 is
 checked; a material that breaks it raises :class:`~translucent.errors.InputError` naming
-the object, patch, channel and column sum. When :math:`3P^2` float32 numbers fit the
-``transfer_budget_mb`` knob, :math:`T = (I - SF)^{-1}S` is precomputed and relighting is one
-matrix-vector product per channel (Sect. 6.4).
+the object, patch, channel and column sum. A Jacobi sweep's change is the residual of the
+iterate it started from, so that iterate is returned with its :math:`FB` (which the image
+needs): every product of SF advances or checks, none is spent twice. Successive frames
+start from the earlier frames' solutions projected on the new irradiance
+(:meth:`RadiosityState.solve`): 2 products per frame on a sliding light.
+
+Relighting with :math:`T = (I - SF)^{-1}S` (Sect. 6.4): T is dense, :math:`3P^2` float32, and
+is precomputed (at the first relighting after a material change, knob ``transfer="auto"``)
+only when that fits the ``transfer_budget_mb`` knob: P <= 6,688 at the default 512 MB; the
+dense solve needs about five times that while it runs. It does not pay on this CPU:
+at 6,270 patches T took 187 s and relit at 13.5 fps against 14.3 fps for the iterative
+solve (``translucent bench radiosity``, load average 8-10 on 2 cores): a frame reads
+:math:`12P^2` bytes of T against about 8 bytes per form factor and product for Jacobi.
+Neither does a low-rank T: the inter-reflection operator :math:`F(I - SF)^{-1}S` of the
+25,080-patch box has a flat spectrum (ray-cast F, near-field corners), and its randomized
+rank-128 approximation misses B by 24 % (rank 32: 35 %) and saves at most two products as
+a starting guess (bench).
 
 Images: direct lighting of diffuse surfaces is evaluated per pixel through the G-buffer
 (the paper's hybrid that removes per-patch shadow artifacts), the global part
@@ -1278,7 +1292,13 @@ class RadiosityState:
     # -- solving -----------------------------------------------------------------------
 
     def transfer_fits(self) -> bool:
-        """Return True when 3 P^2 float32 numbers fit ``transfer_budget_mb`` (the rule for T)."""
+        """Return True when 3 P^2 float32 numbers fit ``transfer_budget_mb`` (the rule for T).
+
+        Memory decides, since T's cost is its size: 12 P^2 bytes read per frame and an
+        O(P^3) solve that holds about five P x P float64 arrays at once. Where it fits it
+        is measured as fast as the warm-started iterative solve, not faster (the module
+        docstring has the numbers); set ``transfer="never"`` to skip its precomputation.
+        """
         size = len(self.patches)
         return 3 * size * size * 4 <= self.knobs["transfer_budget_mb"] * 2**20
 
