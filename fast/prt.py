@@ -1134,6 +1134,7 @@ class PRTState:
         self.basis = _basis(self.knobs)
         self._lighting: dict = {}
         self._vertex_vectors: dict = {}
+        self._product_buffers: dict = {}
         self._frames_lit: dict = {}
         self._pixels: dict | None = None
         self._environment: dict = {}
@@ -1177,15 +1178,23 @@ class PRTState:
 
         Lights of one colour make E one spectrum times one scalar field: then a single
         channel is multiplied (the matrix is read once either way, for a third of the
-        arithmetic) and the colour applied afterwards.
+        arithmetic) and the colour applied afterwards. The products are written into
+        buffers kept per object (no allocation per frame); the returned array is a copy
+        only the caller holds.
         """
         irradiance_w = transfer.samples.to_wavelets(irradiance)
         shape = (transfer.basis_terms + 1, transfer.row_count)
         colour = _single_colour(irradiance_w)
+        channels = () if colour is not None else (3,)
+        key = (transfer.name, channels)
+        if key not in self._product_buffers:
+            self._product_buffers[key] = np.empty((transfer.transfer.rows,) + channels,
+                                                  dtype=np.float32)
+        products = self._product_buffers[key]
         if colour is not None:
-            products = transfer.transfer.product(irradiance_w @ colour)
+            transfer.transfer.product(irradiance_w @ colour, out=products)
             return colour[:, None, None] * products.reshape(shape)[None]
-        products = transfer.transfer.product(irradiance_w)
+        transfer.transfer.product(irradiance_w, out=products)
         return np.ascontiguousarray(products.T.reshape((3,) + shape))
 
     def relight(self, transfer: ObjectTransfer, lights, eta: float) -> None:
