@@ -680,7 +680,7 @@ def render_exitance(material: Dipole, *, shape=(96, 96), pixel_size_mm: float = 
                 image = np.asarray(mi.render(scene, spp=per_pass, seed=int(pass_seed)),
                                    dtype=np.float64)[..., :3]
                 rendered = image[..., targets] if source is None else image[..., :1]
-                images[index, ..., targets] = scale * rendered
+                images[index][..., targets] = scale * rendered
                 if bar is not None:
                     bar.update(1)
     finally:

@@ -57,6 +57,9 @@ def add_arguments(parser):
                         default="exitance",
                         help="volpath: measure the exitance on the slab face (default) or the "
                              "radiance along the normal converted by the diffusion factor")
+    parser.add_argument("--channels", choices=("separate", "rgb"), default="separate",
+                        help="volpath: one grey-medium render per channel (default) or one "
+                             "RGB render of the chromatic medium (fireflies in the far field)")
     parser.add_argument("--peak-signal", type=float, default=20000.0,
                         help="stored value above black of the brightest pixel before "
                              "clipping (sets the exposure)")
@@ -107,7 +110,8 @@ def run(args) -> int:
 
         stored, spec, render = volpath_capture(
             material, spp=args.spp, pass_spp=args.pass_spp or DEFAULT_PASS_SPP,
-            sensor=args.sensor.replace("-", " "), progress=True, **options)
+            sensor=args.sensor.replace("-", " "), channels=args.channels, progress=True,
+            **options)
         detail = (f"volpath {render.spp} spp in {render.passes} passes on {render.variant}, "
                   f"{render.seconds:.1f} s, total exitance {render.total.round(4).tolist()}, "
                   f"relative standard error "

@@ -52,35 +52,46 @@ def _critical(count, dof):
     return stats.t.ppf(1.0 - per_test / 2.0, dof)
 
 
-@pytest.mark.parametrize(("eta", "side", "thickness_mm"), [
-    (1.0, "reflection", None), (1.3, "reflection", None), (1.3, "transmission", 1.0)])
-def test_agrees_with_the_photon_random_walk_in_annuli(eta, side, thickness_mm):
-    medium = Dipole(eta=eta, **SHORT_PATHS)
+def _walk_comparison(medium, *, side="reflection", thickness_mm=None, channels=(0,),
+                     **render_options):
+    """z of volpath minus walk annulus means, (channels, annuli), and the critical value."""
     shape, pixel, centre, beam = (24, 24), 0.25, (14.0, 11.0), 0.5
     render = render_exitance(medium, shape=shape, pixel_size_mm=pixel, incident_px=centre,
                              beam_radius_mm=beam, spp=PASSES * 64, pass_spp=64, seed=11,
-                             side=side, thickness_mm=thickness_mm)
+                             side=side, thickness_mm=thickness_mm, **render_options)
     assert render.passes == PASSES
     film = Film(shape, pixel, centre, side)
     walks = np.stack([photon_random_walk(medium, photons=40000, beam_radius_mm=beam,
                                          film=film, rotations=8, seed=seed,
-                                         thickness_mm=thickness_mm,
-                                         channels=(0,)).film[..., 0]
+                                         thickness_mm=thickness_mm, channels=channels).film
                       for seed in range(PASSES)])
     edges = np.array([0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0])
     masks = _annuli(shape, centre, pixel, edges)
-    critical = _critical(len(masks), PASSES - 1)
-    volpath = render.exitance[..., 0]
-    volpath_se = render.standard_error[..., 0]
-    z = []
-    for mask in masks:
-        difference = volpath[mask].mean() - walks.mean(axis=0)[mask].mean()
-        walk_se = walks[:, mask].mean(axis=1).std(ddof=1) / np.sqrt(PASSES)
-        volpath_mean_se = np.sqrt((volpath_se[mask] ** 2).sum()) / mask.sum()
-        z.append(difference / np.hypot(walk_se, volpath_mean_se))
+    z = np.zeros((len(channels), len(masks)))
+    for i, c in enumerate(channels):
+        for j, mask in enumerate(masks):
+            walk = walks[..., c]
+            difference = render.exitance[..., c][mask].mean() - walk.mean(axis=0)[mask].mean()
+            walk_se = walk[:, mask].mean(axis=1).std(ddof=1) / np.sqrt(PASSES)
+            volpath_se = np.sqrt((render.standard_error[..., c][mask] ** 2).sum()) / mask.sum()
+            z[i, j] = difference / np.hypot(walk_se, volpath_se)
+    return z, _critical(z.size, PASSES - 1), render
+
+
+@pytest.mark.parametrize(("eta", "side", "thickness_mm"), [
+    (1.0, "reflection", None), (1.3, "reflection", None), (1.3, "transmission", 1.0)])
+def test_agrees_with_the_photon_random_walk_in_annuli(eta, side, thickness_mm):
+    z, critical, render = _walk_comparison(Dipole(eta=eta, **SHORT_PATHS), side=side,
+                                           thickness_mm=thickness_mm)
     assert np.all(np.abs(z) < critical), np.round(z, 2)
-    # the channels are one grey medium: they must be the same image
+    # the channels are one grey medium, rendered once
     np.testing.assert_array_equal(render.exitance[..., 1], render.exitance[..., 0])
+
+
+def test_a_chromatic_medium_agrees_with_the_walk_in_every_channel():
+    medium = Dipole(sigma_a=[1.0, 0.5, 2.0], sigma_s_prime=[1.0, 2.0, 1.0], eta=1.3)
+    z, critical, _ = _walk_comparison(medium, channels=(0, 1, 2))
+    assert np.all(np.abs(z) < critical), np.round(z, 2)
 
 
 def test_the_comparison_has_teeth():
@@ -185,14 +196,14 @@ def test_volpath_capture_writes_truth_and_puts_the_beam_at_the_incident_point(tm
 def test_capture_command_renders_volpath(tmp_path):
     from translucent.reports.cli import main
 
-    out = tmp_path / "skin1.json"
-    code = main(["capture", "skin1", "--generator", "volpath", "--spp", "8", "--pass-spp",
+    out = tmp_path / "ketchup.json"
+    code = main(["capture", "ketchup", "--generator", "volpath", "--spp", "8", "--pass-spp",
                  "4", "--size", "16", "--seed", "3", "--out", str(out)])
     assert code == 0
     sidecar = json.loads(out.read_text())
     assert sidecar["synthetic"]["generator"] == "mitsuba volpath"
     assert (tmp_path / sidecar["image"]).is_file()
-    assert main(["capture", "skin1", "--generator", "volpath", "--beam-radius", "0",
+    assert main(["capture", "ketchup", "--generator", "volpath", "--beam-radius", "0",
                  "--size", "16", "--out", str(out)]) == 2
 
 
@@ -232,6 +243,7 @@ def test_normal_radiance_factor_at_index_match_is_pi():
     ({"pixel_size_mm": 0.0}, "must be > 0"),
     ({"incident_px": (40.0, 2.0)}, "must lie inside the 16 x 16 image"),
     ({"sensor": "camera"}, "must be one of exitance, normal radiance"),
+    ({"channels": "spectral"}, "must be one of separate, rgb"),
 ])
 def test_bad_input_is_refused(changes, message):
     options = dict(shape=(16, 16), pixel_size_mm=0.1, beam_radius_mm=0.2, spp=4)
