@@ -8,6 +8,10 @@ the priors of :mod:`translucent.fitting.models` are uniform):
   prior's 68 % interval: the data say little beyond the prior;
 * ``upper limit`` / ``lower limit``: the 95 % interval reaches within
   :data:`EDGE_FRACTION` of a prior bound: only one side is constrained;
+* ``multimodal``: the samples fall into two or more modes of the posterior (the local
+  maxima the sampler started from), each holding at least :data:`MODE_SHARE` of them, and
+  the parameter tells those modes apart (their 68 % intervals do not overlap): the data
+  allow two or more separate values, and the overall 95 % interval spans them;
 * ``constrained`` otherwise; ``nuisance`` for the exposure scale.
 """
 
@@ -31,6 +35,9 @@ EDGE_FRACTION = 0.02
 #: SubEdit knots (smoothness prior, no informative box): a 68 % interval wider than this
 #: (nats) is reported as weakly constrained.
 KNOT_WIDTH_NATS = 1.0
+#: A mode holding fewer samples than this cannot move a 68 % interval much and is not
+#: reported (it still widens the 95 % interval when it holds more than 2.5 %).
+MODE_SHARE = 0.05
 
 
 @dataclass(frozen=True)
@@ -49,6 +56,9 @@ class ParameterSummary:
         Prior range, physical units.
     width_ratio : float
         68 % posterior width over the prior's 68 % width (sampling space).
+    modes : tuple of (float, float)
+        For a ``multimodal`` parameter: the median within each mode (physical units) and
+        the share of the samples in it, heaviest first; empty otherwise.
     """
 
     name: str
@@ -61,6 +71,7 @@ class ParameterSummary:
     status: str
     prior: tuple[float, float]
     width_ratio: float
+    modes: tuple = ()
 
     def describe(self) -> str:
         """One line for the terminal."""
@@ -73,12 +84,35 @@ class ParameterSummary:
         elif self.status == "weakly constrained":
             text += (f"  [weakly constrained: 68 % interval {self.high68 - self.low68:.2g} "
                      "nats wide]")
+        elif self.status == "multimodal":
+            text += "  [multimodal: " + ", ".join(f"{median:.3g} ({share:.0%})"
+                                                 for median, share in self.modes) + "]"
         elif self.status not in ("constrained", "nuisance"):
             text += f"  [{self.status}: posterior {self.width_ratio:.0%} as wide as the prior]"
         return text
 
 
-def summarise_posterior(model, samples) -> list[ParameterSummary]:
+def _separated_modes(values, labels):
+    """Per-mode (median, share) of one coordinate when its modes are told apart, else ().
+
+    Only modes holding at least :data:`MODE_SHARE` of the samples count; the coordinate
+    separates them when two of their 68 % intervals do not overlap.
+    """
+    if labels is None:
+        return ()
+    counts = np.bincount(labels)
+    heavy = [k for k in np.argsort(-counts) if counts[k] >= MODE_SHARE * labels.size]
+    if len(heavy) < 2:
+        return ()
+    intervals = {k: np.percentile(values[labels == k], [16, 50, 84]) for k in heavy}
+    apart = any(intervals[j][2] < intervals[k][0] or intervals[k][2] < intervals[j][0]
+                for i, j in enumerate(heavy) for k in heavy[i + 1:])
+    if not apart:
+        return ()
+    return tuple((intervals[k][1], float(counts[k] / labels.size)) for k in heavy)
+
+
+def summarise_posterior(model, samples, labels=None) -> list[ParameterSummary]:
     """Median, 68 % and 95 % intervals and the verdict of every parameter of ``model``.
 
     Parameters
@@ -86,24 +120,32 @@ def summarise_posterior(model, samples) -> list[ParameterSummary]:
     model : ProfileModel
     samples : ndarray, shape (m, ndim)
         Flat chain in the sampling space.
+    labels : ndarray of int, shape (m,), optional
+        The posterior mode of each sample (``ChainResult.sample_modes``); without it no
+        parameter is called ``multimodal``.
 
     Returns
     -------
     list of ParameterSummary
     """
     samples = np.atleast_2d(samples)
+    labels = None if labels is None else np.asarray(labels, dtype=int)
     quantiles = np.percentile(samples, [50, 16, 84, 2.5, 97.5], axis=0)
     out = []
     for i, info in enumerate(model.parameters):
         q = quantiles[:, i]
         width = info.upper - info.lower
         ratio = float((q[2] - q[1]) / (0.68 * width)) if width > 0 else 0.0
+        modes = ()
         if info.kind == "exposure":
             status = "nuisance"
         elif info.kind == "ln_p":
             status = "constrained" if q[2] - q[1] <= KNOT_WIDTH_NATS else "weakly constrained"
         elif ratio > UNCONSTRAINED_RATIO:
             status = "unconstrained"
+        elif modes := _separated_modes(samples[:, i], labels):
+            status = "multimodal"
+            modes = tuple((float(info.to_physical(median)), share) for median, share in modes)
         elif q[3] - info.lower < EDGE_FRACTION * width:
             status = "upper limit"
         elif info.upper - q[4] < EDGE_FRACTION * width:
@@ -113,7 +155,7 @@ def summarise_posterior(model, samples) -> list[ParameterSummary]:
         physical = info.to_physical(q)
         prior = tuple(float(v) for v in info.to_physical([info.lower, info.upper]))
         out.append(ParameterSummary(info.name, info.unit, *map(float, physical), status,
-                                    prior, ratio))
+                                    prior, ratio, modes))
     return out
 
 
