@@ -109,6 +109,7 @@ __all__ = [
     "effective_rendering_ranges",
     "splat_level",
     "bilateral_upsample",
+    "upsampling_profile_factors",
     "brute_force_exitance",
     "gather_frame",
     "splat_frame",
@@ -137,6 +138,7 @@ DEFAULT_KNOBS: dict = {
     "buffers": "raster",            # G-buffers: "raster" (z-buffer) or "mitsuba" (ray queries)
     "sampling_range": "shortest",   # RGB reading of Eq. 11's range, one of SAMPLING_RANGES
     "level_sampling": 0.0,          # > 0: coarser samples for coarse splatting levels (pixels)
+    "profile_upsampling": False,    # Eq. 17 on B / sqrt(P_o): see upsampling_profile_factors
 }
 #: The splatting kernels: compiled loops (numba, the default: measured fastest on the CPU,
 #: see reports/bench/splatting.py), Dr.Jit (LLVM on the CPU, CUDA where a GPU is there) and
@@ -916,6 +918,44 @@ def bilateral_upsample(coarse: np.ndarray, coarse_level: SurfaceBuffer,
         lambda_m / scene_diameter)
 
 
+def upsampling_profile_factors(material: SubEditProfiles, inner: float) -> np.ndarray:
+    r"""Per-texel factors that carry a coarse level's exitance across material boundaries.
+
+    The exitance that levels coarser than k render, :math:`\sum_i
+    \sqrt{P_{x_o}(d)P_{x_i}(d)}\,E\Delta A` over :math:`d \ge R^{k+1}_{min}`, carries the
+    factor :math:`\sqrt{P_{x_o}(d)}` of the pixel's own texel, which changes abruptly where
+    the texture does; Eq. 17 of Chen et al. 2012 interpolates it as if it were smooth.
+    Divided by :math:`\sqrt{P_{x_o}(r^*)}` before the upsampling and multiplied by the
+    fine pixel's own after it, only the smooth remainder is interpolated. :math:`r^*` is
+    the radius that halves the energy of the mean normalised profile :math:`\bar P` (Eq.
+    15) over :math:`[\rho, 1]`, in units of the median effective range (the distances the
+    coarser levels render, weighted as they contribute). For a homogeneous material the
+    factors are equal and the upsampling is Eq. 17's. Not in the paper (the knob
+    ``profile_upsampling``, off by default).
+
+    Parameters
+    ----------
+    material : SubEditProfiles
+    inner : float
+        :math:`\rho`, the inner edge of the coarser levels' ranges as a fraction of
+        :math:`R_P` (the median :math:`R^{k+1}_{min}/R_P` over the samples), in [0, 1]
+        (clipped there; NaN reads as 0).
+
+    Returns
+    -------
+    ndarray (texels, 3)
+        :math:`\sqrt{P_x(r^* \operatorname{median} R_P)}`, mm^-1; 1 where the profile is 0
+        there.
+    """
+    grid = np.linspace(float(np.clip(np.nan_to_num(inner), 0.0, 1.0)), 1.0, 257)
+    energy = np.cumsum(material.mean_normalized_profile(grid) * grid)
+    median = np.interp(0.5 * energy[-1], energy, grid) if energy[-1] > 0 else grid[0]
+    radius = median * float(np.median(material.effective_scattering_range))
+    texels = np.arange(material.texel_count)
+    factors = np.sqrt(material.profile(np.full(material.texel_count, radius), texels))
+    return np.where(factors > 0, factors, 1.0)
+
+
 # ====================================================================== ground truth
 def brute_force_exitance(samples: IrradianceSamples, buffer: SurfaceBuffer,
                          material: SubEditProfiles, *, mm_per_unit: float,
@@ -1114,9 +1154,14 @@ def splat_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list[
     diameter = 2.0 * sphere_radius
     accumulated = exitance[-1]
     for k in range(len(pyramid) - 2, -1, -1):
-        accumulated = exitance[k] + bilateral_upsample(
-            accumulated, pyramid[k + 1], ranges_mm[texels[k + 1]] / mm_per_unit, pyramid[k],
-            ranges_mm[texels[k]] / mm_per_unit, scene_diameter=diameter,
+        coarse_factor = fine_factor = 1.0
+        if knobs["profile_upsampling"] and len(samples):
+            factors = upsampling_profile_factors(material, float(np.median(
+                bounds[0][:, k + 1] / np.maximum(bounds[0][:, -1], 1e-300))))
+            coarse_factor, fine_factor = factors[texels[k + 1]], factors[texels[k]]
+        accumulated = exitance[k] + fine_factor * bilateral_upsample(
+            accumulated / coarse_factor, pyramid[k + 1], ranges_mm[texels[k + 1]] / mm_per_unit,
+            pyramid[k], ranges_mm[texels[k]] / mm_per_unit, scene_diameter=diameter,
             lambda_z=knobs["lambda_z"], lambda_m=knobs["lambda_m"])
     lap("accumulation")
     radiance = _exitant_radiance(accumulated, camera_buffer, camera, material.eta)
@@ -1233,6 +1278,7 @@ def _check_knobs(knobs: dict) -> dict:
             raise InputError(f"must be one of {', '.join(map(repr, choices))}", field=name,
                              value=merged[name])
     merged["multiresolution"] = bool(merged["multiresolution"])
+    merged["profile_upsampling"] = bool(merged["profile_upsampling"])
     merged["adaptive"] = bool(merged["adaptive"])
     return merged
 
@@ -1544,6 +1590,9 @@ def add_approx_arguments(parser) -> None:
                         help="coarse splatting levels take irradiance samples as sparse as "
                              "this many of their pixels (default 0: the paper's one "
                              "selection for every level)")
+    parser.add_argument("--profile-upsampling", action="store_true",
+                        help="upsample coarse levels divided by each texel's profile factor "
+                             "(upsampling_profile_factors; default: Eq. 17 as published)")
     parser.add_argument("--material", default=None,
                         help="replace the translucent material: a built-in SubEdit name "
                              "(checker, veined_marble, wax_gradient) or a SubEdit .npz file")
@@ -1555,7 +1604,8 @@ def approx(scene, args) -> Image:
 
     knobs = {"irradiance_resolution": args.irradiance_resolution, "levels": args.levels,
              "multiresolution": not args.no_multiresolution, "adaptive": not args.no_adaptive,
-             "backend": args.backend, "level_sampling": args.level_sampling}
+             "backend": args.backend, "level_sampling": args.level_sampling,
+             "profile_upsampling": args.profile_upsampling}
     material = None
     if args.material:
         material = builtin_subedit(args.material) if args.material in BUILTIN_SUBEDIT \

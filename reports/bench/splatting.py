@@ -20,13 +20,15 @@ Error is the relative L1 difference ``sum |test - truth| / sum truth`` over the 
 RGB values. Most of it is common to every setting: each profile is splatted only up to its
 effective range (95 % of its energy, Eq. 13), about 2.4 % of the frame on the
 heterogeneous scene; the accelerations add to it. The comparison "at equal error" is
-therefore made over a sweep of the accelerated method's accuracy knobs (``--epsilons``,
-Eq. 14's tolerance, and ``--level-samplings``, the per-level irradiance sampling of
-:func:`translucent.fast.splatting.level_sample_masks`): among the rows with both
-accelerations, the fastest whose error is at most :data:`EQUAL_ERROR_RATIO` times that of
-no acceleration is compared with no acceleration, in CPU seconds per frame (the steadier
-figure on a shared machine) and in wall seconds. The load average is printed with the
-results, since other work on the machine slows the wall clock.
+therefore made over a sweep of the accelerated method's accuracy knobs: ``--epsilons``
+(Eq. 14's tolerance), ``--level-samplings`` (the per-level irradiance sampling of
+:func:`translucent.fast.splatting.level_sample_masks`), and Eq. 17 with or without the
+profile factors of :func:`translucent.fast.splatting.upsampling_profile_factors`. Among
+the rows with both accelerations, the fastest whose error is at most
+:data:`EQUAL_ERROR_RATIO` times that of no acceleration is compared with no acceleration,
+in CPU seconds per frame (the steadier figure on a shared machine) and in wall seconds.
+The load average is printed with the results, since other work on the machine slows the
+wall clock.
 """
 
 from __future__ import annotations
@@ -78,13 +80,16 @@ def add_arguments(parser):
                         help="irradiance buffer side of the small frame (default 96)")
     parser.add_argument("--settings", default=",".join(SETTINGS),
                         help="comma-separated subset of the settings")
-    parser.add_argument("--epsilons", default="0.0005,0.00025,0.0001",
+    parser.add_argument("--epsilons", default="0.00025,0.0001",
                         help="extra 'both' rows at these Eq. 14 tolerances (comma-separated; "
                              "empty for none)")
     parser.add_argument("--level-samplings", default="1",
                         help="extra 'both' rows with per-level irradiance sampling at these "
                              "pitches in pixels, at every epsilon (comma-separated; empty "
                              "for none)")
+    parser.add_argument("--no-profile-upsampling", action="store_true",
+                        help="leave out the rows with profile upsampling (see "
+                             "translucent.fast.splatting.upsampling_profile_factors)")
 
 
 def _with_size(scene, width: int, height: int):
@@ -105,19 +110,22 @@ def _strided(buffer: splatting.SurfaceBuffer, stride: int) -> splatting.SurfaceB
         "position", "normal", "uv", "depth", "valid", "footprint")))
 
 
-def _rows(names, epsilons, pitches):
+def _rows(names, epsilons, pitches, profile_upsampling):
     rows = {name: dict(SETTINGS[name]) for name in names}
-    for pitch in [0.0] + pitches:
-        for epsilon in [None] + epsilons:
-            if pitch == 0.0 and epsilon is None:
-                continue
-            label = ", ".join(part for part in (
-                "both", None if epsilon is None else f"epsilon {epsilon:g}",
-                None if pitch == 0.0 else f"level sampling {pitch:g}") if part)
-            knobs = {**SETTINGS["both"], "level_sampling": pitch}
-            if epsilon is not None:
-                knobs["epsilon"] = epsilon
-            rows[label] = knobs
+    for upsampling in [False] + ([True] if profile_upsampling else []):
+        for pitch in [0.0] + pitches:
+            for epsilon in [None] + epsilons:
+                if not upsampling and pitch == 0.0 and epsilon is None:
+                    continue
+                label = ", ".join(part for part in (
+                    "both", None if epsilon is None else f"epsilon {epsilon:g}",
+                    None if pitch == 0.0 else f"level sampling {pitch:g}",
+                    "profile upsampling" if upsampling else None) if part)
+                knobs = {**SETTINGS["both"], "level_sampling": pitch,
+                         "profile_upsampling": upsampling}
+                if epsilon is not None:
+                    knobs["epsilon"] = epsilon
+                rows[label] = knobs
     return rows
 
 
@@ -172,7 +180,8 @@ def run(args) -> int:
     results = {}
     warm = False
     load_before = os.getloadavg()
-    for name, knobs in _rows(names, epsilons, pitches).items():
+    for name, knobs in _rows(names, epsilons, pitches,
+                                       not args.no_profile_upsampling).items():
         state = splatting.precompute(full, **common, **knobs)
         # Eq. 14's table depends on the material alone: the paper precomputes it
         splatting.rendering_radius_table(material, state.knobs["epsilon"])
@@ -193,7 +202,7 @@ def run(args) -> int:
             "relative error per channel": relative_error(sampled, truth, (0, 1)).tolist(),
             "relative error, small frame": float(relative_error(small_image, small_truth)),
             "knobs": knobs}
-        print(f"{name:26s} {1 / wall:8.3f} fps  {cpu:7.2f} CPU s/frame  error "
+        print(f"{name:64s} {1 / wall:8.3f} fps  {cpu:7.2f} CPU s/frame  error "
               f"{results[name]['relative error']:.4f}", flush=True)
     load = {"before": list(load_before), "after": list(os.getloadavg())}
     _report(args, results, truth, truth_seconds, camera_buffer.valid.sum(), small, load)
@@ -221,7 +230,7 @@ def _report(args, results, truth, truth_seconds, pixels, small, load) -> None:
           f"{small.camera.height} frame (irradiance {args.validation_irradiance}^2); load "
           f"average {load['before'][0]:.1f} before, {load['after'][0]:.1f} after "
           f"({os.cpu_count()} CPUs)")
-    print(f"{'setting':44s} {'fps':>7s} {'s/frame':>8s} {'CPU s':>7s} {'speed-up':>8s} "
+    print(f"{'setting':64s} {'fps':>7s} {'s/frame':>8s} {'CPU s':>7s} {'speed-up':>8s} "
           f"{'CPU x':>6s} {'samples':>8s} {'pairs':>8s} {'in range':>8s} {'error':>7s} "
           f"{'err x':>6s} {'R, G, B':>20s} {'small':>7s}")
     for name, result in results.items():
@@ -233,7 +242,7 @@ def _report(args, results, truth, truth_seconds, pixels, small, load) -> None:
             result["error ratio to no acceleration"] = (result["relative error"]
                                                         / baseline["relative error"])
         channels = ", ".join(f"{value:.4f}" for value in result["relative error per channel"])
-        print(f"{name:44s} {result['fps']:7.3f} {result['seconds per frame']:8.2f} "
+        print(f"{name:64s} {result['fps']:7.3f} {result['seconds per frame']:8.2f} "
               f"{result['cpu seconds per frame']:7.2f} "
               f"{result.get('speed-up over no acceleration', float('nan')):8.2f} "
               f"{result.get('CPU speed-up over no acceleration', float('nan')):6.2f} "

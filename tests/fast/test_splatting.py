@@ -265,6 +265,38 @@ def test_level_sampling_thins_coarse_levels_at_the_same_error(checker_setup, che
     assert counts[0] == paper and counts[2] < counts[1] <= paper
 
 
+def test_profile_upsampling_crosses_material_boundaries(checker_setup, checker_truth):
+    # the checker's squares switch between two measured materials; coarse levels (epsilon
+    # 0.05) upsampled across those switches are what the knob corrects
+    buffer, model, view, material = checker_setup
+    errors = [relative_error(splat_frame(buffer, model, [view], material,
+                                         mm_per_unit=MM_PER_UNIT, sphere_radius=math.sqrt(2),
+                                         knobs={"epsilon": 0.05, "profile_upsampling": on}),
+                             checker_truth) for on in (False, True)]
+    assert errors[1] < errors[0]
+
+
+def test_profile_upsampling_is_eq17_for_a_homogeneous_material():
+    homogeneous = subedit_from_dipole(measured_medium("Ketchup"), segments=16).profiles
+    buffer, model, view, material = small_setup(homogeneous)
+    images = [splat_frame(buffer, model, [view], material, mm_per_unit=MM_PER_UNIT,
+                          sphere_radius=math.sqrt(2),
+                          knobs={"epsilon": 0.05, "profile_upsampling": on})
+              for on in (False, True)]
+    # the factors are one value per channel, divided out and multiplied back in float64
+    assert np.allclose(images[0], images[1], rtol=1e-12, atol=0)
+    factors = splatting.upsampling_profile_factors(material, 0.3)
+    assert factors.shape == (material.texel_count, 3) and np.all(factors == factors[0])
+
+
+@pytest.mark.parametrize("inner", [0.0, 0.5, 1.0, 2.0, np.nan])
+def test_upsampling_profile_factors_are_positive_and_finite(inner):
+    factors = splatting.upsampling_profile_factors(builtin_subedit("checker", resolution=8),
+                                                   inner)
+    assert np.all(np.isfinite(factors)) and np.all(factors > 0)
+    assert len(np.unique(factors[:, 0])) == 2  # the checker's two materials
+
+
 def test_level_sample_masks_keep_every_selection_a_partition():
     buffer, model, view, material = small_setup(width=64, resolution=32)
     pyramid = irradiance_mipmap(view.buffer, view.flux, view.cosine, 3)
