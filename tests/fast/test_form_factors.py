@@ -32,6 +32,10 @@ PARALLEL_SQUARES = 0.19982
 CAMERA = Camera([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], width=8, height=8)
 
 
+#: The same float64 sums taken in another order: round-off only.
+SUM_ORDER_RTOL = 1e-12
+
+
 def _inside_sphere(subdivisions=2):
     outside = icosphere(subdivisions, 1.0)
     inside = Mesh(outside.vertices, outside.faces[:, ::-1], -outside.normals, name="inside")
@@ -78,6 +82,19 @@ def test_patch_values_average_to_vertices():
     constant = np.full((len(patches), 3), 2.5)
     vertex = patches.vertex_values(0, scene.objects[0].mesh, constant)
     assert np.allclose(vertex, 2.5)
+
+
+def test_vertex_values_are_the_area_weighted_mean_of_the_faces_around(rng):
+    mesh = icosphere(1)
+    scene = Scene([SceneObject("ball", mesh, Lambertian(0.5))], [], CAMERA)
+    patches = build_patches(scene)
+    values = rng.random((len(patches), 3))
+    vertex = patches.vertex_values(0, mesh, values)
+    area = patches.triangle_area
+    for index in rng.integers(0, len(mesh.vertices), 5):
+        around = np.flatnonzero((mesh.faces == index).any(axis=1))
+        expected = area[around] @ values[patches.face_patch[around]] / area[around].sum()
+        assert vertex[index] == pytest.approx(expected, rel=SUM_ORDER_RTOL)
 
 
 def test_patch_sample_points_lie_on_their_patch(rng):
