@@ -7,14 +7,19 @@
   the scattering samples; the memory of F, of the cached scattering operators and of S,
   and the process's peak resident memory;
 * relighting: frames per second of the solve alone (new irradiance, the paper's
-  relighting step) for each solver (Jacobi, GMRES, BiCGSTAB: iterations and seconds), and
-  of a whole frame (irradiance with shadow rays, solve, image);
+  relighting step) for each solver from a cold start (Jacobi, GMRES, BiCGSTAB: products of
+  SF and seconds), of Jacobi started from the earlier frames' solutions, and of a whole
+  frame split into its parts (patch irradiance with shadow rays, solve, image with per-pixel
+  direct light); each timed sequence slides the light along a path not used before;
 * relighting with the precomputed T = (I - SF)^-1 S: at 25k patches T needs 3 P^2 float32
   (7.5 GB) and is skipped by the rule of ``transfer_budget_mb``; it is measured on the same
   scene cut coarser, at the largest patch count the budget allows (``--transfer-patches``);
 * translucency change: frames per second of re-indexing the profiles (new S) and of
   re-indexing plus solving, over a sweep of the block's scattering coefficient;
 * the form-factor threshold: entries, memory and the change of the solution it causes;
+* a low-rank operator instead of T (``--low-rank``): randomized rank-k factors of the
+  inter-reflection operator F (I - SF)^-1 S, their build time, frame time, error of B and
+  the Jacobi products still needed when they give the starting guess;
 * the scattering sampling knobs (polar versus 100-sample self term, sample fall-off) on a
   flat sheet: seconds and energy error against the profile's closed-form total.
 
