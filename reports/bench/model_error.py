@@ -73,8 +73,9 @@ SCENE = "sphere"
 OBJECT = "sphere"
 
 #: Defaults sized for a 2-core CPU: a 48 x 48 image, 64 spp x 4 passes (256 spp in all),
-#: where the index-matched Marble reference reaches a relative standard error of about
-#: 0.06 (measured; scenes/catalogue/sphere.toml). About 10 CPU minutes for the 12 media.
+#: where the index-matched references reach a median relative standard error of 0.07
+#: (Potato, Marble) to 0.12 (Ketchup); the 12 media with the three methods took 22 minutes
+#: of wall clock on this shared machine (measured; docs/model-error.md).
 DEFAULT_SIZE = 48
 DEFAULT_SPP = 64
 DEFAULT_PASSES = 4
