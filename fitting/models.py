@@ -81,6 +81,9 @@ SCALE_SEARCH_NATS = 3.0
 SCALE_SEARCH_POINTS = 121
 #: Grid basins per channel polished on their own before the joint MAP search.
 CHANNEL_CANDIDATES = 4
+#: A channel's second basin becomes a start of its own when its log-likelihood is within
+#: this many nats of the channel's best (the window of the modes kept by the sampler).
+ALTERNATIVE_BASIN_NATS = 10.0
 
 
 def student_t_log_likelihood(residual, stderr, dof) -> np.ndarray:
@@ -336,9 +339,7 @@ class DipoleModel(ProfileModel):
         own_scale = float(np.exp(np.mean(np.log(scales)))) if scales.size else 1.0
         guesses = [self._grid_theta(grid_a, grid_s, grid_eta, {c: own[c][0] for c in own},
                                     own_scale)]
-        refined = self._refined_channel_start(predicted, grid_a, grid_s, grid_eta)
-        if refined is not None:
-            guesses.append(refined)
+        guesses += self._refined_channel_starts(predicted, grid_a, grid_s, grid_eta)
         # one exposure (and eta) for all channels, as the model has it
         if self.fit_exposure and scales.size:
             trial_scales = np.exp(np.linspace(np.log(scales.min()) - SCALE_SEARCH_NATS,
@@ -395,12 +396,16 @@ class DipoleModel(ProfileModel):
         value = student_t_log_likelihood(mean - np.exp(points[:, 2:3]) * predicted, stderr, dof)
         return np.where(np.isfinite(value), value, -1e300)
 
-    def _refined_channel_start(self, predicted, grid_a, grid_s, grid_eta):
+    def _refined_channel_starts(self, predicted, grid_a, grid_s, grid_eta) -> list:
         """Refine each channel's best grid basins on their own, then join the channels.
 
         The :data:`CHANNEL_CANDIDATES` best grid points of each channel (at least two grid
         cells apart) are polished by L-BFGS-B in (ln sigma_a, ln sigma_s', ln exposure) of
-        that channel alone; the best of them is kept. The exposures are combined
+        that channel alone. Two starts come back: every channel at its best basin, and every
+        channel at its second-best distinct basin (its best where it has one only) within
+        :data:`ALTERNATIVE_BASIN_NATS` of the best: a capture that sees part of the profile
+        can leave a channel with two explanations, and the sampler needs both
+        (:func:`~translucent.fitting.sampler.find_modes`). The exposures are combined
         geometrically.
         """
         from scipy import optimize
@@ -409,7 +414,7 @@ class DipoleModel(ProfileModel):
         bounds = [(np.log(SIGMA_A_RANGE[0]), np.log(SIGMA_A_RANGE[1])),
                   (np.log(SIGMA_S_PRIME_RANGE[0]), np.log(SIGMA_S_PRIME_RANGE[1])),
                   (np.log(EXPOSURE_RANGE[0]), np.log(EXPOSURE_RANGE[1]))]
-        picks, scales = {}, []
+        ranked = {}
         cell = np.diff(np.unique(grid_a))[0] if np.unique(grid_a).size > 1 else 1.0
         for c in self.channels:
             scale, loglike = self._profiled_exposure(c, predicted[c])
@@ -420,7 +425,7 @@ class DipoleModel(ProfileModel):
                 if all(max(abs(grid_a[k] - grid_a[j]), abs(grid_s[k] - grid_s[j])) > 2 * cell
                        for j in chosen):
                     chosen.append(k)
-            best = None
+            polished = []
             for k in chosen:
                 start = np.array([grid_a[k], grid_s[k], np.log(scale[k])])
                 fixed = not self.fit_exposure
@@ -431,14 +436,27 @@ class DipoleModel(ProfileModel):
                         point[2] = np.log(self.spec.exposure)
                     return -float(self._channel_log_likelihood(c, point, eta)[0])
 
-                result = optimize.minimize(objective, start, method="L-BFGS-B", bounds=bounds,
-                                           options={"maxiter": 200})
-                if best is None or result.fun < best.fun:
-                    best = result
-            if best is None:
-                return None
-            picks[c] = best.x
-            scales.append(best.x[2])
+                polished.append(optimize.minimize(objective, start, method="L-BFGS-B",
+                                                  bounds=bounds, options={"maxiter": 200}))
+            if not polished:
+                return []
+            polished.sort(key=lambda result: result.fun)
+            distinct = [polished[0]]
+            for result in polished[1:]:
+                if result.fun > polished[0].fun + ALTERNATIVE_BASIN_NATS:
+                    break
+                if np.max(np.abs(result.x[:2] - distinct[0].x[:2])) > 2 * cell:
+                    distinct.append(result)
+                    break
+            ranked[c] = [result.x for result in distinct]
+        starts = [self._channel_theta({c: points[0] for c, points in ranked.items()}, eta)]
+        if any(len(points) > 1 for points in ranked.values()):
+            starts.append(self._channel_theta({c: points[-1] for c, points in ranked.items()},
+                                              eta))
+        return starts
+
+    def _channel_theta(self, picks, eta) -> np.ndarray:
+        """Return a parameter vector from per-channel (ln sigma_a, ln sigma_s', ln exposure)."""
         theta = np.zeros(self.ndim)
         fallback = picks[self.channels[0]]
         for c in range(3):
@@ -448,7 +466,7 @@ class DipoleModel(ProfileModel):
             theta[index] = eta
             index += 1
         if self.fit_exposure:
-            theta[index] = float(np.mean(scales))
+            theta[index] = float(np.mean([point[2] for point in picks.values()]))
         return np.clip(theta, self.bounds[:, 0], self.bounds[:, 1])
 
     def _grid_theta(self, grid_a, grid_s, grid_eta, picks, scale) -> np.ndarray:
