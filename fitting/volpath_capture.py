@@ -248,6 +248,14 @@ def _plugin_classes(variant: str):
     mi = mitsuba()
     import drjit as dr
 
+    # what the two plugins share: no bounding box, no differentiable parameters (nanobind
+    # classes take one base, so no mixin)
+    def no_bbox(self):
+        return mi.ScalarBoundingBox3f()
+
+    def no_parameters(self, *args):
+        pass
+
     class SlabBeam(mi.Emitter):
         """Collimated Gaussian beam starting on a plane inside the medium, going down (-z).
 
@@ -268,6 +276,8 @@ def _plugin_classes(variant: str):
         return_power_0.. float 0       upward power per channel at that plane
         ================ ===== ======= ===========================================
         """
+
+        bbox, traverse, parameters_changed = no_bbox, no_parameters, no_parameters
 
         def __init__(self, props):
             super().__init__(props)
@@ -324,15 +334,6 @@ def _plugin_classes(variant: str):
         def sample_position(self, time, sample, active=True):
             raise NotImplementedError("the slab beam is only sampled from the camera side")
 
-        def bbox(self):
-            return mi.ScalarBoundingBox3f()
-
-        def traverse(self, callback):
-            pass
-
-        def parameters_changed(self, keys):
-            pass
-
         def to_string(self):
             return f"SlabBeam[w = {self.beam_radius} mm, plane z = {self.plane_z} mm]"
 
@@ -351,6 +352,8 @@ def _plugin_classes(variant: str):
 
         Film x maps to +x and film rows to +y, both centred on the origin.
         """
+
+        bbox, traverse, parameters_changed = no_bbox, no_parameters, no_parameters
 
         def __init__(self, props):
             super().__init__(props)
@@ -377,15 +380,6 @@ def _plugin_classes(variant: str):
         def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
             ray, weight = self.sample_ray(time, sample1, sample2, sample3, active)
             return mi.RayDifferential3f(ray), weight
-
-        def bbox(self):
-            return mi.ScalarBoundingBox3f()
-
-        def traverse(self, callback):
-            pass
-
-        def parameters_changed(self, keys):
-            pass
 
         def to_string(self):
             return f"SlabExitanceSensor[{self.width_mm} x {self.height_mm} mm]"
