@@ -47,6 +47,10 @@ Departures from the paper, each a knob or documented where it is made:
   splatting level may take irradiance samples as sparse as its own pixels. The paper
   selects once for all levels, though it mentions running the selection "several times
   ... to generate splatting kernels for each scale".
+* Optional, off by default (``profile_upsampling``, :func:`upsampling_profile_factors`):
+  Eq. 17 upsamples the coarse exitance divided by a per-texel profile factor and
+  multiplies the fine pixel's own back in, so that material boundaries of the texture
+  are not blurred by the coarse levels (the identity for a homogeneous material).
 
 The loops run compiled (:mod:`translucent.fast.splatting_kernels`, numba): each level is
 cut into tiles of 8 x 8 pixels, each sample is binned to the tiles its range can reach
@@ -54,17 +58,18 @@ cut into tiles of 8 x 8 pixels, each sample is binned to the tiles its range can
 each tile evaluates Eq. 8-9 in float32 for its samples, tiles in parallel.
 
 Measured with ``translucent bench splatting`` (heterogeneous scene, 800 x 600, 512^2, this
-2-core CPU shared with other work, load average 12 then 9, so wall times are about three
-times the CPU times): with both accelerations 1.87 CPU seconds a frame (111 million pairs
-in range; 2.54 before the tiled kernel), 7.9x less CPU than without acceleration, at 1.11x
-its error against brute force (0.0264 vs 0.0238). The paper's 10 frames per second are
-out of reach on this CPU. The excess error of the multiresolution levels is their
-upsampling (Eq. 17) across the texture's material boundaries, where the coarse pixel's
+2-core CPU shared with other work, load average about 9, so wall times are about twice the
+CPU times): with both accelerations 1.85 CPU seconds a frame (111 million pairs in range;
+2.54 before the tiled kernel), 8.1x less CPU than without acceleration (14.95), at 1.11x
+its error against brute force (0.0264 vs 0.0238). The excess error of the coarse levels
+is Eq. 17's upsampling across the texture's material boundaries, where a coarse pixel's
 texel stands for its children's: upsampled level 2 differs from the same annulus splatted
-at full resolution by 0.7 % of the frame's energy (blue, the channel with the most
-contrast, 1 %). Only a tighter epsilon moves energy back to level 0: at 1e-4 the error is
-1.03x that of no acceleration at 4.7x less CPU. Per-level sampling (``level_sampling`` =
-1) cuts the CPU time by 17 % at about the same error (0.0265).
+at full resolution by 0.7 % of the frame's energy (1 % in blue, the channel with the most
+contrast). A tighter epsilon only moves energy back to level 0 (at 1e-4: 1.03x the error
+at 4.5x less CPU); ``profile_upsampling`` removes it (0.0237, 0.995x, at 8.3x less CPU),
+and with ``level_sampling`` = 1 as well 0.0238 (0.998x) at 8.7x less CPU (1.72 CPU
+seconds). The paper's 10 frames per second are out of reach on this CPU: 0.58 frames per
+CPU second at best.
 
 Units: positions in scene units, profiles in mm^-2 (``scene.mm_per_unit`` converts);
 radiance in the units of the lights per scene unit squared, as the reference renders.
