@@ -12,36 +12,44 @@ The set-up here converges, for any eta:
   medium with :math:`\sigma_t = \sigma_a + \sigma'_s`, albedo :math:`\sigma'_s/\sigma_t`
   and an isotropic phase function per RGB channel (the similarity relation: the dipole's
   reduced coefficients). Scene units are mm.
-* **Beam** (:class:`SlabBeam`, a Python ``mi.Emitter``): a collimated Gaussian beam that
-  *starts just inside the medium*, on the plane :data:`BEAM_DEPTH_MM` below the top face,
-  travelling straight down. It is delta in direction (like ``directional``) but has a
-  finite origin plane: for a point p below the plane it returns the direction straight
-  up, the sample point p projected onto the plane (so the shadow ray stops before the
-  dielectric and sees only the medium's transmittance) and the weight
-  :math:`E(\rho) = P_{in}\,\frac{2}{\pi w^2}\,e^{-2\rho^2/w^2}` with :math:`P_{in} = 1`:
-  unit power *entering* the slab. The external beam's Fresnel loss at normal incidence
-  is taken out exactly (a normal-incidence collimated beam is not refracted). Points
-  above the plane get nothing. Volpath's next-event estimation at each scattering
-  vertex then adds :math:`E(\rho)\,e^{-\sigma_t d}\,p(\omega)`: the single-scattering
-  source of the collimated beam, every order of scattering following from there.
-  A finite beam radius ``w`` is required: camera paths cannot find a pencil.
-* **Sensor** (:class:`SlabExitanceSensor`, a Python ``mi.Sensor``): a film lying on the
-  slab face the camera sees (the top for ``reflection``, the bottom for
-  ``transmission``), ``pixel_size_mm`` per pixel, box filter. In the default
+* **Beam** (``SlabBeam``, a Python ``mi.Emitter`` registered as :data:`BEAM_PLUGIN`): a
+  collimated Gaussian beam that *starts just inside the medium*, on the plane
+  :data:`BEAM_DEPTH_MM` below the top face, travelling straight down. It is delta in
+  direction (like ``directional``) but has a finite origin plane: for a point p below
+  the plane it returns the direction straight up, the sample point p projected onto the
+  plane (so the shadow ray stops before the dielectric and sees only the medium's
+  transmittance) and the weight :math:`E(\rho) = P_{in}\,\frac{2}{\pi
+  w^2}\,e^{-2\rho^2/w^2}` with :math:`P_{in} = 1`: unit power *entering* the slab. The
+  external beam's Fresnel loss at normal incidence is taken out exactly (a
+  normal-incidence collimated beam is not refracted). Points above the plane get
+  nothing. Volpath's next-event estimation at each scattering vertex then adds
+  :math:`E(\rho)\,e^{-\sigma_t d}\,p(\omega)`: the single-scattering source of the
+  collimated beam, every order of scattering following from there. In a finite slab the
+  unscattered beam reflected at the bottom face (and again at the top) is a second delta
+  direction of the same emitter (:func:`collimated_powers`). A finite beam radius ``w``
+  is required: camera paths cannot find a pencil.
+* **Sensor** (``SlabExitanceSensor``, a Python ``mi.Sensor``, :data:`SENSOR_PLUGIN`): a
+  film lying on the slab face the camera sees (the top for ``reflection``, the bottom
+  for ``transmission``), ``pixel_size_mm`` per pixel, box filter. In the default
   ``"exitance"`` mode each sample starts at a uniform point of its pixel and looks into
   the slab along a cosine-distributed direction with weight :math:`\pi`, so a pixel
-  holds :math:`\int L\cos\theta\,d\omega` averaged over its area: the radiant
-  exitance ``E`` of the capture format (mm^-2 per unit entering power), exactly what the
-  fitter's forward model and the photon random walk describe, with no angular
-  assumption. In ``"normal radiance"`` mode it looks straight along the normal (what an
-  orthographic camera on the axis sees) and converts the radiance ``L`` with
-  :func:`exitance_per_normal_radiance`, which is exact only where the radiance inside
-  is isotropic (see that function for how far from it real profiles are).
+  holds :math:`\int L\cos\theta\,d\omega` averaged over its area: the radiant exitance
+  ``E`` of the capture format (mm^-2 per unit entering power), exactly what the fitter's
+  forward model and the photon random walk describe, with no angular assumption. In
+  ``"normal radiance"`` mode it looks straight along the normal (what an orthographic
+  camera on the axis sees) and converts the radiance ``L`` with
+  :func:`exitance_per_normal_radiance`, which is exact only where the radiance inside is
+  isotropic (see that function for how far from it real profiles are). Camera paths
+  cannot see a collimated beam, so the unscattered light leaving the imaged face is
+  added in closed form over the beam's footprint (:func:`beam_pixel_image`).
 * **Integrator**: ``volpath`` with unlimited depth (high-albedo media need thousands of
   bounces) and Russian roulette only once the throughput has fallen to
   :data:`ROULETTE_THROUGHPUT` (:func:`roulette_depth`): volpath's default (from the
   fifth bounce, survival capped at 0.95) makes the far field of a high-albedo medium an
   estimate that is unbiased in theory and almost always far too low in practice.
+* **Channels**: one render per distinct channel, of a grey medium with that channel's
+  coefficients (:data:`CHANNEL_MODES`): volpath's RGB mode fills a chromatic medium's
+  far field with fireflies.
 
 The image is rendered in passes of at most ``pass_spp`` samples per pixel (independent
 seeds), so that 10^4 spp fit in memory on a GPU; the mean is the capture and the spread
