@@ -66,7 +66,8 @@ class FitResult:
         Flat posterior samples in the model's sampling space.
     parameters : list of ParameterSummary
     material : dict
-        The material table (posterior medians).
+        The material table: posterior medians (of the heaviest mode when a parameter is
+        ``multimodal``).
     """
 
     kind: str
@@ -187,8 +188,17 @@ def fit_dipole(capture, *, fit_eta: bool | None = None, walkers: int | None = No
     notes += _mode_notes(model, chain, summaries)
     notes += [f"channel {'RGB'[c]} has no usable annulus: its parameters are the prior's"
               for c in range(3) if c not in model.channels]
+    values = _medians(summaries)
+    if any(s.status == "multimodal" for s in summaries):
+        # a median between two modes explains the profile worse than either mode
+        heaviest = int(np.argmax(chain.mode_fractions()))
+        in_mode = chain.samples[chain.sample_modes == heaviest]
+        values = _medians(summarise_posterior(model, in_mode))
+        notes.append(f"the material file holds the medians of the heaviest mode "
+                     f"({chain.mode_fractions()[heaviest]:.0%} of the samples), not of the "
+                     "whole posterior")
     return FitResult("dipole", capture, profile, model, [chain], chain.samples, summaries,
-                     model.material(_medians(summaries)), notes)
+                     model.material(values), notes)
 
 
 def fit_subedit(capture, *, segments: int = 8, r_s_mm: float | None = None,

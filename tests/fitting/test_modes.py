@@ -207,6 +207,13 @@ def test_corner_capture_is_not_confidently_wrong():
             half = high - median if np.log(truth) > median else median - low
             assert abs(np.log(truth) - median) < bound * half, summary.describe()
     assert any("the posterior has" in note and "modes" in note for note in result.notes)
+    split = [s for s in result.parameters if s.status == "multimodal"]
+    if split:  # the material is one mode's, never a point between the modes
+        assert any("medians of the heaviest mode" in note for note in result.notes)
+        for summary in split:
+            kind, channel = summary.name[:-3], "RGB".index(summary.name[-2])
+            assert result.material[kind][channel] == pytest.approx(summary.modes[0][0],
+                                                                   rel=1e-9)
 
 
 def test_mode_labels_follow_the_weighted_gaussians():
