@@ -259,3 +259,27 @@ def test_bad_input_is_refused(changes, message):
 def test_material_must_be_a_dipole():
     with pytest.raises(InputError, match="must be a Dipole"):
         render_exitance("marble", shape=(16, 16), beam_radius_mm=0.2, spp=4)
+
+
+def test_bias_table_refuses_an_unknown_generator():
+    from translucent.fitting.validation import model_bias_table
+
+    with pytest.raises(InputError, match="must be one of walk, volpath"):
+        model_bias_table(["skin1"], generator="mcml")
+
+
+@pytest.mark.slow
+def test_bias_table_from_volpath_captures(tmp_path):
+    # ~30 s: one medium, a tiny capture (at 32 spp most far pixels get no path to the beam
+    # and fall below black: no usable annuli); the row says which solver made it
+    from translucent.reports.cli import main
+
+    code = main(["bench", "fitting", "--bias-table", "--generator", "volpath", "--materials",
+                 "ketchup", "--size", "32", "--spp", "128", "--pass-spp", "64", "--out",
+                 str(tmp_path)])
+    figures = json.loads((tmp_path / "bias_volpath.json").read_text())
+    (row,) = figures["rows"]
+    assert row["generator"] == "mitsuba volpath" and row["spp"] == 128
+    assert code == (0 if row["converged"] else 1)
+    assert np.all(np.isfinite(row["fit_sigma_s_prime"]))
+    assert (tmp_path / "bias_volpath.md").read_text().count("Ketchup") == 1
