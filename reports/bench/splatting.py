@@ -221,6 +221,13 @@ def run(args) -> int:
     return 0
 
 
+def _millions(counts) -> float:
+    """Sum of per-level counts in millions; NaN where a kernel does not count (Dr.Jit, numpy)."""
+    if any(count is None for count in counts):
+        return float("nan")
+    return sum(counts) / 1e6
+
+
 def _report(args, results, truth, truth_seconds, pixels, small, load) -> None:
     baseline = results.get("no acceleration")
     print(f"\nsplatting: {args.width} x {args.height} ({pixels} object pixels), irradiance "
@@ -247,7 +254,7 @@ def _report(args, results, truth, truth_seconds, pixels, small, load) -> None:
               f"{result.get('speed-up over no acceleration', float('nan')):8.2f} "
               f"{result.get('CPU speed-up over no acceleration', float('nan')):6.2f} "
               f"{result['samples']:8d} {sum(result['pairs per level']) / 1e6:7.1f}M "
-              f"{sum(result['pairs in range per level']) / 1e6:7.1f}M "
+              f"{_millions(result['pairs in range per level']):7.1f}M "
               f"{result['relative error']:7.4f} "
               f"{result.get('error ratio to no acceleration', float('nan')):6.3f} "
               f"{channels:>20s} {result['relative error, small frame']:7.4f}")
