@@ -667,9 +667,11 @@ def test_against_volumetric_path_tracing(name, tmp_path):
 #: x0.25 is the model: a 5.7 mm mean free path (1 / sigma_tr = 37 mm in red) in a 30 mm
 #: block, where the semi-infinite dipole sends 17-23 % of the light that the finite block
 #: re-emits into a half-space that is not there (S / walk 0.83 0.89 0.82, the image 0.77 0.81
-#: 0.72; the limitation of Sheng et al. 2014, Sect. 7), plus 2.7 % of the red profile that
-#: was beyond max_d when these numbers were measured (the cut-off was x1's; the test now
-#: takes the widest profile's). x8 is not the model: S returns 1-3 % *less* than
+#: 0.72; the limitation of Sheng et al. 2014, Sect. 7). The cut-off is not the cause: x1's
+#: leaves 2.7 % of the x0.25 red profile beyond it, yet with the widest profile's (159 mm,
+#: what the test now uses) the image ratio is 0.766 0.810 0.715, no higher (the block ends
+#: within both; the energy of the semi-infinite profile out there has no surface to leave
+#: through). x8 is not the model: S returns 1-3 % *less* than
 #: the walk, so radiosity cannot be 19 % too bright through S. At x8 91-93 % of the light
 #: leaves through the top near where it entered, so a Lambertian block with the walk's
 #: exit fractions (0.980 0.973 0.939) is a converged stand-in: path traced (128 spp x 4)
