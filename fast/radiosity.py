@@ -161,12 +161,13 @@ DEFAULT_KNOBS: dict = {
     "transfer": "auto",              # "auto": T at the first relighting when it fits; "never"
     "transfer_budget_mb": 512,       # T fits when 3 P^2 float32 do (P <= 6,688 at 512 MB)
     "light_samples": 16,             # samples per area light / environment per point
+    "diffuse_light_samples": None,   # per diffuse patch (its E feeds only F B); None: as above
     "seed": 0,
 }
 
 #: Knobs that only steer solving and lighting: not part of the precomputation's cache key.
 RUNTIME_KNOBS = ("solver", "tolerance", "max_iterations", "warm_start", "transfer",
-                 "transfer_budget_mb", "light_samples")
+                 "transfer_budget_mb", "light_samples", "diffuse_light_samples")
 
 #: The iterative solvers.
 SOLVERS = ("jacobi", "gmres", "bicgstab")
@@ -1310,11 +1311,26 @@ class RadiosityState:
         return time.perf_counter() - started
 
     def patch_irradiance(self, lights=None) -> np.ndarray:
-        """Direct irradiance E of every patch (at its centroid), shape (P, 3)."""
+        """Direct irradiance E of every patch (at its centroid), shape (P, 3).
+
+        Translucent patches take ``light_samples`` per area light; diffuse ones take
+        ``diffuse_light_samples`` when it is set: their E reaches the image only through the
+        form factors, which average it over everything a pixel's surface sees (the image's
+        own direct light is per pixel), so fewer shadow rays cost little there.
+        """
         p = self.patches
         offset_points = p.centroid + 1e-6 * p.radius[:, None] * p.normal
-        return direct_irradiance(self.scene, offset_points, p.normal, lights=lights,
-                                 samples=self.knobs["light_samples"], seed=self.knobs["seed"])
+        samples = self.knobs["light_samples"]
+        diffuse_samples = self.knobs.get("diffuse_light_samples")
+        if diffuse_samples is None or diffuse_samples == samples:
+            return direct_irradiance(self.scene, offset_points, p.normal, lights=lights,
+                                     samples=samples, seed=self.knobs["seed"])
+        diffuse = ~np.isin(p.object_of, list(self.geometry.objects))
+        E = np.zeros((len(p), 3))
+        for rows, count in ((~diffuse, samples), (diffuse, diffuse_samples)):
+            E[rows] = direct_irradiance(self.scene, offset_points[rows], p.normal[rows],
+                                        lights=lights, samples=count, seed=self.knobs["seed"])
+        return E
 
     def solve(self, irradiance, component: str = "both") -> tuple[np.ndarray, dict]:
         """Radiosity B (P, 3) for patch irradiance E, for one bounce component (Fig. 6)."""
@@ -1541,6 +1557,11 @@ def _resolve_knobs(scene, knobs: dict) -> dict:
     elif not float(resolved["max_distance_mm"]) > 0:
         raise InputError("must be > 0 mm", field="max_distance_mm",
                          value=resolved["max_distance_mm"])
+    diffuse_samples = resolved["diffuse_light_samples"]
+    if diffuse_samples is not None and (int(diffuse_samples) != diffuse_samples
+                                        or diffuse_samples < 1):
+        raise InputError("must be None (as light_samples) or an integer >= 1",
+                         field="diffuse_light_samples", value=diffuse_samples)
     thickness = resolved["sheet_thickness_mm"]
     if thickness is not None and not float(thickness) > 0:
         raise InputError("must be > 0 mm", field="sheet_thickness_mm", value=thickness)
