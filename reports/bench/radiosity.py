@@ -10,7 +10,9 @@
   relighting step) for each solver from a cold start (Jacobi, GMRES, BiCGSTAB: products of
   SF and seconds), of Jacobi started from the earlier frames' solutions, and of a whole
   frame split into its parts (patch irradiance with shadow rays, solve, image with per-pixel
-  direct light); each timed sequence slides the light along a path not used before;
+  direct light), and what fewer shadow rays on diffuse patches (knob
+  ``diffuse_light_samples``) save and change in the image; each timed sequence slides the
+  light along a path not used before;
 * relighting with the precomputed T = (I - SF)^-1 S: at 25k patches T needs 3 P^2 float32
   (7.5 GB) and is skipped by the rule of ``transfer_budget_mb``; it is measured on the same
   scene cut coarser, at the largest patch count the budget allows (``--transfer-patches``);
@@ -224,14 +226,34 @@ def _relighting(state, args, baseline, bandwidth, out):
 
     seconds, image = _timed(whole, max(1, args.frames - 1))
     split = dict(zip(FRAME_PARTS, np.mean(parts[1:], axis=0).tolist(), strict=True))
+    out_rows: dict = {}
+    fewer = _diffuse_light_samples(state, lights[-1], image, out_rows)
     out["relighting"] = {"solvers": solvers, "fastest": fastest,
                          "irradiance seconds": irradiance_seconds,
                          "frame seconds": seconds, "frame fps": 1.0 / seconds,
-                         "frame parts seconds": split, "image": list(image.shape)}
+                         "frame parts seconds": split, "image": list(image.shape),
+                         "diffuse light samples": out_rows}
     print(f"  whole frame ({fastest}, {image.shape[1]} x {image.shape[0]}): "
           f"{1 / seconds:.2f} fps ({seconds:.3f} s: patch irradiance with shadow rays "
           f"{split['irradiance']:.3f} s, solve {split['solve']:.3f} s, image with per-pixel "
           f"direct light {split['image']:.3f} s)")
+    print(fewer)
+
+
+def _diffuse_light_samples(state, light, image, rows, counts=(4, 1)) -> str:
+    """Patch irradiance time and image change with fewer shadow rays on diffuse patches."""
+    full = state.knobs["light_samples"]
+    lines = []
+    for count in (full,) + tuple(counts):
+        state.knobs["diffuse_light_samples"] = count
+        seconds, _ = _timed(lambda light=light: state.patch_irradiance(light), 2)
+        change = np.abs(state.render(lights=light).rgb - image.rgb).mean() \
+            / max(float(np.abs(image.rgb).mean()), 1e-300)
+        rows[str(count)] = {"irradiance seconds": seconds, "relative image change": change}
+        lines.append(f"{count} ({seconds:.3f} s, image change {change:.4f})")
+    state.knobs["diffuse_light_samples"] = None
+    return ("  shadow rays per diffuse patch and area light (patch irradiance seconds, mean "
+            "absolute image change against " + str(full) + "): " + ", ".join(lines))
 
 
 def _translucency(state, args, baseline, out):
