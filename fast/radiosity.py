@@ -49,9 +49,10 @@ Relighting with :math:`T = (I - SF)^{-1}S` (Sect. 6.4): T is dense, :math:`3P^2`
 is precomputed (at the first relighting after a material change, knob ``transfer="auto"``)
 only when that fits the ``transfer_budget_mb`` knob: P <= 6,688 at the default 512 MB; the
 dense solve needs about five times that while it runs. It does not pay on this CPU:
-at 6,270 patches T took 187 s and relit at 13.5 fps against 14.3 fps for the iterative
-solve (``translucent bench radiosity``, load average 8-10 on 2 cores): a frame reads
-:math:`12P^2` bytes of T against about 8 bytes per form factor and product for Jacobi.
+at 6,270 patches T took 44 s and relit at 75.1 fps against 75.0 fps for the warm-started
+iterative solve (``translucent bench radiosity`` on 2 idle cores; 187 s, 13.5 and 14.3 fps
+at a load average of 9): a frame reads :math:`12P^2` bytes of T against about 8 bytes per
+form factor and product for Jacobi.
 Neither does a low-rank T: the inter-reflection operator :math:`F(I - SF)^{-1}S` of the
 25,080-patch box has a flat spectrum (ray-cast F, near-field corners), and its randomized
 rank-128 approximation misses B by 24 % (rank 32: 35 %) and saves at most two products as
