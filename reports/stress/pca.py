@@ -16,7 +16,7 @@ import functools
 
 import numpy as np
 
-from ...fast.prt import LOCAL_BLEND_START
+from ...fast.prt import LOCAL_BLEND_START, projection_blend
 from ...materials.catalogue import MEASURED_MEDIA
 from ...materials.dipole import dipole_reflectance_profile
 from ...materials.dipole_pca import dipole_pca_basis
@@ -164,7 +164,7 @@ def pca_energy(basis_name: str, sigmas=SIGMAS, etas=ETAS) -> StressResult:
     excess = (coefficients**2).sum(axis=-1) - profile_energy * (1.0 + BESSEL_SLACK)
     result.negative += int((excess > 0).sum())
     relative = _relative(energy, exact_energy)
-    trusted = residual < LOCAL_BLEND_START
+    trusted = projection_blend(basis, sigma_a, sigma_s_prime, eta)[1] == 0
     judged = np.where(trusted, relative, 0.0)
     worst = int(np.argmax(judged))
     peak = np.abs(reconstruction).max(axis=0)
