@@ -22,9 +22,9 @@ scripted session: a sweep of point-light positions (relighting) and a sweep of m
 Wall-clock figures are shared-machine figures; each is printed beside the process CPU time,
 which other jobs on the machine disturb less. ``--sweep`` adds the error against the number
 of basis terms K and against the wavelet terms kept (small sphere, both parameterisations of
-the basis), written as JSON and a PNG. ``--model-error`` adds the table of FLIP and relative
-MSE against Mitsuba volumetric path tracing for the 12 measured media on the built-in sphere
-(slow: 12 reference renders).
+the basis), written as JSON and a PNG. The model error against Mitsuba volumetric path
+tracing for the 12 measured media is ``translucent bench model_error``
+(:mod:`translucent.reports.bench.model_error`).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ import numpy as np
 
 from ...atomic import atomic_path, atomic_write_text
 from ...fast import prt
-from ...materials import Dipole, measured_medium, measured_medium_names
+from ...materials import Dipole, measured_medium
 from ...scenes import Camera, PointLight, Scene, SceneObject, geometry_image, icosphere
 
 #: Targets of the task on this 2-core machine.
@@ -72,12 +72,6 @@ def add_arguments(parser):
     parser.add_argument("--size", type=int, default=128, help="image side (default 128)")
     parser.add_argument("--sweep", action="store_true",
                         help="error against K and against the wavelet terms kept")
-    parser.add_argument("--model-error", action="store_true",
-                        help="FLIP and relative MSE against Mitsuba for the 12 measured media")
-    parser.add_argument("--spp", type=int, default=64,
-                        help="reference samples per pixel per pass for --model-error")
-    parser.add_argument("--passes", type=int, default=4,
-                        help="reference passes for --model-error (default 4)")
     parser.add_argument("--png", default=None,
                         help="error-sweep figure (default bench_prt_sweep.png)")
 
@@ -346,32 +340,6 @@ def write_sweep_figure(path, sweep: dict) -> Path:
     return Path(path)
 
 
-def model_error_table(*, spp: int = 64, passes: int = 4, samples: int = 16384) -> list[dict]:
-    """FLIP and relative MSE of PRT against Mitsuba for the 12 measured media (built-in sphere).
-
-    This measures the dipole model (and its diffuse-only BSSRDF), not the method: the
-    reference path-traces the medium behind its dielectric boundary. One precomputation
-    serves all media (editing).
-    """
-    from ...reference import render as reference_render
-    from ...reports.metrics import compare
-    from ...scenes import load_scene
-
-    scene = load_scene("sphere")
-    state = prt.precompute(scene, samples=samples, progress=False)
-    table = []
-    for name in measured_medium_names():
-        material = measured_medium(name)
-        reference = reference_render(scene.with_material("sphere", material), spp=spp,
-                                     passes=passes, progress=False)
-        image = state.render(material=material)
-        metrics = compare(reference, image)
-        table.append({"material": name, "hdr_flip": metrics.hdr_flip,
-                      "relative_mse": metrics.relative_mse,
-                      "relative_mse_raw": metrics.relative_mse_raw})
-    return table
-
-
 # ------------------------------------------------------------------------ the command
 
 
@@ -439,11 +407,6 @@ def run(args) -> int:
         figure = write_sweep_figure(args.png or "bench_prt_sweep.png", sweep)
         print(f"error sweep: {json.dumps(sweep['basis_terms'])}; terms: "
               f"{json.dumps(sweep['terms'])}; figure {figure}")
-    if args.model_error:
-        output["model_error"] = model_error_table(spp=args.spp, passes=args.passes)
-        for row in output["model_error"]:
-            print(f"{row['material']:<12} HDR-FLIP {row['hdr_flip']:.4f} relMSE "
-                  f"{row['relative_mse']:.4g}")
     path = args.json or "bench_prt.json"
     atomic_write_text(path, json.dumps(output, indent=2, default=float))
     print(f"wrote {path}")
