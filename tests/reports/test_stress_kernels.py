@@ -60,14 +60,17 @@ def test_pca_float32_error_is_within_the_roundoff_bound():
     assert 0 < result.worst_relative_error < result.bound
 
 
-def test_pca_energy_finds_the_paper_basis_trusting_an_unresolved_profile():
+def test_pca_energy_no_longer_trusts_an_unresolved_profile():
     # sigma = 1e3 mm^-1: a profile 1e-3 mm wide, between the paper's first two samples
-    # (0.1 mm apart); the residual says 7.5e-5 while the K-term energy is wrong in sign
+    # (0.1 mm apart). The residual alone (7.5e-5, below LOCAL_BLEND_START) trusted it while
+    # the K-term energy is wrong in sign; the method's criterion now refuses it, so the
+    # kernel judges nothing there and passes.
     result = pca.pca_energy("paper", sigmas=(1e3,), etas=(1.3,))
-    assert not result.passed
-    assert result.worst_relative_error > 100 * result.bound
     assert result.worst_at["residual"] < pca.LOCAL_BLEND_START
     assert result.worst_at["energy"] < 0 < result.worst_at["exact_energy"]
+    assert result.details[0]["trusted"] == 0
+    assert result.details[0]["untrusted_worst_energy_error"] > 100 * result.bound
+    assert result.passed
 
 
 def test_radiosity_refuses_at_and_above_albedo_one():
