@@ -6,8 +6,9 @@ from translucent.errors import InputError
 from translucent.fast import prt
 from translucent.fast.sparse_transport import SharedColumnBlocks
 from translucent.image import Image
-from translucent.materials import Dipole, Lambertian, measured_medium
+from translucent.materials import MEASURED_MEDIA, Dipole, Lambertian, measured_medium
 from translucent.materials.dipole import total_diffuse_reflectance
+from translucent.materials.dipole_pca import PARAMETERISATIONS, dipole_pca_basis
 from translucent.materials.fresnel import fresnel_transmittance
 from translucent.reports.cli import main
 from translucent.scenes import (
@@ -60,6 +61,12 @@ SMOOTHING_TOLERANCE = 0.02
 #: neighbouring facets (the shadow terminator).
 GRAZING_COSINE = 0.2
 
+#: Illumination sample spacing of the default 16384 samples on the 10 mm sphere, mm.
+DEFAULT_SAMPLE_SPACING = float(np.sqrt(4 * np.pi * 10.0**2 / 16384))
+
+#: Coefficients swept by the trust tests, mm^-1: the stress sweep's decades (1e-6 to 1e3).
+SWEPT_SIGMAS = np.geomspace(1e-6, 1e3, 10)
+
 SAMPLES = 4096
 MM_PER_UNIT = 10.0
 LIGHT = PointLight([3.0, 4.0, 4.0], 100.0)
@@ -100,10 +107,25 @@ def vertex_radiance(state, material, lights=(LIGHT,)):
     return state.vertex_radiance(transfer, material)
 
 
+def eq1_vertex_radiance(state, material, lights=(LIGHT,)):
+    """PRT's sum of Eq. 5-7 over the samples, without the sampling blend.
+
+    The sampling blend deliberately departs from Eq. 1 on the samples where they do not
+    resolve the profile (at 1024-4096 samples on the 10 mm sphere, h = 0.55-1.1 mm, some
+    measured channels): the brute-force comparisons measure the compression alone.
+    """
+    saved = state.knobs["sampling_blend"]
+    state.knobs["sampling_blend"] = False
+    try:
+        return vertex_radiance(state, material, lights)
+    finally:
+        state.knobs["sampling_blend"] = saved
+
+
 @pytest.mark.parametrize("name", ["Marble", "Skin1", "Chicken1", "Ketchup", "Wholemilk"])
 def test_prt_matches_the_brute_force_eq1_on_the_same_samples(state, name):
     material = measured_medium(name)
-    error = relative_error(vertex_radiance(state, material), brute_force(state, material))
+    error = relative_error(eq1_vertex_radiance(state, material), brute_force(state, material))
     assert error < BRUTE_FORCE_TARGET, f"{name}: relative L2 {error:.4f}"
 
 
@@ -326,7 +348,8 @@ def test_spatial_compression_on_a_geometry_image():
     assert transfer.spatial_shape == (17, 17)
     assert "CDF 9/7" in spatial.log.notes["spatial"]["sphere"]
     material = measured_medium("Skin1")
-    error = relative_error(vertex_radiance(spatial, material), brute_force(spatial, material))
+    error = relative_error(eq1_vertex_radiance(spatial, material),
+                           brute_force(spatial, material))
     assert error < SPATIAL_TARGET
     image = spatial.render(material=material)
     assert np.isfinite(image.rgb).all() and image.rgb.max() > 0
@@ -376,6 +399,7 @@ def test_approx_command_rejects_half_a_material(tmp_path, capsys):
     ({"selection": "random"}, "selection"),
     ({"layout": "columns"}, "layout.*'shared' or 'rows'"),
     ({"environment_resolution": 12}, "power of two"),
+    ({"sampling_blend": "yes"}, "sampling_blend.*True or False"),
     ({"colour": "red"}, "unknown knob"),
 ])
 def test_bad_knobs_are_rejected(knobs, message):
@@ -412,3 +436,95 @@ def test_bad_materials_are_rejected(state):
     with pytest.raises(InputError, match="sigma_a"):
         Dipole(-1.0, 1.0, 1.3)
 
+
+
+def _inside_grid(basis, sigma_a, sigma_s_prime):
+    s_range, a_range = basis.sampling.sigma_s_prime_range, basis.sampling.sigma_a_range
+    return (s_range[0] <= sigma_s_prime <= s_range[1]) and (a_range[0] <= sigma_a <= a_range[1])
+
+
+@pytest.mark.parametrize("basis_name", list(PARAMETERISATIONS))
+def test_measured_media_inside_the_grid_are_trusted(basis_name):
+    """beta = 0 for every measured channel a basis's grid covers: the paper's method unchanged."""
+    basis = dipole_pca_basis(basis_name)
+    covered = 0
+    for name, (sigma_s_prime, sigma_a, eta) in MEASURED_MEDIA.items():
+        for a, s in zip(np.broadcast_to(sigma_a, 3), np.broadcast_to(sigma_s_prime, 3),
+                        strict=True):
+            if _inside_grid(basis, a, s):
+                covered += 1
+                _, blend = prt.projection_blend(basis, a, s, eta)
+                assert blend == 0, f"{name}: beta {blend} at sigma_a {a}, sigma_s' {s}"
+    assert covered >= 30  # all but Spectralon (and Cream on the paper's [0, 5] grid)
+
+
+@pytest.mark.parametrize("basis_name", list(PARAMETERISATIONS))
+def test_trusted_projections_hold_the_profile_energy(basis_name):
+    """Wherever beta = 0, residual and energy error are within the blend thresholds."""
+    basis = dipole_pca_basis(basis_name)
+    sigma_a, sigma_s_prime, eta = (grid.ravel() for grid in np.meshgrid(
+        SWEPT_SIGMAS, SWEPT_SIGMAS, np.array([1.0, 1.3, 2.5]), indexing="ij"))
+    _, blend = prt.projection_blend(basis, sigma_a, sigma_s_prime, eta)
+    _, residual, energy, exact = basis.project_with_energy(sigma_a, sigma_s_prime, eta)
+    trusted = blend == 0
+    assert trusted.any() and not trusted.all()
+    assert residual[trusted].max() <= prt.LOCAL_BLEND_START
+    error = np.abs(energy - exact) / np.where(exact > 0, exact, 1.0)
+    assert error[trusted].max() <= prt.ENERGY_BLEND_START
+    assert np.all((blend >= 0) & (blend <= 1))
+
+
+def test_small_residuals_with_the_wrong_energy_are_blended():
+    # the cases the residual alone trusted: a profile narrower than the paper's 0.1 mm
+    # spacing (residual 7.5e-5, K-term energy -204 against 0.073), and the default basis
+    # beyond its sigma_a range (residual 0.009, energy 0.098 against 0.073)
+    paper = dipole_pca_basis("paper")
+    _, residual = paper.project_with_residual(1e3, 1e3, 2.5)
+    assert residual < prt.LOCAL_BLEND_START
+    assert prt.projection_blend(paper, 1e3, 1e3, 2.5)[1] == 1
+    improved = dipole_pca_basis("area_normalised")
+    _, residual, energy, exact = improved.project_with_energy(10.0, 10.0, 2.5)
+    assert residual < prt.LOCAL_BLEND_START
+    expected = np.clip((abs(energy / exact - 1) - prt.ENERGY_BLEND_START)
+                       / (prt.ENERGY_BLEND_END - prt.ENERGY_BLEND_START), 0, 1)
+    assert 0 < expected
+    assert prt.projection_blend(improved, 10.0, 10.0, 2.5)[1] == pytest.approx(expected)
+
+
+def test_profiles_narrower_than_the_sample_spacing_are_blended():
+    """log2 ramp from one mean free path per spacing (0.1 mm) to a quarter of it."""
+    paper = dipole_pca_basis("paper")
+    spacing = paper.radii[1] - paper.radii[0]
+    # sigma_a = 0 keeps the energy right (Spectralon-like): the sampling decides
+    sigma_s_prime = np.array([0.5, 1.0, 2.0, 4.0, 8.0]) / spacing
+    _, blend = prt.projection_blend(paper, np.zeros(5), sigma_s_prime, 1.3)
+    np.testing.assert_allclose(blend, [0.0, 0.0, 0.5, 1.0, 1.0], atol=ROUND_OFF_32)
+
+
+@pytest.mark.parametrize("eta", [None, 1.0])
+def test_sampling_blend_keeps_in_grid_media_at_the_default_density(eta):
+    """At 16384 samples on the 10 mm sphere only Spectralon's narrow profile is blended."""
+    basis = dipole_pca_basis(prt.DEFAULT_KNOBS["basis"])
+    for name, (sigma_s_prime, sigma_a, own_eta) in MEASURED_MEDIA.items():
+        sigma_a = np.broadcast_to(sigma_a, 3)
+        _, blend = prt.projection_blend(basis, sigma_a, sigma_s_prime,
+                                        own_eta if eta is None else eta, DEFAULT_SAMPLE_SPACING)
+        if name == "Spectralon":
+            assert blend.max() > 0.5  # 56-72 % of its energy within one spacing at eta = 1
+        else:
+            assert np.all(blend == 0), f"{name}: beta {blend}"
+
+
+def test_sampling_blend_renders_unresolved_profiles_locally(state):
+    """Spectralon at 4096 samples (h = 0.55 mm): almost all local, R_d times the local vector."""
+    spectralon = measured_medium("Spectralon")
+    spacing = float(np.sqrt(state.transfers[0].samples.area))
+    _, blend = prt.projection_blend(state.basis, spectralon.sigma_a,
+                                    spectralon.sigma_s_prime, spectralon.eta, spacing)
+    weights = state.coefficients(spectralon, spacing)
+    albedo = total_diffuse_reflectance(spectralon.sigma_a, spectralon.sigma_s_prime,
+                                       spectralon.eta)
+    np.testing.assert_allclose(weights[:, -1], blend * albedo, rtol=ROUND_OFF_32)
+    assert blend.min() > 0.9
+    # off, the projection alone decides: Eq. 5-7 as the paper sums them
+    np.testing.assert_array_equal(state.coefficients(spectralon)[:, -1], 0.0)

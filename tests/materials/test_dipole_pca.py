@@ -16,6 +16,7 @@ from translucent.materials.dipole_pca import (
     leading_basis_functions,
     singular_value_roots,
     terms_to_match,
+    truncated_diffuse_reflectance,
     write_analysis_figure,
 )
 
@@ -221,6 +222,59 @@ def test_profiles_stay_finite_and_non_negative(improved, r, sigma_a, sigma_s_pri
     assert np.isfinite(profile) and profile >= 0
     assert np.all(np.isfinite(improved.evaluate(dtype(r))))
     assert np.isfinite(area_relative_error(improved, sigma_a, sigma_s_prime, eta))
+
+
+@settings(max_examples=40, deadline=None)
+@given(sigma_a=coefficient, sigma_s_prime=coefficient, eta=index,
+       radius=st.floats(min_value=1e-3, max_value=65.0))
+def test_truncated_reflectance_is_the_integral_of_the_profile(sigma_a, sigma_s_prime, eta,
+                                                               radius):
+    """The closed form against the trapezoid rule on 4001 distances dense near 0."""
+    radii, measure = pca._fine_radii(radius)
+    profile = dipole_reflectance_profile(radii, sigma_a, sigma_s_prime, eta)
+    quadrature = 2 * np.pi * float((profile * measure).sum())
+    closed = float(truncated_diffuse_reflectance(sigma_a, sigma_s_prime, eta, radius))
+    assert closed == pytest.approx(quadrature, rel=QUADRATURE_RTOL, abs=ROUND_OFF)
+
+
+def test_truncated_reflectance_limits():
+    sigma_a, sigma_s_prime = np.array([1e-3, 0.1, 10.0]), np.array([0.5, 2.0, 30.0])
+    # all of it far away: the total diffuse reflectance (Eq. 5 of Jensen et al. 2001)
+    far = truncated_diffuse_reflectance(sigma_a, sigma_s_prime, 1.3, 1e9)
+    np.testing.assert_allclose(far, total_diffuse_reflectance(sigma_a, sigma_s_prime, 1.3),
+                               rtol=ROUND_OFF)
+    # none of it within radius 0, and it never shrinks as the radius grows
+    assert np.all(truncated_diffuse_reflectance(sigma_a, sigma_s_prime, 1.3, 0.0) == 0)
+    growing = truncated_diffuse_reflectance(0.1, 2.0, 1.3, np.linspace(0.0, 65.0, 100))
+    assert np.all(np.diff(growing) >= 0) and growing[1] > 0
+    # no scattering, nothing reflected (and no NaN from the infinite source depths)
+    assert truncated_diffuse_reflectance([0.0, 1.0], 0.0, 1.3, 65.0).tolist() == [0.0, 0.0]
+
+
+@pytest.mark.parametrize("name", list(PARAMETERISATIONS))
+def test_projection_energy_is_the_energy_of_the_reconstruction(name):
+    basis = dipole_pca_basis(name)
+    sigma_a, sigma_s_prime = np.array([0.0021, 0.05, 1.0]), np.array([2.19, 1.0, 3.0])
+    coefficients, residual, energy, exact = basis.project_with_energy(sigma_a, sigma_s_prime)
+    expected_coefficients, expected_residual = basis.project_with_residual(sigma_a,
+                                                                           sigma_s_prime)
+    np.testing.assert_array_equal(coefficients, expected_coefficients)
+    np.testing.assert_array_equal(residual, expected_residual)
+    radii, measure = pca._fine_radii(65.0)
+    reconstruction = basis.reconstruct(radii, coefficients)
+    np.testing.assert_allclose(energy, 2 * np.pi * (reconstruction * measure[:, None]).sum(0),
+                               rtol=ROUND_OFF)
+    np.testing.assert_allclose(exact, truncated_diffuse_reflectance(sigma_a, sigma_s_prime,
+                                                                    1.3, 65.0), rtol=ROUND_OFF)
+
+
+def test_bad_truncation_radius_is_rejected():
+    with pytest.raises(InputError, match=r"radius.*>= 0 mm"):
+        truncated_diffuse_reflectance(0.1, 1.0, 1.3, -1.0)
+    with pytest.raises(InputError, match="radius.*finite"):
+        truncated_diffuse_reflectance(0.1, 1.0, 1.3, np.nan)
+    with pytest.raises(InputError, match=r"eta.*\[1, 3\]"):
+        truncated_diffuse_reflectance(0.1, 1.0, 0.5, 1.0)
 
 
 @pytest.mark.parametrize("kwargs, message", [
