@@ -151,7 +151,8 @@ def pca_energy(basis_name: str, sigmas=SIGMAS, etas=ETAS) -> StressResult:
         evaluations=coefficients.size + reconstruction.size,
         bound=TRUSTED_ENERGY_FACTOR * measured_worst,
         against="exact profile energy 2 pi int R_d r dr over [0, 65] mm",
-        notes=f"energy error of projections the method trusts (residual < {LOCAL_BLEND_START}),"
+        notes="energy error of projections the method trusts (blend weight 0 in "
+              "fast.prt.projection_blend: residual, energy and sampling agree),"
               f" at most {TRUSTED_ENERGY_FACTOR:g} x the worst of the 36 measured profiles "
               f"({measured_worst:.3g}); negative counts projections holding more energy than "
               "their profile (Bessel's inequality)")
