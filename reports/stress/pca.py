@@ -16,7 +16,7 @@ import functools
 
 import numpy as np
 
-from ...fast.prt import LOCAL_BLEND_START, projection_blend
+from ...fast.prt import projection_blend
 from ...materials.catalogue import MEASURED_MEDIA
 from ...materials.dipole import dipole_reflectance_profile
 from ...materials.dipole_pca import dipole_pca_basis

@@ -11,6 +11,7 @@ import types
 
 import numpy as np
 import pytest
+from translucent.fast.prt import LOCAL_BLEND_START
 from translucent.fast.wavelets import SpatialWavelet
 from translucent.fitting.results import ParameterSummary
 from translucent.materials.dipole_pca import DipolePCABasis
@@ -66,7 +67,7 @@ def test_pca_energy_no_longer_trusts_an_unresolved_profile():
     # the K-term energy is wrong in sign; the method's criterion now refuses it, so the
     # kernel judges nothing there and passes.
     result = pca.pca_energy("paper", sigmas=(1e3,), etas=(1.3,))
-    assert result.worst_at["residual"] < pca.LOCAL_BLEND_START
+    assert result.worst_at["residual"] < LOCAL_BLEND_START
     assert result.worst_at["energy"] < 0 < result.worst_at["exact_energy"]
     assert result.details[0]["trusted"] == 0
     assert result.details[0]["untrusted_worst_energy_error"] > 100 * result.bound
