@@ -116,6 +116,7 @@ __all__ = [
     "COMPONENTS",
     "DEFAULT_KNOBS",
     "SOLVERS",
+    "AreaLightShadows",
     "ConvergenceError",
     "RadiosityState",
     "ScatteringGeometry",
@@ -163,12 +164,14 @@ DEFAULT_KNOBS: dict = {
     "transfer_budget_mb": 512,       # T fits when 3 P^2 float32 do (P <= 6,688 at 512 MB)
     "light_samples": 16,             # samples per area light / environment per point
     "diffuse_light_samples": None,   # per diffuse patch (its E feeds only F B); None: as above
+    "shadow_ray_engine": "auto",     # relighting's shadow rays: "auto", "embree", "mitsuba"
     "seed": 0,
 }
 
 #: Knobs that only steer solving and lighting: not part of the precomputation's cache key.
 RUNTIME_KNOBS = ("solver", "tolerance", "max_iterations", "warm_start", "transfer",
-                 "transfer_budget_mb", "light_samples", "diffuse_light_samples")
+                 "transfer_budget_mb", "light_samples", "diffuse_light_samples",
+                 "shadow_ray_engine")
 
 #: The iterative solvers.
 SOLVERS = ("jacobi", "gmres", "bicgstab")
@@ -1102,18 +1105,23 @@ def direct_irradiance(scene, points, normals, *, lights=None, samples: int = 16,
     return total
 
 
+def _area_light_positions(light, samples, rng) -> np.ndarray:
+    """Stratified sample positions on a rectangular light, (samples, 3) scene units."""
+    side = int(np.ceil(np.sqrt(samples)))
+    cells = np.arange(side * side)[:samples]
+    u = (cells % side + rng.random(samples)) / side * 2.0 - 1.0
+    v = (cells // side + rng.random(samples)) / side * 2.0 - 1.0
+    return light.center + u[:, None] * light.u_axis + v[:, None] * light.v_axis
+
+
 def _area_light_irradiance(scene, light, points, normals, samples, rng, visible):
     """Stratified samples on the rectangle, one visibility query per sample position.
 
     One query for all samples at once was measured no faster on 25,080 patches x 16
     samples (0.51-0.95 s against 0.47-0.51 s, the same run): its temporaries outweigh the
-    per-call cost of the ray engine.
+    per-call cost of the ray engine. Relighting takes :class:`AreaLightShadows` instead.
     """
-    side = int(np.ceil(np.sqrt(samples)))
-    cells = np.arange(side * side)[:samples]
-    u = (cells % side + rng.random(samples)) / side * 2.0 - 1.0
-    v = (cells // side + rng.random(samples)) / side * 2.0 - 1.0
-    positions = light.center + u[:, None] * light.u_axis + v[:, None] * light.v_axis
+    positions = _area_light_positions(light, samples, rng)
     result = np.zeros((len(points), 3))
     for position in positions:
         to_light = position - points
@@ -1128,6 +1136,109 @@ def _area_light_irradiance(scene, light, points, normals, samples, rng, visible)
             strength[np.flatnonzero(lit)[~seen]] = 0.0
         result += strength[:, None]
     return result * light.radiance * light.area / len(positions)
+
+
+@functools.lru_cache(maxsize=1)
+def _compiled_shadow_rays():
+    """Compile the per-frame loops of :class:`AreaLightShadows` (geometry and rays)."""
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def strengths(points, normals, positions, light_normal, out):  # pragma: no cover
+        # the expressions and their order are those of _area_light_irradiance
+        for i in numba.prange(len(points)):
+            for s in range(len(positions)):
+                x = positions[s, 0] - points[i, 0]
+                y = positions[s, 1] - points[i, 1]
+                z = positions[s, 2] - points[i, 2]
+                distance2 = x * x + y * y + z * z
+                length = math.sqrt(distance2)
+                x, y, z = x / length, y / length, z / length
+                cos_point = max(normals[i, 0] * x + normals[i, 1] * y + normals[i, 2] * z, 0.0)
+                cos_light = max(-(x * light_normal[0] + y * light_normal[1]
+                                  + z * light_normal[2]), 0.0)
+                out[i, s] = cos_point * cos_light / distance2
+
+    @numba.njit(parallel=True, cache=True)
+    def rays(starts, positions, lit, count, offset, origins, directions, tmax):  # pragma: no cover
+        # the segment of visible() with normals_a given
+        for k in numba.prange(len(lit)):
+            i, s = lit[k] // count, lit[k] % count
+            x = positions[s, 0] - starts[i, 0]
+            y = positions[s, 1] - starts[i, 1]
+            z = positions[s, 2] - starts[i, 2]
+            length = math.sqrt(x * x + y * y + z * z)
+            origins[k, 0], origins[k, 1], origins[k, 2] = starts[i, 0], starts[i, 1], starts[i, 2]
+            if length <= 2.0 * offset:
+                directions[k, 0], directions[k, 1], directions[k, 2] = 0.0, 0.0, 1.0
+                tmax[k] = -1.0  # marks a pair close enough to count as visible
+            else:
+                directions[k, 0], directions[k, 1] = x / length, y / length
+                directions[k, 2] = z / length
+                tmax[k] = max(length - offset, 0.0)
+
+    return strengths, rays
+
+
+class AreaLightShadows:
+    """Surface points lit by rectangular area lights every frame: shadow rays without overhead.
+
+    The per-frame part of :func:`direct_irradiance` (Sheng et al. 2014, Eq. 7, and the
+    per-pixel direct light of Sect. 6.1) for points that stay put while the lights move:
+    the offset ray origins of :func:`translucent.scenes.raycast.visible` are computed once,
+    the cosines and the rays of all samples in two compiled loops, and every shadow ray of
+    a light in one call of the ray engine. Same samples, same rays, same result as
+    :func:`direct_irradiance` (up to float rounding).
+
+    Parameters
+    ----------
+    scene : Scene
+    points, normals : ndarray, (N, 3)
+        Scene units; normals of unit length on the lit side.
+    engine : {"auto", "embree", "mitsuba"}, optional
+        Ray engine of the shadow rays (knob ``shadow_ray_engine``); default: the scene's.
+    """
+
+    def __init__(self, scene, points, normals, engine=None):
+        from ..scenes.raycast import OFFSET_FRACTION, ray_engine
+
+        self.scene = scene
+        self.points = np.ascontiguousarray(points, dtype=np.float64)
+        self.normals = np.ascontiguousarray(normals, dtype=np.float64)
+        self.offset = ray_engine(scene).diagonal * OFFSET_FRACTION
+        # a lit point faces the light: visible() moves it along +normal
+        length = np.linalg.norm(self.normals, axis=-1)
+        self.starts = self.points + (self.offset / np.where(length > 0, length, 1.0))[:, None] \
+            * self.normals
+        self.engine = ray_engine(scene, engine)
+
+    @staticmethod
+    def handles(lights) -> bool:
+        """Return True when every light is a rectangular area light (else: the general path)."""
+        return all(isinstance(light, RectangularAreaLight) for light in lights)
+
+    def irradiance(self, lights, samples: int, seed: int) -> np.ndarray:
+        """Irradiance at the points, (N, 3): :func:`direct_irradiance` for the same arguments."""
+        strengths, rays = _compiled_shadow_rays()
+        rng = np.random.default_rng(seed)
+        total = np.zeros((len(self.points), 3))
+        strength = np.empty((len(self.points), samples))
+        for light in lights:
+            positions = _area_light_positions(light, samples, rng)
+            strengths(self.points, self.normals, positions,
+                      np.asarray(light.normal, dtype=np.float64), strength)
+            lit = np.flatnonzero(strength.ravel() > 0)
+            origins = np.empty((len(lit), 3))
+            directions = np.empty((len(lit), 3))
+            tmax = np.empty(len(lit))
+            rays(self.starts, positions, lit, samples, self.offset, origins, directions, tmax)
+            close = tmax < 0
+            blocked = self.engine.occluded_unit(
+                origins.astype(np.float32), directions.astype(np.float32),
+                np.where(close, 0.0, tmax).astype(np.float32))
+            strength.ravel()[lit[blocked & ~close]] = 0.0
+            total += strength.sum(axis=1)[:, None] * (light.radiance * light.area / samples)
+        return total
 
 
 def _sphere_light_irradiance(scene, light, points, normals, samples, rng, trace):
@@ -1256,7 +1367,7 @@ class RadiosityState:
         self._energy_beyond_cutoff()
         self.transfer = None
         self._transfer_materials = None
-        self._frames = []  # (E, B) of earlier frames: stale once S changes
+        self._frames = []  # (E, B - SE) of earlier frames: stale once S changes
         return time.perf_counter() - started
 
     def _energy_beyond_cutoff(self):
@@ -1323,15 +1434,32 @@ class RadiosityState:
         offset_points = p.centroid + 1e-6 * p.radius[:, None] * p.normal
         samples = self.knobs["light_samples"]
         diffuse_samples = self.knobs.get("diffuse_light_samples")
-        if diffuse_samples is None or diffuse_samples == samples:
-            return direct_irradiance(self.scene, offset_points, p.normal, lights=lights,
-                                     samples=samples, seed=self.knobs["seed"])
-        diffuse = ~np.isin(p.object_of, list(self.geometry.objects))
+        groups = [(np.arange(len(p)), samples)]
+        if diffuse_samples is not None and diffuse_samples != samples:
+            diffuse = ~np.isin(p.object_of, list(self.geometry.objects))
+            groups = [(np.flatnonzero(~diffuse), samples),
+                      (np.flatnonzero(diffuse), diffuse_samples)]
+        lights = self.scene.lights if lights is None else tuple(lights)
         E = np.zeros((len(p), 3))
-        for rows, count in ((~diffuse, samples), (diffuse, diffuse_samples)):
-            E[rows] = direct_irradiance(self.scene, offset_points[rows], p.normal[rows],
-                                        lights=lights, samples=count, seed=self.knobs["seed"])
+        for rows, count in groups:
+            if AreaLightShadows.handles(lights):
+                shadows = self._shadows(("patches", len(rows)), offset_points[rows],
+                                        p.normal[rows])
+                E[rows] = shadows.irradiance(lights, count, self.knobs["seed"])
+            else:
+                E[rows] = direct_irradiance(self.scene, offset_points[rows], p.normal[rows],
+                                            lights=lights, samples=count,
+                                            seed=self.knobs["seed"])
         return E
+
+    def _shadows(self, key, points, normals) -> AreaLightShadows:
+        """Return the :class:`AreaLightShadows` of a point set (built once per key, engine)."""
+        cache = self.__dict__.setdefault("_shadow_points", {})
+        key = key + (self.knobs["shadow_ray_engine"],)
+        if key not in cache:
+            cache[key] = AreaLightShadows(self.scene, points, normals,
+                                          self.knobs["shadow_ray_engine"])
+        return cache[key]
 
     def solve(self, irradiance, component: str = "both") -> tuple[np.ndarray, dict]:
         """Radiosity B (P, 3) for patch irradiance E, for one bounce component (Fig. 6)."""
@@ -1356,7 +1484,7 @@ class RadiosityState:
         initial = self._warm_start(irradiance, source) if self.knobs["warm_start"] else None
         B, info = self._solve(self.S, source, initial)
         self._interreflected = B - source
-        self._frames = (self._frames + [(np.array(irradiance, dtype=np.float64), B)])[
+        self._frames = (self._frames + [(np.array(irradiance, dtype=np.float64), B - source)])[
             -WARM_START_FRAMES:]
         info["warm_start"] = initial is not None
         return B, info
@@ -1377,14 +1505,17 @@ class RadiosityState:
         :math:`SFB` is added to the new :math:`SE`. The residual test decides either way.
         """
         if self._frames:
-            irradiances = np.stack([E for E, _ in self._frames], axis=-1)   # (P, 3, k)
-            solutions = np.stack([B for _, B in self._frames], axis=-1)
-            weights = np.zeros((3, len(self._frames)))
+            guess = np.array(source, dtype=np.float64)
             for c in range(3):
-                weights[c] = np.linalg.lstsq(irradiances[:, c], irradiance[:, c],
-                                             rcond=None)[0]
-            rest = irradiance - np.einsum("pck,ck->pc", irradiances, weights)
-            return np.einsum("pck,ck->pc", solutions, weights) + self.S.dot(rest)
+                irradiances = np.stack([E[:, c] for E, _ in self._frames])   # (k, P)
+                # least squares through the k x k normal equations (matrix products): the
+                # SVD of lstsq on (P, k) and einsum cost more than the rest of the frame
+                weights = np.linalg.lstsq(irradiances @ irradiances.T,
+                                          irradiances @ irradiance[:, c], rcond=None)[0]
+                # sum_k a_k B_k + S(E - sum_k a_k E_k) = SE + sum_k a_k (B_k - S E_k): the
+                # frames keep their inter-reflected parts, so the guess needs no product of S
+                guess[:, c] += weights @ np.stack([part[:, c] for _, part in self._frames])
+            return guess
         previous = getattr(self, "_interreflected", None)
         return None if previous is None else source + previous
 
@@ -1406,15 +1537,94 @@ class RadiosityState:
             self._cached_gbuffer = gbuffer(self.scene)
         return self._cached_gbuffer
 
+    def _image_operators(self, scene) -> dict:
+        """Per-camera linear maps from patch values to pixels, built once (:meth:`image`).
+
+        The vertex averages of :meth:`Patches.vertex_values` followed by the barycentric
+        interpolation of the G-buffer are linear in the patch values: their product is one
+        sparse (pixels x patches) matrix per kind of surface, so a frame's image costs two
+        sparse products instead of an average and an interpolation per object.
+        """
+        lambertian = tuple(obj.material if isinstance(obj.material, Lambertian) else None
+                           for obj in scene.objects)
+        cached = getattr(self, "_cached_image_operators", None)
+        if cached is not None and cached["lambertian"] == lambertian:
+            return cached
+        gb = self._gbuffer()
+        object_id = gb.object_id.reshape(-1)
+        behind = np.einsum("hwd,hwd->hw", gb.geometric_normal, gb.view_direction).reshape(-1) < 0
+        diffuse, diffuse_weights, translucent, translucent_weights = [], [], [], []
+        for index, obj in enumerate(scene.objects):
+            pixels = np.flatnonzero(object_id == index)
+            if not len(pixels):
+                continue
+            if lambertian[index] is not None:
+                diffuse.append(pixels)
+                diffuse_weights.append(self._pixel_weights(gb, index, obj.mesh, pixels))
+                continue
+            if index in self.geometry.sheets:
+                # a two-sided sheet shows the face turned towards the camera
+                pixels = np.concatenate([pixels[~behind[pixels]], pixels[behind[pixels]]])
+                weights = sparse.vstack([
+                    self._pixel_weights(gb, index, obj.mesh, pixels[~behind[pixels]]),
+                    self._pixel_weights(gb, index, obj.mesh, pixels[behind[pixels]],
+                                        back=True)])
+            else:
+                weights = self._pixel_weights(gb, index, obj.mesh, pixels)
+            translucent.append(pixels)
+            translucent_weights.append(weights)
+        size = len(self.patches)
+
+        def stacked(blocks):
+            return sparse.vstack(blocks).tocsr() if blocks else sparse.csr_matrix((0, size))
+
+        diffuse = np.concatenate(diffuse) if diffuse else np.zeros(0, dtype=np.int64)
+        albedo = np.zeros((len(diffuse), 3))
+        for index, material in enumerate(lambertian):
+            if material is not None:
+                albedo[object_id[diffuse] == index] = material.albedo
+        points = gb.position.reshape(-1, 3)[diffuse]
+        normals = gb.geometric_normal.reshape(-1, 3)[diffuse]
+        facing = np.sign(np.einsum("ij,ij->i", normals,
+                                   gb.view_direction.reshape(-1, 3)[diffuse]))
+        shading = gb.normal.reshape(-1, 3)[diffuse] * np.where(facing == 0, 1.0, facing)[:, None]
+        self._cached_image_operators = {
+            "lambertian": lambertian, "diffuse": diffuse, "diffuse_weights":
+            stacked(diffuse_weights), "translucent": np.concatenate(translucent) if translucent
+            else np.zeros(0, dtype=np.int64), "translucent_weights": stacked(translucent_weights),
+            "albedo_over_pi": albedo / np.pi, "points": points + 1e-6 * normals * facing[:, None],
+            "shading": shading}
+        return self._cached_image_operators
+
+    def _pixel_weights(self, gb, index, mesh, pixels, back=False) -> sparse.csr_matrix:
+        """(pixels x patches) weights: area-weighted vertex averages, then barycentrics."""
+        start, stop = self.patches.face_offset[index], self.patches.face_offset[index + 1]
+        owner = (self.patches.face_back_patch if back else self.patches.face_patch)[start:stop]
+        area = self.patches.triangle_area[start:stop]
+        corners = np.asarray(mesh.faces).T.ravel()
+        count = len(mesh.vertices)
+        vertex_weight = np.bincount(corners, np.tile(area, 3), minlength=count)
+        to_vertices = sparse.csr_matrix(
+            (np.tile(area, 3) / np.maximum(vertex_weight, 1e-300)[corners],
+             (corners, np.tile(owner, 3))), shape=(count, len(self.patches)))
+        triangles = gb.triangle_id.reshape(-1)[pixels]
+        to_pixels = sparse.csr_matrix(
+            (gb.barycentrics.reshape(-1, 3)[pixels].ravel(),
+             (np.repeat(np.arange(len(pixels)), 3), np.asarray(mesh.faces)[triangles].ravel())),
+            shape=(len(pixels), count))
+        return (to_pixels @ to_vertices).tocsr()
+
     def image(self, B, lights=None, component: str = "both") -> np.ndarray:
         r"""Compose the image (H, W, 3) from the patch radiosity B.
 
         Diffuse surfaces: :math:`\rho/\pi (E_{direct} + FB)` with the direct part per pixel;
-        translucent surfaces: :math:`B/\pi` interpolated from the vertices.
+        translucent surfaces: :math:`B/\pi` interpolated from the vertices (both through
+        the per-camera weights of :meth:`_image_operators`).
         """
         gb = self._gbuffer()
         scene = self._scene_with_materials()
-        rgb = np.zeros(gb.shape + (3,))
+        operators = self._image_operators(scene)
+        rgb = np.zeros((gb.shape[0] * gb.shape[1], 3))
         if self.form_factors is None or component not in ("interreflection", "both"):
             global_irradiance = np.zeros_like(B)
         elif self._solved is not None and self._solved[0] is B:
@@ -1422,40 +1632,22 @@ class RadiosityState:
             global_irradiance = self._solved[1]
         else:
             global_irradiance = form_factor_product(self.form_factors, B)
-        diffuse_pixels = np.zeros(gb.shape, dtype=bool)
-        for index, obj in enumerate(scene.objects):
-            mask = gb.mask(index)
-            if not mask.any():
-                continue
-            if isinstance(obj.material, Lambertian):
-                vertex = self.patches.vertex_values(index, obj.mesh, global_irradiance)
-                rgb[mask] = gb.interpolate(index, vertex)[mask] * obj.material.albedo / np.pi
-                diffuse_pixels |= mask
+        diffuse = operators["diffuse"]
+        rgb[operators["translucent"]] = operators["translucent_weights"] @ B / np.pi
+        if len(diffuse):
+            lights = scene.lights if lights is None else tuple(lights)
+            if AreaLightShadows.handles(lights):
+                shadows = self._shadows(("pixels",) + gb.shape, operators["points"],
+                                        operators["shading"])
+                direct = shadows.irradiance(lights, self.knobs["light_samples"],
+                                            self.knobs["seed"] + 1)
             else:
-                vertex = self.patches.vertex_values(index, obj.mesh, B)
-                seen = gb.interpolate(index, vertex)
-                if index in self.geometry.sheets:
-                    # a two-sided sheet shows the face turned towards the camera
-                    back = self.patches.vertex_values(index, obj.mesh, B, back=True)
-                    behind = np.einsum("hwd,hwd->hw", gb.geometric_normal,
-                                       gb.view_direction) < 0
-                    seen = np.where(behind[..., None], gb.interpolate(index, back), seen)
-                rgb[mask] = seen[mask] / np.pi
-        if diffuse_pixels.any():
-            points = gb.position[diffuse_pixels]
-            normals = gb.geometric_normal[diffuse_pixels]
-            facing = np.sign(np.einsum("ij,ij->i", normals, gb.view_direction[diffuse_pixels]))
-            shading = gb.normal[diffuse_pixels] * np.where(facing == 0, 1.0, facing)[:, None]
-            direct = direct_irradiance(scene, points + 1e-6 * normals * facing[:, None],
-                                       shading, lights=lights,
-                                       samples=self.knobs["light_samples"],
-                                       seed=self.knobs["seed"] + 1)
-            albedo = np.zeros((len(points), 3))
-            object_id = gb.object_id[diffuse_pixels]
-            for index, obj in enumerate(scene.objects):
-                if isinstance(obj.material, Lambertian):
-                    albedo[object_id == index] = obj.material.albedo
-            rgb[diffuse_pixels] += albedo / np.pi * direct
+                direct = direct_irradiance(scene, operators["points"], operators["shading"],
+                                           lights=lights, samples=self.knobs["light_samples"],
+                                           seed=self.knobs["seed"] + 1)
+            rgb[diffuse] = operators["albedo_over_pi"] * (
+                operators["diffuse_weights"] @ global_irradiance + direct)
+        rgb = rgb.reshape(gb.shape + (3,))
         rgb += _emitters_seen(scene.with_lights(self.scene.lights if lights is None
                                                 else lights), gb)
         return rgb
@@ -1563,6 +1755,11 @@ def _resolve_knobs(scene, knobs: dict) -> dict:
                                         or diffuse_samples < 1):
         raise InputError("must be None (as light_samples) or an integer >= 1",
                          field="diffuse_light_samples", value=diffuse_samples)
+    from ..scenes.raycast import RAY_ENGINES
+
+    if resolved["shadow_ray_engine"] not in RAY_ENGINES:
+        raise InputError(f"unknown ray engine; valid: {', '.join(RAY_ENGINES)}",
+                         field="shadow_ray_engine", value=resolved["shadow_ray_engine"])
     thickness = resolved["sheet_thickness_mm"]
     if thickness is not None and not float(thickness) > 0:
         raise InputError("must be > 0 mm", field="sheet_thickness_mm", value=thickness)

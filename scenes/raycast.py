@@ -415,7 +415,25 @@ class RayEngine:
 
     def occluded(self, origins, directions, tmax) -> np.ndarray:
         """Return True where a ray hits anything with ``t <= tmax`` (any hit; cheaper)."""
-        origins, directions, tmax = _ray_batch(origins, directions, tmax)
+        return self.occluded_unit(*_ray_batch(origins, directions, tmax))
+
+    def occluded_unit(self, origins, directions, tmax) -> np.ndarray:
+        """:meth:`occluded` for a batch already checked: no validation, no copies.
+
+        For callers that trace shadow rays every frame (:func:`visible`, relighting).
+
+        Parameters
+        ----------
+        origins, directions : ndarray, (N, 3)
+            Finite; directions of unit length. float32 C-contiguous arrays are passed to
+            the engine as they are, others are converted.
+        tmax : ndarray, (N,)
+            Scene units, ``0 <= tmax`` and finite.
+
+        Returns
+        -------
+        ndarray of bool, (N,)
+        """
         blocked = np.zeros(len(origins), dtype=bool)
         for start in range(0, len(origins), RAYS_PER_CALL):
             chunk = slice(start, min(len(origins), start + RAYS_PER_CALL))
@@ -958,7 +976,9 @@ def visible(scene: Scene, points_a, points_b, *, normals_a=None, normals_b=None,
     start = a_moved + (offset if normals_a is None else 0.0) * direction
     reach = length - offset - (offset if normals_a is None else 0.0)
     reach = np.where(close, 0.0, np.maximum(reach, 0.0))
-    blocked = engine.occluded(start, direction, reach)
+    # the batch is checked and its directions are unit vectors: skip occluded()'s checks
+    blocked = engine.occluded_unit(start, direction,
+                                   np.minimum(reach, np.finfo(np.float32).max))
     return ~blocked | close
 
 
