@@ -53,6 +53,10 @@ RECOMPUTED_RTOL = 1e-9
 #: of Eq. 8.
 SHEET_ENERGY_RTOL = 0.015
 
+#: Relative resolution of the float32 images (two float64 images of the same frame, solved
+#: twice to the same B up to round-off, agree to it after rounding).
+FLOAT32_EPS = float(np.finfo(np.float32).eps)
+
 #: T is stored in float32: 1e-6 relative per entry, summed over the patches.
 TRANSFER_RTOL = 1e-4
 
@@ -391,6 +395,9 @@ def test_bad_knobs_are_reported():
     with pytest.raises(InputError, match="diffuse_light_samples.*None .as light_samples. or "
                                          "an integer >= 1"):
         precompute(_block_scene(), diffuse_light_samples=0)
+    with pytest.raises(InputError, match="shadow_ray_engine.*unknown ray engine; valid: auto, "
+                                         "embree, mitsuba"):
+        precompute(_block_scene(), shadow_ray_engine="optix")
 
 
 def test_fewer_diffuse_light_samples_leave_the_translucent_patches_alone():
@@ -460,6 +467,74 @@ def test_area_and_environment_irradiance_match_closed_forms():
     # an unoccluded hemisphere of constant radiance: E = pi L
     E = direct_irradiance(scene, point, up, lights=[ConstantEnvironment(0.5)], samples=64)
     assert E[0] == pytest.approx([np.pi * 0.5] * 3, rel=1e-9)
+
+
+def _area_lit_block_scene():
+    light = RectangularAreaLight([0.3, 2.0, 0.2], [0.4, 0.0, 0.0], [0.0, 0.0, 0.4], 10.0)
+    return _block_scene(lights=[light, RectangularAreaLight([-1.0, 1.5, 1.0], [0.2, 0.0, 0.0],
+                                                            [0.0, -0.1, 0.2], 4.0)])
+
+
+@pytest.mark.parametrize("samples", [1, 5, 16])
+def test_relighting_shadow_rays_give_the_irradiance_of_direct_irradiance(samples):
+    scene = _area_lit_block_scene()
+    patches = build_patches(scene)
+    points = patches.centroid + 1e-6 * patches.radius[:, None] * patches.normal
+    general = direct_irradiance(scene, points, patches.normal, samples=samples, seed=3)
+    shadows = radiosity.AreaLightShadows(scene, points, patches.normal)
+    fast = shadows.irradiance(scene.lights, samples, seed=3)
+    # the same samples and rays: equal up to the order of the sums; the block shadows part
+    # of the floor (some floor patches get only a share of the light)
+    assert np.abs(fast - general).max() <= RECOMPUTED_RTOL * np.abs(general).max()
+    floor = general[patches.of_object(0), 0]
+    assert (floor == 0).any() and (floor > 0).mean() > 0.5
+    assert radiosity.AreaLightShadows.handles(scene.lights)
+    assert not radiosity.AreaLightShadows.handles([PointLight([0.0, 2.0, 0.0], 1.0)])
+
+
+def test_relighting_shadow_rays_agree_between_ray_engines():
+    scene = _area_lit_block_scene()
+    patches = build_patches(scene)
+    points = patches.centroid + 1e-6 * patches.radius[:, None] * patches.normal
+    answers = [radiosity.AreaLightShadows(scene, points, patches.normal, engine).irradiance(
+        scene.lights, 16, seed=0) for engine in ("auto", "mitsuba")]
+    # the engines differ only on rays within float32 resolution of an edge
+    # (tests/scenes/test_raycast.py): at most one of the 16 samples of a few patches
+    differ = np.abs(answers[0] - answers[1]).max(axis=1) > RECOMPUTED_RTOL * answers[0].max()
+    assert differ.mean() < 0.01
+
+
+def test_image_weights_are_the_vertex_averages_interpolated():
+    state = _block_state()
+    scene = state._scene_with_materials()
+    operators = state._image_operators(scene)
+    gb = state._gbuffer()
+    B = np.random.default_rng(5).uniform(0.0, 1.0, size=(len(state.patches), 3))
+    for kind, index in (("diffuse", 0), ("translucent", 1)):
+        pixels = operators[kind]
+        assert set(gb.object_id.reshape(-1)[pixels]) == {index}
+        expected = gb.interpolate(index, state.patches.vertex_values(index,
+                                                                     scene.objects[index].mesh,
+                                                                     B)).reshape(-1, 3)[pixels]
+        got = operators[f"{kind}_weights"] @ B
+        assert np.abs(got - expected).max() <= RECOMPUTED_RTOL * np.abs(expected).max()
+    # every pixel that sees a surface is drawn once
+    drawn = np.concatenate([operators["diffuse"], operators["translucent"]])
+    assert len(set(drawn)) == len(drawn) == gb.hit.sum()
+
+
+def test_area_lit_image_equals_the_general_path(monkeypatch):
+    state = precompute(_area_lit_block_scene(), rays_per_patch=64, transfer="never")
+    image = state.render()
+    assert image.metadata["irradiance_seconds"] > 0
+    B, _ = state.solve(state.patch_irradiance())
+    fast = state.image(B)
+    # the same frame with every light through direct_irradiance
+    monkeypatch.setattr(radiosity.AreaLightShadows, "handles", staticmethod(lambda lights: False))
+    general = state.image(B)
+    assert np.abs(fast - general).max() <= RECOMPUTED_RTOL * np.abs(general).max()
+    # render() composes the same image (stored in float32)
+    assert np.abs(image.rgb - fast).max() <= FLOAT32_EPS * np.abs(fast).max()
 
 
 def test_render_and_bounce_decomposition():

@@ -426,3 +426,18 @@ def test_engine_choice_and_its_errors(monkeypatch, sphere_scene):
     monkeypatch.setenv("TRANSLUCENT_RAY_ENGINE", "cuda")
     with pytest.raises(InputError, match=r"TRANSLUCENT_RAY_ENGINE.*unknown ray engine"):
         ray_engine(sphere_scene)
+
+
+@pytest.mark.parametrize("name", ["mitsuba"] + (["embree"] if embree_available() else []))
+def test_occluded_unit_answers_as_occluded_for_a_checked_batch(name, sphere_scene, rng):
+    engine = ray_engine(sphere_scene, name)
+    origins = rng.uniform(-3.0, 3.0, size=(5000, 3))
+    directions = rng.uniform(-1.0, 1.0, size=(5000, 3)) - origins
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    tmax = rng.uniform(0.5, 6.0, size=5000)
+    blocked = engine.occluded(origins, directions, tmax)
+    assert 0.1 < blocked.mean() < 0.9
+    # the same rays, already float32: passed to the engine without a copy or a check
+    unit = engine.occluded_unit(origins.astype(np.float32), directions.astype(np.float32),
+                                tmax.astype(np.float32))
+    assert np.array_equal(unit, blocked)
