@@ -10,9 +10,10 @@
   relighting step) for each solver from a cold start (Jacobi, GMRES, BiCGSTAB: products of
   SF and seconds), of Jacobi started from the earlier frames' solutions, and of a whole
   frame split into its parts (patch irradiance with shadow rays, solve, image with per-pixel
-  direct light), and what fewer shadow rays on diffuse patches (knob
-  ``diffuse_light_samples``) save and change in the image; each timed sequence slides the
-  light along a path not used before;
+  direct light) for each ray engine of the shadow rays (knob ``shadow_ray_engine``) and
+  with 16 or 4 shadow rays per diffuse patch (knob ``diffuse_light_samples``), with the load
+  average at each; what fewer shadow rays on diffuse patches save and change in the image;
+  each timed sequence slides the light along a path not used before;
 * relighting with the precomputed T = (I - SF)^-1 S: at 25k patches T needs 3 P^2 float32
   (7.5 GB) and is skipped by the rule of ``transfer_budget_mb``; it is measured on the same
   scene cut coarser, at the largest patch count the budget allows (``--transfer-patches``);
@@ -34,6 +35,7 @@ report the bytes a frame moves against that bandwidth. The paper's GPU figures (
 from __future__ import annotations
 
 import json
+import os
 import re
 import resource
 import time
@@ -44,6 +46,7 @@ from ...atomic import atomic_write_text
 from ...fast import radiosity
 from ...materials import Dipole, measured_medium
 from ...scenes import RectangularAreaLight, SceneObject
+from ...scenes.raycast import embree_available, ray_engine
 from ...scenes.scene_file import builtin_scene_path, loads_scene
 
 #: The paper's Table 1, Cornell box (24,640 polygons, GTX 590).
@@ -55,6 +58,10 @@ BASELINE_BYTES = 256 * 2**20
 
 #: The timed parts of a relighting frame (``RadiosityState.render`` metadata).
 FRAME_PARTS = ("irradiance", "solve", "image")
+
+#: Ray engines of the shadow rays a whole frame is measured with (knob shadow_ray_engine;
+#: Embree where ``embreex`` is installed).
+SHADOW_ENGINES = ("embree", "mitsuba")
 
 #: Tolerance of the converged solutions the low-rank operators are judged against.
 LOW_RANK_REFERENCE_TOLERANCE = 1e-6
@@ -215,7 +222,42 @@ def _relighting(state, args, baseline, bandwidth, out):
                                          "ratio to baseline": warm_seconds / baseline}
     print(f"  {fastest}, started from the earlier frames' solutions: "
           f"{1 / warm_seconds:.2f} fps, {info['iterations']} iterations")
-    lights = list(_moved_lights(state.scene, args.frames, axis=2))
+    frames = {}
+    axis = 2
+    for engine in [e for e in SHADOW_ENGINES if e != "embree" or embree_available()]:
+        state.knobs["shadow_ray_engine"] = engine
+        for count in (None, 4):
+            state.knobs["diffuse_light_samples"] = count
+            # a path of the light not used before (the warm start gains nothing from repeats)
+            lights = list(_moved_lights(state.scene, args.frames, axis=axis))
+            axis = 2 - axis
+            seconds, split, image = _whole_frame(state, lights, args.frames)
+            label = (f"shadow rays {engine}, diffuse light samples "
+                     f"{count or state.knobs['light_samples']}")
+            frames[label] = {"frame seconds": seconds, "frame fps": 1.0 / seconds,
+                             "frame parts seconds": split, "load average": os.getloadavg()[0]}
+            print(f"  whole frame ({fastest}, {image.shape[1]} x {image.shape[0]}, {label}, "
+                  f"load {os.getloadavg()[0]:.2f}): {1 / seconds:.2f} fps ({seconds:.3f} s: "
+                  f"patch irradiance with shadow rays {split['irradiance']:.3f} s, solve "
+                  f"{split['solve']:.3f} s, image with per-pixel direct light "
+                  f"{split['image']:.3f} s)")
+    state.knobs["shadow_ray_engine"] = radiosity.DEFAULT_KNOBS["shadow_ray_engine"]
+    state.knobs["diffuse_light_samples"] = None
+    default_engine = ray_engine(state.scene, state.knobs["shadow_ray_engine"]).engine
+    default = frames[f"shadow rays {default_engine}, diffuse light samples "
+                     f"{state.knobs['light_samples']}"]
+    out_rows: dict = {}
+    # the image change is measured against the default knobs' image of the same light
+    fewer = _diffuse_light_samples(state, lights[-1], state.render(lights=lights[-1]), out_rows)
+    out["relighting"] = {"solvers": solvers, "fastest": fastest,
+                         "irradiance seconds": irradiance_seconds, **default,
+                         "whole frames": frames, "image": list(image.shape),
+                         "diffuse light samples": out_rows}
+    print(fewer)
+
+
+def _whole_frame(state, lights, frames: int):
+    """Seconds per whole relighting frame, its split into FRAME_PARTS, the last image."""
     frame = iter(range(10**9))
     parts = []
 
@@ -224,20 +266,9 @@ def _relighting(state, args, baseline, bandwidth, out):
         parts.append([image.metadata[f"{part}_seconds"] for part in FRAME_PARTS])
         return image
 
-    seconds, image = _timed(whole, max(1, args.frames - 1))
+    seconds, image = _timed(whole, max(1, frames - 1))
     split = dict(zip(FRAME_PARTS, np.mean(parts[1:], axis=0).tolist(), strict=True))
-    out_rows: dict = {}
-    fewer = _diffuse_light_samples(state, lights[-1], image, out_rows)
-    out["relighting"] = {"solvers": solvers, "fastest": fastest,
-                         "irradiance seconds": irradiance_seconds,
-                         "frame seconds": seconds, "frame fps": 1.0 / seconds,
-                         "frame parts seconds": split, "image": list(image.shape),
-                         "diffuse light samples": out_rows}
-    print(f"  whole frame ({fastest}, {image.shape[1]} x {image.shape[0]}): "
-          f"{1 / seconds:.2f} fps ({seconds:.3f} s: patch irradiance with shadow rays "
-          f"{split['irradiance']:.3f} s, solve {split['solve']:.3f} s, image with per-pixel "
-          f"direct light {split['image']:.3f} s)")
-    print(fewer)
+    return seconds, split, image
 
 
 def _diffuse_light_samples(state, light, image, rows, counts=(4, 1)) -> str:
