@@ -61,10 +61,18 @@ a starting guess (bench).
 Images: direct lighting of diffuse surfaces is evaluated per pixel through the G-buffer
 (the paper's hybrid that removes per-patch shadow artifacts), the global part
 :math:`FB` and the radiosity of translucent surfaces come from the patch solution,
-averaged to the vertices and interpolated. :meth:`RadiosityState.components` gives the
-decomposition of the paper's Fig. 6: direct only, inter-reflection only (translucent
-patches as diffuse ones of the same total reflectance), subsurface only (:math:`B = SE`),
-and both.
+averaged to the vertices and interpolated: both linear maps are multiplied into one sparse
+(pixels x patches) matrix per camera, so a frame's image is two sparse products.
+
+A relighting frame moves only the lights: the shadow rays of rectangular area lights
+(patches and diffuse pixels) start from points offset once (:class:`AreaLightShadows`),
+their cosines and rays come from two compiled loops and each light's rays go to the ray
+engine in one call (knob ``shadow_ray_engine``); the result is that of
+:func:`direct_irradiance` to round-off. Other lights take :func:`direct_irradiance`.
+
+:meth:`RadiosityState.components` gives the decomposition of the paper's Fig. 6: direct
+only, inter-reflection only (translucent patches as diffuse ones of the same total
+reflectance), subsurface only (:math:`B = SE`), and both.
 """
 
 from __future__ import annotations
@@ -1160,18 +1168,22 @@ def _compiled_shadow_rays():
                 out[i, s] = cos_point * cos_light / distance2
 
     @numba.njit(parallel=True, cache=True)
-    def rays(starts, positions, lit, count, offset, origins, directions, tmax):  # pragma: no cover
-        # the segment of visible() with normals_a given
+    def rays(starts, positions, lit, count, offset,  # pragma: no cover - compiled
+             origins, directions, tmax, close):
+        # the segment of visible() with normals_a given, written in the engine's float32
         for k in numba.prange(len(lit)):
             i, s = lit[k] // count, lit[k] % count
             x = positions[s, 0] - starts[i, 0]
             y = positions[s, 1] - starts[i, 1]
             z = positions[s, 2] - starts[i, 2]
             length = math.sqrt(x * x + y * y + z * z)
-            origins[k, 0], origins[k, 1], origins[k, 2] = starts[i, 0], starts[i, 1], starts[i, 2]
-            if length <= 2.0 * offset:
+            for d in range(3):
+                origins[k, d] = starts[i, d]
+            close[k] = length <= 2.0 * offset
+            if close[k]:
+                # close enough to count as visible (no ray)
                 directions[k, 0], directions[k, 1], directions[k, 2] = 0.0, 0.0, 1.0
-                tmax[k] = -1.0  # marks a pair close enough to count as visible
+                tmax[k] = 0.0
             else:
                 directions[k, 0], directions[k, 1] = x / length, y / length
                 directions[k, 2] = z / length
@@ -1228,14 +1240,13 @@ class AreaLightShadows:
             strengths(self.points, self.normals, positions,
                       np.asarray(light.normal, dtype=np.float64), strength)
             lit = np.flatnonzero(strength.ravel() > 0)
-            origins = np.empty((len(lit), 3))
-            directions = np.empty((len(lit), 3))
-            tmax = np.empty(len(lit))
-            rays(self.starts, positions, lit, samples, self.offset, origins, directions, tmax)
-            close = tmax < 0
-            blocked = self.engine.occluded_unit(
-                origins.astype(np.float32), directions.astype(np.float32),
-                np.where(close, 0.0, tmax).astype(np.float32))
+            origins = np.empty((len(lit), 3), dtype=np.float32)
+            directions = np.empty((len(lit), 3), dtype=np.float32)
+            tmax = np.empty(len(lit), dtype=np.float32)
+            close = np.empty(len(lit), dtype=np.bool_)
+            rays(self.starts, positions, lit, samples, self.offset, origins, directions, tmax,
+                 close)
+            blocked = self.engine.occluded_unit(origins, directions, tmax)
             strength.ravel()[lit[blocked & ~close]] = 0.0
             total += strength.sum(axis=1)[:, None] * (light.radiance * light.area / samples)
         return total
