@@ -45,6 +45,13 @@ needs): every product of SF advances or checks, none is spent twice. Successive 
 start from the earlier frames' solutions projected on the new irradiance
 (:meth:`RadiosityState.solve`): 2 products per frame on a sliding light.
 
+A whole relighting frame of the bench's 25,080-patch box at 96 x 96 (patch irradiance with
+16 shadow rays per patch, warm-started Jacobi, image with 16 shadow rays per diffuse pixel):
+0.056-0.078 s, 17.9-12.9 fps at load averages 0.7-1.2 on 2 cores, against 0.184-0.208 s
+(5.4-4.8 fps) before the frame path below in the same runs; the solve is now the largest
+part (0.023-0.038 s: the product SE, then one F and one S product per Jacobi sweep, 1 or
+2 sweeps; the compiled products run on both cores, F 9-11 ms against 16-21 ms on one).
+
 Relighting with :math:`T = (I - SF)^{-1}S` (Sect. 6.4): T is dense, :math:`3P^2` float32, and
 is precomputed (at the first relighting after a material change, knob ``transfer="auto"``)
 only when that fits the ``transfer_budget_mb`` knob: P <= 6,688 at the default 512 MB; the
@@ -1439,7 +1446,14 @@ class RadiosityState:
         Translucent patches take ``light_samples`` per area light; diffuse ones take
         ``diffuse_light_samples`` when it is set: their E reaches the image only through the
         form factors, which average it over everything a pixel's surface sees (the image's
-        own direct light is per pixel), so fewer shadow rays cost little there.
+        own direct light is per pixel), so fewer shadow rays cost little there. Measured
+        against the index-matched Mitsuba references at 96 x 96 (the slow tests): 4 rays
+        instead of 16 move the Cornell box from relative MSE 0.00775 / HDR-FLIP 0.160 to
+        0.00795 / 0.169 (the bowl: 0.0236 / 0.267 either way) and cut the 25,080-patch
+        irradiance from 0.029 to 0.012 s; it stays off by default.
+
+        Rectangular area lights go through :class:`AreaLightShadows` (set up once per point
+        set), other lights through :func:`direct_irradiance`; the two agree to round-off.
         """
         p = self.patches
         offset_points = p.centroid + 1e-6 * p.radius[:, None] * p.normal
