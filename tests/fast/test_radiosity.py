@@ -811,3 +811,27 @@ def test_translucency_sweep_matches_the_reference_at_both_ends(scale):
     expected, got = reference.rgb[block].mean(axis=0), test.rgb[block].mean(axis=0)
     print(scale, expected, got, got / expected)
     assert got == pytest.approx(expected, rel=SWEEP_BLOCK_RTOL)
+
+
+@pytest.mark.parametrize("eye", [(0.0, 3.0, 4.0), (0.0, 0.4, 5.0)])
+def test_image_weights_of_a_sheet_show_the_face_towards_the_camera(eye):
+    scene = _sheet_scene(measured_medium("Skin1"))
+    assert scene.objects[0].mesh.normals[:, 1].min() > 0
+    target = (0.0, 1.0, 0.0) if eye[1] > 1.0 else (0.0, 0.9, 0.0)
+    scene = Scene(scene.objects, scene.lights, Camera(eye, target, width=16, height=16),
+                  mm_per_unit=scene.mm_per_unit)
+    state = precompute(scene, sheet_thickness_mm=3.0, rays_per_patch=32)
+    operators = state._image_operators(state._scene_with_materials())
+    gb = state._gbuffer()
+    B = np.random.default_rng(7).uniform(0.0, 1.0, size=(len(state.patches), 3))
+    mesh = scene.objects[0].mesh
+    front = gb.interpolate(0, state.patches.vertex_values(0, mesh, B))
+    back = gb.interpolate(0, state.patches.vertex_values(0, mesh, B, back=True))
+    behind = np.einsum("hwd,hwd->hw", gb.geometric_normal, gb.view_direction) < 0
+    pixels = operators["translucent"]
+    expected = np.where(behind[..., None], back, front).reshape(-1, 3)[pixels]
+    assert len(pixels) > 10
+    got = operators["translucent_weights"] @ B
+    assert np.abs(got - expected).max() <= RECOMPUTED_RTOL * np.abs(expected).max()
+    # from above the camera sees the front face (normal up), from below the back face
+    assert set(behind.reshape(-1)[pixels]) == {eye[1] < 1.0}
