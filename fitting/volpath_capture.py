@@ -70,6 +70,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..materials import Dipole
+from ..materials.dipole import reduced_albedo, reduced_extinction
 from ..materials.fresnel import fresnel_reflectance
 from .synthetic import Camera, _capture_spec, apply_camera
 
@@ -190,9 +191,7 @@ def roulette_depth(material: Dipole) -> int:
     The throughput after ``n`` scatterings is ``albedo^n`` (reduced albedo
     :math:`\sigma'_s / (\sigma_a + \sigma'_s)`, the highest channel).
     """
-    sigma_t_prime = material.sigma_a + material.sigma_s_prime
-    albedo = float(np.max(np.where(sigma_t_prime > 0, material.sigma_s_prime
-                                   / np.maximum(sigma_t_prime, 1e-300), 0.0)))
+    albedo = float(np.max(reduced_albedo(material.sigma_a, material.sigma_s_prime)))
     if albedo >= 1.0:
         return MAX_ROULETTE_DEPTH
     if albedo <= ROULETTE_THROUGHPUT:
@@ -448,9 +447,8 @@ def slab_scene_dict(material: Dipole, *, shape, pixel_size_mm, incident_px, side
     width_mm, height_mm = width * pixel_size_mm, height * pixel_size_mm
     lateral = 0.5 * math.hypot(width_mm, height_mm) + LATERAL_MARGIN_DEPTHS * depth
     transform = mi.ScalarTransform4f
-    sigma_t_prime = material.sigma_a + material.sigma_s_prime
-    albedo = np.where(sigma_t_prime > 0, material.sigma_s_prime / np.maximum(sigma_t_prime, 1e-300),
-                      0.0)
+    sigma_t_prime = reduced_extinction(material.sigma_a, material.sigma_s_prime)
+    albedo = reduced_albedo(material.sigma_a, material.sigma_s_prime)
     sigma_t_texture, sigma_t_scale = _rgb_texture(sigma_t_prime)
     boundary = {"type": "null"} if material.eta == 1.0 else \
         {"type": "dielectric", "int_ior": float(material.eta), "ext_ior": 1.0}
