@@ -1455,12 +1455,7 @@ class SplattingState:
                              file=scene.source, field="scene", value=scene.name)
         log = StageLog()
         start = time.perf_counter()
-        if self.knobs["buffers"] == "raster":
-            camera_view = rasterize_view(scene, camera=scene.camera)
-        else:
-            from ..scenes.raycast import gbuffer
-
-            camera_view = gbuffer(scene)
+        camera_view = self._camera_view(scene)
         camera = CameraModel.from_camera(scene.camera)
         log.seconds["buffer generation"] = time.perf_counter() - start
         radiance = np.zeros((scene.camera.height, scene.camera.width, 3))
@@ -1489,15 +1484,17 @@ class SplattingState:
         if lights is not None:
             scene = scene.with_lights(lights)
         index = _translucent_objects(scene)[0]
-        if self.knobs["buffers"] == "raster":
-            camera_view = rasterize_view(scene, camera=scene.camera)
-        else:
-            from ..scenes.raycast import gbuffer
-
-            camera_view = gbuffer(scene)
-        camera_buffer, views, material, radius = self._object_buffers(scene, index,
-                                                                      camera_view)
+        camera_buffer, views, material, radius = self._object_buffers(
+            scene, index, self._camera_view(scene))
         return camera_buffer, CameraModel.from_camera(scene.camera), views, material, radius
+
+    def _camera_view(self, scene):
+        """Return the camera's buffers: a :class:`RasterView` or a ray-cast G-buffer."""
+        if self.knobs["buffers"] == "raster":
+            return rasterize_view(scene, camera=scene.camera)
+        from ..scenes.raycast import gbuffer
+
+        return gbuffer(scene)
 
     def _object_buffers(self, scene, index, camera_view):
         item = scene.objects[index]
