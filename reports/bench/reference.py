@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ...atomic import atomic_write_text
+from . import at_width
 
 #: The overhead the suite may add to a plain Mitsuba render (issue 2).
 TARGET_OVERHEAD = 1.05
@@ -60,7 +61,7 @@ def add_arguments(parser):
 
 def _scene(args):
     from ...errors import InputError
-    from ...scenes import Camera, load_scene
+    from ...scenes import load_scene
 
     scene = load_scene(args.scene)
     for name in ("spp", "passes", "repeats"):
@@ -69,12 +70,7 @@ def _scene(args):
     if args.size < 0:
         raise InputError("must be >= 0 (0: the scene's own size)", field="--size",
                          value=args.size)
-    if args.size:
-        camera = scene.camera
-        height = max(1, round(args.size * camera.height / camera.width))
-        scene = scene.with_camera(Camera(camera.origin, camera.target, camera.up, camera.fov,
-                                         args.size, height))
-    return scene
+    return at_width(scene, args.size)
 
 
 def _overhead(scene, args) -> dict:

@@ -45,6 +45,7 @@ import numpy as np
 
 from ...atomic import atomic_path, atomic_write_text
 from ...errors import InputError
+from . import at_width
 
 __all__ = ["LADDERS", "DEFAULT_SCENES", "add_arguments", "run", "sweep",
            "path_tracing_point", "equal_error_seconds"]
@@ -258,17 +259,6 @@ def _ladders(module, name: str) -> tuple[dict[str, list[dict]], list[str]]:
     return kept, notes
 
 
-def _resized(scene, size: int):
-    from ...scenes import Camera
-
-    if not size:
-        return scene
-    camera = scene.camera
-    height = max(1, round(size * camera.height / camera.width))
-    return scene.with_camera(Camera(camera.origin, camera.target, camera.up, camera.fov, size,
-                                    height))
-
-
 # ====================================================================== equal error
 
 
@@ -384,7 +374,7 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
         if name not in METHODS:
             raise InputError(f"unknown fast method; valid: {', '.join(METHODS)}",
                              field="--methods", value=name)
-    loaded = [_resized(s if isinstance(s, Scene) else load_scene(s), size) for s in scenes]
+    loaded = [at_width(s if isinstance(s, Scene) else load_scene(s), size) for s in scenes]
     spps = [2**k for k in range(int(math.log2(max_spp)) + 1)]
 
     tasks, owners = [], []

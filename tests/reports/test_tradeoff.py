@@ -130,7 +130,7 @@ def test_a_tiny_sweep(tmp_path, monkeypatch):
 
 def test_the_command_writes_json_and_plot(tmp_path, monkeypatch):
     monkeypatch.setitem(LADDERS, "radiosity", {"tiny": [{}]})
-    monkeypatch.setattr(tradeoff, "_resized", lambda scene, size: _tiny_scene())
+    monkeypatch.setattr(tradeoff, "at_width", lambda scene, size: _tiny_scene())
     out = tmp_path / "tradeoff.json"
     code = main(["bench", "tradeoff", "--scene", "sphere", "--methods", "radiosity",
                  "--serial", "--max-spp", "2", "--reference-spp", str(TINY_REFERENCE_SPP),
