@@ -117,7 +117,7 @@ from ..scenes.scene import (
     SphereAreaLight,
     SpotLight,
 )
-from .base import StageLog, with_defaults
+from .base import StageLog, refuse_inapplicable, with_defaults
 from .form_factors import Patches, build_patches, form_factors, needs_form_factors
 from .optical_distance import (
     closed_surface,
@@ -1224,12 +1224,13 @@ class AreaLightShadows:
         self.scene = scene
         self.points = np.ascontiguousarray(points, dtype=np.float64)
         self.normals = np.ascontiguousarray(normals, dtype=np.float64)
-        self.offset = ray_engine(scene).diagonal * OFFSET_FRACTION
+        self.engine = ray_engine(scene, engine)
+        # the offset of visible(): the bounding box, hence the diagonal, is every engine's
+        self.offset = self.engine.diagonal * OFFSET_FRACTION
         # a lit point faces the light: visible() moves it along +normal
         length = np.linalg.norm(self.normals, axis=-1)
         self.starts = self.points + (self.offset / np.where(length > 0, length, 1.0))[:, None] \
             * self.normals
-        self.engine = ray_engine(scene, engine)
 
     @staticmethod
     def handles(lights) -> bool:
@@ -1363,6 +1364,12 @@ class RadiosityState:
         self.log = log
         self.materials: dict = {}
         self.transfer = None
+        # the patch centroids, nudged off the surface, and the patch rows per light-sample
+        # group: fixed by the geometry, so every frame's patch_irradiance reuses them
+        self._patch_points = patches.centroid + 1e-6 * patches.radius[:, None] * patches.normal
+        translucent = np.isin(patches.object_of, list(geometry.objects))
+        self._translucent_rows = np.flatnonzero(translucent)
+        self._diffuse_rows = np.flatnonzero(~translucent)
         self._solved = None
         self.set_material(None)
 
@@ -1456,24 +1463,22 @@ class RadiosityState:
         set), other lights through :func:`direct_irradiance`; the two agree to round-off.
         """
         p = self.patches
-        offset_points = p.centroid + 1e-6 * p.radius[:, None] * p.normal
         samples = self.knobs["light_samples"]
         diffuse_samples = self.knobs.get("diffuse_light_samples")
-        groups = [(np.arange(len(p)), samples)]
+        groups = [("all", slice(None), samples)]
         if diffuse_samples is not None and diffuse_samples != samples:
-            diffuse = ~np.isin(p.object_of, list(self.geometry.objects))
-            groups = [(np.flatnonzero(~diffuse), samples),
-                      (np.flatnonzero(diffuse), diffuse_samples)]
+            groups = [("translucent", self._translucent_rows, samples),
+                      ("diffuse", self._diffuse_rows, diffuse_samples)]
         lights = self.scene.lights if lights is None else tuple(lights)
         E = np.zeros((len(p), 3))
-        for rows, count in groups:
+        for name, rows, count in groups:
             if AreaLightShadows.handles(lights):
-                shadows = self._shadows(("patches", len(rows)), offset_points[rows],
+                shadows = self._shadows(("patches", name), self._patch_points[rows],
                                         p.normal[rows])
                 E[rows] = shadows.irradiance(lights, count, self.knobs["seed"])
             else:
-                E[rows] = direct_irradiance(self.scene, offset_points[rows], p.normal[rows],
-                                            lights=lights, samples=count,
+                E[rows] = direct_irradiance(self.scene, self._patch_points[rows],
+                                            p.normal[rows], lights=lights, samples=count,
                                             seed=self.knobs["seed"])
         return E
 
@@ -1813,7 +1818,7 @@ def precompute(scene, **knobs) -> RadiosityState:
 
     reason = applies_to(scene)
     if reason is not None and not reason.startswith("no translucent"):
-        raise InputError(f"radiosity does not apply: {reason}", field="scene", value=scene.name)
+        refuse_inapplicable(scene, reason, "radiosity does not apply")
     resolved = _resolve_knobs(scene, knobs)
     translucent = [i for i, o in enumerate(scene.objects) if profile_for(o.material) is not None]
     # an open translucent surface is a thin sheet of constant thickness, lit from both
