@@ -24,7 +24,8 @@ from typing import Any, Protocol
 from ..errors import InputError
 from ..image import Image
 
-__all__ = ["METHODS", "PrecomputedState", "method", "StageLog", "with_defaults"]
+__all__ = ["METHODS", "PrecomputedState", "method", "refuse_inapplicable", "StageLog",
+           "with_defaults"]
 
 #: method name -> module under translucent.fast
 METHODS: dict[str, str] = {
@@ -86,3 +87,25 @@ def with_defaults(knobs: dict, defaults: dict) -> dict:
         raise InputError(f"unknown knob; valid: {', '.join(defaults)}", field="knobs",
                          value=unknown)
     return {**defaults, **knobs}
+
+
+def refuse_inapplicable(scene, reason: str | None, sentence: str) -> None:
+    """Refuse a scene for which a method's ``applies_to`` gave a reason; None returns.
+
+    Parameters
+    ----------
+    scene : Scene
+    reason : str or None
+        What the method's ``applies_to(scene)`` returned.
+    sentence : str
+        The start of the message, naming the method ("the prt method cannot render this
+        scene"); the reason follows it after a colon.
+
+    Raises
+    ------
+    InputError
+        When ``reason`` is not None, naming the scene's file and name.
+    """
+    if reason is not None:
+        raise InputError(f"{sentence}: {reason}", file=scene.source, field="scene",
+                         value=scene.name)

@@ -99,7 +99,7 @@ from ..scenes.scene import (
     SphereAreaLight,
     SpotLight,
 )
-from .base import StageLog, with_defaults
+from .base import StageLog, refuse_inapplicable, with_defaults
 from .sparse_transport import QuantisedRows, SparseRows, _product_rgb, nonlinear_approximation
 from .wavelets import haar2d_forward, haar2d_support_weights, quadtree_layout
 
@@ -1178,10 +1178,7 @@ def precompute(scene, **knobs) -> BRDFPCAState:
     """
     from ..cache import Cache, content_hash
 
-    reason = applies_to(scene)
-    if reason is not None:
-        raise InputError(f"the BRDF-editing method does not apply: {reason}", field="scene",
-                         value=scene.name)
+    refuse_inapplicable(scene, applies_to(scene), "the BRDF-editing method does not apply")
     resolved = _resolve_knobs(knobs)
     key = content_hash("brdf_pca", FORMAT_VERSION, scene.geometry_key(),
                        scene.camera.cache_key(), resolved, _structure_key(scene))

@@ -81,7 +81,7 @@ from ..scenes.scene import (
     SphereAreaLight,
     SpotLight,
 )
-from .base import StageLog, with_defaults
+from .base import StageLog, refuse_inapplicable, with_defaults
 from .sparse_transport import (
     QuantisedRows,
     SharedColumnBlocks,
@@ -758,10 +758,7 @@ def precompute(scene, **knobs) -> PRTState:
     """
     from ..cache import Cache
 
-    reason = applies_to(scene)
-    if reason is not None:
-        raise InputError(f"the prt method cannot render this scene: {reason}",
-                         file=scene.source, field="scene", value=scene.name)
+    refuse_inapplicable(scene, applies_to(scene), "the prt method cannot render this scene")
     knobs = _check_knobs(knobs)
     log = StageLog()
     cache = Cache("prt")
