@@ -329,9 +329,9 @@ class DipoleModel(ProfileModel):
             for c, values in enumerate(self.profile.operator.predict(unit)):
                 predicted[c][block] = values
         # each channel on its own: the weighted least-squares exposure of every grid point
+        profiled = {c: self._profiled_exposure(c, predicted[c]) for c in self.channels}
         own = {}
-        for c in self.channels:
-            scale, loglike = self._profiled_exposure(c, predicted[c])
+        for c, (scale, loglike) in profiled.items():
             k = int(np.argmax(loglike))
             own[c] = (k, scale[k])
         scales = np.array([own[c][1] for c in own], dtype=np.float64)
@@ -339,7 +339,7 @@ class DipoleModel(ProfileModel):
         own_scale = float(np.exp(np.mean(np.log(scales)))) if scales.size else 1.0
         guesses = [self._grid_theta(grid_a, grid_s, grid_eta, {c: own[c][0] for c in own},
                                     own_scale)]
-        guesses += self._refined_channel_starts(predicted, grid_a, grid_s, grid_eta)
+        guesses += self._refined_channel_starts(profiled, grid_a, grid_s, grid_eta)
         # one exposure (and eta) for all channels, as the model has it
         if self.fit_exposure and scales.size:
             trial_scales = np.exp(np.linspace(np.log(scales.min()) - SCALE_SEARCH_NATS,
@@ -396,8 +396,11 @@ class DipoleModel(ProfileModel):
         value = student_t_log_likelihood(mean - np.exp(points[:, 2:3]) * predicted, stderr, dof)
         return np.where(np.isfinite(value), value, -1e300)
 
-    def _refined_channel_starts(self, predicted, grid_a, grid_s, grid_eta) -> list:
+    def _refined_channel_starts(self, profiled, grid_a, grid_s, grid_eta) -> list:
         """Refine each channel's best grid basins on their own, then join the channels.
+
+        ``profiled`` maps each channel to its grid points' exposures and log-likelihoods
+        (:meth:`_profiled_exposure`).
 
         The :data:`CHANNEL_CANDIDATES` best grid points of each channel (at least two grid
         cells apart) are polished by L-BFGS-B in (ln sigma_a, ln sigma_s', ln exposure) of
@@ -416,8 +419,7 @@ class DipoleModel(ProfileModel):
                   (np.log(EXPOSURE_RANGE[0]), np.log(EXPOSURE_RANGE[1]))]
         ranked = {}
         cell = np.diff(np.unique(grid_a))[0] if np.unique(grid_a).size > 1 else 1.0
-        for c in self.channels:
-            scale, loglike = self._profiled_exposure(c, predicted[c])
+        for c, (scale, loglike) in profiled.items():
             chosen = []
             for k in np.argsort(loglike)[::-1]:
                 if not np.isfinite(loglike[k]) or len(chosen) == CHANNEL_CANDIDATES:
