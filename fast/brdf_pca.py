@@ -1330,19 +1330,14 @@ class BRDFPCAState:
         else:
             lobe = edited_term(material.model, material.gamma, variable)
         direct = np.einsum("ps,psc->pc", lobe, weight)
-        if name in self.frozen:
-            products = self._products.get(name)
-            if products is None:
-                products = _product(self.frozen[name][1], self._radiance_w)
-                self._products[name] = products
-            indirect = products
-        else:
-            products = self._products.get(name)
-            if products is None:
-                products = np.stack([_product(m, self._radiance_w)
-                                     for m in self._transfer[name]])
-                self._products[name] = products
-            indirect = np.einsum("j,jpc->pc", self.coefficients(name), products)
+        frozen = name in self.frozen
+        products = self._products.get(name)
+        if products is None:
+            products = (_product(self.frozen[name][1], self._radiance_w) if frozen else
+                        np.stack([_product(m, self._radiance_w) for m in self._transfer[name]]))
+            self._products[name] = products
+        indirect = (products if frozen else
+                    np.einsum("j,jpc->pc", self.coefficients(name), products))
         parts = {"direct": material.rho_s * direct, "indirect": material.rho_s * indirect}
         parts["all"] = parts["direct"] + parts["indirect"]
         self._glossy_parts[name] = (key, parts)
