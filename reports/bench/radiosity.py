@@ -101,11 +101,8 @@ def _cornell(wall: int, block: int, mm_per_unit: float, material):
     text = re.sub(r'(part = "[a-z_]+", size = 2\.0, subdivisions = )\d+', rf"\g<1>{wall}", text)
     text = re.sub(r'(type = "box".*?subdivisions = )\d+', rf"\g<1>{block}", text)
     text = re.sub(r"mm_per_unit = [0-9.]+", f"mm_per_unit = {mm_per_unit}", text)
-    scene = loads_scene(text, file=str(path), base_dir=path.parent)
-    objects = [SceneObject(o.name, o.mesh, material) if o.name == "block" else o
-               for o in scene.objects]
-    return type(scene)(objects, scene.lights, scene.camera, scene.mm_per_unit, scene.name,
-                       scene.description, scene.source)
+    return loads_scene(text, file=str(path), base_dir=path.parent).with_material("block",
+                                                                              material)
 
 
 def _baseline() -> tuple[float, float]:
