@@ -22,13 +22,9 @@ __all__ = ["drjit_available", "walk_channel_drjit"]
 def drjit_available() -> bool:
     """Tell whether Dr.Jit's LLVM backend works here (set up as the suite does for Mitsuba)."""
     try:
-        import os
+        from ..backend import configure_libllvm
 
-        from ..backend import find_libllvm
-
-        libllvm = find_libllvm()
-        if libllvm and "DRJIT_LIBLLVM_PATH" not in os.environ:
-            os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
+        configure_libllvm()
         import drjit as dr
 
         return bool(dr.has_backend(dr.JitBackend.LLVM))
