@@ -1424,11 +1424,14 @@ class BRDFPCAState:
             "gamma": {name: self.materials[name].gamma for name in self._members},
             "frozen": sorted(self.frozen), "skipped": list(self.log.skipped)})
 
+    def _check_editable(self, name: str, field_name: str) -> None:
+        if name not in self._members:
+            raise InputError("not an object with an analytic BRDF; editable: "
+                             f"{', '.join(self._members)}", field=field_name, value=name)
+
     def edit(self, object_name: str, gamma: float) -> Image:
         """Set one object's gamma and render: only that object's pixels change (Sect. 6.2)."""
-        if object_name not in self._members:
-            raise InputError("not an object with an analytic BRDF; editable: "
-                             f"{', '.join(self._members)}", field="object", value=object_name)
+        self._check_editable(object_name, "object")
         material = self.materials[object_name].with_gamma(gamma)
         return self.render(material={object_name: material})
 
@@ -1444,10 +1447,8 @@ class BRDFPCAState:
         ``editing=None`` freezes them all (the light-editing mode).
         """
         started = time.perf_counter()
-        if editing is not None and editing not in self._members:
-            raise InputError("not an object with an analytic BRDF; editable: "
-                             f"{', '.join(self._members)}", field="editing", value=editing)
         if editing is not None:
+            self._check_editable(editing, "editing")
             self.unfreeze(editing)
         for name, matrices in self._transfer.items():
             if name == editing or name in self.frozen:
