@@ -1263,12 +1263,14 @@ class PRTState:
             return None
         from ..cache import Cache, content_hash
 
-        resolution = self.knobs["environment_resolution"]
-        terms = self.knobs["environment_terms"]
-        key = content_hash("prt-environment", PRT_VERSION, self.scene.geometry_key(),
-                           transfer.name, resolution, terms,
-                           {k: v for k, v in self.knobs.items() if k not in _UNKEYED_KNOBS})
-        if key not in self._environment:
+        # the scene and knobs are fixed for the state: one visibility per object, and the
+        # geometry is hashed only when it is first needed, not on every relighting frame
+        if transfer.name not in self._environment:
+            resolution = self.knobs["environment_resolution"]
+            terms = self.knobs["environment_terms"]
+            key = content_hash("prt-environment", PRT_VERSION, self.scene.geometry_key(),
+                               transfer.name, resolution, terms,
+                               {k: v for k, v in self.knobs.items() if k not in _UNKEYED_KNOBS})
             cache = Cache("prt")
             environment = cache.load_pickle(key)
             if not isinstance(environment, EnvironmentTransfer):
@@ -1277,8 +1279,8 @@ class PRTState:
                                                      terms)
                 cache.store_pickle(key, environment)
                 self.log.seconds["environment visibility"] = time.perf_counter() - start
-            self._environment[key] = environment
-        return self._environment[key]
+            self._environment[transfer.name] = environment
+        return self._environment[transfer.name]
 
     def irradiance(self, transfer: ObjectTransfer, lights, eta: float) -> np.ndarray:
         """E at the samples of one object (:func:`sample_irradiance`), (N, 3)."""
