@@ -24,7 +24,8 @@ from ..scenes import Scene
 from .delta_lights import DEFAULT_SIZE
 from .mitsuba_scene import convert_scene
 
-__all__ = ["render", "reference_settings", "reference_key", "REFERENCE_FORMAT"]
+__all__ = ["render", "reference_settings", "reference_key", "load_scenes", "render_sample",
+           "REFERENCE_FORMAT"]
 
 #: Bumped whenever the scene conversion or the estimator changes what a reference holds,
 #: so that older cache entries miss.
@@ -66,6 +67,71 @@ def _render_pass(mitsuba_scene, spp: int, seed: int) -> np.ndarray:
     mi = mitsuba()
     # convert in float32 first: asking Dr.Jit for float64 fuses a cast into the render kernel
     return np.array(mi.render(mitsuba_scene, spp=spp, seed=seed)).astype(np.float64)[..., :3]
+
+
+def load_scenes(scene: Scene, *, spp: int, per_channel: bool | None = None,
+                integrator: str | None = None, max_depth: int | None = None,
+                rr_depth: int | None = None, substitute_delta_lights: bool | None = None,
+                delta_light_size: float = DEFAULT_SIZE):
+    """Convert ``scene`` and load it into Mitsuba: once in RGB, or once per channel.
+
+    Parameters
+    ----------
+    scene : Scene
+    spp : int
+        Samples per pixel the conversion's sampler is built with.
+    per_channel : bool, optional
+        One grey-medium scene per RGB channel; default: where the conversion recommends
+        it (``MitsubaConversion.per_channel_recommended``).
+    integrator, max_depth, rr_depth, substitute_delta_lights, delta_light_size
+        As :func:`~translucent.reference.convert_scene`.
+
+    Returns
+    -------
+    channels : tuple
+        ``(0, 1, 2)`` per channel, else ``(None,)``.
+    conversions : list of MitsubaConversion
+        One per entry of ``channels``.
+    mitsuba_scenes : list
+        The loaded Mitsuba scenes, one per entry of ``channels``.
+    """
+    mi = mitsuba()
+
+    def convert(channel):
+        return convert_scene(scene, integrator=integrator, max_depth=max_depth, spp=spp,
+                             channel=channel, rr_depth=rr_depth,
+                             substitute_delta_lights=substitute_delta_lights,
+                             delta_light_size=delta_light_size)
+
+    conversions = [] if per_channel else [convert(None)]
+    if per_channel is None:
+        per_channel = conversions[0].per_channel_recommended
+    channels = (0, 1, 2) if per_channel else (None,)
+    if per_channel:
+        conversions = [convert(channel) for channel in channels]
+    return channels, conversions, [mi.load_dict(c.scene_dict) for c in conversions]
+
+
+def render_sample(channels, mitsuba_scenes, spp: int, seed: int, on_render=None) -> np.ndarray:
+    """Render one sample image of scenes loaded by :func:`load_scenes`, float64 ``H x W x 3``.
+
+    Per channel, each channel of the image comes from its own scene's render.
+    ``on_render`` (optional) is called after each Mitsuba render.
+    """
+    if channels == (None,):
+        sample = _render_pass(mitsuba_scenes[0], spp, seed)
+        if on_render is not None:
+            on_render()
+        return sample
+    sample = None
+    for channel, mitsuba_scene in zip(channels, mitsuba_scenes, strict=True):
+        pixels = _render_pass(mitsuba_scene, spp, seed)
+        if sample is None:
+            sample = np.empty_like(pixels)
+        sample[..., channel] = pixels[..., channel]
+        if on_render is not None:
+            on_render()
+    return sample
 
 
 def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
@@ -150,22 +216,12 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
             except InputError:
                 pass  # an unreadable entry is a miss: render again and replace it
 
-    mi = mitsuba()
     start = time.perf_counter()
-
-    def convert(channel):
-        return convert_scene(scene, integrator=integrator, max_depth=max_depth, spp=spp,
-                             channel=channel, rr_depth=rr_depth,
-                             substitute_delta_lights=substitute_delta_lights,
-                             delta_light_size=delta_light_size)
-
-    conversions = [convert(None)]
-    if per_channel is None:
-        per_channel = conversions[0].per_channel_recommended
-    channels = (0, 1, 2) if per_channel else (None,)
-    if per_channel:
-        conversions = [convert(channel) for channel in channels]
-    mitsuba_scenes = [mi.load_dict(c.scene_dict) for c in conversions]
+    channels, conversions, mitsuba_scenes = load_scenes(
+        scene, spp=spp, per_channel=per_channel, integrator=integrator, max_depth=max_depth,
+        rr_depth=rr_depth, substitute_delta_lights=substitute_delta_lights,
+        delta_light_size=delta_light_size)
+    per_channel = channels != (None,)
 
     from tqdm.auto import tqdm
 
@@ -177,16 +233,8 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
                leave=False, file=sys.stderr)
     try:
         for k in range(passes):
-            pass_seed = seed * passes + k
-            if per_channel:
-                sample = np.empty((height, width, 3))
-                for channel, mitsuba_scene in zip(channels, mitsuba_scenes, strict=True):
-                    sample[..., channel] = _render_pass(mitsuba_scene, spp, pass_seed)[
-                        ..., channel]
-                    bar.update()
-            else:
-                sample = _render_pass(mitsuba_scenes[0], spp, pass_seed)
-                bar.update()
+            sample = render_sample(channels, mitsuba_scenes, spp, seed * passes + k,
+                                   bar.update)
             delta = sample - mean
             mean += delta / (k + 1)
             sum_squares += delta * (sample - mean)

@@ -177,37 +177,21 @@ def path_tracing_point(scene, spp: int, seed: int = 1, repeats: int = PATH_TRACI
         ``images`` (one :class:`~translucent.image.Image` per timed render), or ``error`` (a
         string) when Mitsuba failed.
     """
-    from ...backend import mitsuba
     from ...image import Image
-    from ...reference import convert_scene
+    from ...reference.render import load_scenes, render_sample
 
     try:
-        mi = mitsuba()
-        conversion = convert_scene(scene, spp=spp)
-        per_channel = bool(conversion.per_channel_recommended)
-        channels = (0, 1, 2) if per_channel else (None,)
-        loaded = [mi.load_dict((convert_scene(scene, spp=spp, channel=channel) if per_channel
-                                else conversion).scene_dict) for channel in channels]
-
-        def render(render_seed):
-            rgb = np.empty((scene.camera.height, scene.camera.width, 3), dtype=np.float32)
-            for channel, mitsuba_scene in zip(channels, loaded, strict=True):
-                pixels = np.array(mi.render(mitsuba_scene, spp=spp, seed=render_seed))[..., :3]
-                if channel is None:
-                    rgb[...] = pixels
-                else:
-                    rgb[..., channel] = pixels[..., channel]
-            return rgb
-
-        render(seed + repeats)
+        channels, conversions, loaded = load_scenes(scene, spp=spp)
+        per_channel = channels != (None,)
+        render_sample(channels, loaded, spp, seed + repeats)
         timings, images = [], []
         for k in range(repeats):
             started = time.perf_counter()
-            rgb = render(seed + k)
+            rgb = render_sample(channels, loaded, spp, seed + k)
             timings.append(time.perf_counter() - started)
             images.append(Image(rgb, metadata={"producer": "path tracing", "spp": spp,
                                                "seed": seed + k, "per_channel": per_channel,
-                                               "integrator": conversion.integrator}))
+                                               "integrator": conversions[0].integrator}))
     except Exception as error:  # reported in the JSON; the sweep goes on
         return {"spp": spp, "error": f"{type(error).__name__}: {error}"}
     return {"spp": spp, "seconds": float(np.median(timings)), "per_channel": per_channel,
