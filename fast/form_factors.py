@@ -131,6 +131,36 @@ class Patches:
         within = np.arange(len(rows)) - np.repeat(np.cumsum(counts) - counts, counts)
         return rows, self.patch_faces[starts + within]
 
+    def vertex_average(self, object_index: int, mesh, *, back: bool = False
+                       ) -> sparse.csr_matrix:
+        """Return the linear map from per-patch values to one object's vertices (area-weighted).
+
+        Row ``v`` holds, for every patch, the area of the triangles around vertex ``v`` it
+        owns divided by the area of all of them, so ``vertex_average(...) @ values`` is
+        :meth:`vertex_values`; the image operators of the radiosity renderer build on it.
+
+        Parameters
+        ----------
+        object_index : int
+        mesh : Mesh
+            The object's mesh.
+        back : bool
+            Take the back patches of a two-sided sheet.
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix, shape (V, P)
+        """
+        start, stop = self.face_offset[object_index], self.face_offset[object_index + 1]
+        owner = (self.face_back_patch if back else self.face_patch)[start:stop]
+        area = np.tile(self.triangle_area[start:stop], 3)
+        corners = np.asarray(mesh.faces).T.ravel()
+        count = len(mesh.vertices)
+        vertex_area = np.bincount(corners, area, minlength=count)
+        return sparse.csr_matrix(
+            (area / np.maximum(vertex_area, 1e-300)[corners], (corners, np.tile(owner, 3))),
+            shape=(count, len(self)))
+
     def vertex_values(self, object_index: int, mesh, values, *, back: bool = False
                       ) -> np.ndarray:
         """Per-patch values of one object averaged to its vertices (area-weighted).
@@ -152,19 +182,7 @@ class Patches:
         -------
         ndarray, shape (V, C)
         """
-        start, stop = self.face_offset[object_index], self.face_offset[object_index + 1]
-        owner = (self.face_back_patch if back else self.face_patch)[start:stop]
-        face_values = np.asarray(values)[owner]
-        weights = self.triangle_area[start:stop]
-        # bincount over the three corners at once (np.add.at is several times slower and
-        # this runs for every object in every frame)
-        corners = np.asarray(mesh.faces).T.ravel()
-        count = len(mesh.vertices)
-        weight = np.bincount(corners, np.tile(weights, 3), minlength=count)
-        weighted = np.tile(face_values * weights[:, None], (3, 1))
-        total = np.stack([np.bincount(corners, weighted[:, c], minlength=count)
-                          for c in range(weighted.shape[1])], axis=1)
-        return total / np.maximum(weight, 1e-300)[:, None]
+        return self.vertex_average(object_index, mesh, back=back) @ np.asarray(values)
 
     def sample_points(self, patches, per_patch: int, rng) -> tuple[np.ndarray, np.ndarray]:
         """Uniform random points on the given patches: ``(rows, points)`` in scene units.

@@ -1628,20 +1628,12 @@ class RadiosityState:
 
     def _pixel_weights(self, gb, index, mesh, pixels, back=False) -> sparse.csr_matrix:
         """(pixels x patches) weights: area-weighted vertex averages, then barycentrics."""
-        start, stop = self.patches.face_offset[index], self.patches.face_offset[index + 1]
-        owner = (self.patches.face_back_patch if back else self.patches.face_patch)[start:stop]
-        area = self.patches.triangle_area[start:stop]
-        corners = np.asarray(mesh.faces).T.ravel()
-        count = len(mesh.vertices)
-        vertex_weight = np.bincount(corners, np.tile(area, 3), minlength=count)
-        to_vertices = sparse.csr_matrix(
-            (np.tile(area, 3) / np.maximum(vertex_weight, 1e-300)[corners],
-             (corners, np.tile(owner, 3))), shape=(count, len(self.patches)))
+        to_vertices = self.patches.vertex_average(index, mesh, back=back)
         triangles = gb.triangle_id.reshape(-1)[pixels]
         to_pixels = sparse.csr_matrix(
             (gb.barycentrics.reshape(-1, 3)[pixels].ravel(),
              (np.repeat(np.arange(len(pixels)), 3), np.asarray(mesh.faces)[triangles].ravel())),
-            shape=(len(pixels), count))
+            shape=(len(pixels), len(mesh.vertices)))
         return (to_pixels @ to_vertices).tocsr()
 
     def image(self, B, lights=None, component: str = "both") -> np.ndarray:
