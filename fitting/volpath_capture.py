@@ -71,7 +71,7 @@ import numpy as np
 from ..errors import InputError
 from ..materials import Dipole
 from ..materials.dipole import reduced_albedo, reduced_extinction
-from ..materials.fresnel import fresnel_reflectance
+from ..materials.profiles import diffuse_entry_transmittance
 from .synthetic import Camera, _capture_spec, apply_camera
 
 __all__ = ["BEAM_DEPTH_MM", "CHANNEL_MODES", "DEFAULT_BEAM_FRACTION", "VolpathRender",
@@ -145,7 +145,8 @@ def exitance_per_normal_radiance(eta: float) -> float:
 
     using :math:`1 - F^{int}_{dr} = (1 - F^{ext}_{dr})/\eta^2`.
     :math:`F^{ext}_{dr} = \int_0^1 2\mu F_r(\eta, \mu)\,d\mu` is the diffuse Fresnel
-    reflectance of light from outside, integrated here from the exact Fresnel term. (The
+    reflectance of light from outside, integrated from the exact Fresnel term by
+    :func:`~translucent.materials.profiles.diffuse_entry_transmittance`. (The
     polynomial of Jensen et al. 2001,
     :func:`~translucent.materials.fresnel.diffuse_fresnel_reflectance`, is the *internal*
     one: 0.445 at eta = 1.3, against 0.061 from outside.)
@@ -166,11 +167,8 @@ def exitance_per_normal_radiance(eta: float) -> float:
     float
         :math:`E / L`, sr (pi at eta = 1).
     """
-    mu, weights = np.polynomial.legendre.leggauss(64)
-    mu = 0.5 * (mu + 1.0)
-    f_dr_external = float(np.sum(0.5 * weights * 2.0 * mu * fresnel_reflectance(eta, mu)))
     r_normal = ((eta - 1.0) / (eta + 1.0)) ** 2
-    return math.pi * (1.0 - f_dr_external) / (1.0 - r_normal)
+    return math.pi * float(diffuse_entry_transmittance(eta)) / (1.0 - r_normal)
 
 
 def semi_infinite_depth(material: Dipole) -> float:
