@@ -782,13 +782,9 @@ class _NumpyKernel:
 @functools.lru_cache(maxsize=1)
 def _jit():
     """Dr.Jit and its array types: CUDA where a GPU is usable, else LLVM (libLLVM set up first)."""
-    import os
+    from ..backend import configure_libllvm
 
-    from ..backend import find_libllvm
-
-    libllvm = find_libllvm()
-    if libllvm and "DRJIT_LIBLLVM_PATH" not in os.environ:
-        os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
+    configure_libllvm()
     import drjit as dr
 
     if dr.has_backend(dr.JitBackend.CUDA):
