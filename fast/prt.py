@@ -988,8 +988,8 @@ def _environment_directions(resolution: int):
     return squares.reshape(-1, 3), angles.reshape(-1)
 
 
-def _environment_radiance(light, directions, subsamples: int = 4) -> np.ndarray:
-    """Radiance of an environment light averaged over each direction cell, (D, 3)."""
+def _environment_radiance(light, directions) -> np.ndarray:
+    """Radiance of an environment light towards each direction cell's centre, (D, 3)."""
     if isinstance(light, ConstantEnvironment):
         return np.broadcast_to(light.radiance, directions.shape).astype(np.float64)
     image = light.radiance.astype(np.float64) * light.scale
