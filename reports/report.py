@@ -887,9 +887,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                for scene in loaded]
     run_cache = Cache("report")
     tasks: list[tuple] = []
-    owners: list[tuple[SceneReport, str | None]] = []
-    keys: dict[tuple[int, str], str] = {}
-    for position, report in enumerate(reports):
+    owners: list[tuple[SceneReport, str | None, str | None]] = []
+    for report in reports:
         report.reference = _cached_reference(report.scene, report.spp, passes)
         report.reference_cached = report.reference is not None
         portable = _portable(report.scene, report.scene_hash, scheduler is None)
@@ -897,7 +896,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
             report.reference_error = _unconvertible(report.scene)
         if report.reference is None and not report.reference_error:
             tasks.append(("reference", portable, report.spp, passes))
-            owners.append((report, None))
+            owners.append((report, None, None))
         for name in chosen:
             if report.reference_error:
                 report.runs[name] = MethodRun(name, report.name, "not run",
@@ -918,14 +917,13 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 report.runs[name] = MethodRun(name, report.name, "not applicable", str(reason))
                 continue
             key = _run_key(name, report.scene, {}, fingerprint, versions)
-            keys[position, name] = key
             stored = run_cache.load_pickle(key)
             if isinstance(stored, MethodRun) and stored.status == "ok":
                 stored.cached = True
                 report.runs[name] = stored
                 continue
             tasks.append(("method", portable, name, {}))
-            owners.append((report, name))
+            owners.append((report, name, key))
 
     if tasks:
         print(f"running {len(tasks)} task(s): "
@@ -936,7 +934,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                             progress=progress)
     else:
         results = []
-    for (report, name), result in zip(owners, results, strict=True):
+    for (report, name, key), result in zip(owners, results, strict=True):
         if name is None:
             if isinstance(result, Image):
                 report.reference = result
@@ -945,7 +943,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
             continue
         report.runs[name] = result
         if result.status == "ok":
-            run_cache.store_pickle(keys[reports.index(report), name], result)
+            run_cache.store_pickle(key, result)
 
     staging = None
     try:
