@@ -328,6 +328,13 @@ class RayEngine:
         ray.maxt = mi.Float(np.ascontiguousarray(tmax, dtype=np.float32))
         return ray
 
+    def _embree_run(self, origins, directions, tmax, **query):
+        """One Embree query on a chunk of rays (float32, C-contiguous; no copy if already)."""
+        return self._embree_scene.run(np.ascontiguousarray(origins, dtype=np.float32),
+                                      np.ascontiguousarray(directions, dtype=np.float32),
+                                      dists=np.ascontiguousarray(tmax, dtype=np.float32),
+                                      **query)
+
     def trace(self, origins, directions, tmax=np.inf) -> RayHits:
         """Closest hits of rays ``origins + t directions``, ``0 <= t <= tmax``.
 
@@ -359,11 +366,8 @@ class RayEngine:
             stop = min(count, start + RAYS_PER_CALL)
             chunk = slice(start, stop)
             if self._embree_scene is not None:
-                found = self._embree_scene.run(
-                    np.ascontiguousarray(origins[chunk], dtype=np.float32),
-                    np.ascontiguousarray(directions[chunk], dtype=np.float32),
-                    dists=np.ascontiguousarray(tmax[chunk], dtype=np.float32),
-                    output=True)
+                found = self._embree_run(origins[chunk], directions[chunk], tmax[chunk],
+                                         output=True)
                 primitive = found["primID"].astype(np.int64)
                 valid = primitive >= 0
                 t[chunk] = np.where(valid, found["tfar"], np.inf)
@@ -438,11 +442,8 @@ class RayEngine:
         for start in range(0, len(origins), RAYS_PER_CALL):
             chunk = slice(start, min(len(origins), start + RAYS_PER_CALL))
             if self._embree_scene is not None:
-                geometry = self._embree_scene.run(
-                    np.ascontiguousarray(origins[chunk], dtype=np.float32),
-                    np.ascontiguousarray(directions[chunk], dtype=np.float32),
-                    dists=np.ascontiguousarray(tmax[chunk], dtype=np.float32),
-                    query="OCCLUDED")
+                geometry = self._embree_run(origins[chunk], directions[chunk], tmax[chunk],
+                                            query="OCCLUDED")
                 blocked[chunk] = geometry >= 0
                 continue
             ray = self._rays(origins[chunk], directions[chunk], tmax[chunk])
