@@ -1347,12 +1347,6 @@ class RasterView:
                              np.where(valid, self.footprint, 0.0))
 
 
-def _default_up(direction: np.ndarray) -> np.ndarray:
-    """+y, or +z looking nearly along y: the image up of the scenes' light views."""
-    up = np.array([0.0, 1.0, 0.0])
-    return np.array([0.0, 0.0, 1.0]) if abs(direction @ up) > 0.99 else up
-
-
 def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None,
                    extent=None) -> RasterView:
     """Render the G-buffer of a perspective ``camera`` or an orthographic light view.
@@ -1365,7 +1359,8 @@ def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None
     ``size`` pixels and half-width ``extent`` around ``centre``, scene units) up to
     rounding, in milliseconds instead of seconds.
     """
-    from ..scenes.raycast import NEAR_CLIP
+    # the ray-cast G-buffers' own image frames, so that both kinds of buffer agree
+    from ..scenes.raycast import NEAR_CLIP, _camera_frame, _default_up
     from .splatting_kernels import rasterize
 
     meshes = [item.mesh for item in scene.objects]
@@ -1375,10 +1370,7 @@ def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None
     faces = np.concatenate([m.faces + offset
                             for m, offset in zip(meshes, vertex_offsets[:-1], strict=True)])
     if camera is not None:
-        forward = camera.forward
-        left = np.cross(camera.up, forward)
-        left /= np.linalg.norm(left)
-        up = np.cross(forward, left)
+        forward, left, up = _camera_frame(camera)
         tan_x = math.tan(math.radians(camera.fov) / 2.0)
         tan_y = tan_x * camera.height / camera.width
         width, height, eye, orthographic = camera.width, camera.height, camera.origin, False
@@ -1526,7 +1518,7 @@ class SplattingState:
                            knobs=self.knobs, log=log)
 
     def _light_view(self, scene, index, light, centre, radius, eta) -> LightView:
-        from ..scenes.raycast import gbuffer_from_point, gbuffer_orthographic
+        from ..scenes.raycast import _default_up, gbuffer_from_point, gbuffer_orthographic
         from ..scenes.scene import Camera
 
         size = self.knobs["irradiance_resolution"]
