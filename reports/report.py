@@ -888,14 +888,22 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     run_cache = Cache("report")
     tasks: list[tuple] = []
     owners: list[tuple[SceneReport, str | None, str | None]] = []
+    portables: dict[str, Any] = {}
+
+    def portable(report: SceneReport):
+        # worked out only for a scene with a task: it may load the scene file again
+        if report.slug not in portables:
+            portables[report.slug] = _portable(report.scene, report.scene_hash,
+                                               scheduler is None)
+        return portables[report.slug]
+
     for report in reports:
         report.reference = _cached_reference(report.scene, report.spp, passes)
         report.reference_cached = report.reference is not None
-        portable = _portable(report.scene, report.scene_hash, scheduler is None)
         if report.reference is None:
             report.reference_error = _unconvertible(report.scene)
         if report.reference is None and not report.reference_error:
-            tasks.append(("reference", portable, report.spp, passes))
+            tasks.append(("reference", portable(report), report.spp, passes))
             owners.append((report, None, None))
         for name in chosen:
             if report.reference_error:
@@ -922,7 +930,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 stored.cached = True
                 report.runs[name] = stored
                 continue
-            tasks.append(("method", portable, name, {}))
+            tasks.append(("method", portable(report), name, {}))
             owners.append((report, name, key))
 
     if tasks:
