@@ -238,12 +238,7 @@ def _check_knobs(knobs: dict) -> dict:
                 or not low <= value <= high:
             raise InputError(f"must be an integer in [{low}, {high}]", field=name, value=value)
         merged[name] = int(value)
-    per_part = merged["samples"] // merged["parts"]
-    level = round(math.log(max(per_part, 1), 4))
-    if merged["samples"] % merged["parts"] or 4 ** level != per_part:
-        valid = ", ".join(str(merged["parts"] * 4 ** n) for n in range(2, 9))
-        raise InputError(f"must be parts x 4^n (with parts = {merged['parts']}: {valid}, ...)",
-                         field="samples", value=merged["samples"])
+    _quadtree_level(merged["samples"], merged["parts"])
     resolution = merged["environment_resolution"]
     if resolution & (resolution - 1):
         raise InputError("must be a power of two", field="environment_resolution",
@@ -272,6 +267,17 @@ def _check_knobs(knobs: dict) -> dict:
                          value=merged["sampling_blend"])
     merged["sampling_blend"] = bool(merged["sampling_blend"])
     return merged
+
+
+def _quadtree_level(count: int, parts: int) -> int:
+    """Return n with ``count = parts x 4^n`` (the quadtree layout of every part), else raise."""
+    per_part = count // parts
+    level = round(math.log(max(per_part, 1), 4))
+    if count % parts or 4 ** level != per_part:
+        valid = ", ".join(str(parts * 4 ** n) for n in range(2, 9))
+        raise InputError(f"must be parts x 4^n (with parts = {parts}: {valid}, ...)",
+                         field="samples", value=count)
+    return level
 
 
 def _basis(knobs: dict) -> DipolePCABasis:
@@ -334,10 +340,7 @@ def illumination_samples(mesh, count: int, parts: int, *, mm_per_unit: float = 1
     -------
     IlluminationSamples
     """
-    per_part = count // parts
-    level = round(math.log(max(per_part, 1), 4))
-    if count % parts or 4 ** level != per_part:
-        raise InputError("must be parts x 4^n", field="samples", value=count)
+    level = _quadtree_level(count, parts)
     rng = np.random.default_rng(seed)
     areas = mesh.face_areas
     cumulative = np.cumsum(areas)
