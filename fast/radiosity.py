@@ -1370,7 +1370,13 @@ class RadiosityState:
         translucent = np.isin(patches.object_of, list(geometry.objects))
         self._translucent_rows = np.flatnonzero(translucent)
         self._diffuse_rows = np.flatnonzero(~translucent)
-        self._solved = None
+        self._solved = None                 # (B, F B) of the last solve, for image()
+        # the F half of the bound of Eq. 15 does not change with the materials
+        self._form_factor_facts = form_factor_bounds(F, patches)
+        self._shadow_points: dict = {}      # AreaLightShadows per point set (see _shadows)
+        self._interreflected = None         # S F B of the last solve (warm start)
+        self._cached_gbuffer = None
+        self._cached_image_operators = None
         self.set_material(None)
 
     # -- materials ---------------------------------------------------------------------
@@ -1385,8 +1391,6 @@ class RadiosityState:
         overrides = _materials_of(self.scene, material)
         self.materials = {**self.materials, **overrides}
         self.S = scattering_matrix(self.geometry, self.scene, self.patches, self.materials)
-        if getattr(self, "_form_factor_facts", None) is None:
-            self._form_factor_facts = form_factor_bounds(self.form_factors, self.patches)
         self.convergence = check_convergence(self.S, self.form_factors, self.patches,
                                              form_factor_facts=self._form_factor_facts)
         self._energy_beyond_cutoff()
@@ -1484,7 +1488,7 @@ class RadiosityState:
 
     def _shadows(self, key, points, normals) -> AreaLightShadows:
         """Return the :class:`AreaLightShadows` of a point set (built once per key, engine)."""
-        cache = self.__dict__.setdefault("_shadow_points", {})
+        cache = self._shadow_points
         key = key + (self.knobs["shadow_ray_engine"],)
         if key not in cache:
             cache[key] = AreaLightShadows(self.scene, points, normals,
@@ -1546,8 +1550,7 @@ class RadiosityState:
                 # frames keep their inter-reflected parts, so the guess needs no product of S
                 guess[:, c] += weights @ np.stack([part[:, c] for _, part in self._frames])
             return guess
-        previous = getattr(self, "_interreflected", None)
-        return None if previous is None else source + previous
+        return None if self._interreflected is None else source + self._interreflected
 
     def _solve(self, S, source, initial=None):
         """Solve with the knobs; keep F B of the result for :meth:`image`."""
@@ -1561,7 +1564,7 @@ class RadiosityState:
     # -- images ------------------------------------------------------------------------
 
     def _gbuffer(self):
-        if getattr(self, "_cached_gbuffer", None) is None:
+        if self._cached_gbuffer is None:
             from ..scenes.raycast import gbuffer
 
             self._cached_gbuffer = gbuffer(self.scene)
@@ -1577,7 +1580,7 @@ class RadiosityState:
         """
         lambertian = tuple(obj.material if isinstance(obj.material, Lambertian) else None
                            for obj in scene.objects)
-        cached = getattr(self, "_cached_image_operators", None)
+        cached = self._cached_image_operators
         if cached is not None and cached["lambertian"] == lambertian:
             return cached
         gb = self._gbuffer()
