@@ -620,7 +620,16 @@ class ObjectTransfer:
         return int(self.statistics["vertices"])
 
 
-def _spatial_decision(mesh, knobs: dict) -> tuple[bool, str]:
+def _spatial_decision(scene_object, knobs: dict, log: StageLog) -> bool:
+    """Whether the object gets the spatial pass; the reason goes into ``log`` either way."""
+    spatial, sentence = _spatial_reason(scene_object.mesh, knobs)
+    log.notes.setdefault("spatial", {})[scene_object.name] = sentence
+    if not spatial:
+        log.skip(f"object '{scene_object.name}': {sentence}")
+    return spatial
+
+
+def _spatial_reason(mesh, knobs: dict) -> tuple[bool, str]:
     if knobs["spatial"] == "off":
         return False, "spatial compression off (knob spatial = 'off')"
     if mesh.grid_shape is None:
@@ -646,10 +655,7 @@ def _precompute_object(scene_object, mm_per_unit: float, knobs: dict,
                        log: StageLog) -> ObjectTransfer:
     mesh = scene_object.mesh
     basis = _basis(knobs)
-    spatial, sentence = _spatial_decision(mesh, knobs)
-    (log.notes.setdefault("spatial", {}))[scene_object.name] = sentence
-    if not spatial:
-        log.skip(f"object '{scene_object.name}': {sentence}")
+    spatial = _spatial_decision(scene_object, knobs, log)
     start = time.perf_counter()
     samples = illumination_samples(mesh, knobs["samples"], knobs["parts"],
                                    mm_per_unit=mm_per_unit, seed=knobs["seed"])
@@ -773,10 +779,7 @@ def precompute(scene, **knobs) -> PRTState:
         transfer = cache.load_pickle(key)
         if isinstance(transfer, ObjectTransfer):
             log.notes.setdefault("cache", {})[item.name] = "loaded from the cache"
-            spatial, sentence = _spatial_decision(item.mesh, knobs)
-            log.notes.setdefault("spatial", {})[item.name] = sentence
-            if not spatial:
-                log.skip(f"object '{item.name}': {sentence}")
+            _spatial_decision(item, knobs, log)
         else:
             transfer = _precompute_object(item, scene.mm_per_unit, knobs, log)
             cache.store_pickle(key, transfer)
