@@ -1373,7 +1373,7 @@ class RadiosityState:
         self._solved = None                 # (B, F B) of the last solve, for image()
         # the F half of the bound of Eq. 15 does not change with the materials
         self._form_factor_facts = form_factor_bounds(F, patches)
-        self._shadow_points: dict = {}      # AreaLightShadows per point set (see _shadows)
+        self._shadow_points: dict = {}      # AreaLightShadows per point set and engine
         self._interreflected = None         # S F B of the last solve (warm start)
         self._cached_gbuffer = None
         self._cached_image_operators = None
@@ -1476,24 +1476,24 @@ class RadiosityState:
         lights = self.scene.lights if lights is None else tuple(lights)
         E = np.zeros((len(p), 3))
         for name, rows, count in groups:
-            if AreaLightShadows.handles(lights):
-                shadows = self._shadows(("patches", name), self._patch_points[rows],
-                                        p.normal[rows])
-                E[rows] = shadows.irradiance(lights, count, self.knobs["seed"])
-            else:
-                E[rows] = direct_irradiance(self.scene, self._patch_points[rows],
-                                            p.normal[rows], lights=lights, samples=count,
-                                            seed=self.knobs["seed"])
+            E[rows] = self._direct_irradiance(("patches", name), self._patch_points[rows],
+                                              p.normal[rows], lights, count, self.knobs["seed"])
         return E
 
-    def _shadows(self, key, points, normals) -> AreaLightShadows:
-        """Return the :class:`AreaLightShadows` of a point set (built once per key, engine)."""
-        cache = self._shadow_points
+    def _direct_irradiance(self, key, points, normals, lights, samples, seed) -> np.ndarray:
+        """:func:`direct_irradiance` at a fixed point set, named by ``key``.
+
+        Rectangular area lights go through the point set's :class:`AreaLightShadows`, built
+        once per key and ray engine; other lights through :func:`direct_irradiance`.
+        """
+        if not AreaLightShadows.handles(lights):
+            return direct_irradiance(self.scene, points, normals, lights=lights,
+                                     samples=samples, seed=seed)
         key = key + (self.knobs["shadow_ray_engine"],)
-        if key not in cache:
-            cache[key] = AreaLightShadows(self.scene, points, normals,
-                                          self.knobs["shadow_ray_engine"])
-        return cache[key]
+        if key not in self._shadow_points:
+            self._shadow_points[key] = AreaLightShadows(self.scene, points, normals,
+                                                        self.knobs["shadow_ray_engine"])
+        return self._shadow_points[key].irradiance(lights, samples, seed)
 
     def solve(self, irradiance, component: str = "both") -> tuple[np.ndarray, dict]:
         """Radiosity B (P, 3) for patch irradiance E, for one bounce component (Fig. 6)."""
@@ -1661,15 +1661,9 @@ class RadiosityState:
         rgb[operators["translucent"]] = operators["translucent_weights"] @ B / np.pi
         if len(diffuse):
             lights = scene.lights if lights is None else tuple(lights)
-            if AreaLightShadows.handles(lights):
-                shadows = self._shadows(("pixels",) + gb.shape, operators["points"],
-                                        operators["shading"])
-                direct = shadows.irradiance(lights, self.knobs["light_samples"],
-                                            self.knobs["seed"] + 1)
-            else:
-                direct = direct_irradiance(scene, operators["points"], operators["shading"],
-                                           lights=lights, samples=self.knobs["light_samples"],
-                                           seed=self.knobs["seed"] + 1)
+            direct = self._direct_irradiance(("pixels",), operators["points"],
+                                             operators["shading"], lights,
+                                             self.knobs["light_samples"], self.knobs["seed"] + 1)
             rgb[diffuse] = operators["albedo_over_pi"] * (
                 operators["diffuse_weights"] @ global_irradiance + direct)
         rgb = rgb.reshape(gb.shape + (3,))
