@@ -91,7 +91,6 @@ def _bias_table(args) -> int:
     from ...fitting.validation import bias_table_text, model_bias_table
 
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     json_path, text_path = out / f"bias_{args.generator}.json", out / f"bias_{args.generator}.md"
     rows = []
     began = time.perf_counter()
@@ -103,6 +102,7 @@ def _bias_table(args) -> int:
 
     def finished(row):
         rows.append(row)
+        out.mkdir(parents=True, exist_ok=True)  # at the first row: bad input leaves nothing
         figures = {"generator": args.generator, "size": args.size, "seed": args.seed,
                    "spp": args.spp if args.generator == "volpath" else None,
                    "photons": int(args.photons) if args.generator == "walk" else None,
