@@ -591,23 +591,11 @@ def _engine(scene):
     return engine, engine.diagonal * OFFSET_FRACTION
 
 
-#: Rays per Mitsuba call: a block of the transfer at the default ``block_pairs`` in one
-#: call (about 200 MB of ray data in flight), so its arrays need no copy.
-RAYS_PER_CALL = 1 << 22
-
-
 def _occluded(engine, origins, directions, reach) -> np.ndarray:
     """Any-hit tests of rays given as (3, N) float32 arrays, through the scene's engine."""
-    mi = engine.mi
-    count = origins.shape[1]
-    blocked = np.zeros(count, dtype=bool)
-    for start in range(0, count, RAYS_PER_CALL):
-        stop = min(count, start + RAYS_PER_CALL)
-        ray = mi.Ray3f(mi.Point3f(np.ascontiguousarray(origins[:, start:stop])),
-                       mi.Vector3f(np.ascontiguousarray(directions[:, start:stop])))
-        ray.maxt = mi.Float(np.ascontiguousarray(reach[start:stop]))
-        blocked[start:stop] = engine.scene.ray_test(ray).numpy().astype(bool)
-    return blocked
+    # (N, 3) views of the (3, N) arrays: the Mitsuba engine's rays take their transposes,
+    # so a batch within one of its calls is not copied
+    return engine.occluded_unit(origins.T, directions.T, reach)
 
 
 def _pair_visibility(engine, offset, x, n_x, positions, normals):
