@@ -796,13 +796,22 @@ def precompute(scene, **knobs) -> PRTState:
 # ------------------------------------------------------------------- lighting
 
 
-def _point_irradiance(samples, position, intensity, eta, falloff=None):
+def _transmitted_cosine(eta, cosine):
+    r""":math:`F_t(\eta, n \cdot \omega_i)\,(n \cdot \omega_i)` of Eq. 6, 0 from below."""
+    return np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0, 1)) * cosine, 0.0)
+
+
+def _far_distance(samples: IlluminationSamples) -> float:
+    """Return a distance past the samples' extent (scene units), for rays to infinity."""
+    return 10.0 * max(1.0, float(np.ptp(samples.positions, axis=0).max()))
+
+
+def _point_irradiance(samples, position, eta, falloff=None):
     offset = position - samples.positions
     squared = np.maximum(np.einsum("nd,nd->n", offset, offset), 1e-300)
     direction = offset / np.sqrt(squared)[:, None]
     cosine = np.einsum("nd,nd->n", samples.normals, direction)
-    weight = np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0, 1)) * cosine
-                      / squared, 0.0)
+    weight = _transmitted_cosine(eta, cosine) / squared
     if falloff is not None:
         weight = weight * falloff(-direction)
     return weight, direction
@@ -911,21 +920,20 @@ def sample_irradiance(scene, samples: IlluminationSamples, lights, eta: float, *
     for light_index, light in enumerate(lights):
         if isinstance(light, (PointLight, SpotLight)):
             falloff = _spot_falloff(light) if isinstance(light, SpotLight) else None
-            weight, _ = _point_irradiance(samples, light.position, light.intensity, eta, falloff)
+            weight, _ = _point_irradiance(samples, light.position, eta, falloff)
             _shadow(scene, samples, weight, light.position, None)
             irradiance += weight[:, None] * light.intensity
         elif isinstance(light, DirectionalLight):
             cosine = samples.normals @ -light.direction
-            weight = np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0, 1))
-                              * cosine, 0.0)
-            far = 10.0 * max(1.0, float(np.ptp(samples.positions, axis=0).max()))
+            weight = _transmitted_cosine(eta, cosine)
+            far = _far_distance(samples)
             _shadow(scene, samples, weight, samples.positions - far * light.direction, None)
             irradiance += weight[:, None] * light.irradiance
         elif isinstance(light, RectangularAreaLight):
             points, normal, patch = _rectangle_points(light, area_light_samples,
                                                       seed + light_index)
             for point in points:
-                weight, direction = _point_irradiance(samples, point, None, eta)
+                weight, direction = _point_irradiance(samples, point, eta)
                 weight *= np.clip(-(direction @ normal), 0.0, None) * patch
                 _shadow(scene, samples, weight, point, normal)
                 irradiance += weight[:, None] * light.radiance
@@ -933,8 +941,7 @@ def sample_irradiance(scene, samples: IlluminationSamples, lights, eta: float, *
             for direction, points, solid_angle in _sphere_light_directions(
                     light, samples, area_light_samples, seed + light_index):
                 cosine = np.einsum("nd,nd->n", samples.normals, direction)
-                weight = np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0, 1))
-                                  * cosine * solid_angle, 0.0)
+                weight = _transmitted_cosine(eta, cosine) * solid_angle
                 _shadow(scene, samples, weight, points, None)
                 irradiance += weight[:, None] * light.radiance
         elif isinstance(light, (ConstantEnvironment, ImageEnvironment)):
@@ -1051,7 +1058,7 @@ def precompute_environment(scene, samples: IlluminationSamples, resolution: int,
 
     directions, solid_angle = _environment_directions(resolution)
     mu_grid, factors, _, _ = fresnel_cosine_factors()
-    far = 10.0 * max(1.0, float(np.ptp(samples.positions, axis=0).max()))
+    far = _far_distance(samples)
     block = max(1, (1 << 20) // len(directions))
     # ranked by support: the lighting is smooth where visibility has sharp horizons, so the
     # coarse coefficients matter more than their size says (measured on a constant
