@@ -705,9 +705,13 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
                              "were precomputed: precompute with it translucent",
                              field="material", value=getattr(material, "name", "") or
                              type(material).__name__)
+        # a thin sheet has two blocks of each kind (its two faces): tabulate once per kind
+        tables: dict = {}
         if not isinstance(profile, MixedProfiles):
             for kind, samples, cumulative_operator, segment_operator in item.operators:
-                table, cumulative = _object_profile_tables(profile, grid, kind)
+                if kind not in tables:
+                    tables[kind] = _object_profile_tables(profile, grid, kind)
+                table, cumulative = tables[kind]
                 data += samples @ table
                 if cumulative_operator is not None:
                     data += cumulative_operator @ cumulative + segment_operator @ table
@@ -716,15 +720,20 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
             raise InputError(f"a heterogeneous material on '{obj.name}' needs its face labels "
                              "at precomputation: precompute with the MixedProfiles material",
                              field="material", value=profile.name)
+        labels = item.samples["patch_label"]
         for kind, pair_position, own_position in item.blocks:
-            data[pair_position] += _mixed_values(item, profile, grid, kind)
-            labels = item.samples["patch_label"]
-            for label, homogeneous in enumerate(profile.profiles):
-                table, cumulative = _object_profile_tables(homogeneous, grid, kind)
+            if kind not in tables:
+                # the self term of every patch with each label's homogeneous profile
+                own_values = [] if item.self_cumulative is None else [
+                    item.self_cumulative @ cumulative + item.self_segment @ table
+                    for table, cumulative in (_object_profile_tables(homogeneous, grid, kind)
+                                              for homogeneous in profile.profiles)]
+                tables[kind] = (_mixed_values(item, profile, grid, kind), own_values)
+            pair_values, own_values = tables[kind]
+            data[pair_position] += pair_values
+            for label, values in enumerate(own_values):
                 mine = labels == label
-                if item.self_cumulative is not None:
-                    values = item.self_cumulative @ cumulative + item.self_segment @ table
-                    data[own_position[mine]] += values[mine]
+                data[own_position[mine]] += values[mine]
     return ScatteringMatrix(geometry.indptr, geometry.indices, data)
 
 
