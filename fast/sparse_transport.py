@@ -336,6 +336,15 @@ def _product_scalar(indptr, packed, scales, index_bits, vector, out):  # pragma:
         out[r] = total * scales[r]
 
 
+def _product_vector(vector, columns: int) -> np.ndarray:
+    """Return ``vector`` as contiguous float32 of shape (columns, 3) or (columns,), or raise."""
+    vector = np.ascontiguousarray(vector, dtype=np.float32)
+    if vector.shape not in ((columns, 3), (columns,)):
+        raise InputError(f"must have shape ({columns}, 3) or ({columns},)", field="vector",
+                         value=vector.shape)
+    return vector
+
+
 @dataclass(frozen=True, eq=False)
 class QuantisedRows(_RowPointers):
     """A sparse matrix with 16-bit values and 16-bit indices packed in int32 words.
@@ -398,10 +407,7 @@ class QuantisedRows(_RowPointers):
         -------
         ndarray, (R, 3) or (R,), float32
         """
-        vector = np.ascontiguousarray(vector, dtype=np.float32)
-        if vector.shape not in ((self.columns, 3), (self.columns,)):
-            raise InputError(f"must have shape ({self.columns}, 3) or ({self.columns},)",
-                             field="vector", value=vector.shape)
+        vector = _product_vector(vector, self.columns)
         if out is None:
             out = np.empty((self.rows,) + vector.shape[1:], dtype=np.float32)
         kernel = _product_rgb if vector.ndim == 2 else _product_scalar
@@ -650,10 +656,7 @@ class SharedColumnBlocks:
         -------
         ndarray, (B R, 3) or (B R,), float32
         """
-        vector = np.asarray(vector)
-        if vector.shape not in ((self.columns, 3), (self.columns,)):
-            raise InputError(f"must have shape ({self.columns}, 3) or ({self.columns},)",
-                             field="vector", value=vector.shape)
+        vector = _product_vector(vector, self.columns)
         channels = 1 if vector.ndim == 1 else 3
         if out is None:
             out = np.empty((self.rows,) + vector.shape[1:], dtype=np.float32)
@@ -661,7 +664,7 @@ class SharedColumnBlocks:
                 or not out.flags.c_contiguous:
             raise InputError(f"must be a contiguous float32 array of shape "
                              f"{(self.rows,) + vector.shape[1:]}", field="out", value=out.shape)
-        matrix = np.ascontiguousarray(vector, dtype=np.float32).reshape(self.columns, channels)
+        matrix = vector.reshape(self.columns, channels)
         shape = (self.blocks, len(self.indptr) - 1)
         if channels == 3:
             _blocks_product_rgb(self.indptr, self.indices, self.levels, self.scales, matrix,
