@@ -96,7 +96,7 @@ from ..materials.fresnel import fresnel_transmittance
 from ..materials.homogeneous import Dipole
 from ..materials.subedit import SubEditProfiles, subedit_from_dipole
 from ..scenes.scene import DirectionalLight, PointLight
-from .base import StageLog, with_defaults
+from .base import StageLog, refuse_inapplicable, with_defaults
 
 __all__ = [
     "DEFAULT_KNOBS",
@@ -1235,6 +1235,10 @@ MAX_LIGHT_FOV = 160.0
 VIEW_MARGIN = 1.02
 
 
+#: How an InputError for a scene the method cannot render begins (the reason follows).
+_REFUSAL = "the splatting method cannot render this scene"
+
+
 def _translucent_objects(scene) -> list[int]:
     return [index for index, item in enumerate(scene.objects)
             if isinstance(item.material, (Dipole, SubEditProfiles))]
@@ -1292,10 +1296,7 @@ def precompute(scene, **knobs) -> SplattingState:
     tables (the SubEdit conversion of a dipole and Eq. 14's lookup table) depend on the
     material alone and are built on first use.
     """
-    reason = applies_to(scene)
-    if reason is not None:
-        raise InputError(f"the splatting method cannot render this scene: {reason}",
-                         file=scene.source, field="scene", value=scene.name)
+    refuse_inapplicable(scene, applies_to(scene), _REFUSAL)
     return SplattingState(scene, _check_knobs(knobs))
 
 
@@ -1437,10 +1438,7 @@ class SplattingState:
         if material is not None:
             for index in _translucent_objects(scene):
                 scene = scene.with_material(scene.objects[index].name, material)
-        reason = applies_to(scene)
-        if reason is not None:
-            raise InputError(f"the splatting method cannot render this scene: {reason}",
-                             file=scene.source, field="scene", value=scene.name)
+        refuse_inapplicable(scene, applies_to(scene), _REFUSAL)
         log = StageLog()
         start = time.perf_counter()
         camera_view = self._camera_view(scene)
