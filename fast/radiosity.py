@@ -1658,6 +1658,7 @@ class RadiosityState:
         gb = self._gbuffer()
         scene = self._scene_with_materials()
         operators = self._image_operators(scene)
+        lights = scene.lights if lights is None else tuple(lights)
         rgb = np.zeros((gb.shape[0] * gb.shape[1], 3))
         if self.form_factors is None or component not in ("interreflection", "both"):
             global_irradiance = np.zeros_like(B)
@@ -1669,15 +1670,13 @@ class RadiosityState:
         diffuse = operators["diffuse"]
         rgb[operators["translucent"]] = operators["translucent_weights"] @ B / np.pi
         if len(diffuse):
-            lights = scene.lights if lights is None else tuple(lights)
             direct = self._direct_irradiance(("pixels",), operators["points"],
                                              operators["shading"], lights,
                                              self.knobs["light_samples"], self.knobs["seed"] + 1)
             rgb[diffuse] = operators["albedo_over_pi"] * (
                 operators["diffuse_weights"] @ global_irradiance + direct)
         rgb = rgb.reshape(gb.shape + (3,))
-        rgb += _emitters_seen(scene.with_lights(self.scene.lights if lights is None
-                                                else lights), gb)
+        rgb += _emitters_seen(scene.with_lights(lights), gb)
         return rgb
 
     def render(self, lights=None, material=None, component: str = "both") -> Image:
