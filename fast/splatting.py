@@ -532,11 +532,10 @@ class CameraModel:
     @classmethod
     def from_camera(cls, camera) -> CameraModel:
         """From a :class:`~translucent.scenes.Camera` (horizontal fov, Mitsuba's look-at)."""
-        forward = camera.forward
-        right = np.cross(forward, camera.up)
-        right /= np.linalg.norm(right)
-        up = np.cross(right, forward)
-        return cls(camera.origin, forward, right, up, math.tan(math.radians(camera.fov) / 2),
+        from ..scenes.raycast import _camera_frame
+
+        forward, left, up = _camera_frame(camera)
+        return cls(camera.origin, forward, -left, up, math.tan(math.radians(camera.fov) / 2),
                    camera.width, camera.height)
 
     def project(self, points: np.ndarray, width: int, height: int):
