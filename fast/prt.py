@@ -1264,6 +1264,7 @@ class PRTState:
         self._product_buffers: dict = {}
         self._frames_lit: dict = {}
         self._pixels: dict | None = None
+        self._exit_factors: dict = {}
         self._environment: dict = {}
         self._wavelets = {t.name: SpatialWavelet(t.spatial_shape) for t in self.transfers
                           if t.spatial_shape is not None}
@@ -1418,6 +1419,18 @@ class PRTState:
             self._pixels = {"shape": view.shape, "maps": maps}
         return self._pixels
 
+    def _exit_factor(self, name: str, pixel_map: _PixelMap, eta: float) -> np.ndarray:
+        r""":math:`F_t(\eta, \omega_o)/\pi` at the object's pixels, kept while eta is unchanged.
+
+        Edits that keep eta (most of them) reuse it instead of evaluating Fresnel per pixel.
+        """
+        held = self._exit_factors.get(name)
+        if held is None or held[0] != eta:
+            held = (eta, (fresnel_transmittance(eta, pixel_map.cosine) / np.pi)
+                    .astype(np.float32))
+            self._exit_factors[name] = held
+        return held[1]
+
     def render(self, lights=None, material=None) -> Image:
         """Render a frame: relight if the lights (or eta) changed, re-weight for the material.
 
@@ -1452,8 +1465,7 @@ class PRTState:
                     self.relight(transfer, wanted, chosen.eta)
                 radiance = self.vertex_radiance(transfer, chosen)
                 pixel_map = maps["maps"][transfer.name]
-                exit_factor = (fresnel_transmittance(chosen.eta, pixel_map.cosine)
-                               / np.pi).astype(np.float32)
+                exit_factor = self._exit_factor(transfer.name, pixel_map, chosen.eta)
                 gathered = np.einsum("pk,pkc->pc", pixel_map.barycentrics,
                                      radiance[pixel_map.corners])
                 image[pixel_map.pixels] = gathered * exit_factor[:, None]
