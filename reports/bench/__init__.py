@@ -16,10 +16,26 @@ def at_width(scene, width: int):
         The same scene with a camera of ``width`` x ``round(width * height / width)``
         pixels (at least 1 high), or ``scene`` itself for width 0.
     """
-    from dataclasses import replace
-
     if not width:
         return scene
     camera = scene.camera
-    height = max(1, round(width * camera.height / camera.width))
-    return scene.with_camera(replace(camera, width=width, height=height))
+    return with_size(scene, width, max(1, round(width * camera.height / camera.width)))
+
+
+def with_size(scene, width: int, height: int):
+    """Return ``scene`` with its camera resized to ``width`` x ``height`` pixels.
+
+    Parameters
+    ----------
+    scene : Scene
+    width, height : int
+        Image size in pixels.
+
+    Returns
+    -------
+    Scene
+        The same scene and camera pose, another film size.
+    """
+    from dataclasses import replace
+
+    return scene.with_camera(replace(scene.camera, width=width, height=height))

@@ -37,7 +37,8 @@ from ...errors import InputError
 from ...fast import brdf_pca
 from ...materials.brdf_pca import pca_analysis
 from ...materials.brdfs import GAMMA_RANGES, MODELS, AnalyticBRDF
-from ...scenes import Camera, PointLight, load_scene
+from ...scenes import PointLight, load_scene
+from . import with_size
 
 #: Targets of the task (frames per second on this machine).
 TARGET_EDIT_FPS = 20.0
@@ -83,12 +84,6 @@ def add_arguments(parser):
                         help="folder for figures and error maps (default bench_brdf_pca)")
 
 
-def _with_size(scene, width: int, height: int):
-    camera = scene.camera
-    return scene.with_camera(Camera(camera.origin, camera.target, camera.up, camera.fov,
-                                    width, height))
-
-
 def _memory_bandwidth() -> float:
     """Bytes per second of a 256 MB array copy (read + write), the best of three."""
     source = np.ones(1 << 25, dtype=np.float64)
@@ -120,7 +115,7 @@ def _baseline(scene, spp: int) -> float:
 
 
 def _performance(args) -> dict:
-    scene = _with_size(load_scene(args.scene), args.width, args.height)
+    scene = with_size(load_scene(args.scene), args.width, args.height)
     name = args.object
     material = scene.object(name).material
     if not isinstance(material, AnalyticBRDF):
@@ -267,7 +262,7 @@ def _validate(args, folder: Path) -> dict:
 
     base = load_scene("glossy")
     aspect = base.camera.height / base.camera.width
-    base = _with_size(base, args.validation_width, max(1, round(args.validation_width * aspect)))
+    base = with_size(base, args.validation_width, max(1, round(args.validation_width * aspect)))
     spp, gathers = args.validation_spp, args.validation_gather_samples
     rows = []
     print(f"\nvalidation on 'glossy' at {base.camera.width} x {base.camera.height}, {gathers} "

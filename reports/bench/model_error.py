@@ -137,12 +137,10 @@ def bench_scene(size: int = DEFAULT_SIZE):
     -------
     Scene
     """
-    from ...scenes import Camera, load_scene
+    from ...scenes import load_scene
+    from . import with_size
 
-    scene = load_scene(SCENE)
-    camera = scene.camera
-    return scene.with_camera(Camera(camera.origin, camera.target, camera.up, camera.fov,
-                                    size, size))
+    return with_size(load_scene(SCENE), size, size)
 
 
 def object_mask(scene, object_name: str = OBJECT) -> np.ndarray:

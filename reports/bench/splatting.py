@@ -41,7 +41,8 @@ import numpy as np
 
 from ...atomic import atomic_write_text
 from ...fast import splatting
-from ...scenes import Camera, load_scene
+from ...scenes import load_scene
+from . import with_size
 
 #: The ablation settings of the paper's Table 1.
 SETTINGS = {
@@ -90,12 +91,6 @@ def add_arguments(parser):
     parser.add_argument("--no-profile-upsampling", action="store_true",
                         help="leave out the rows with profile upsampling (see "
                              "translucent.fast.splatting.upsampling_profile_factors)")
-
-
-def _with_size(scene, width: int, height: int):
-    camera = scene.camera
-    return scene.with_camera(Camera(camera.origin, camera.target, camera.up, camera.fov,
-                                    width, height))
 
 
 def relative_error(test: np.ndarray, reference: np.ndarray, axis=None):
@@ -163,8 +158,8 @@ def run(args) -> int:
         raise InputError("must be >= 1", field="--validation-stride",
                          value=args.validation_stride)
     base = load_scene(args.scene)
-    full = _with_size(base, args.width, args.height)
-    small = _with_size(base, args.validation_width,
+    full = with_size(base, args.width, args.height)
+    small = with_size(base, args.validation_width,
                        max(1, round(args.validation_width * args.height / args.width)))
     common = {"irradiance_resolution": args.irradiance_resolution, "backend": args.backend}
     # ground truth on a regular subset of the timed frame's own pixels (same buffers)
