@@ -620,13 +620,6 @@ def _pair_visibility(engine, offset, x, n_x, positions, normals):
 # lights
 
 
-def _spot_falloff(light: SpotLight, directions) -> np.ndarray:
-    """Mitsuba's ``spot`` profile: 1 inside the beam, linear in angle to 0 at the cutoff."""
-    angle = np.degrees(np.arccos(np.clip(directions @ light.direction, -1.0, 1.0)))
-    ramp = (light.cutoff_angle - angle) / max(light.cutoff_angle - light.beam_width, 1e-12)
-    return np.clip(np.where(angle <= light.beam_width, 1.0, ramp), 0.0, 1.0)
-
-
 def _check_lights(lights) -> None:
     for index, light in enumerate(lights):
         if isinstance(light, (ConstantEnvironment, ImageEnvironment)):
@@ -701,7 +694,7 @@ def _direct_samples(scene, lights, points, normals, samples: int, seed: int):
             if emitter_normals is not None:
                 strength = strength * np.clip(-(wi @ emitter_normals[k]), 0.0, None)
             if isinstance(light, SpotLight):
-                strength = strength * _spot_falloff(light, -wi)
+                strength = strength * light.falloff(-wi)
             strength[_shadowed(engine, offset, points, normals, wi, distance, strength > 0)] = 0
             directions.append(wi[:, None])
             irradiance.append((strength[:, None] * weights[k])[:, None])

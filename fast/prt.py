@@ -817,16 +817,6 @@ def _point_irradiance(samples, position, eta, falloff=None):
     return weight, direction
 
 
-def _spot_falloff(light: SpotLight):
-    """Mitsuba's ``spot`` profile: 1 inside the beam, linear in angle to 0 at the cutoff."""
-    def falloff(directions):
-        angle = np.degrees(np.arccos(np.clip(directions @ light.direction, -1.0, 1.0)))
-        ramp = (light.cutoff_angle - angle) / max(light.cutoff_angle - light.beam_width, 1e-12)
-        return np.where(angle <= light.beam_width, 1.0,
-                        np.where(angle < light.cutoff_angle, ramp, 0.0))
-    return falloff
-
-
 def _stratified_unit_square(count: int, seed: int) -> np.ndarray:
     side = int(math.ceil(math.sqrt(count)))
     rng = np.random.default_rng(seed)
@@ -919,7 +909,7 @@ def sample_irradiance(scene, samples: IlluminationSamples, lights, eta: float, *
     irradiance = np.zeros((len(samples), 3))
     for light_index, light in enumerate(lights):
         if isinstance(light, (PointLight, SpotLight)):
-            falloff = _spot_falloff(light) if isinstance(light, SpotLight) else None
+            falloff = light.falloff if isinstance(light, SpotLight) else None
             weight, _ = _point_irradiance(samples, light.position, eta, falloff)
             _shadow(scene, samples, weight, light.position, None)
             irradiance += weight[:, None] * light.intensity

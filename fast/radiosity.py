@@ -1024,15 +1024,6 @@ def transfer_matrix(S: ScatteringMatrix, F) -> list[np.ndarray]:
 # direct lighting
 
 
-def _spot_falloff(light: SpotLight, directions) -> np.ndarray:
-    """Mitsuba's ``spot`` profile: 1 inside the beam, linear in angle to 0 at the cutoff."""
-    cos_theta = np.clip(directions @ light.direction, -1.0, 1.0)
-    angle = np.degrees(np.arccos(cos_theta))
-    ramp = (light.cutoff_angle - angle) / max(light.cutoff_angle - light.beam_width, 1e-12)
-    return np.where(angle <= light.beam_width, 1.0, np.where(angle < light.cutoff_angle,
-                                                              ramp, 0.0))
-
-
 def _environment_radiance(light, directions) -> np.ndarray:
     """Radiance arriving from ``directions`` (pointing away from the scene), (N, 3)."""
     if isinstance(light, ConstantEnvironment):
@@ -1098,7 +1089,7 @@ def direct_irradiance(scene, points, normals, *, lights=None, samples: int = 16,
             cosine = np.clip(np.einsum("ij,ij->i", normals, direction), 0.0, None)
             strength = cosine / distance2
             if isinstance(light, SpotLight):
-                strength = strength * _spot_falloff(light, -direction)
+                strength = strength * light.falloff(-direction)
             lit = strength > 0
             if lit.any():
                 seen = visible(scene, points[lit], light.position, normals_a=normals[lit])

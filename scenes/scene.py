@@ -277,6 +277,24 @@ class SpotLight:
         object.__setattr__(self, "cutoff_angle", cutoff)
         object.__setattr__(self, "beam_width", width)
 
+    def falloff(self, directions) -> np.ndarray:
+        """Mitsuba's ``spot`` profile: 1 inside the beam, linear in angle to 0 at the cutoff.
+
+        Parameters
+        ----------
+        directions : (..., 3) unit vectors leaving the light
+
+        Returns
+        -------
+        ndarray, shape (...)
+            Intensity relative to the axis, in [0, 1].
+        """
+        cos_theta = np.clip(np.asarray(directions) @ self.direction, -1.0, 1.0)
+        angle = np.degrees(np.arccos(cos_theta))
+        ramp = (self.cutoff_angle - angle) / max(self.cutoff_angle - self.beam_width, 1e-12)
+        return np.where(angle <= self.beam_width, 1.0,
+                        np.where(angle < self.cutoff_angle, ramp, 0.0))
+
 
 @dataclass(frozen=True)
 class DirectionalLight:
