@@ -65,6 +65,21 @@ def check_nonnegative(value, field: str, *, file=None):
     return array
 
 
+def check_count(value, field: str, minimum: int = 1, *, why: str = "", file=None) -> int:
+    """Return ``value`` as an int; :class:`InputError` unless an integer >= ``minimum``.
+
+    Booleans are refused (``True`` is not a count); ``why`` is appended to the message.
+    """
+    try:
+        integral = not isinstance(value, bool) and int(value) == value
+    except (TypeError, ValueError, OverflowError):
+        integral = False
+    if not integral or value < minimum:
+        raise InputError(f"must be an integer >= {minimum}{why}", file=file, field=field,
+                         value=value)
+    return int(value)
+
+
 def check_positive(value, field: str, *, file=None):
     """Return ``value`` as a finite float64 array, raising :class:`InputError` if any entry <= 0."""
     array = check_finite(value, field, file=file)

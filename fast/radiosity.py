@@ -95,7 +95,7 @@ from scipy import sparse
 from scipy.sparse import linalg as sparse_linalg
 from scipy.spatial import cKDTree
 
-from ..errors import InputError
+from ..errors import InputError, check_count
 from ..image import Image
 from ..materials.homogeneous import Lambertian
 from ..materials.profiles import (
@@ -1755,8 +1755,7 @@ def _resolve_knobs(scene, knobs: dict) -> dict:
             raise InputError("must be > 0", field=name, value=resolved[name])
     for name in ("self_samples", "voxels_per_axis", "profile_samples", "max_iterations",
                  "light_samples", "mix_points"):
-        if int(resolved[name]) != resolved[name] or resolved[name] < 1:
-            raise InputError("must be an integer >= 1", field=name, value=resolved[name])
+        check_count(resolved[name], name)
     if resolved["max_distance_mm"] is None:
         radii = []
         for obj in scene.objects:

@@ -68,7 +68,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, check_count
 from ..materials import Dipole
 from ..materials.dipole import reduced_albedo, reduced_extinction
 from ..materials.profiles import diffuse_entry_transmittance
@@ -591,11 +591,8 @@ def _check_inputs(material, *, shape, pixel_size_mm, incident_px, side, thicknes
         raise InputError("must be > 0 for volpath captures: camera paths cannot find a "
                          "pencil beam (use the walk or dipole generator for one)",
                          field="beam_radius_mm", value=beam_radius_mm)
-    if int(spp) < 2 or int(spp) != spp:
-        raise InputError("must be an integer >= 2 (two passes at least, for the standard "
-                         "error)", field="spp", value=spp)
-    if int(pass_spp) < 1 or int(pass_spp) != pass_spp:
-        raise InputError("must be an integer >= 1", field="pass_spp", value=pass_spp)
+    check_count(spp, "spp", 2, why=" (two passes at least, for the standard error)")
+    check_count(pass_spp, "pass_spp")
     if sensor not in SENSOR_MODES:
         raise InputError(f"must be one of {', '.join(SENSOR_MODES)}", field="sensor",
                          value=sensor)

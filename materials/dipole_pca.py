@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, check_finite
+from ..errors import InputError, check_count, check_finite
 from .catalogue import MEASURED_MEDIA
 from .dipole import (
     dipole_depths,
@@ -144,9 +144,7 @@ class ProfileSampling:
             object.__setattr__(self, field_name, (lo, hi))
         for field_name, least in (("sigma_samples", 2), ("distance_samples", 16)):
             value = getattr(self, field_name)
-            if int(value) != value or value < least:
-                raise InputError(f"must be an integer >= {least}", field=field_name, value=value)
-            object.__setattr__(self, field_name, int(value))
+            object.__setattr__(self, field_name, check_count(value, field_name, least))
         radius_max = float(check_finite(self.radius_max, "radius_max"))
         if radius_max <= 0:
             raise InputError("must be > 0 mm", field="radius_max", value=self.radius_max)

@@ -363,14 +363,13 @@ def render_lambertian_gather(scene, *, bounces: int = 2, spp: int = 64, passes: 
     """
     import numpy as np
 
-    from ..errors import InputError
+    from ..errors import check_count
     from ..image import Image
     from .mitsuba_scene import to_mitsuba_dict
 
     for name, value, low in (("bounces", bounces, 0), ("spp", spp, 1), ("passes", passes, 1),
                              ("seed", seed, 0)):
-        if int(value) != value or value < low:
-            raise InputError(f"must be an integer >= {low}", field=name, value=value)
+        check_count(value, name, low)
     mi = mitsuba()
     register_plugin()
     _register("integrator", mi.variant())

@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from ..backend import mitsuba
-from ..errors import InputError
+from ..errors import InputError, check_count
 from ..materials import Dipole, Lambertian
 from ..scenes import (
     ConstantEnvironment,
@@ -406,8 +406,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
                          field="integrator", value=integrator)
     if channel is not None and channel not in (0, 1, 2):
         raise InputError("must be 0, 1, 2 (R, G, B) or None", field="channel", value=channel)
-    if int(spp) != spp or spp < 1:
-        raise InputError("must be an integer >= 1", field="spp", value=spp)
+    check_count(spp, "spp")
     if max_depth is None:
         max_depth = DEFAULT_MAX_DEPTH
     if int(max_depth) != max_depth or (max_depth < 1 and max_depth != -1):

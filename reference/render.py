@@ -18,7 +18,7 @@ import numpy as np
 
 from ..backend import mitsuba
 from ..cache import Cache, content_hash
-from ..errors import InputError
+from ..errors import InputError, check_count
 from ..image import Image, read_exr
 from ..scenes import Scene
 from .delta_lights import DEFAULT_SIZE
@@ -34,11 +34,6 @@ REFERENCE_FORMAT = 1
 #: Show a progress bar only for renders that last longer than this (seconds).
 PROGRESS_DELAY_SECONDS = 1.0
 
-
-def _check_count(value, name: str, minimum: int) -> int:
-    if isinstance(value, bool) or int(value) != value or value < minimum:
-        raise InputError(f"must be an integer >= {minimum}", field=name, value=value)
-    return int(value)
 
 
 def reference_settings(*, spp: int, passes: int, seed: int, integrator: str | None,
@@ -195,9 +190,9 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
     InputError
         Bad counts, an unknown integrator or material (see ``convert_scene``).
     """
-    spp = _check_count(spp, "spp", 1)
-    passes = _check_count(passes, "passes", 1)
-    seed = _check_count(seed, "seed", 0)
+    spp = check_count(spp, "spp", 1)
+    passes = check_count(passes, "passes", 1)
+    seed = check_count(seed, "seed", 0)
     if not isinstance(scene, Scene):
         raise InputError("expected a translucent.scenes.Scene", field="scene",
                          value=type(scene).__name__)

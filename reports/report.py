@@ -55,7 +55,7 @@ from typing import Any
 import numpy as np
 
 from ..atomic import atomic_write_text
-from ..errors import InputError
+from ..errors import InputError, check_count
 from ..image import Image
 
 __all__ = [
@@ -776,11 +776,6 @@ def _check_out(out) -> Path:
     return out
 
 
-def _check_count(value, name: str) -> int:
-    if isinstance(value, bool) or int(value) != value or value < 1:
-        raise InputError("must be an integer >= 1", field=name, value=value)
-    return int(value)
-
 
 def _methods(methods) -> list[str]:
     from ..fast.base import METHODS
@@ -863,8 +858,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
 
     stream = sys.stdout if stream is None else stream
     started = time.perf_counter()
-    spp = None if spp is None else _check_count(spp, "--spp")
-    passes = _check_count(passes, "--passes")
+    spp = None if spp is None else check_count(spp, "--spp")
+    passes = check_count(passes, "--passes")
     chosen = _methods(methods)
     out = _check_out(out)
     baseline_path = Path(baseline) if baseline is not None else DEFAULT_BASELINE

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from ...atomic import atomic_write_text
-from ...errors import InputError
+from ...errors import InputError, check_count
 from ...materials import Dipole, measured_medium, measured_medium_names
 
 __all__ = [
@@ -341,10 +341,9 @@ def measure_medium(scene, medium: Dipole, methods=METHODS, *, spp: int = DEFAULT
 def _check(size: int, spp: int, passes: int, methods, eta: float) -> tuple:
     for name, value, minimum in (("--size", size, MIN_SIZE), ("--spp", spp, 1),
                                  ("--passes", passes, 2)):
-        if isinstance(value, bool) or int(value) != value or value < minimum:
-            why = {"--size": " (FLIP and SSIM need 11 x 11 pixels)",
-                   "--passes": " (the reference's noise needs two passes)"}.get(name, "")
-            raise InputError(f"must be an integer >= {minimum}{why}", field=name, value=value)
+        why = {"--size": " (FLIP and SSIM need 11 x 11 pixels)",
+               "--passes": " (the reference's noise needs two passes)"}.get(name, "")
+        check_count(value, name, minimum, why=why)
     methods = tuple(methods)
     unknown = [m for m in methods if m not in METHODS]
     if unknown or not methods:

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from ...atomic import atomic_path, atomic_write_text
-from ...errors import InputError
+from ...errors import InputError, check_count
 from . import at_width
 
 __all__ = ["LADDERS", "DEFAULT_SCENES", "add_arguments", "run", "sweep",
@@ -346,8 +346,7 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
 
     for value, name in ((max_spp, "--max-spp"), (reference_spp, "--reference-spp"),
                         (reference_passes, "--reference-passes")):
-        if isinstance(value, bool) or int(value) != value or value < 1:
-            raise InputError("must be an integer >= 1", field=name, value=value)
+        check_count(value, name)
     if size < 0 or (0 < size < 11):
         raise InputError("must be 0 (the scene's own) or >= 11 pixels (SSIM's window)",
                          field="--size", value=size)
