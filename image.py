@@ -21,6 +21,9 @@ from .errors import InputError
 
 __all__ = ["Image", "read_exr", "write_exr"]
 
+#: Rec. 709 / linear-sRGB luminance weights (the Y row of the sRGB -> XYZ matrix).
+LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+
 #: Header attribute holding the metadata as JSON (read back losslessly).
 METADATA_ATTRIBUTE = "translucent:metadata"
 

@@ -91,7 +91,7 @@ import numpy as np
 
 from ..cache import content_hash
 from ..errors import InputError
-from ..image import Image
+from ..image import LUMINANCE_WEIGHTS, Image
 from ..materials.fresnel import fresnel_transmittance
 from ..materials.homogeneous import Dipole
 from ..materials.subedit import SubEditProfiles, subedit_from_dipole
@@ -302,8 +302,6 @@ def _upsample_mask(mask: np.ndarray, shape) -> np.ndarray:
 #: alone adds no error with "shortest", about 5 % more relative error with "luminance"
 #: (35 % fewer samples) and 30 % more with "longest" (60 % fewer samples).
 SAMPLING_RANGES = ("shortest", "luminance", "longest")
-#: Rec. 709 luminance weights of the RGB channel ranges ("luminance" above).
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def sampling_range(material: SubEditProfiles, sampling: str = "shortest") -> np.ndarray:
@@ -321,7 +319,7 @@ def sampling_range(material: SubEditProfiles, sampling: str = "shortest") -> np.
         return ranges.min(axis=-1)
     if sampling == "longest":
         return ranges.max(axis=-1)
-    return ranges @ LUMINANCE
+    return ranges @ LUMINANCE_WEIGHTS  # Rec. 709 weights of the channel ranges
 
 
 def select_irradiance_samples(pyramid: list[IrradianceLevel], material: SubEditProfiles, *,

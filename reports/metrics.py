@@ -40,7 +40,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError
-from ..image import Image
+from ..image import LUMINANCE_WEIGHTS, Image
 
 __all__ = [
     "METRICS",
@@ -67,9 +67,6 @@ __all__ = [
 #: that pixels darker than about sqrt(1e-2) = 0.1 are judged by their absolute rather than
 #: relative error and a black pixel cannot make the mean infinite.
 RELMSE_EPSILON = 1e-2
-
-#: Rec. 709 / linear-sRGB luminance weights (the Y row of the sRGB -> XYZ matrix).
-LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
 
 #: Percentile of the reference's luminance mapped to display white: a robust peak that a
 #: few fireflies of a path-traced reference cannot push up.
