@@ -35,9 +35,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..materials.dipole import dipole_reflectance_profile
+from ..materials.multipole import slab_reflectance_profile, slab_transmittance_profile
 from ..materials.subedit import LOG_FLOOR, SubEditProfiles
 from .capture import CaptureSpec
-from .multipole import slab_reflectance_profile, slab_transmittance_profile
 from .profile import RadialProfile
 
 __all__ = [

@@ -25,9 +25,9 @@ import numpy as np
 from ..errors import InputError
 from ..materials import Dipole
 from ..materials.dipole import dipole_reflectance_profile
+from ..materials.multipole import multipole_profiles
 from .beam import beam_irradiance
 from .capture import CaptureSpec, encode_srgb
-from .multipole import multipole_profiles
 
 __all__ = ["Camera", "apply_camera", "default_pixel_size", "dipole_capture", "exitance_image",
            "material_profile_function"]
@@ -146,7 +146,7 @@ def material_profile_function(material: Dipole, *, side="reflection", thickness_
     """``f(r) -> (..., 3)`` exitance per unit entering power, mm^-2, for the dipole model.
 
     Semi-infinite reflection: Eq. 2 of Wang et al. 2008 (Jensen et al. 2001); slabs:
-    the multipole of Donner & Jensen 2005 (:mod:`translucent.fitting.multipole`).
+    the multipole of Donner & Jensen 2005 (:mod:`translucent.materials.multipole`).
     """
     sigma_a, sigma_s_prime, eta = material.sigma_a, material.sigma_s_prime, material.eta
     if side == "transmission":

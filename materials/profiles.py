@@ -43,14 +43,11 @@ import numpy as np
 
 from ..errors import InputError, check_finite
 from .dipole import (
-    dipole_boundary_factor,
     dipole_reflectance_profile,
-    effective_transport_coefficient,
-    reduced_albedo,
-    reduced_extinction,
 )
 from .fresnel import fresnel_reflectance
 from .homogeneous import Dipole, Lambertian, rgb_field
+from .multipole import multipole_profiles
 
 __all__ = [
     "PROFILE_KINDS",
@@ -418,40 +415,21 @@ class SlabProfile(RadialProfile):
         self.name = f"{dipole.name or 'slab'} ({thickness:g} mm)"
         self.entry = float(diffuse_entry_transmittance(dipole.eta)) if entry_fresnel else 1.0
 
-    def _sources(self):
+    def _profiles(self, r, transmission: bool):
         d = self.dipole
-        sigma_t_prime = reduced_extinction(d.sigma_a, d.sigma_s_prime)
-        with np.errstate(divide="ignore"):
-            ell = 1.0 / sigma_t_prime
-        z_b = 2.0 * dipole_boundary_factor(d.eta) * ell / 3.0
-        index = np.arange(-self.pairs, self.pairs + 1)[:, None]
-        period = 2.0 * index * (self.thickness + 2.0 * z_b)
-        return period + ell, period - ell - 2.0 * z_b
-
-    def _sum(self, r, depth_real, depth_virtual) -> np.ndarray:
-        d = self.dipole
-        albedo = reduced_albedo(d.sigma_a, d.sigma_s_prime)
-        sigma_tr = effective_transport_coefficient(d.sigma_a, d.sigma_s_prime)
-        r = np.asarray(r, dtype=np.float64)[..., None, None]
-        total = 0.0
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore", under="ignore"):
-            for depth, sign in ((depth_real, 1.0), (depth_virtual, -1.0)):
-                dist = np.sqrt(r * r + depth * depth)
-                total = total + sign * depth * (1.0 + sigma_tr * dist) \
-                    * np.exp(-sigma_tr * dist) / dist**3
-            value = self.entry * albedo / (4.0 * np.pi) * np.sum(total, axis=-2)
-        # the truncated image series leaves round-off of either sign far out in the tail
-        return np.clip(np.where(np.isfinite(value), value, 0.0), 0.0, None)
+        r = np.asarray(r, dtype=np.float64)[..., None]
+        reflect, transmit = multipole_profiles(r, d.sigma_a, d.sigma_s_prime, d.eta,
+                                               self.thickness, poles=self.pairs,
+                                               transmission=transmission)
+        return self.entry * (transmit if transmission else reflect)
 
     def reflection(self, r) -> np.ndarray:
         """:math:`R(r)`, mm^-2, shape ``r.shape + (3,)`` (Donner and Jensen 2005, Eq. 10)."""
-        z_r, z_v = self._sources()
-        return self._sum(r, z_r, z_v)
+        return self._profiles(r, transmission=False)
 
     def transmission(self, r) -> np.ndarray:
         """:math:`T(r)`, mm^-2, shape ``r.shape + (3,)`` (Donner and Jensen 2005, Eq. 11)."""
-        z_r, z_v = self._sources()
-        return self._sum(r, self.thickness - z_r, self.thickness - z_v)
+        return self._profiles(r, transmission=True)
 
     def cache_key(self) -> dict:
         """Return what identifies this profile in content hashes."""

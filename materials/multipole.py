@@ -23,7 +23,7 @@ slab is thicker than a transport mean free path :math:`\ell` (for :math:`d < \el
 real source lies outside the slab and T loses its meaning). With :math:`n = 0` and
 :math:`d \to \infty`, :math:`R` is Eq. 2 of Wang et al. 2008 (the dipole of
 :mod:`translucent.materials.dipole`). :class:`translucent.materials.profiles.SlabProfile`
-evaluates the same sum for one material; this module evaluates it for many parameter
+evaluates it for one material with a fixed pole count; fits evaluate it for many parameter
 sets at once (the walkers of a fit), with the pole count chosen from the coefficients.
 
 References
@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..materials.dipole import (
+from .dipole import (
     dipole_boundary_factor,
     effective_transport_coefficient,
     reduced_albedo,

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from translucent.fitting.multipole import multipole_profiles, pole_count
 from translucent.materials import Dipole, dipole_reflectance_profile
+from translucent.materials.multipole import multipole_profiles, pole_count
 from translucent.materials.profiles import SlabProfile
 
 #: Same formula, different code: agreement to round-off.
