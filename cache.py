@@ -10,10 +10,13 @@ The folder is ``TRANSLUCENT_CACHE`` if set, else ``$XDG_CACHE_HOME/translucent``
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import pickle
+import shutil
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +24,7 @@ import numpy as np
 
 from .atomic import atomic_path
 
-__all__ = ["cache_dir", "content_hash", "Cache"]
+__all__ = ["cache_dir", "content_hash", "private_cache", "Cache"]
 
 
 def cache_dir() -> Path:
@@ -31,6 +34,26 @@ def cache_dir() -> Path:
         return Path(given).expanduser()
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "translucent"
+
+
+@contextlib.contextmanager
+def private_cache(prefix: str = "translucent-cold-"):
+    """Point ``TRANSLUCENT_CACHE`` at an empty temporary folder for the block.
+
+    Precomputations inside run cold (what a benchmark or a cold-cache report measures);
+    the folder is removed and the previous setting restored afterwards. Yields the folder.
+    """
+    previous = os.environ.get("TRANSLUCENT_CACHE")
+    folder = tempfile.mkdtemp(prefix=prefix)
+    os.environ["TRANSLUCENT_CACHE"] = folder
+    try:
+        yield Path(folder)
+    finally:
+        if previous is None:
+            os.environ.pop("TRANSLUCENT_CACHE", None)
+        else:
+            os.environ["TRANSLUCENT_CACHE"] = previous
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _canonical(value: Any) -> Any:

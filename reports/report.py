@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 
 from ..atomic import atomic_write_text
+from ..cache import private_cache
 from ..errors import InputError, check_count
 from ..image import Image
 
@@ -300,22 +301,6 @@ def _plain(value: Any, depth: int = 0) -> Any:
     return str(value)
 
 
-@contextlib.contextmanager
-def _private_cache():
-    """Point the cache at an empty temporary folder: precomputations run cold."""
-    previous = os.environ.get("TRANSLUCENT_CACHE")
-    folder = tempfile.mkdtemp(prefix="translucent-cold-")
-    os.environ["TRANSLUCENT_CACHE"] = folder
-    try:
-        yield Path(folder)
-    finally:
-        if previous is None:
-            os.environ.pop("TRANSLUCENT_CACHE", None)
-        else:
-            os.environ["TRANSLUCENT_CACHE"] = previous
-        shutil.rmtree(folder, ignore_errors=True)
-
-
 def _quiet_knobs(module, knobs: dict) -> dict:
     """Turn off a method's own progress bars (they would garble the run's bar)."""
     defaults = getattr(module, "DEFAULT_KNOBS", {}) or {}
@@ -365,7 +350,7 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
         reason = module.applies_to(scene)
         if reason is not None:
             return MethodRun(status="not applicable", reason=str(reason), **base)
-        with _private_cache() if cold else contextlib.nullcontext():
+        with private_cache() if cold else contextlib.nullcontext():
             started = time.perf_counter()
             state = module.precompute(scene, **_quiet_knobs(module, knobs))
             precomputed = time.perf_counter()

@@ -29,3 +29,15 @@ def test_pickle_round_trip_and_miss(tmp_path):
     # a corrupt entry is a miss, not a crash
     cache.path(key, ".pkl").write_bytes(b"garbage")
     assert cache.load_pickle(key) is None
+
+
+def test_private_cache_is_empty_then_removed_and_restores_the_setting(tmp_path, monkeypatch):
+    from translucent.cache import cache_dir, private_cache
+
+    monkeypatch.setenv("TRANSLUCENT_CACHE", str(tmp_path))
+    with private_cache(prefix="t-") as folder:
+        assert cache_dir() == folder and folder.name.startswith("t-")
+        assert not any(folder.iterdir())
+        (folder / "entry").write_text("x")
+    assert not folder.exists()
+    assert cache_dir() == tmp_path

@@ -32,13 +32,13 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ...atomic import atomic_path, atomic_write_text
+from ...cache import private_cache
 from ...fast import prt
 from ...materials import Dipole, measured_medium
 from ...scenes import Camera, PointLight, Scene, SceneObject, geometry_image, icosphere
@@ -159,14 +159,6 @@ def _environment(name: str, value: str):
             os.environ[name] = previous
 
 
-@contextlib.contextmanager
-def _private_cache():
-    """Precompute into a temporary cache: the bench measures the work, not a cache hit."""
-    with tempfile.TemporaryDirectory(prefix="bench_prt_") as folder, \
-            _environment("TRANSLUCENT_CACHE", folder):
-        yield
-
-
 def _ray_engine(name: str):
     """Route the scene's ray queries through the engine ``name`` for the block."""
     return _environment("TRANSLUCENT_RAY_ENGINE", name)
@@ -207,7 +199,7 @@ def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -
     """Precompute, relight and edit one mesh at one sample count; every figure as a dict."""
     scene = bench_scene(mesh, args.size)
     start_wall, start_cpu = time.perf_counter(), time.process_time()
-    with _private_cache():
+    with private_cache(prefix="bench_prt_"):
         state = prt.precompute(scene, samples=samples, progress=True)
     precompute_wall = time.perf_counter() - start_wall
     precompute_cpu = time.process_time() - start_cpu
@@ -293,7 +285,7 @@ def error_sweep(samples: int = 4096) -> dict:
     mesh = icosphere(3)
     names = ("Marble", "Skin1", "Chicken1")
     result = {"samples": samples, "materials": list(names), "basis_terms": {}, "terms": {}}
-    with _private_cache():
+    with private_cache(prefix="bench_prt_"):
         for basis in ("paper", "area_normalised"):
             rows = []
             for count in (2, 4, 6, 8, 10, 12, 14, 16):
