@@ -530,9 +530,9 @@ class CameraModel:
     @classmethod
     def from_camera(cls, camera) -> CameraModel:
         """From a :class:`~translucent.scenes.Camera` (horizontal fov, Mitsuba's look-at)."""
-        from ..scenes.raycast import _camera_frame
+        from ..scenes.raycast import camera_frame
 
-        forward, left, up = _camera_frame(camera)
+        forward, left, up = camera_frame(camera)
         return cls(camera.origin, forward, -left, up, math.tan(math.radians(camera.fov) / 2),
                    camera.width, camera.height)
 
@@ -1358,7 +1358,7 @@ def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None
     rounding, in milliseconds instead of seconds.
     """
     # the ray-cast G-buffers' own image frames, so that both kinds of buffer agree
-    from ..scenes.raycast import NEAR_CLIP, _camera_frame, _default_up
+    from ..scenes.raycast import NEAR_CLIP, camera_frame, default_up
     from .splatting_kernels import rasterize
 
     meshes = [item.mesh for item in scene.objects]
@@ -1368,14 +1368,14 @@ def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None
     faces = np.concatenate([m.faces + offset
                             for m, offset in zip(meshes, vertex_offsets[:-1], strict=True)])
     if camera is not None:
-        forward, left, up = _camera_frame(camera)
+        forward, left, up = camera_frame(camera)
         tan_x = math.tan(math.radians(camera.fov) / 2.0)
         tan_y = tan_x * camera.height / camera.width
         width, height, eye, orthographic = camera.width, camera.height, camera.origin, False
     else:
         forward = np.asarray(direction, dtype=np.float64)
         forward = forward / np.linalg.norm(forward)
-        left = np.cross(_default_up(forward), forward)
+        left = np.cross(default_up(forward), forward)
         left /= np.linalg.norm(left)
         up = np.cross(forward, left)
         tan_x = tan_y = float(extent)
@@ -1513,7 +1513,7 @@ class SplattingState:
                            knobs=self.knobs, log=log)
 
     def _light_view(self, scene, index, light, centre, radius, eta) -> LightView:
-        from ..scenes.raycast import _default_up, gbuffer_from_point, gbuffer_orthographic
+        from ..scenes.raycast import default_up, gbuffer_from_point, gbuffer_orthographic
         from ..scenes.scene import Camera
 
         size = self.knobs["irradiance_resolution"]
@@ -1532,7 +1532,7 @@ class SplattingState:
             towards = towards / np.linalg.norm(towards)
             if raster:
                 buffer = rasterize_view(scene, camera=Camera(
-                    light.position, light.position + towards, _default_up(towards), fov, size,
+                    light.position, light.position + towards, default_up(towards), fov, size,
                     size)).surface(scene, index)
             else:
                 view = gbuffer_from_point(scene, light.position, towards, fov, size)

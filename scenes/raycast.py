@@ -34,6 +34,7 @@ Conventions
 Public API (stable): :func:`trace` -> :class:`RayHits`, :func:`gbuffer` ->
 :class:`GBuffer` (with :meth:`GBuffer.interpolate`), :func:`gbuffer_from_point`,
 :func:`gbuffer_orthographic`, :func:`visible`, :func:`visibility_matrix`,
+:func:`camera_frame`, :func:`default_up`,
 :func:`camera_rays`, :func:`project`, :func:`perspective_sensor_dict`,
 :func:`to_mitsuba_mesh`, :func:`ray_engine`, :class:`RayEngine`.
 """
@@ -59,7 +60,9 @@ __all__ = [
     "RAYS_PER_CALL",
     "RayEngine",
     "RayHits",
+    "camera_frame",
     "camera_rays",
+    "default_up",
     "embree_available",
     "gbuffer",
     "gbuffer_from_point",
@@ -700,7 +703,7 @@ def camera_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     directions : ndarray, (H, W, 3)
         Unit directions, row 0 at the top.
     """
-    forward, left, up = _camera_frame(camera)
+    forward, left, up = camera_frame(camera)
     tan_x = math.tan(math.radians(camera.fov) / 2.0)
     tan_y = tan_x * camera.height / camera.width
     sx = (np.arange(camera.width) + 0.5) / camera.width
@@ -712,7 +715,8 @@ def camera_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     return camera.origin.copy(), directions
 
 
-def _camera_frame(camera: Camera):
+def camera_frame(camera: Camera):
+    """Return the camera's unit axes ``(forward, left, up)``, ``up`` from ``camera.up``."""
     forward = camera.forward
     left = np.cross(camera.up, forward)
     left /= np.linalg.norm(left)
@@ -738,7 +742,7 @@ def project(camera: Camera, points) -> tuple[np.ndarray, np.ndarray]:
     in_front : ndarray of bool, (...)
         The point lies in front of the eye (beyond the near clip plane).
     """
-    forward, left, up = _camera_frame(camera)
+    forward, left, up = camera_frame(camera)
     relative = np.asarray(points, dtype=np.float64) - camera.origin
     z = relative @ forward
     tan_x = math.tan(math.radians(camera.fov) / 2.0)
@@ -812,7 +816,7 @@ def _size(size) -> tuple[int, int]:
     return int(pair[0]), int(pair[1])
 
 
-def _default_up(direction: np.ndarray) -> np.ndarray:
+def default_up(direction: np.ndarray) -> np.ndarray:
     """Return an up vector not parallel to ``direction``: +y, or +z looking along y."""
     up = np.array([0.0, 1.0, 0.0])
     return np.array([0.0, 0.0, 1.0]) if abs(direction @ up) > 0.99 else up
@@ -847,7 +851,7 @@ def gbuffer_from_point(scene: Scene, position, direction, fov: float, size, *,
     direction = vector3(direction, "direction", unit=True)
     width, height = _size(size)
     camera = Camera(position, position + direction,
-                    _default_up(direction) if up is None else up, fov, width, height)
+                    default_up(direction) if up is None else up, fov, width, height)
     return gbuffer(scene, camera)
 
 
@@ -891,7 +895,7 @@ def gbuffer_orthographic(scene: Scene, direction, size, *, center=None, extent=N
     if half_width <= 0:
         raise InputError("must be > 0", field="extent", value=extent)
     half_height = half_width * height / width
-    up = _default_up(direction) if up is None else vector3(up, "up", unit=True)
+    up = default_up(direction) if up is None else vector3(up, "up", unit=True)
     left = np.cross(up, direction)
     if np.linalg.norm(left) < 1e-9:
         raise InputError("up must not be parallel to direction", field="up", value=up.tolist())
