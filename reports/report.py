@@ -60,6 +60,8 @@ from ..errors import InputError, check_count
 from ..image import Image
 
 __all__ = [
+    "json_safe",
+    "reference_path",
     "BASELINE_FORMAT",
     "DEFAULT_BASELINE",
     "DEFAULT_PASSES",
@@ -268,8 +270,8 @@ class MethodRun:
                 "precompute_seconds": self.precompute_seconds,
                 "frame_seconds": self.frame_seconds,
                 "first_frame_seconds": self.first_frame_seconds, "skipped": list(self.skipped),
-                "stage_seconds": _plain(self.stage_seconds), "notes": _plain(self.notes),
-                "knobs": _plain(self.knobs), "measured_at": self.measured_at,
+                "stage_seconds": json_safe(self.stage_seconds), "notes": json_safe(self.notes),
+                "knobs": json_safe(self.knobs), "measured_at": self.measured_at,
                 "cached": self.cached}
 
 
@@ -278,16 +280,16 @@ def _now() -> str:
         timespec="seconds")
 
 
-def _plain(value: Any, depth: int = 0) -> Any:
+def json_safe(value: Any, depth: int = 0) -> Any:
     """Return a JSON-safe copy: numpy scalars to numbers, small arrays to lists, else str."""
     if depth > 8:
         return str(value)
     if isinstance(value, dict):
-        return {str(k): _plain(v, depth + 1) for k, v in value.items()}
+        return {str(k): json_safe(v, depth + 1) for k, v in value.items()}
     if isinstance(value, (list, tuple, set)):
-        return [_plain(v, depth + 1) for v in value]
+        return [json_safe(v, depth + 1) for v in value]
     if isinstance(value, np.ndarray):
-        return _plain(value.tolist(), depth + 1) if value.size <= 16 else \
+        return json_safe(value.tolist(), depth + 1) if value.size <= 16 else \
             f"array{tuple(value.shape)} {value.dtype}"
     if isinstance(value, (np.bool_, bool)):
         return bool(value)
@@ -376,7 +378,7 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
                      frame_seconds=float(np.median(relit)) if relit else first_frame,
                      first_frame_seconds=first_frame, skipped=skipped,
                      stage_seconds={str(k): float(v) for k, v in stage_seconds.items()},
-                     notes=_plain(notes), **base)
+                     notes=json_safe(notes), **base)
 
 
 def render_reference(scene, spp: int, passes: int):
@@ -475,7 +477,7 @@ def backend_versions() -> dict:
             "numpy": np.__version__}
 
 
-def _reference_path(scene, spp: int, passes: int) -> Path:
+def reference_path(scene, spp: int, passes: int) -> Path:
     """Where the reference ``render(scene, spp=spp, passes=passes)`` is cached (may not exist).
 
     The settings are those of :func:`translucent.reference.render` with its own defaults, read
@@ -510,7 +512,7 @@ def _unconvertible(scene) -> str:
 def _cached_reference(scene, spp: int, passes: int) -> Image | None:
     from ..image import read_exr
 
-    path = _reference_path(scene, spp, passes)
+    path = reference_path(scene, spp, passes)
     if not path.is_file():
         return None
     try:
@@ -583,7 +585,7 @@ class BaselineCheck:
 
     def as_dict(self) -> dict:
         """Return a JSON-safe dict."""
-        return {"status": self.status, "message": self.message, "metrics": _plain(self.metrics)}
+        return {"status": self.status, "message": self.message, "metrics": json_safe(self.metrics)}
 
 
 def check_against_baseline(scene_name: str, scene_hash: str, reference: dict, method_name: str,
@@ -680,7 +682,7 @@ def updated_baseline(baseline: dict, results: list[dict], versions: dict) -> dic
             {name: values for name, values in previous.get("methods", {}).items()
              if name not in result["methods_run"]}
         for name, values in result["metrics"].items():
-            methods[name] = {key: _plain(values[key]) for key in REPORTED_METRICS}
+            methods[name] = {key: json_safe(values[key]) for key in REPORTED_METRICS}
         entries[result["name"]] = {"scene_hash": result["scene_hash"],
                                    "reference": dict(result["reference"]),
                                    "methods": dict(sorted(methods.items()))}
@@ -1070,7 +1072,7 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
         reference = None
         if report.reference is not None:
             meta = report.reference.metadata
-            reference = {key: _plain(meta.get(key)) for key in (
+            reference = {key: json_safe(meta.get(key)) for key in (
                 "spp", "passes", "seconds", "integrator", "variant", "mitsuba",
                 "substitutions", "scene_hash")}
             reference["cached"] = report.reference_cached
@@ -1079,7 +1081,7 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
         for name in chosen:
             run = report.runs.get(name)
             entry = run.as_dict() if run else {"status": "not run"}
-            entry["metrics"] = _plain(report.metrics.get(name))
+            entry["metrics"] = json_safe(report.metrics.get(name))
             entry["metrics_error"] = report.metric_errors.get(name, "")
             entry["files"] = report.files.get(name, {})
             check = report.checks.get(name)
@@ -1092,7 +1094,7 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
                                "methods": methods}
     tolerances = {name: {"absolute": t.absolute, "relative": t.relative,
                          "lower_is_better": t.lower_is_better} for name, t in TOLERANCES.items()}
-    return {"format": 1, **_plain(context), "tolerances": tolerances, "scenes": scenes}
+    return {"format": 1, **json_safe(context), "tolerances": tolerances, "scenes": scenes}
 
 
 def _format(value, digits: int = 4) -> str:

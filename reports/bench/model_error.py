@@ -243,9 +243,9 @@ def object_metrics(reference, test, mask: np.ndarray) -> dict:
 def _reference(scene, spp: int, passes: int):
     """Render (or load from the cache) the reference; return it and whether it was cached."""
     from ...reference import render
-    from ..report import _reference_path
+    from ..report import reference_path
 
-    cached = _reference_path(scene, spp, passes).is_file()
+    cached = reference_path(scene, spp, passes).is_file()
     return render(scene, spp=spp, passes=passes, progress=False), cached
 
 
@@ -422,9 +422,9 @@ def markdown(result: dict) -> str:
 
 
 def _write(result: dict, json_path: Path, markdown_path: Path) -> None:
-    from ..report import _plain
+    from ..report import json_safe
 
-    atomic_write_text(json_path, json.dumps(_plain(result), indent=2) + "\n")
+    atomic_write_text(json_path, json.dumps(json_safe(result), indent=2) + "\n")
     atomic_write_text(markdown_path, markdown(result))
 
 
