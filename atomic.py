@@ -49,3 +49,13 @@ def atomic_write_bytes(target, data: bytes) -> Path:
 def atomic_write_text(target, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``target`` atomically and return the target path."""
     return atomic_write_bytes(target, text.encode("utf-8"))
+
+
+def atomic_save_figure(target, figure, *, dpi: int = 90) -> Path:
+    """Save a Matplotlib ``figure`` as PNG to ``target`` atomically, close it, return the path."""
+    import matplotlib.pyplot as plt
+
+    with atomic_path(target, suffix=".png") as tmp:
+        figure.savefig(tmp, format="png", dpi=dpi)
+    plt.close(figure)
+    return Path(target)

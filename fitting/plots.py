@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..atomic import atomic_path
+from ..atomic import atomic_save_figure
 
 __all__ = ["corner_plot", "profile_plot"]
 
@@ -42,7 +42,7 @@ def corner_plot(path, model, samples, *, truths=None, title: str = "", columns=N
     """
     import corner
 
-    plt = _pyplot()
+    _pyplot()  # the Agg backend before corner draws
     columns = slice(None) if columns is None else columns
     labels = [(f"ln {p.name}" if p.transform == "log" else p.name)
               for p in model.parameters][columns]
@@ -57,9 +57,7 @@ def corner_plot(path, model, samples, *, truths=None, title: str = "", columns=N
                            truth_color="tab:orange")
     if title:
         figure.suptitle(title)
-    with atomic_path(path) as tmp:
-        figure.savefig(tmp, format="png", dpi=80)
-    plt.close(figure)
+    atomic_save_figure(path, figure, dpi=80)
 
 
 def profile_plot(path, model, samples, *, title: str = "", seed: int = 0) -> None:
@@ -113,6 +111,4 @@ def profile_plot(path, model, samples, *, title: str = "", seed: int = 0) -> Non
     bottom.set_xlabel("radius from the incident point (mm)")
     bottom.set_ylabel("residual / std. error")
     figure.tight_layout()
-    with atomic_path(path) as tmp:
-        figure.savefig(tmp, format="png", dpi=90)
-    plt.close(figure)
+    atomic_save_figure(path, figure)

@@ -802,7 +802,7 @@ def write_analysis_figure(path, bases: dict[str, DipolePCABasis], *, resolution:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..atomic import atomic_path
+    from ..atomic import atomic_save_figure
 
     rows = len(bases) + 1
     figure, axes = plt.subplots(rows, 4, figsize=(16, 3.6 * rows), squeeze=False)
@@ -834,7 +834,4 @@ def write_analysis_figure(path, bases: dict[str, DipolePCABasis], *, resolution:
     for axis in axes[-1, 1:]:
         axis.axis("off")
     figure.tight_layout()
-    with atomic_path(path, suffix=".png") as tmp:
-        figure.savefig(tmp, dpi=90, format="png")
-    plt.close(figure)
-    return Path(path)
+    return atomic_save_figure(path, figure)

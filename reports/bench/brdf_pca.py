@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_write_text
+from ...atomic import atomic_save_figure, atomic_write_text
 from ...errors import InputError
 from ...fast import brdf_pca
 from ...materials.brdf_pca import pca_analysis
@@ -230,8 +230,7 @@ def _analysis(folder: Path) -> dict:
     figure.tight_layout()
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "fig5_pca_analysis.png"
-    figure.savefig(path, dpi=90)
-    plt.close(figure)
+    atomic_save_figure(path, figure)
     print(f"wrote {path}")
     return results
 

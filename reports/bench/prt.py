@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_path, atomic_write_text
+from ...atomic import atomic_save_figure, atomic_write_text
 from ...cache import private_cache
 from ...fast import prt
 from ...materials import Dipole, measured_medium
@@ -326,10 +326,7 @@ def write_sweep_figure(path, sweep: dict) -> Path:
               title="error against wavelet terms (K = 12)")
     right.legend()
     figure.tight_layout()
-    with atomic_path(path, suffix=".png") as tmp:
-        figure.savefig(tmp, dpi=90, format="png")
-    plt.close(figure)
-    return Path(path)
+    return atomic_save_figure(path, figure)
 
 
 # ------------------------------------------------------------------------ the command

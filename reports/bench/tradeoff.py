@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_path, atomic_write_text
+from ...atomic import atomic_save_figure, atomic_write_text
 from ...errors import InputError, check_count
 from . import at_width
 
@@ -518,11 +518,7 @@ def plot(figures: dict, path) -> Path:
         axis.grid(True, which="both", alpha=0.3)
         axis.legend(fontsize=6.5, loc="best")
     figure.tight_layout()
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        figure.savefig(tmp, format="png", dpi=110)
-    pyplot.close(figure)
-    return path
+    return atomic_save_figure(path, figure, dpi=110)
 
 
 def _print_table(figures: dict) -> None:
