@@ -1,0 +1,408 @@
+r"""How much more light a finite object re-emits than the semi-infinite dipole says.
+
+The scattering factors of translucent radiosity (Sheng et al. 2014, Eq. 8) index a
+semi-infinite profile, the dipole of Jensen et al. 2001, by the optical distance between
+two patches. Where the object is not much larger than the diffusion length
+:math:`1/\sigma_{tr}`, light that the half-space would absorb far below the surface
+leaves the object through its other faces instead: the paper names this its limitation
+for very translucent objects (Sect. 7). In the 30 x 60 x 30 mm Cornell-box block at a
+quarter of skim milk's scattering (:math:`1/\sigma_{tr}` = 37 mm in red) the dipole's
+total re-emission is 0.77 / 0.77 / 0.61 (R, G, B) where a photon random walk in the box
+gives 0.97 / 0.95 / 0.81.
+
+This module measures that difference with the diffusion equation itself, in the object's
+own shape. The escape probability :math:`e(x)` of diffusing light -- the fraction of the
+light created at :math:`x` that leaves through the surface rather than being absorbed --
+solves the adjoint of the diffusion equation of the dipole (same :math:`D = 1/(3\sigma'_t)`,
+:math:`\sigma_a` and extrapolated boundary :math:`z_b = 2AD`),
+
+.. math:: -D\nabla^2 e + \sigma_a e = 0 \text{ inside}, \qquad
+          e + 2AD\,\partial e/\partial n = 1 \text{ on the surface},
+
+(Green's reciprocity: the exitance :math:`J = \phi/(2A)` of the forward problem integrated
+over the surface is :math:`\int q\,e`), one linear solve per channel for every source point
+at once. In a half-space it is :math:`e(z) = e^{-\sigma_{tr}z}/(1 + 2AD\sigma_{tr})`. The
+*gain* of a patch is the ratio of the two at the dipole's source, a depth
+:math:`z_r = 1/\sigma'_t` below it:
+
+.. math:: g_i = e_{\text{object}}(c_i - z_r n_i) \,/\, e_{\text{half-space}}(z_r)
+
+and :func:`~translucent.fast.radiosity.scattering_matrix` scales patch i's column of S so
+that its power sum is the profile's semi-infinite total times :math:`g_i` (knob
+``finite_object_energy``). Both escape probabilities come from the same finite-volume
+scheme (cell-centred on a voxel grid, the Robin condition on each boundary face), so the
+discretisation error largely cancels in the ratio; a face's staircase of voxel faces is
+weighted by :math:`1/\|n\|_1` so that its area is the face's own. The object is read
+through the ratio of absorbed fractions, which (unlike the gain) varies slowly with depth,
+so a source shallower than a voxel is read one voxel deep (:func:`finite_object_gain`).
+
+What the gain does not change: the *shape* of each column (where the extra light leaves is
+taken to be where the dipole puts the rest); the dipole's own error against transport
+(the random walk re-emits 1-3 % more than the dipole even in a very large object).
+
+Lengths in mm, coefficients in mm^-1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from scipy import sparse
+from scipy.sparse import linalg as sparse_linalg
+from scipy.spatial import cKDTree
+
+from ..errors import InputError, check_count
+from ..materials.dipole import dipole_boundary_factor
+from .optical_distance import voxelize
+
+__all__ = [
+    "DiffusionGrid",
+    "diffusion_grid",
+    "escape_probability",
+    "halfspace_escape_probability",
+    "finite_object_gain",
+    "slab_gain",
+    "voxel_size_for",
+]
+
+#: Relative residual of the conjugate-gradient solve of the escape probability (its
+#: values lie in [0, 1]; the gain needs three digits).
+SOLVE_TOLERANCE = 1e-7
+
+#: Shallowest depth, in voxels, at which the object's escape probability is read: the
+#: staircase boundary is resolved to about half a voxel, so shallower readings measure it.
+MIN_PROBE_VOXELS = 1.0
+
+
+@dataclass(eq=False)
+class DiffusionGrid:
+    """Cells of a voxel grid whose centres lie inside a closed object, with their faces.
+
+    Parameters
+    ----------
+    origin : ndarray, shape (3,)
+        Corner of voxel (0, 0, 0), mm.
+    voxel_size : float
+        Edge length h, mm.
+    node_of : ndarray of int32, shape (nx, ny, nz)
+        Cell index of each voxel, -1 outside.
+    centers : ndarray, shape (N, 3)
+        Cell centres, mm.
+    pairs : ndarray of int64, shape (M, 2)
+        Cells sharing a face.
+    boundary_area : ndarray, shape (N,)
+        Area (mm^2) of each cell's faces on the surface, each staircase face weighted by
+        :math:`1/\\|n\\|_1` of the surface normal there.
+    """
+
+    origin: np.ndarray
+    voxel_size: float
+    node_of: np.ndarray
+    centers: np.ndarray
+    pairs: np.ndarray
+    boundary_area: np.ndarray
+
+    @property
+    def cells(self) -> int:
+        """Number of interior cells."""
+        return len(self.centers)
+
+    def interpolate(self, values: np.ndarray, points) -> np.ndarray:
+        """Trilinear interpolation of cell values at ``points`` (mm) over interior cells only.
+
+        Corners outside the object are left out and the weights renormalised; a point with
+        no interior corner takes its nearest cell's value.
+        """
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        values = np.asarray(values, dtype=np.float64)
+        local = (points - self.origin) / self.voxel_size - 0.5
+        base = np.floor(local).astype(np.int64)
+        frac = local - base
+        shape = np.array(self.node_of.shape)
+        total = np.zeros((len(points),) + values.shape[1:])
+        weight_sum = np.zeros(len(points))
+        for corner in np.ndindex(2, 2, 2):
+            ijk = base + np.array(corner)
+            valid = ((ijk >= 0) & (ijk < shape)).all(axis=1)
+            cell = np.full(len(points), -1, dtype=np.int64)
+            cell[valid] = self.node_of[tuple(ijk[valid].T)]
+            weight = np.prod(np.where(np.array(corner) == 1, frac, 1.0 - frac), axis=1)
+            weight = np.where(cell >= 0, weight, 0.0)
+            total += weight.reshape((-1,) + (1,) * (values.ndim - 1)) * values[np.maximum(cell, 0)]
+            weight_sum += weight
+        missing = weight_sum <= 1e-12
+        if missing.any():
+            _, nearest = cKDTree(self.centers).query(points[missing])
+            total[missing] = values[nearest]
+            weight_sum[missing] = 1.0
+        return total / weight_sum.reshape((-1,) + (1,) * (values.ndim - 1))
+
+
+@numba.njit(cache=True)
+def _winding_numbers(points, triangles):  # pragma: no cover - compiled
+    """Generalised winding number of a closed mesh at each point (van Oosterom-Strackee)."""
+    out = np.zeros(len(points))
+    for p in range(len(points)):
+        total = 0.0
+        for t in range(len(triangles)):
+            ax = triangles[t, 0, 0] - points[p, 0]
+            ay = triangles[t, 0, 1] - points[p, 1]
+            az = triangles[t, 0, 2] - points[p, 2]
+            bx = triangles[t, 1, 0] - points[p, 0]
+            by = triangles[t, 1, 1] - points[p, 1]
+            bz = triangles[t, 1, 2] - points[p, 2]
+            cx = triangles[t, 2, 0] - points[p, 0]
+            cy = triangles[t, 2, 1] - points[p, 1]
+            cz = triangles[t, 2, 2] - points[p, 2]
+            la = math.sqrt(ax * ax + ay * ay + az * az)
+            lb = math.sqrt(bx * bx + by * by + bz * bz)
+            lc = math.sqrt(cx * cx + cy * cy + cz * cz)
+            det = ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
+            div = (la * lb * lc + (ax * bx + ay * by + az * bz) * lc
+                   + (bx * cx + by * cy + bz * cz) * la + (cx * ax + cy * ay + cz * az) * lb)
+            total += 2.0 * math.atan2(det, div)
+        out[p] = total / (4.0 * math.pi)
+    return out
+
+
+def diffusion_grid(triangles, voxel_size: float) -> DiffusionGrid:
+    """The finite-volume grid of a closed object.
+
+    Parameters
+    ----------
+    triangles : ndarray, shape (F, 3, 3)
+        The closed surface, mm, counter-clockwise seen from outside.
+    voxel_size : float
+        mm, > 0.
+
+    Returns
+    -------
+    DiffusionGrid
+
+    Raises
+    ------
+    InputError
+        No cell centre lies inside (the object is thinner than a voxel).
+    """
+    triangles = np.ascontiguousarray(triangles, dtype=np.float64)
+    if not voxel_size > 0:
+        raise InputError("must be > 0 mm", field="voxel_size", value=voxel_size)
+    filled = voxelize(triangles, voxel_size, fill=True)
+    shell = voxelize(triangles, voxel_size, fill=False)
+    inside = filled.node_of >= 0
+    # voxels the surface passes through: their centre may lie on either side
+    on_surface = shell.node_of >= 0
+    candidates = np.argwhere(inside & on_surface)
+    centres = filled.origin + (candidates + 0.5) * voxel_size
+    # either orientation: the magnitude is 1 inside a closed surface, 0 outside
+    keep = np.abs(_winding_numbers(centres, triangles)) > 0.5
+    inside[tuple(candidates[~keep].T)] = False
+    ijk = np.argwhere(inside)
+    if len(ijk) == 0:
+        raise InputError("no voxel centre lies inside the object: use smaller voxels",
+                         field="voxel_size", value=voxel_size)
+    node_of = np.full(inside.shape, -1, dtype=np.int32)
+    node_of[tuple(ijk.T)] = np.arange(len(ijk), dtype=np.int32)
+    centers = filled.origin + (ijk + 0.5) * voxel_size
+    # the surface normal near each boundary face, from the nearest triangle centroid
+    face_normal = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
+    tree = cKDTree(triangles.mean(axis=1))
+    pairs = []
+    boundary_area = np.zeros(len(ijk))
+    shape = np.array(inside.shape)
+    for axis in range(3):
+        for step in (-1, 1):
+            offset = np.zeros(3, dtype=np.int64)
+            offset[axis] = step
+            neighbour = ijk + offset
+            valid = ((neighbour >= 0) & (neighbour < shape)).all(axis=1)
+            other = np.full(len(ijk), -1, dtype=np.int64)
+            other[valid] = node_of[tuple(neighbour[valid].T)]
+            if step == 1:
+                joined = np.flatnonzero(other >= 0)
+                pairs.append(np.stack([joined, other[joined]], axis=1))
+            open_face = np.flatnonzero(other < 0)
+            if len(open_face):
+                _, nearest = tree.query(centers[open_face] + 0.5 * voxel_size * offset)
+                norm1 = np.abs(face_normal[nearest]).sum(axis=1)
+                boundary_area[open_face] += voxel_size ** 2 / norm1
+    return DiffusionGrid(filled.origin, float(voxel_size), node_of, centers,
+                         np.concatenate(pairs).astype(np.int64), boundary_area)
+
+
+def _diffusion_terms(sigma_a, sigma_s_prime, eta):
+    sigma_a = np.asarray(sigma_a, dtype=np.float64).reshape(-1)
+    sigma_s_prime = np.asarray(sigma_s_prime, dtype=np.float64).reshape(-1)
+    sigma_t_prime = sigma_a + sigma_s_prime
+    if not (np.all(sigma_a > 0) and np.all(sigma_s_prime > 0)):
+        raise InputError("the escape probability needs sigma_a > 0 and sigma_s' > 0 mm^-1",
+                         field="sigma_a, sigma_s_prime",
+                         value=f"{sigma_a.tolist()}, {sigma_s_prime.tolist()}")
+    diffusion = 1.0 / (3.0 * sigma_t_prime)
+    extrapolation = 2.0 * float(dipole_boundary_factor(eta)) * diffusion
+    return sigma_a, diffusion, extrapolation, 1.0 / sigma_t_prime
+
+
+def _boundary_conductance(diffusion, extrapolation, h):
+    """Flux per unit area and unit (e_cell - 1) through a Robin face half a cell away."""
+    return 2.0 * diffusion / (h + 2.0 * extrapolation)
+
+
+def escape_probability(grid: DiffusionGrid, sigma_a, sigma_s_prime, eta) -> np.ndarray:
+    r"""Escape probability of diffusing light from every cell, per channel, shape (N, C).
+
+    Finite volumes: :math:`\sum_{faces} D h (e_c - e_n) + \sum_{surface} a_f
+    \frac{2D}{h + 2z_b}(e_c - 1) + \sigma_a h^3 e_c = 0` per cell, with :math:`a_f` the
+    weighted boundary area; symmetric positive definite, solved by conjugate gradients
+    with a diagonal preconditioner.
+
+    Parameters
+    ----------
+    grid : DiffusionGrid
+    sigma_a, sigma_s_prime : array_like, shape (C,)
+        mm^-1, > 0.
+    eta : float
+        Relative index of refraction (the boundary factor A).
+    """
+    sigma_a, diffusion, extrapolation, _ = _diffusion_terms(sigma_a, sigma_s_prime, eta)
+    h = grid.voxel_size
+    n = grid.cells
+    i, j = grid.pairs[:, 0], grid.pairs[:, 1]
+    laplacian = sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    laplacian = (laplacian + laplacian.T).tocsr()
+    degree = np.asarray(laplacian.sum(axis=1)).ravel()
+    out = np.empty((n, len(sigma_a)))
+    for c in range(len(sigma_a)):
+        robin = grid.boundary_area * _boundary_conductance(diffusion[c], extrapolation[c], h)
+        diagonal = diffusion[c] * h * degree + robin + sigma_a[c] * h ** 3
+        matrix = sparse.diags(diagonal) - diffusion[c] * h * laplacian
+        solution, info = sparse_linalg.cg(matrix, robin, rtol=SOLVE_TOLERANCE,
+                                          maxiter=20 * n, M=sparse.diags(1.0 / diagonal))
+        if info != 0:
+            raise RuntimeError(f"the escape-probability solve did not converge ({info})")
+        out[:, c] = solution
+    return out
+
+
+def halfspace_escape_probability(depth, sigma_a, sigma_s_prime, eta, voxel_size: float,
+                                 ) -> np.ndarray:
+    r"""The same finite-volume scheme in a half-space, read at ``depth`` (mm), shape (..., C).
+
+    One column of cells of side ``voxel_size`` below a Robin face, deep enough
+    (:math:`12/\sigma_{tr}`) that the bottom does not matter; linear interpolation between
+    cell centres (and the face value above the first). Converges to
+    :math:`e^{-\sigma_{tr}z}/(1 + 2AD\sigma_{tr})` as the cells shrink.
+    """
+    sigma_a, diffusion, extrapolation, _ = _diffusion_terms(sigma_a, sigma_s_prime, eta)
+    h = float(voxel_size)
+    depth = np.asarray(depth, dtype=np.float64)
+    out = np.empty(depth.shape + (len(sigma_a),))
+    for c in range(len(sigma_a)):
+        sigma_tr = math.sqrt(sigma_a[c] / diffusion[c])
+        count = int(max(np.max(depth, initial=0.0), 12.0 / sigma_tr) / h) + 4
+        robin = _boundary_conductance(diffusion[c], extrapolation[c], h)
+        main = np.full(count, sigma_a[c] * h + 2.0 * diffusion[c] / h)
+        main[0] += robin - diffusion[c] / h
+        main[-1] -= diffusion[c] / h
+        off = np.full(count - 1, -diffusion[c] / h)
+        matrix = sparse.diags([off, main, off], [-1, 0, 1], format="csc")
+        rhs = np.zeros(count)
+        rhs[0] = robin
+        cells = sparse_linalg.spsolve(matrix, rhs)
+        # the face value from the Robin condition: e_f + z_b (e_f - e_0) / (h/2) = 1
+        ratio = 2.0 * extrapolation[c] / h
+        face = (1.0 + ratio * cells[0]) / (1.0 + ratio)
+        z = np.concatenate([[0.0], (np.arange(count) + 0.5) * h])
+        out[..., c] = np.interp(depth, z, np.concatenate([[face], cells]))
+    return out
+
+
+def finite_object_gain(grid: DiffusionGrid, points, normals, sigma_a, sigma_s_prime, eta,
+                       escape: np.ndarray | None = None) -> np.ndarray:
+    r"""Gain :math:`g_i = e_{object}(c_i - z_r n_i) / e_{half-space}(z_r)` per point, shape (P, C).
+
+    The object's escape probability is read through its *absorption ratio*
+    :math:`k = (1 - e_{object}) / (1 - e_{half-space})` (both from the finite-volume scheme,
+    at the depth :math:`z_p = \max(z_r, h)`), which varies slowly with depth where the gain
+    itself does not (the half-space deficit :math:`1 - e` grows from about 0 at the surface),
+    and which a voxel one cell deep already measures; then
+
+    .. math:: g = \frac{1 - k\,(1 - e_h(z_r))}{e_h(z_r)}, \qquad
+              e_h(z) = \frac{e^{-\sigma_{tr}z}}{1 + z_b\sigma_{tr}}.
+
+    Measured in a 30 x 60 x 30 mm box at the face centre: k changes by 1-3 % between depths
+    of 0.4 and 3 mm, and by under 1 % between voxels of 2 and 0.75 mm.
+
+    Parameters
+    ----------
+    grid : DiffusionGrid
+    points : ndarray, shape (P, 3)
+        Surface points (patch centroids), mm.
+    normals : ndarray, shape (P, 3)
+        Outward unit normals.
+    sigma_a, sigma_s_prime : array_like, shape (C,)
+        mm^-1, > 0.
+    eta : float
+    escape : ndarray, shape (N, C), optional
+        :func:`escape_probability` of these coefficients, when already known.
+
+    Returns
+    -------
+    ndarray
+        The gain at the dipole's source depth :math:`z_r = 1/\sigma'_t`.
+    """
+    sigma_a = np.atleast_1d(np.asarray(sigma_a, dtype=np.float64))
+    sigma_s_prime = np.atleast_1d(np.asarray(sigma_s_prime, dtype=np.float64))
+    sigma_a, diffusion, extrapolation, source_depth = _diffusion_terms(sigma_a, sigma_s_prime,
+                                                                       eta)
+    if escape is None:
+        escape = escape_probability(grid, sigma_a, sigma_s_prime, eta)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    probe = np.maximum(source_depth, MIN_PROBE_VOXELS * grid.voxel_size)
+    gain = np.empty((len(points), len(probe)))
+    for c, z in enumerate(probe):
+        inside = grid.interpolate(escape[:, c], points - z * normals)
+        half = float(halfspace_escape_probability(z, sigma_a[c:c + 1], sigma_s_prime[c:c + 1],
+                                                  eta, grid.voxel_size)[0])
+        absorption_ratio = (1.0 - inside) / max(1.0 - half, 1e-300)
+        sigma_tr = math.sqrt(sigma_a[c] / diffusion[c])
+        exact = math.exp(-sigma_tr * source_depth[c]) / (1.0 + extrapolation[c] * sigma_tr)
+        gain[:, c] = (1.0 - absorption_ratio * (1.0 - exact)) / exact
+    return gain
+
+
+def slab_gain(depth, thickness, sigma_a, sigma_s_prime, eta) -> np.ndarray:
+    r"""Closed-form gain of an infinite slab, the continuum limit of :func:`finite_object_gain`.
+
+    .. math:: g(z) = \frac{(1 + z_b\sigma_{tr})\cosh(\sigma_{tr}(z - L/2))\,e^{\sigma_{tr}z}}
+                          {\cosh(\sigma_{tr}L/2) + z_b\sigma_{tr}\sinh(\sigma_{tr}L/2)}
+
+    (the escape probability :math:`C\cosh(\sigma_{tr}(z - L/2))` of a slab of thickness
+    :math:`L` with the Robin condition on both faces, over the half-space's).
+
+    Parameters
+    ----------
+    depth, thickness : float
+        mm.
+    sigma_a, sigma_s_prime : array_like, shape (C,)
+        mm^-1, > 0.
+    eta : float
+    """
+    sigma_a, diffusion, extrapolation, _ = _diffusion_terms(sigma_a, sigma_s_prime, eta)
+    sigma_tr = np.sqrt(sigma_a / diffusion)
+    half = sigma_tr * thickness / 2.0
+    slab = np.cosh(sigma_tr * (depth - thickness / 2.0)) / (
+        np.cosh(half) + extrapolation * sigma_tr * np.sinh(half))
+    return slab * (1.0 + extrapolation * sigma_tr) * np.exp(sigma_tr * depth)
+
+
+def voxel_size_for(triangles, voxels_per_axis: int) -> float:
+    """Voxel edge (mm) that puts ``voxels_per_axis`` cells along the object's longest side."""
+    check_count(voxels_per_axis, "diffusion_voxels_per_axis", minimum=4)
+    extent = np.ptp(np.asarray(triangles).reshape(-1, 3), axis=0).max()
+    return float(extent) / int(voxels_per_axis)
