@@ -36,6 +36,10 @@ SPLAT_TOLERANCE = 0.06
 #: numpy (float64 accumulation) and Dr.Jit (float32 scatter-add) kernels: float32 sums of
 #: ~1e4 terms agree to ~1e-5 relative.
 BACKEND_RTOL = 1e-4
+#: The two paths of the splat kernel add the same float32 terms, fused into multiply-adds in
+#: different places: the log-value (|ln P| < 30 in the tests) moves by a few roundings of
+#: 30 * 2^-24 = 1.8e-6, and the exponential carries that relative error into the value.
+TWO_SEGMENT_RTOL = 1e-5
 #: Cephes' expf polynomial is accurate to about one float32 ulp (6e-8); two ulps of margin
 #: cover the rounding of the argument reduction.
 EXP32_RTOL = 2e-7
@@ -198,6 +202,87 @@ def test_tiled_splat_equals_numpy_for_any_level_size_and_range(width, reach, inn
                                  mm_per_unit=MM_PER_UNIT, backend=name)
            for name in ("numpy", "numba")]
     assert np.allclose(out[0], out[1], rtol=BACKEND_RTOL, atol=BACKEND_RTOL * out[0].max())
+
+
+def two_segment_case(seed, pitch, narrow_share):
+    """A jittered plane of 16 x 24 pixels, a random table, samples on the plane.
+
+    A ``narrow_share`` of the samples have annuli 1.5 segments wide from their own point
+    (every pixel in range lies in segment 0 or 1: the two-segment path); the others 6 to 12
+    segments wide from a random inner radius (the general path).
+    """
+    rng = np.random.default_rng(seed)
+    segments, r_s, texels = 8, 1.0, 7
+    rows, cols = np.mgrid[0:16, 0:24] * pitch
+    position = np.stack([cols, rows, rng.normal(scale=0.1 * pitch, size=cols.shape)])
+    valid = rng.random(cols.shape) > 0.1
+    tiled, labels, bounds, tiles_y, tiles_x = kernels.tile_layout(
+        position.astype(np.float32), rng.integers(0, texels, cols.shape), valid)
+    table = kernels.segment_table(rng.uniform(-20.0, 2.0, (texels, segments + 1, 3)))
+    step_inverse = np.float32(segments / r_s)
+    count = 40
+    pick = rng.integers(0, cols.size, count)
+    sample_position = np.ascontiguousarray(position.reshape(3, -1)[:, pick], np.float32)
+    narrow = rng.random(count) < narrow_share
+    low = np.where(narrow, 0.0, rng.uniform(0.0, 3.0, count) / step_inverse)
+    high = low + np.where(narrow, 1.5, rng.uniform(6.0, 12.0, count)) / step_inverse
+    low2, high2 = (np.square(bound).astype(np.float32) for bound in (low, high))
+    # every sample's window (centre 12, 8; radius 20 pixels) covers the level, so only the
+    # tiles' bounding boxes cull
+    start, members = kernels.bin_samples(
+        bounds, tiles_y, tiles_x, sample_position, np.full(count, 12.0, np.float32),
+        np.full(count, 8.0, np.float32), np.full(count, 20.0, np.float32), low2, high2)
+    arguments = (tiled, labels, table, step_inverse, sample_position,
+                 rng.integers(0, texels, count).astype(np.int32),
+                 rng.uniform(0.1, 2.0, (count, 3)).astype(np.float32), low2, high2, start,
+                 members)
+    return arguments, narrow
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(min_value=0, max_value=2**31 - 1), st.floats(min_value=0.002, max_value=0.02),
+       st.floats(min_value=0.3, max_value=1.0))
+def test_two_segment_path_equals_the_general_path(seed, pitch, narrow_share):
+    arguments, narrow = two_segment_case(seed, pitch, narrow_share)
+    out = [np.empty(arguments[0].shape, np.float32) for _ in range(2)]
+    used = [kernels.splat_tiles(out[0], *arguments),
+            kernels.splat_tiles(out[1], *arguments, np.float32(0.0))]  # general path only
+    assert np.array_equal(used[0], used[1])
+    assert np.allclose(out[0], out[1], rtol=TWO_SEGMENT_RTOL, atol=TWO_SEGMENT_RTOL * out[1].max())
+    # the case does take the two-segment path: some narrow sample has enough pixels in
+    # range in one tile
+    tiled, labels, _, _, sample_position, _, _, _, high2, start, members = arguments
+    fewest = max(kernels.FEWEST_IN_VECTORS, 1)
+    reached = [
+        np.sum((labels[tile] >= 0) & (np.sum(np.square(
+            tiled[tile] - sample_position[:, s, None]), axis=0) < high2[s])) >= fewest
+        for tile in range(len(start) - 1) for s in members[start[tile]:start[tile + 1]]
+        if narrow[s]]
+    assert any(reached)
+
+
+def test_two_segment_path_leaves_unreached_pixels_black():
+    # lanes out of range are evaluated in the vectors too, then masked to exactly 0
+    arguments, _ = two_segment_case(3, 0.01, 1.0)
+    out = np.empty(arguments[0].shape, np.float32)
+    kernels.splat_tiles(out, *arguments)
+    general = np.empty_like(out)
+    kernels.splat_tiles(general, *arguments, np.float32(0.0))
+    assert np.all(np.isfinite(out))
+    assert np.array_equal(out == 0, general == 0)
+    assert (out == 0).any()
+
+
+def test_projection_is_the_pinhole_of_the_camera_frame():
+    camera = Camera(origin=[0.3, -0.2, 3.0], target=[0, 0.1, 0], fov=40, width=64, height=48)
+    model = CameraModel.from_camera(camera)
+    points = np.random.default_rng(5).normal(size=(50, 3))
+    x, y, z = model.project(points, 32, 24)
+    relative = points - model.origin
+    focal = 32 / (2 * model.tan_half_fov)
+    assert np.allclose(z, relative @ model.forward, rtol=1e-12, atol=1e-12)
+    assert np.allclose(x, relative @ model.right / z * focal + 16, rtol=1e-12, atol=1e-9)
+    assert np.allclose(y, -(relative @ model.up) / z * focal + 12, rtol=1e-12, atol=1e-9)
 
 
 @numba.njit
