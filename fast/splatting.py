@@ -538,12 +538,20 @@ class CameraModel:
 
     def project(self, points: np.ndarray, width: int, height: int):
         """Continuous pixel coordinates (x, y) at a level of size width x height, and depth z."""
-        relative = points - self.origin
-        z = relative @ self.forward
+        points = np.asarray(points, dtype=np.float64)
+        relative = [points[..., c] - self.origin[c] for c in range(3)]
+
+        def along(axis):
+            # three products instead of ``relative @ axis``: numpy hands (N, 3) @ (3,) to
+            # OpenBLAS, measured 24 ms for a frame's 158 k samples against 0.7 ms, and its
+            # idle threads then spin on, charging CPU time to the stages that follow
+            return relative[0] * axis[0] + relative[1] * axis[1] + relative[2] * axis[2]
+
+        z = along(self.forward)
         safe = np.where(np.abs(z) > 1e-12, z, 1e-12)
         focal = width / (2.0 * self.tan_half_fov)
-        x = (relative @ self.right) / safe * focal + 0.5 * width
-        y = -(relative @ self.up) / safe * focal + 0.5 * height
+        x = along(self.right) / safe * focal + 0.5 * width
+        y = -along(self.up) / safe * focal + 0.5 * height
         return x, y, z
 
 
