@@ -58,18 +58,21 @@ cut into tiles of 8 x 8 pixels, each sample is binned to the tiles its range can
 each tile evaluates Eq. 8-9 in float32 for its samples, tiles in parallel.
 
 Measured with ``translucent bench splatting`` (heterogeneous scene, 800 x 600, 512^2, this
-2-core CPU shared with other work, load average about 9, so wall times are about twice the
-CPU times): with both accelerations 1.85 CPU seconds a frame (111 million pairs in range;
-2.54 before the tiled kernel), 8.1x less CPU than without acceleration (14.95), at 1.11x
-its error against brute force (0.0264 vs 0.0238). The excess error of the coarse levels
+2-core CPU shared with other work, load average about 3, where wall and CPU times per
+frame are about equal): with both accelerations 1.63 CPU seconds a frame (111 million
+pairs in range; level 2 55 % of it, level 0 16 %, level 1 13 %, buffer generation 9 %;
+1.86 before the two-segment path of the splat kernel, the one-pass binning and the
+projection without a matrix-vector product, 1.67 after, measured back to back; 2.54
+before the tiled kernel), 8.3x less CPU than without acceleration (13.56), at 1.11x its
+error against brute force (0.0264 vs 0.0238). The excess error of the coarse levels
 is Eq. 17's upsampling across the texture's material boundaries, where a coarse pixel's
 texel stands for its children's: upsampled level 2 differs from the same annulus splatted
 at full resolution by 0.7 % of the frame's energy (1 % in blue, the channel with the most
 contrast). A tighter epsilon only moves energy back to level 0 (at 1e-4: 1.03x the error
-at 4.5x less CPU); ``profile_upsampling`` removes it (0.0237, 0.995x, at 8.3x less CPU),
-and with ``level_sampling`` = 1 as well 0.0238 (0.998x) at 8.7x less CPU (1.72 CPU
-seconds). The paper's 10 frames per second are out of reach on this CPU: 0.58 frames per
-CPU second at best.
+at 3.8x less CPU); ``profile_upsampling`` removes it (0.0237, 0.995x, at 8.1x less CPU),
+and with ``level_sampling`` = 1 as well 0.0238 (0.998x) at 9.2x less CPU (1.47 CPU
+seconds). The paper's 10 frames per second are out of reach on this CPU: 0.61 frames per
+CPU second with both accelerations, 0.74 at best (``level_sampling`` = 1, 1.11x the error).
 
 Units: positions in scene units, profiles in mm^-2 (``scene.mm_per_unit`` converts);
 radiance in the units of the lights per scene unit squared, as the reference renders.
