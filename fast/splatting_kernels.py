@@ -832,6 +832,25 @@ def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, heig
     triangle = np.full((height, width), -1, np.int64)
     barycentric = np.zeros((height, width, 2))
     depth = np.full((height, width), np.inf)
+    # each pixel's unit direction and near-plane distance, computed once rather than for
+    # every triangle whose box covers the pixel (the same operations, so the same bits):
+    # 0.089 to 0.075-0.080 CPU s for the two buffers of the heterogeneous scene
+    ray = np.empty((height, width, 4)) if not orthographic else np.empty((0, 0, 4))
+    for y in range(ray.shape[0]):
+        sy = tan_y * (1.0 - 2.0 * (y + 0.5) / height)
+        for x in range(ray.shape[1]):
+            sx = tan_x * (1.0 - 2.0 * (x + 0.5) / width)
+            dx = forward[0] + sx * left[0] + sy * up[0]
+            dy = forward[1] + sx * left[1] + sy * up[1]
+            dz = forward[2] + sx * left[2] + sy * up[2]
+            norm = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+            dx *= norm
+            dy *= norm
+            dz *= norm
+            ray[y, x, 0] = dx
+            ray[y, x, 1] = dy
+            ray[y, x, 2] = dz
+            ray[y, x, 3] = near / (dx * forward[0] + dy * forward[1] + dz * forward[2])
     for f in range(faces.shape[0]):
         a = vertices[faces[f, 0]]
         b = vertices[faces[f, 1]]
@@ -889,14 +908,7 @@ def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, heig
                     start = 0.0
                 else:
                     ox, oy, oz = eye[0], eye[1], eye[2]
-                    dx = forward[0] + sx * left[0] + sy * up[0]
-                    dy = forward[1] + sx * left[1] + sy * up[1]
-                    dz = forward[2] + sx * left[2] + sy * up[2]
-                    norm = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
-                    dx *= norm
-                    dy *= norm
-                    dz *= norm
-                    start = near / (dx * forward[0] + dy * forward[1] + dz * forward[2])
+                    dx, dy, dz, start = ray[y, x, 0], ray[y, x, 1], ray[y, x, 2], ray[y, x, 3]
                 px = dy * e2z - dz * e2y
                 py = dz * e2x - dx * e2z
                 pz = dx * e2y - dy * e2x
