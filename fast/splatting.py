@@ -61,9 +61,7 @@ Measured with ``translucent bench splatting`` (heterogeneous scene, 800 x 600, 5
 2-core CPU shared with other work, load average about 3, where wall and CPU times per
 frame are about equal): with both accelerations 1.63 CPU seconds a frame (111 million
 pairs in range; level 2 55 % of it, level 0 16 %, level 1 13 %, buffer generation 9 %;
-1.86 before the two-segment path of the splat kernel, the one-pass binning and the
-projection without a matrix-vector product, 1.67 after, measured back to back; 2.54
-before the tiled kernel), 8.3x less CPU than without acceleration (13.56), at 1.11x its
+2.54 before the tiled kernel), 8.3x less CPU than without acceleration (13.56), at 1.11x its
 error against brute force (0.0264 vs 0.0238). The excess error of the coarse levels
 is Eq. 17's upsampling across the texture's material boundaries, where a coarse pixel's
 texel stands for its children's: upsampled level 2 differs from the same annulus splatted
@@ -73,6 +71,10 @@ at 3.8x less CPU); ``profile_upsampling`` removes it (0.0237, 0.995x, at 8.1x le
 and with ``level_sampling`` = 1 as well 0.0238 (0.998x) at 9.2x less CPU (1.47 CPU
 seconds). The paper's 10 frames per second are out of reach on this CPU: 0.61 frames per
 CPU second with both accelerations, 0.74 at best (``level_sampling`` = 1, 1.11x the error).
+The two-segment path of the splat kernel, the one-pass binning, the projection without a
+matrix-vector product and the rasteriser's per-pixel rays took a frame with both
+accelerations from 1.80-1.94 to 1.40-1.67 CPU seconds (four before/after pairs run back to
+back, load average 3.1-4.0; the same images to 1.2e-7).
 
 Units: positions in scene units, profiles in mm^-2 (``scene.mm_per_unit`` converts);
 radiance in the units of the lights per scene unit squared, as the reference renders.
