@@ -79,7 +79,7 @@ MIN_PROBE_VOXELS = 1.0
 
 @dataclass(eq=False)
 class DiffusionGrid:
-    """Cells of a voxel grid whose centres lie inside a closed object, with their faces.
+    r"""Cells of a voxel grid whose centres lie inside a closed object, with their faces.
 
     Parameters
     ----------
@@ -95,7 +95,7 @@ class DiffusionGrid:
         Cells sharing a face.
     boundary_area : ndarray, shape (N,)
         Area (mm^2) of each cell's faces on the surface, each staircase face weighted by
-        :math:`1/\\|n\\|_1` of the surface normal there.
+        :math:`1/\|n\|_1` of the surface normal there.
     """
 
     origin: np.ndarray
@@ -169,7 +169,7 @@ def _winding_numbers(points, triangles):  # pragma: no cover - compiled
 
 
 def diffusion_grid(triangles, voxel_size: float) -> DiffusionGrid:
-    """The finite-volume grid of a closed object.
+    """Build the finite-volume grid of a closed object.
 
     Parameters
     ----------
@@ -290,7 +290,9 @@ def escape_probability(grid: DiffusionGrid, sigma_a, sigma_s_prime, eta) -> np.n
 
 def halfspace_escape_probability(depth, sigma_a, sigma_s_prime, eta, voxel_size: float,
                                  ) -> np.ndarray:
-    r"""The same finite-volume scheme in a half-space, read at ``depth`` (mm), shape (..., C).
+    r"""Solve the same finite-volume scheme in a half-space; read it at ``depth`` (mm).
+
+    Returns shape ``depth.shape + (C,)``.
 
     One column of cells of side ``voxel_size`` below a Robin face, deep enough
     (:math:`12/\sigma_{tr}`) that the bottom does not matter; linear interpolation between

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from translucent.errors import InputError
 from translucent.fast.diffusion_escape import (
     diffusion_grid,
