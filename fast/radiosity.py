@@ -2015,6 +2015,9 @@ def add_approx_arguments(parser) -> None:
                         help="scattering cut-off max_d in mm (default: from the profiles)")
     parser.add_argument("--triangles-per-patch", type=int,
                         default=DEFAULT_KNOBS["triangles_per_patch"])
+    parser.add_argument("--semi-infinite", action="store_true",
+                        help="the dipole as the paper uses it, without the finite-object "
+                             "energy (knob finite_object_energy)")
 
 
 def approx(scene, args) -> Image:
@@ -2035,7 +2038,8 @@ def approx(scene, args) -> Image:
             scene = scene.with_material(name, material)
     state = precompute(scene, solver=args.solver, rays_per_patch=args.rays,
                        max_distance_mm=args.max_distance,
-                       triangles_per_patch=args.triangles_per_patch)
+                       triangles_per_patch=args.triangles_per_patch,
+                       finite_object_energy=not args.semi_infinite)
     image = state.render(component=args.component)
     for sentence in state.log.skipped:
         print(f"skipped: {sentence}")

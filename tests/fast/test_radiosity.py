@@ -686,6 +686,11 @@ intensity = 20.0
     image = read_exr(out)
     assert image.rgb.shape == (12, 12, 3)
     assert image.metadata["component"] == "subsurface"
+    # the paper's semi-infinite dipole: the 10 mm Marble cube re-emits less
+    semi = tmp_path / "semi.exr"
+    assert main(["approx", "radiosity", str(scene_file), "--out", str(semi), "--rays", "16",
+                 "--material", "Marble", "--component", "subsurface", "--semi-infinite"]) == 0
+    assert read_exr(semi).rgb.sum() < image.rgb.sum()
     assert main(["approx", "radiosity", str(scene_file), "--material", "Unobtainium"]) == 2
     table = tmp_path / "measured.csv"
     table.write_text("r_mm,R\n0,0.02\n2,0.004\n8,0\n")  # total reflectance 0.52
