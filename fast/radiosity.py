@@ -142,7 +142,13 @@ from ..scenes.scene import (
     SpotLight,
 )
 from .base import StageLog, refuse_inapplicable, with_defaults
-from .diffusion_escape import DiffusionGrid, diffusion_grid, finite_object_gain, voxel_size_for
+from .diffusion_escape import (
+    DiffusionGrid,
+    diffusion_grid,
+    finite_object_gain,
+    source_escape_probability,
+    voxel_size_for,
+)
 from .form_factors import Patches, build_patches, form_factors, needs_form_factors
 from .optical_distance import (
     closed_surface,
@@ -786,7 +792,9 @@ def _carry_finite_object_energy(data, geometry: ScatteringGeometry, patches: Pat
     r"""Give the object's columns of S the re-emission of diffusion in its own shape.
 
     Column i (incident patch i) is brought to the power sum :math:`g_i\int s`: the
-    profile's semi-infinite total times the gain of
+    profile's semi-infinite total (at most the entry transmittance times
+    :func:`~translucent.fast.diffusion_escape.source_escape_probability`, so that no column
+    exceeds what diffusion lets out of the object) times the gain of
     :func:`~translucent.fast.diffusion_escape.finite_object_gain` (1 in a large object,
     above 1 where the object is comparable to the diffusion length :math:`1/\sigma_{tr}`).
     The light added is light the half-space would have absorbed deep below the surface,
@@ -808,7 +816,10 @@ def _carry_finite_object_energy(data, geometry: ScatteringGeometry, patches: Pat
     in_object = np.zeros(size, dtype=bool)
     in_object[members] = True
     target = np.zeros((size, 3))
-    target[members] = profile.total()[None, :] * gain
+    # never more than the object's own escape probability (times the entry transmittance)
+    ceiling = profile.entry * source_escape_probability(dipole.sigma_a, dipole.sigma_s_prime,
+                                                        dipole.eta)
+    target[members] = np.minimum(profile.total(), ceiling)[None, :] * gain
     z_r, _ = dipole_depths(dipole.sigma_a, dipole.sigma_s_prime, dipole.eta)
     _compiled_energy_correction()(
         geometry.indptr, geometry.indices, data, in_object, np.ascontiguousarray(area),

@@ -351,7 +351,7 @@ GAIN_TARGET_RTOL = 1e-9
 
 
 def test_finite_object_energy_brings_columns_to_the_diffusion_gain():
-    from translucent.fast.diffusion_escape import finite_object_gain
+    from translucent.fast.diffusion_escape import finite_object_gain, source_escape_probability
 
     state, plain = _block_state(), _block_state(finite_object_energy=False)
     patches = state.patches
@@ -363,7 +363,10 @@ def test_finite_object_energy_brings_columns_to_the_diffusion_gain():
                               material.sigma_s_prime, material.eta)
     # a 10 mm Skin1 cube: 1/sigma_tr is 3.7 mm in red, the cube re-emits more
     assert np.all(gain > 1.0)
-    target = DipoleProfile(material).total()[None, :] * gain
+    profile = DipoleProfile(material)
+    ceiling = profile.entry * source_escape_probability(material.sigma_a,
+                                                        material.sigma_s_prime, material.eta)
+    target = np.minimum(profile.total(), ceiling)[None, :] * gain
     sums = state.S.power_column_sums(patches.area)[members]
     assert sums == pytest.approx(target, rel=GAIN_TARGET_RTOL)
     assert np.all(sums > plain.S.power_column_sums(patches.area)[members])
@@ -396,6 +399,32 @@ def test_finite_object_energy_leaves_a_large_object_alone():
     sums = state.S.power_column_sums(state.patches.area)[members]
     assert sums == pytest.approx(np.broadcast_to(DipoleProfile(dense).total(), sums.shape),
                                  rel=0.01)
+
+
+def test_finite_object_energy_never_exceeds_the_escape_probability():
+    from translucent.fast.diffusion_escape import finite_object_gain, source_escape_probability
+    from translucent.materials import Dipole
+
+    # eta 1.5 and reduced albedo 0.7, where the dipole's total exceeds the half-space's
+    # escape probability from the source depth (1.24x): a 4 mm cube lets out almost all of
+    # the light diffusion carries, so R_d x gain would create energy
+    medium = Dipole([3.0 / 7.0] * 3, [1.0] * 3, 1.5, name="reflective boundary")
+    scene = _block_scene(medium)
+    scene = Scene(scene.objects, scene.lights, CAMERA, mm_per_unit=4.0)
+    state = precompute(scene, rays_per_patch=16)
+    patches = state.patches
+    members = patches.of_object(1)
+    profile = DipoleProfile(medium)
+    gain = finite_object_gain(state.geometry.objects[1].diffusion,
+                              patches.centroid[members] * patches.mm_per_unit,
+                              patches.normal[members], medium.sigma_a, medium.sigma_s_prime,
+                              medium.eta)
+    ceiling = profile.entry * source_escape_probability(medium.sigma_a, medium.sigma_s_prime,
+                                                        medium.eta)
+    assert np.any(profile.total() * gain > ceiling * gain)  # the ceiling is what binds
+    sums = state.S.power_column_sums(patches.area)[members]
+    assert np.all(sums <= profile.entry * 1.0)
+    assert sums == pytest.approx(ceiling[None, :] * gain, rel=GAIN_TARGET_RTOL)
 
 
 def test_finite_object_knobs_are_checked():
