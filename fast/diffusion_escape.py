@@ -111,11 +111,13 @@ class DiffusionGrid:
         """Number of interior cells."""
         return len(self.centers)
 
-    def interpolate(self, values: np.ndarray, points) -> np.ndarray:
+    def interpolate(self, values: np.ndarray, points, *, inside: np.ndarray | None = None,
+                    ) -> np.ndarray:
         """Trilinear interpolation of cell values at ``points`` (mm) over interior cells only.
 
         Corners outside the object are left out and the weights renormalised; a point with
-        no interior corner takes its nearest cell's value.
+        no interior corner takes its nearest cell's value. ``inside``, when given (bool,
+        one per point), is set True where some corner was interior.
         """
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         values = np.asarray(values, dtype=np.float64)
@@ -135,6 +137,8 @@ class DiffusionGrid:
             total += weight.reshape((-1,) + (1,) * (values.ndim - 1)) * values[np.maximum(cell, 0)]
             weight_sum += weight
         missing = weight_sum <= 1e-12
+        if inside is not None:
+            inside[:] = ~missing
         if missing.any():
             _, nearest = cKDTree(self.centers).query(points[missing])
             total[missing] = values[nearest]
@@ -356,7 +360,8 @@ def finite_object_gain(grid: DiffusionGrid, points, normals, sigma_a, sigma_s_pr
     Returns
     -------
     ndarray
-        The gain at the dipole's source depth :math:`z_r = 1/\sigma'_t`.
+        The gain at the dipole's source depth :math:`z_r = 1/\sigma'_t`; 1 where that
+        source lies outside the object (thinner than a transport mean free path there).
     """
     sigma_a = np.atleast_1d(np.asarray(sigma_a, dtype=np.float64))
     sigma_s_prime = np.atleast_1d(np.asarray(sigma_s_prime, dtype=np.float64))
@@ -369,12 +374,15 @@ def finite_object_gain(grid: DiffusionGrid, points, normals, sigma_a, sigma_s_pr
     exact_escape = source_escape_probability(sigma_a, sigma_s_prime, eta)
     gain = np.empty((len(points), len(probe)))
     for c, z in enumerate(probe):
-        inside = grid.interpolate(escape[:, c], points - z * normals)
+        within = np.zeros(len(points), dtype=bool)
+        inside = grid.interpolate(escape[:, c], points - z * normals, inside=within)
         half = float(halfspace_escape_probability(z, sigma_a[c:c + 1], sigma_s_prime[c:c + 1],
                                                   eta, grid.voxel_size)[0])
         absorption_ratio = (1.0 - inside) / max(1.0 - half, 1e-300)
         exact = float(exact_escape[c])
-        gain[:, c] = (1.0 - absorption_ratio * (1.0 - exact)) / exact
+        # a source deeper than the object is thick (an optically thin object): diffusion
+        # from it does not describe the object, which keeps the dipole's energy
+        gain[:, c] = np.where(within, (1.0 - absorption_ratio * (1.0 - exact)) / exact, 1.0)
     return gain
 
 

@@ -146,3 +146,12 @@ def test_bad_input_is_refused():
         escape_probability(grid, [0.0], [1.0], 1.0)
     with pytest.raises(InputError, match="diffusion_voxels_per_axis"):
         voxel_size_for(triangles, 2)
+
+
+def test_an_optically_thin_object_keeps_the_dipoles_energy():
+    # sigma'_t = 2e-4 mm^-1: the dipole's source lies 5 m below a 30 mm block's surface
+    triangles = _box((30.0, 60.0, 30.0))
+    grid = diffusion_grid(triangles, voxel_size_for(triangles, 16))
+    gain = finite_object_gain(grid, [[0.0, 60.0, 0.0]], [[0.0, 1.0, 0.0]], [1e-4], [1e-4], 1.0)
+    assert gain[0, 0] == 1.0
+
