@@ -1,4 +1,4 @@
-"""The stress kernels beyond the materials: PCA projections, radiosity, wavelets, fits.
+"""The stress kernels beyond the materials: PCA projections, radiosity, wavelets, fits, diffusion.
 
 Each kernel runs here in a tiny configuration; the full sweeps are what
 ``translucent stress`` runs. A kernel whose method is made to return NaN must fail, and
@@ -17,7 +17,7 @@ from translucent.fitting.results import ParameterSummary
 from translucent.materials.dipole_pca import DipolePCABasis
 from translucent.reports import stress
 from translucent.reports.cli import main
-from translucent.reports.stress import fits, pca, radiosity, wavelets
+from translucent.reports.stress import diffusion, fits, pca, radiosity, wavelets
 
 #: Coefficients inside both preset grids (area_normalised: sigma_s' in [0.02, 25],
 #: sigma_a in [1e-4, 5] mm^-1), where the bases are built to work.
@@ -37,6 +37,9 @@ TINY = {
         functools.partial(fits.degenerate_fits, cases=fits.EMPTY_CASES),
     "spatial CDF 9/7 compression at extreme ratios":
         functools.partial(wavelets.spatial_compression, grids=((9, 10),)),
+    "finite-object diffusion gain":
+        functools.partial(diffusion.finite_object_gain_sweep, sigma_as=(1e-8, 1e-2),
+                          sigma_s_primes=(0.5, 1e3), etas=(1.0, 2.0)),
 }
 
 
