@@ -809,22 +809,32 @@ def _carry_finite_object_energy(data, geometry: ScatteringGeometry, patches: Pat
     area = patches.area
     mm = patches.mm_per_unit
     dipole = profile.dipole
-    gain = finite_object_gain(item.diffusion, patches.centroid[members] * mm,
-                              patches.normal[members], dipole.sigma_a, dipole.sigma_s_prime,
-                              dipole.eta)
+    # a channel without absorption (or without scattering) has no diffusion length: the
+    # dipole already returns all of it (or none), and its columns are left as they are
+    channels = np.flatnonzero((dipole.sigma_a > 0) & (dipole.sigma_s_prime > 0))
+    gain = np.ones((len(members), 3))
+    ceiling = np.ones(3)
+    if len(channels):
+        sigma_a, sigma_s_prime = dipole.sigma_a[channels], dipole.sigma_s_prime[channels]
+        gain[:, channels] = finite_object_gain(item.diffusion, patches.centroid[members] * mm,
+                                               patches.normal[members], sigma_a,
+                                               sigma_s_prime, dipole.eta)
+        # never more than the object's own escape probability (times the entry transmittance)
+        ceiling[channels] = profile.entry * source_escape_probability(sigma_a, sigma_s_prime,
+                                                                      dipole.eta)
     size = len(area)
     in_object = np.zeros(size, dtype=bool)
     in_object[members] = True
     target = np.zeros((size, 3))
-    # never more than the object's own escape probability (times the entry transmittance)
-    ceiling = profile.entry * source_escape_probability(dipole.sigma_a, dipole.sigma_s_prime,
-                                                        dipole.eta)
     target[members] = np.minimum(profile.total(), ceiling)[None, :] * gain
+    applied = np.zeros(3, dtype=bool)
+    applied[channels] = True
     z_r, _ = dipole_depths(dipole.sigma_a, dipole.sigma_s_prime, dipole.eta)
     _compiled_energy_correction()(
         geometry.indptr, geometry.indices, data, in_object, np.ascontiguousarray(area),
         np.ascontiguousarray(patches.centroid * mm), np.ascontiguousarray(patches.normal),
-        np.asarray(z_r, np.float64), np.asarray(dipole.sigma_tr, np.float64), target)
+        np.asarray(z_r, np.float64), np.asarray(dipole.sigma_tr, np.float64), target,
+        applied)
     item.facts["finite_object_gain"] = {"min": gain.min(axis=0).tolist(),
                                         "mean": gain.mean(axis=0).tolist(),
                                         "max": gain.max(axis=0).tolist()}
@@ -849,7 +859,7 @@ def _compiled_energy_correction():
 
     @numba.njit(parallel=True, fastmath=True, cache=True)
     def correct(indptr, indices, data, in_object, area, centroid, normal, z_r, sigma_tr,
-                target):  # pragma: no cover - compiled
+                target, applied):  # pragma: no cover - compiled
         size = len(indptr) - 1
         # the weights A_j * fluence, once (in parallel: no entry shares its slot)
         weight = np.zeros((len(indices), 3), np.float32)
@@ -858,8 +868,9 @@ def _compiled_energy_correction():
                 column = indices[k]
                 if in_object[column]:
                     for c in range(3):
-                        weight[k, c] = area[row] * fluence(centroid, normal, row, column,
-                                                           z_r[c], sigma_tr[c])
+                        if applied[c]:
+                            weight[k, c] = area[row] * fluence(centroid, normal, row, column,
+                                                               z_r[c], sigma_tr[c])
         current = np.zeros((size, 3))
         norm = np.zeros((size, 3))
         for row in range(size):  # serial: columns gather from every row
@@ -878,6 +889,8 @@ def _compiled_energy_correction():
                 if not in_object[column]:
                     continue
                 for c in range(3):
+                    if not applied[c]:
+                        continue
                     missing = target[column, c] - current[column, c]
                     if missing > 0.0:
                         if norm[column, c] > 0.0:

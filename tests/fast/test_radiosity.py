@@ -427,6 +427,17 @@ def test_finite_object_energy_never_exceeds_the_escape_probability():
     assert sums == pytest.approx(ceiling[None, :] * gain, rel=GAIN_TARGET_RTOL)
 
 
+def test_a_channel_without_absorption_keeps_the_dipoles_columns():
+    from translucent.materials import Dipole
+
+    # no diffusion length in red: the dipole returns all of it already
+    medium = Dipole([0.0, 0.01, 0.1], [1.0, 1.0, 1.0], 1.3, name="clear in red")
+    on = precompute(_block_scene(medium), rays_per_patch=16)
+    off = precompute(_block_scene(medium), rays_per_patch=16, finite_object_energy=False)
+    assert np.array_equal(on.S.data[:, 0], off.S.data[:, 0])
+    assert np.all(on.S.data[:, 1:].sum(axis=0) > off.S.data[:, 1:].sum(axis=0))
+
+
 def test_finite_object_knobs_are_checked():
     with pytest.raises(InputError, match="finite_object_energy"):
         precompute(_block_scene(), finite_object_energy="yes")
