@@ -45,18 +45,23 @@ Lengths in mm, coefficients in mm^-1.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy import sparse
+from scipy import ndimage, sparse
 from scipy.sparse import linalg as sparse_linalg
 from scipy.spatial import cKDTree
 
 from ..errors import InputError, check_count
-from ..materials.dipole import dipole_boundary_factor
-from .optical_distance import voxelize
+from ..materials.dipole import (
+    dipole_boundary_factor,
+    effective_transport_coefficient,
+    mean_free_path,
+)
+from .optical_distance import surface_voxels
 
 __all__ = [
     "DiffusionGrid",
@@ -110,6 +115,18 @@ class DiffusionGrid:
     def cells(self) -> int:
         """Number of interior cells."""
         return len(self.centers)
+
+    @functools.cached_property
+    def adjacency(self) -> tuple[sparse.csr_matrix, np.ndarray]:
+        """Cells sharing a face as a symmetric 0/1 matrix, and each cell's count of them.
+
+        Material-independent: built once, reused by every escape solve of the grid.
+        """
+        n = self.cells
+        i, j = self.pairs[:, 0], self.pairs[:, 1]
+        matrix = sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+        matrix = (matrix + matrix.T).tocsr()
+        return matrix, np.asarray(matrix.sum(axis=1)).ravel()
 
     def interpolate(self, values: np.ndarray, points, *, inside: np.ndarray | None = None,
                     ) -> np.ndarray:
@@ -193,15 +210,11 @@ def diffusion_grid(triangles, voxel_size: float) -> DiffusionGrid:
         No cell centre lies inside (the object is thinner than a voxel).
     """
     triangles = np.ascontiguousarray(triangles, dtype=np.float64)
-    if not voxel_size > 0:
-        raise InputError("must be > 0 mm", field="voxel_size", value=voxel_size)
-    filled = voxelize(triangles, voxel_size, fill=True)
-    shell = voxelize(triangles, voxel_size, fill=False)
-    inside = filled.node_of >= 0
+    origin, on_surface = surface_voxels(triangles, voxel_size)
+    inside = ndimage.binary_fill_holes(on_surface)
     # voxels the surface passes through: their centre may lie on either side
-    on_surface = shell.node_of >= 0
-    candidates = np.argwhere(inside & on_surface)
-    centres = filled.origin + (candidates + 0.5) * voxel_size
+    candidates = np.argwhere(on_surface)
+    centres = origin + (candidates + 0.5) * voxel_size
     # either orientation: the magnitude is 1 inside a closed surface, 0 outside
     keep = np.abs(_winding_numbers(centres, triangles)) > 0.5
     inside[tuple(candidates[~keep].T)] = False
@@ -211,7 +224,7 @@ def diffusion_grid(triangles, voxel_size: float) -> DiffusionGrid:
                          field="voxel_size", value=voxel_size)
     node_of = np.full(inside.shape, -1, dtype=np.int32)
     node_of[tuple(ijk.T)] = np.arange(len(ijk), dtype=np.int32)
-    centers = filled.origin + (ijk + 0.5) * voxel_size
+    centers = origin + (ijk + 0.5) * voxel_size
     # the surface normal near each boundary face, from the nearest triangle centroid
     face_normal = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
     face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
@@ -235,21 +248,23 @@ def diffusion_grid(triangles, voxel_size: float) -> DiffusionGrid:
                 _, nearest = tree.query(centers[open_face] + 0.5 * voxel_size * offset)
                 norm1 = np.abs(face_normal[nearest]).sum(axis=1)
                 boundary_area[open_face] += voxel_size ** 2 / norm1
-    return DiffusionGrid(filled.origin, float(voxel_size), node_of, centers,
+    return DiffusionGrid(origin, float(voxel_size), node_of, centers,
                          np.concatenate(pairs).astype(np.int64), boundary_area)
 
 
 def _diffusion_terms(sigma_a, sigma_s_prime, eta):
+    """sigma_a, D, z_b = 2AD, z_r = 1/sigma'_t and sigma_tr per channel (mm, mm^-1)."""
     sigma_a = np.asarray(sigma_a, dtype=np.float64).reshape(-1)
     sigma_s_prime = np.asarray(sigma_s_prime, dtype=np.float64).reshape(-1)
-    sigma_t_prime = sigma_a + sigma_s_prime
     if not (np.all(sigma_a > 0) and np.all(sigma_s_prime > 0)):
         raise InputError("the escape probability needs sigma_a > 0 and sigma_s' > 0 mm^-1",
                          field="sigma_a, sigma_s_prime",
                          value=f"{sigma_a.tolist()}, {sigma_s_prime.tolist()}")
-    diffusion = 1.0 / (3.0 * sigma_t_prime)
+    source_depth = mean_free_path(sigma_a, sigma_s_prime)
+    diffusion = source_depth / 3.0
     extrapolation = 2.0 * float(dipole_boundary_factor(eta)) * diffusion
-    return sigma_a, diffusion, extrapolation, 1.0 / sigma_t_prime
+    sigma_tr = effective_transport_coefficient(sigma_a, sigma_s_prime)
+    return sigma_a, diffusion, extrapolation, source_depth, sigma_tr
 
 
 def _boundary_conductance(diffusion, extrapolation, h):
@@ -273,13 +288,10 @@ def escape_probability(grid: DiffusionGrid, sigma_a, sigma_s_prime, eta) -> np.n
     eta : float
         Relative index of refraction (the boundary factor A).
     """
-    sigma_a, diffusion, extrapolation, _ = _diffusion_terms(sigma_a, sigma_s_prime, eta)
+    sigma_a, diffusion, extrapolation, _, _ = _diffusion_terms(sigma_a, sigma_s_prime, eta)
     h = grid.voxel_size
     n = grid.cells
-    i, j = grid.pairs[:, 0], grid.pairs[:, 1]
-    laplacian = sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
-    laplacian = (laplacian + laplacian.T).tocsr()
-    degree = np.asarray(laplacian.sum(axis=1)).ravel()
+    laplacian, degree = grid.adjacency
     out = np.empty((n, len(sigma_a)))
     for c in range(len(sigma_a)):
         robin = grid.boundary_area * _boundary_conductance(diffusion[c], extrapolation[c], h)
@@ -304,13 +316,13 @@ def halfspace_escape_probability(depth, sigma_a, sigma_s_prime, eta, voxel_size:
     cell centres (and the face value above the first). Converges to
     :math:`e^{-\sigma_{tr}z}/(1 + 2AD\sigma_{tr})` as the cells shrink.
     """
-    sigma_a, diffusion, extrapolation, _ = _diffusion_terms(sigma_a, sigma_s_prime, eta)
+    sigma_a, diffusion, extrapolation, _, sigma_trs = _diffusion_terms(sigma_a, sigma_s_prime,
+                                                                       eta)
     h = float(voxel_size)
     depth = np.asarray(depth, dtype=np.float64)
     out = np.empty(depth.shape + (len(sigma_a),))
     for c in range(len(sigma_a)):
-        sigma_tr = math.sqrt(sigma_a[c] / diffusion[c])
-        count = int(max(np.max(depth, initial=0.0), 12.0 / sigma_tr) / h) + 4
+        count = int(max(np.max(depth, initial=0.0), 12.0 / sigma_trs[c]) / h) + 4
         robin = _boundary_conductance(diffusion[c], extrapolation[c], h)
         main = np.full(count, sigma_a[c] * h + 2.0 * diffusion[c] / h)
         main[0] += robin - diffusion[c] / h
@@ -365,7 +377,7 @@ def finite_object_gain(grid: DiffusionGrid, points, normals, sigma_a, sigma_s_pr
     """
     sigma_a = np.atleast_1d(np.asarray(sigma_a, dtype=np.float64))
     sigma_s_prime = np.atleast_1d(np.asarray(sigma_s_prime, dtype=np.float64))
-    sigma_a, _, _, source_depth = _diffusion_terms(sigma_a, sigma_s_prime, eta)
+    sigma_a, _, _, source_depth, _ = _diffusion_terms(sigma_a, sigma_s_prime, eta)
     if escape is None:
         escape = escape_probability(grid, sigma_a, sigma_s_prime, eta)
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -395,9 +407,7 @@ def source_escape_probability(sigma_a, sigma_s_prime, eta) -> np.ndarray:
     1.01x at eta = 1.3, 1.24x at eta = 1.5 near albedo 0.7), so a gain applied to
     :math:`R_d` alone could create energy.
     """
-    sigma_a, diffusion, extrapolation, source_depth = _diffusion_terms(sigma_a, sigma_s_prime,
-                                                                       eta)
-    sigma_tr = np.sqrt(sigma_a / diffusion)
+    _, _, extrapolation, source_depth, sigma_tr = _diffusion_terms(sigma_a, sigma_s_prime, eta)
     return np.exp(-sigma_tr * source_depth) / (1.0 + extrapolation * sigma_tr)
 
 
@@ -418,8 +428,7 @@ def slab_gain(depth, thickness, sigma_a, sigma_s_prime, eta) -> np.ndarray:
         mm^-1, > 0.
     eta : float
     """
-    sigma_a, diffusion, extrapolation, _ = _diffusion_terms(sigma_a, sigma_s_prime, eta)
-    sigma_tr = np.sqrt(sigma_a / diffusion)
+    _, _, extrapolation, _, sigma_tr = _diffusion_terms(sigma_a, sigma_s_prime, eta)
     half = sigma_tr * thickness / 2.0
     slab = np.cosh(sigma_tr * (depth - thickness / 2.0)) / (
         np.cosh(half) + extrapolation * sigma_tr * np.sinh(half))

@@ -40,6 +40,7 @@ __all__ = [
     "mesh_volume",
     "optical_distances",
     "subdivision_barycentrics",
+    "surface_voxels",
     "voxelize",
     "welded_faces",
 ]
@@ -228,6 +229,40 @@ def _compiled_segment_test():
     return segment_test
 
 
+def surface_voxels(triangles, voxel_size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mark the voxels a surface passes through (dense point samples of every triangle).
+
+    Parameters
+    ----------
+    triangles : ndarray, shape (F, 3, 3)
+        Triangle corners, mm.
+    voxel_size : float
+        mm, > 0.
+
+    Returns
+    -------
+    origin : ndarray, shape (3,)
+        Corner of voxel (0, 0, 0), mm: one voxel of margin below the surface's box.
+    occupied : ndarray of bool, shape (nx, ny, nz)
+    """
+    triangles = np.asarray(triangles, dtype=np.float64)
+    if not voxel_size > 0:
+        raise InputError("must be > 0 mm", field="voxel_size", value=voxel_size)
+    lower = triangles.reshape(-1, 3).min(axis=0) - voxel_size
+    upper = triangles.reshape(-1, 3).max(axis=0) + voxel_size
+    shape = np.ceil((upper - lower) / voxel_size).astype(np.int64) + 1
+    occupied = np.zeros(tuple(shape), dtype=bool)
+    edge = np.linalg.norm(triangles - np.roll(triangles, 1, axis=1), axis=2).max(axis=1)
+    splits = np.maximum(1, np.ceil(edge / voxel_size * SURFACE_POINTS_PER_VOXEL)).astype(int)
+    for m in np.unique(splits):
+        rows = triangles[splits == m]
+        weights = np.concatenate([subdivision_barycentrics(int(m)), np.eye(3)])
+        points = np.einsum("sk,fkd->fsd", weights, rows).reshape(-1, 3)
+        ijk = np.floor((points - lower) / voxel_size).astype(np.int64)
+        occupied[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = True
+    return lower, occupied
+
+
 def voxelize(triangles, voxel_size: float, *, fill: bool = True) -> VoxelGrid:
     """Voxelise a surface (and, when ``fill``, the volume it encloses).
 
@@ -245,23 +280,10 @@ def voxelize(triangles, voxel_size: float, *, fill: bool = True) -> VoxelGrid:
     -------
     VoxelGrid
     """
-    triangles = np.asarray(triangles, dtype=np.float64)
-    if not voxel_size > 0:
-        raise InputError("must be > 0 mm", field="voxel_size", value=voxel_size)
-    lower = triangles.reshape(-1, 3).min(axis=0) - voxel_size
-    upper = triangles.reshape(-1, 3).max(axis=0) + voxel_size
-    shape = np.ceil((upper - lower) / voxel_size).astype(np.int64) + 1
-    occupied = np.zeros(tuple(shape), dtype=bool)
-    edge = np.linalg.norm(triangles - np.roll(triangles, 1, axis=1), axis=2).max(axis=1)
-    splits = np.maximum(1, np.ceil(edge / voxel_size * SURFACE_POINTS_PER_VOXEL)).astype(int)
-    for m in np.unique(splits):
-        rows = triangles[splits == m]
-        weights = np.concatenate([subdivision_barycentrics(int(m)), np.eye(3)])
-        points = np.einsum("sk,fkd->fsd", weights, rows).reshape(-1, 3)
-        ijk = np.floor((points - lower) / voxel_size).astype(np.int64)
-        occupied[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = True
+    lower, occupied = surface_voxels(triangles, voxel_size)
     if fill:
         occupied = ndimage.binary_fill_holes(occupied)
+    shape = np.array(occupied.shape)
     node_of = np.full(occupied.shape, -1, dtype=np.int32)
     ijk = np.argwhere(occupied)
     node_of[tuple(ijk.T)] = np.arange(len(ijk), dtype=np.int32)

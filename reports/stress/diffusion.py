@@ -24,7 +24,11 @@ from ...fast.diffusion_escape import (
     slab_gain,
     source_escape_probability,
 )
-from ...materials.dipole import total_diffuse_reflectance
+from ...materials.dipole import (
+    effective_transport_coefficient,
+    mean_free_path,
+    total_diffuse_reflectance,
+)
 from ...scenes.meshes import box
 from . import StressResult, count_nonfinite, stress_kernel
 
@@ -66,9 +70,8 @@ def finite_object_gain_sweep(sigma_as=SIGMA_A, sigma_s_primes=SIGMA_S_PRIME,
         count_nonfinite([gain], result)
         result.negative += int((escape > 1.0 + ABOVE_ONE).sum()) + \
             int(ceiling * gain > 1.0 + ABOVE_ONE)
-        sigma_t_prime = sigma_a + sigma_s_prime
-        diffusion_length = 1.0 / np.sqrt(3.0 * sigma_a * sigma_t_prime)
-        source_depth = 1.0 / sigma_t_prime
+        diffusion_length = 1.0 / effective_transport_coefficient(sigma_a, sigma_s_prime)
+        source_depth = mean_free_path(sigma_a, sigma_s_prime)
         case = {"sigma_a": sigma_a, "sigma_s_prime": sigma_s_prime, "eta": eta,
                 "gain": float(gain), "escape_min": float(escape.min()),
                 "escape_max": float(escape.max())}
