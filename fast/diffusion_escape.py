@@ -311,22 +311,25 @@ def halfspace_escape_probability(depth, sigma_a, sigma_s_prime, eta, voxel_size:
 
     Returns shape ``depth.shape + (C,)``.
 
-    One column of cells of side ``voxel_size`` below a Robin face, deep enough
-    (:math:`12/\sigma_{tr}`) that the bottom does not matter; linear interpolation between
+    One column of cells of side ``voxel_size`` below a Robin face, a few cells deeper than
+    the deepest reading; below it the scheme's own decaying solution, :math:`e_{k+1} = r e_k`
+    with :math:`r + 1/r = 2 + \sigma_a h^2/D`, closes the column, so that it is the infinite
+    column's solution at any depth and any diffusion length. Linear interpolation between
     cell centres (and the face value above the first). Converges to
     :math:`e^{-\sigma_{tr}z}/(1 + 2AD\sigma_{tr})` as the cells shrink.
     """
-    sigma_a, diffusion, extrapolation, _, sigma_trs = _diffusion_terms(sigma_a, sigma_s_prime,
-                                                                       eta)
+    sigma_a, diffusion, extrapolation, _, _ = _diffusion_terms(sigma_a, sigma_s_prime, eta)
     h = float(voxel_size)
     depth = np.asarray(depth, dtype=np.float64)
     out = np.empty(depth.shape + (len(sigma_a),))
+    count = int(np.max(depth, initial=0.0) / h) + 4
     for c in range(len(sigma_a)):
-        count = int(max(np.max(depth, initial=0.0), 12.0 / sigma_trs[c]) / h) + 4
+        q = sigma_a[c] * h * h / diffusion[c]
+        decay = 1.0 / (1.0 + 0.5 * q + math.sqrt(q + 0.25 * q * q))  # the root below 1
         robin = _boundary_conductance(diffusion[c], extrapolation[c], h)
         main = np.full(count, sigma_a[c] * h + 2.0 * diffusion[c] / h)
         main[0] += robin - diffusion[c] / h
-        main[-1] -= diffusion[c] / h
+        main[-1] -= decay * diffusion[c] / h
         off = np.full(count - 1, -diffusion[c] / h)
         matrix = sparse.diags([off, main, off], [-1, 0, 1], format="csc")
         rhs = np.zeros(count)
