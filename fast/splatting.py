@@ -151,9 +151,10 @@ DEFAULT_KNOBS: dict = {
     "profile_upsampling": False,    # Eq. 17 on B / sqrt(P_o): see upsampling_profile_factors
 }
 #: The splatting kernels: compiled loops (numba, the default: measured fastest on the CPU,
-#: see reports/bench/splatting.py), Dr.Jit (LLVM on the CPU, CUDA where a GPU is there) and
-#: plain numpy (the reference the others are tested against).
-BACKENDS = ("numba", "drjit", "numpy")
+#: see reports/bench/splatting.py), CUDA (numba.cuda, :mod:`.splatting_cuda`: the same tiles
+#: on a GPU), Dr.Jit (LLVM on the CPU, CUDA where a GPU is there) and plain numpy (the
+#: reference the others are tested against).
+BACKENDS = ("numba", "cuda", "drjit", "numpy")
 
 #: Pairs evaluated at once by the numpy splatting kernel (bounds its memory to ~1 GB).
 PAIR_CHUNK = 1 << 21
@@ -674,14 +675,14 @@ def splat_level(samples: IrradianceSamples, bounds_low: np.ndarray, bounds_high:
     if not len(index):
         return exitance.reshape(height, width, 3)
     scale = float(mm_per_unit) ** 2  # mm^-2 -> per scene unit squared
-    kernels = {"numba": None, "numpy": _NumpyKernel, "drjit": _DrJitKernel}
+    kernels = {"numba": None, "cuda": None, "numpy": _NumpyKernel, "drjit": _DrJitKernel}
     if backend not in kernels:
         raise InputError(f"unknown backend; valid: {', '.join(kernels)}", field="backend",
                          value=backend)
-    if backend == "numba":
-        exitance, pairs = _splat_numba(samples, bounds_low, bounds_high, level, level_texel,
+    if kernels[backend] is None:
+        exitance, pairs = _splat_tiled(samples, bounds_low, bounds_high, level, level_texel,
                                        material, mm_per_unit, scale, index, centre_x,
-                                       centre_y, reach_pixels)
+                                       centre_y, reach_pixels, gpu=backend == "cuda")
         if stats is not None:
             stats["pairs"] = stats.get("pairs", 0) + pairs[0]
             stats["pairs in range"] = stats.get("pairs in range", 0) + pairs[1]
@@ -702,11 +703,19 @@ def splat_level(samples: IrradianceSamples, bounds_low: np.ndarray, bounds_high:
     return kernel.result().reshape(height, width, 3)
 
 
-def _splat_numba(samples, bounds_low, bounds_high, level, level_texel, material, mm_per_unit,
-                 scale, index, centre_x, centre_y, radius):
-    """Run the compiled kernel of :func:`splat_level` (:func:`.splatting_kernels.splat_tiles`)."""
+def _splat_tiled(samples, bounds_low, bounds_high, level, level_texel, material, mm_per_unit,
+                 scale, index, centre_x, centre_y, radius, gpu=False):
+    """Run the tiled kernel of :func:`splat_level` (numba on the CPU, or CUDA).
+
+    Samples are binned to tiles on the CPU, then :func:`.splatting_kernels.splat_tiles` or
+    :func:`.splatting_cuda.splat_tiles` splats them.
+    """
     from . import splatting_kernels as kernels
 
+    if gpu:
+        from .splatting_cuda import splat_tiles
+    else:
+        splat_tiles = kernels.splat_tiles
     height, width = level.shape
     position, texel, tile_bounds, tiles_y, tiles_x = kernels.tile_layout(
         np.moveaxis(level.position, -1, 0), level_texel, level.valid)
@@ -722,7 +731,7 @@ def _splat_numba(samples, bounds_low, bounds_high, level, level_texel, material,
         (radius * (1.0 + 1e-5) + (0.5 * math.sqrt(2.0) + 1e-3)).astype(np.float32),
         low2, high2)
     out = np.empty(position.shape, dtype=np.float32)
-    used = kernels.splat_tiles(
+    used = splat_tiles(
         out, position, texel, _segment_table(material),
         np.float32(material.segments / (material.r_s / mm_per_unit)), sample_position,
         samples.texel[index].astype(np.int32),
@@ -988,8 +997,11 @@ def brute_force_exitance(samples: IrradianceSamples, buffer: SurfaceBuffer,
         return exitance.reshape(height, width, 3)
     position = buffer.position.reshape(-1, 3)[pixels]
     texel_out = material.texel_index(buffer.uv.reshape(-1, 2)[pixels])
-    if backend == "numba":
-        from .splatting_kernels import gather_samples
+    if backend in ("numba", "cuda"):
+        if backend == "cuda":
+            from .splatting_cuda import gather_samples
+        else:
+            from .splatting_kernels import gather_samples
 
         gathered = np.zeros((len(pixels), 3))
         gather_samples(gathered, np.ascontiguousarray(position.T, dtype=np.float32),

@@ -622,8 +622,8 @@ def test_applies_to_and_knob_errors(heterogeneous_scene):
     with pytest.raises(InputError, match=r"levels = 0: must be an integer in \[1, 8192\]"):
         splatting.precompute(heterogeneous_scene, levels=0)
     with pytest.raises(InputError,
-                       match="backend = 'cuda': must be one of 'numba', 'drjit', 'numpy'"):
-        splatting.precompute(heterogeneous_scene, backend="cuda")
+                       match="backend = 'opencl': must be one of 'numba', 'cuda', 'drjit'"):
+        splatting.precompute(heterogeneous_scene, backend="opencl")
     with pytest.raises(InputError, match="buffers = 'gpu': must be one of 'raster', 'mitsuba'"):
         splatting.precompute(heterogeneous_scene, buffers="gpu")
     with pytest.raises(InputError, match="sampling_range = 'red': must be one of 'shortest'"):

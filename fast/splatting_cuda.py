@@ -1,0 +1,238 @@
+r"""CUDA kernels of the multiresolution splatting method (Chen et al. 2012), via numba.cuda.
+
+The GPU counterpart of :func:`translucent.fast.splatting_kernels.splat_tiles` (Eq. 12,
+backend ``"cuda"`` of :func:`translucent.fast.splatting.splat_level`): one thread block
+per tile of :data:`~translucent.fast.splatting_kernels.TILE` x ``TILE`` pixels, one thread
+per pixel. The block walks the samples binned to its tile
+(:func:`~translucent.fast.splatting_kernels.bin_samples`, on the CPU) in chunks staged in
+shared memory; each thread tests its pixel's distance against the sample's
+:math:`[R^k_{min}, R^k_{max})` and adds :math:`\sqrt{P_{x_o}(d)P_{x_i}(d)}\,\Phi_s`
+(Eq. 8-9) in registers. Each thread owns its pixel and visits the samples in the CPU
+kernel's order, so both add the same float32 terms in the same order; they differ by the
+exponential (the GPU's ``__expf`` under fastmath, relative error of a few 1e-6 over the
+profile's range) and by where multiply-adds are fused.
+
+Without a GPU the same kernels run in numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``),
+which is how they are tested on machines without one.
+
+References
+----------
+Chen, Peers, Zhang, Tong: Real-time rendering of deformable heterogeneous translucent
+objects using multiresolution splatting. The Visual Computer (2012).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import cuda, float32, float64, int32
+
+from ..errors import InputError
+
+__all__ = ["available", "splat_tiles", "gather_samples", "SAMPLES_PER_CHUNK"]
+
+#: Samples staged in shared memory at a time by :func:`splat_tiles` (one per thread of an
+#: 8 x 8 tile: each thread loads one).
+SAMPLES_PER_CHUNK = 64
+#: Threads per block of the brute-force gather.
+_GATHER_THREADS = 128
+
+
+def available() -> bool:
+    """Return True when numba.cuda can run kernels here (a GPU, or the simulator)."""
+    try:
+        return bool(cuda.is_available())
+    except Exception:  # noqa: BLE001 - a broken driver reads as "no GPU"
+        return False
+
+
+def _require():
+    if not available():
+        raise InputError("backend 'cuda' needs a CUDA GPU that numba.cuda can use (or "
+                         "NUMBA_ENABLE_CUDASIM=1 for the simulator); use backend 'numba'",
+                         field="backend", value="cuda")
+
+
+@cuda.jit(fastmath=True)
+def _splat(out, used, position, texel, table, step_inverse, sample_position,
+          sample_texel, sample_flux, low2, high2, start, members):
+    tile = cuda.blockIdx.x
+    lane = cuda.threadIdx.x
+    shared_x = cuda.shared.array(SAMPLES_PER_CHUNK, float32)
+    shared_y = cuda.shared.array(SAMPLES_PER_CHUNK, float32)
+    shared_z = cuda.shared.array(SAMPLES_PER_CHUNK, float32)
+    shared_low = cuda.shared.array(SAMPLES_PER_CHUNK, float32)
+    shared_high = cuda.shared.array(SAMPLES_PER_CHUNK, float32)
+    shared_texel = cuda.shared.array(SAMPLES_PER_CHUNK, int32)
+    shared_flux = cuda.shared.array((SAMPLES_PER_CHUNK, 3), float32)
+    px = position[tile, 0, lane]
+    py = position[tile, 1, lane]
+    pz = position[tile, 2, lane]
+    label = texel[tile, lane]
+    segments = table.shape[1]
+    support = float32(segments)
+    red = float32(0.0)
+    green = float32(0.0)
+    blue = float32(0.0)
+    pairs = 0
+    first = start[tile]
+    last = start[tile + 1]
+    for base in range(first, last, SAMPLES_PER_CHUNK):
+        cuda.syncthreads()  # the previous chunk is read by every thread
+        if lane < SAMPLES_PER_CHUNK and base + lane < last:
+            s = members[base + lane]
+            shared_x[lane] = sample_position[0, s]
+            shared_y[lane] = sample_position[1, s]
+            shared_z[lane] = sample_position[2, s]
+            shared_low[lane] = low2[s]
+            shared_high[lane] = high2[s]
+            shared_texel[lane] = sample_texel[s]
+            shared_flux[lane, 0] = sample_flux[s, 0]
+            shared_flux[lane, 1] = sample_flux[s, 1]
+            shared_flux[lane, 2] = sample_flux[s, 2]
+        cuda.syncthreads()
+        if label < 0:
+            continue
+        for m in range(min(SAMPLES_PER_CHUNK, last - base)):
+            dx = px - shared_x[m]
+            dy = py - shared_y[m]
+            dz = pz - shared_z[m]
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 < shared_low[m] or d2 >= shared_high[m]:
+                continue
+            at = math.sqrt(d2) * step_inverse
+            if at >= support:
+                continue
+            k = int32(at)
+            w = at - float32(k)
+            own = shared_texel[m]
+            red += math.exp((table[label, k, 0] + table[own, k, 0]) +
+                            w * (table[label, k, 3] + table[own, k, 3])) * shared_flux[m, 0]
+            green += math.exp((table[label, k, 1] + table[own, k, 1]) +
+                              w * (table[label, k, 4] + table[own, k, 4])) * \
+                shared_flux[m, 1]
+            blue += math.exp((table[label, k, 2] + table[own, k, 2]) +
+                             w * (table[label, k, 5] + table[own, k, 5])) * \
+                shared_flux[m, 2]
+            pairs += 1
+    out[tile, 0, lane] = red
+    out[tile, 1, lane] = green
+    out[tile, 2, lane] = blue
+    if pairs:
+        cuda.atomic.add(used, tile, pairs)
+
+@cuda.jit(fastmath=True)
+def _gather(out, pixel_position, pixel_texel, table, step_inverse, sample_position,
+           sample_texel, sample_flux):
+    pixel = cuda.grid(1)
+    if pixel >= pixel_texel.shape[0]:
+        return
+    px = pixel_position[0, pixel]
+    py = pixel_position[1, pixel]
+    pz = pixel_position[2, pixel]
+    label = pixel_texel[pixel]
+    segments = table.shape[1]
+    support = float32(segments)
+    # float64 sums: hundreds of thousands of terms per pixel (the CPU kernel's too)
+    red = float64(0.0)
+    green = float64(0.0)
+    blue = float64(0.0)
+    for s in range(sample_texel.shape[0]):
+        dx = px - sample_position[0, s]
+        dy = py - sample_position[1, s]
+        dz = pz - sample_position[2, s]
+        at = math.sqrt(dx * dx + dy * dy + dz * dz) * step_inverse
+        if at >= support:
+            continue
+        k = int32(at)
+        w = at - float32(k)
+        own = sample_texel[s]
+        red += math.exp((table[label, k, 0] + table[own, k, 0]) +
+                        w * (table[label, k, 3] + table[own, k, 3])) * sample_flux[0, s]
+        green += math.exp((table[label, k, 1] + table[own, k, 1]) +
+                          w * (table[label, k, 4] + table[own, k, 4])) * sample_flux[1, s]
+        blue += math.exp((table[label, k, 2] + table[own, k, 2]) +
+                         w * (table[label, k, 5] + table[own, k, 5])) * sample_flux[2, s]
+    out[pixel, 0] = red
+    out[pixel, 1] = green
+    out[pixel, 2] = blue
+
+
+#: Segment tables on the device, by the identity of the host array (which each entry keeps
+#: alive, so that the identity is not reused): ``splatting._segment_table`` returns one
+#: array per material, so a material's table is uploaded once.
+_DEVICE_TABLES: dict[int, tuple] = {}
+#: Device tables kept at most (the oldest is dropped first).
+_DEVICE_TABLES_KEPT = 8
+
+
+def _table_on_device(table: np.ndarray):
+    entry = _DEVICE_TABLES.get(id(table))
+    if entry is None or entry[0] is not table:
+        if len(_DEVICE_TABLES) >= _DEVICE_TABLES_KEPT:
+            _DEVICE_TABLES.pop(next(iter(_DEVICE_TABLES)))
+        entry = (table, cuda.to_device(np.ascontiguousarray(table, np.float32)))
+        _DEVICE_TABLES[id(table)] = entry
+    return entry[1]
+
+
+def splat_tiles(out, position, texel, table, step_inverse, sample_position, sample_texel,
+                sample_flux, low2, high2, start, members):
+    r"""Eq. 12 of Chen et al. 2012 on the GPU; arguments and result as the CPU kernel's.
+
+    See :func:`translucent.fast.splatting_kernels.splat_tiles` for the arrays (host numpy
+    arrays here; ``table`` is uploaded once and kept on the device).
+
+    Returns
+    -------
+    ndarray (tiles,) int64
+        Sample-pixel pairs within range per tile; ``out`` is written.
+    """
+    _require()
+    tiles, _, lanes = position.shape
+    if tiles == 0:
+        return np.zeros(0, np.int64)
+    if lanes > SAMPLES_PER_CHUNK and lanes % SAMPLES_PER_CHUNK:
+        raise InputError("tile lanes must be at most, or a multiple of, SAMPLES_PER_CHUNK",
+                         field="position.shape[2]", value=lanes)
+    if len(members) == 0:  # nothing binned: no launch (and no empty transfers)
+        out[...] = 0.0
+        return np.zeros(tiles, np.int64)
+    stream = cuda.stream()
+    device_out = cuda.device_array(out.shape, np.float32, stream=stream)
+    used = cuda.to_device(np.zeros(tiles, np.int64), stream=stream)
+    arguments = [cuda.to_device(np.ascontiguousarray(array), stream=stream) for array in (
+        position, texel)]
+    samples = [cuda.to_device(np.ascontiguousarray(array), stream=stream) for array in (
+        sample_position, sample_texel, sample_flux, low2, high2, start, members)]
+    _splat[tiles, lanes, stream](device_out, used, *arguments, _table_on_device(table),
+                                np.float32(step_inverse), *samples)
+    device_out.copy_to_host(out, stream=stream)
+    counts = used.copy_to_host(stream=stream)
+    stream.synchronize()
+    return counts
+
+
+def gather_samples(out, pixel_position, pixel_texel, table, step_inverse, sample_position,
+                   sample_texel, sample_flux):
+    r"""Eq. 5 by brute force on the GPU, as :func:`.splatting_kernels.gather_samples`.
+
+    ``out`` (pixels, 3) receives the sums (float64, each term float32); ``sample_flux``
+    is (3, N).
+    """
+    _require()
+    pixels = len(pixel_texel)
+    if pixels == 0 or len(sample_texel) == 0:
+        out[...] = 0.0
+        return
+    device_out = cuda.device_array((pixels, 3), np.float64)
+    blocks = -(-pixels // _GATHER_THREADS)
+    _gather[blocks, _GATHER_THREADS](
+        device_out, cuda.to_device(np.ascontiguousarray(pixel_position, np.float32)),
+        cuda.to_device(np.ascontiguousarray(pixel_texel, np.int32)), _table_on_device(table),
+        np.float32(step_inverse),
+        cuda.to_device(np.ascontiguousarray(sample_position, np.float32)),
+        cuda.to_device(np.ascontiguousarray(sample_texel, np.int32)),
+        cuda.to_device(np.ascontiguousarray(sample_flux, np.float32)))
+    out[...] = device_out.copy_to_host()
