@@ -47,10 +47,12 @@ Departures from the paper, each a knob or documented where it is made:
   splatting level may take irradiance samples as sparse as its own pixels. The paper
   selects once for all levels, though it mentions running the selection "several times
   ... to generate splatting kernels for each scale".
-* Optional, off by default (``profile_upsampling``, :func:`upsampling_profile_factors`):
-  Eq. 17 upsamples the coarse exitance divided by a per-texel profile factor and
-  multiplies the fine pixel's own back in, so that material boundaries of the texture
-  are not blurred by the coarse levels (the identity for a homogeneous material).
+* On by default (``profile_upsampling``, :func:`upsampling_profile_factors`; off gives
+  Eq. 17 as published): Eq. 17 upsamples the coarse exitance divided by a per-texel
+  profile factor and multiplies the fine pixel's own back in, so that material boundaries
+  of the texture are not blurred by the coarse levels (the identity for a homogeneous
+  material). On the heterogeneous scene it takes the error against brute force from 1.11x
+  to 0.995x that of splatting without acceleration, at the same cost.
 
 The loops run compiled (:mod:`translucent.fast.splatting_kernels`, numba): each level is
 cut into tiles of 8 x 8 pixels, each sample is binned to the tiles its range can reach
@@ -87,6 +89,7 @@ objects using multiresolution splatting. The Visual Computer (2012).
 
 from __future__ import annotations
 
+import argparse
 import functools
 import math
 import time
@@ -148,7 +151,7 @@ DEFAULT_KNOBS: dict = {
     "buffers": "raster",            # G-buffers: "raster" (z-buffer) or "mitsuba" (ray queries)
     "sampling_range": "shortest",   # RGB reading of Eq. 11's range, one of SAMPLING_RANGES
     "level_sampling": 0.0,          # > 0: coarser samples for coarse splatting levels (pixels)
-    "profile_upsampling": False,    # Eq. 17 on B / sqrt(P_o): see upsampling_profile_factors
+    "profile_upsampling": True,     # Eq. 17 on B / sqrt(P_o): see upsampling_profile_factors
 }
 #: The splatting kernels: compiled loops (numba, the default: measured fastest on the CPU,
 #: see reports/bench/splatting.py), CUDA (numba.cuda, :mod:`.splatting_cuda`: the same tiles
@@ -1600,9 +1603,11 @@ def add_approx_arguments(parser) -> None:
                         help="coarse splatting levels take irradiance samples as sparse as "
                              "this many of their pixels (default 0: the paper's one "
                              "selection for every level)")
-    parser.add_argument("--profile-upsampling", action="store_true",
+    parser.add_argument("--profile-upsampling", action=argparse.BooleanOptionalAction,
+                        default=DEFAULT_KNOBS["profile_upsampling"],
                         help="upsample coarse levels divided by each texel's profile factor "
-                             "(upsampling_profile_factors; default: Eq. 17 as published)")
+                             "(upsampling_profile_factors; default on; --no-profile-upsampling"
+                             ": Eq. 17 as published)")
     parser.add_argument("--material", default=None,
                         help="replace the translucent material: a built-in SubEdit name "
                              "(checker, veined_marble, wax_gradient) or a SubEdit .npz file")

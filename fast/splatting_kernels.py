@@ -109,6 +109,9 @@ FEWEST_IN_VECTORS = 8
 #: ln of the value given to a pair outside its range before the exponential: exp(-87) is
 #: below float32's smallest normal number times any flux, so the pair adds nothing.
 _OUTSIDE = np.float32(-1000.0)
+#: Chunks of samples listed per row in parallel by :func:`bin_samples` (a constant, so that
+#: the kernel can be cached; several per thread up to 16 threads).
+_BIN_CHUNKS = 64
 #: Samples per block of the brute-force gather (its scratch stays in the L1/L2 caches).
 _GATHER_BLOCK = 1024
 
@@ -269,21 +272,36 @@ def bin_samples(bounds, tiles_y, tiles_x, sample_position, centre_x, centre_y, r
     members : ndarray int32
     """
     count = sample_position.shape[1]
-    row_start = np.zeros(tiles_y + 1, np.int64)
     first_row = np.empty(count, np.int64)
     last_row = np.empty(count, np.int64)
-    for s in range(count):
+    for s in numba.prange(count):
         first_row[s] = max(int(math.floor((centre_y[s] - radius[s]) / TILE)), 0)
         last_row[s] = min(int(math.floor((centre_y[s] + radius[s]) / TILE)), tiles_y - 1)
-        for row in range(first_row[s], last_row[s] + 1):
-            row_start[row + 1] += 1
-    _prefix_sum(row_start)
-    row_members = np.empty(row_start[-1], np.int32)
-    cursor = row_start[:-1].copy()
-    for s in range(count):
-        for row in range(first_row[s], last_row[s] + 1):
-            row_members[cursor[row]] = s
-            cursor[row] += 1
+    # rows' member lists in parallel over chunks of samples: each chunk counts its samples
+    # per row, the counts are laid out row by row and chunk by chunk, then each chunk fills
+    # its slots, so every row lists its samples in input order as a serial pass would
+    chunks = max(1, min(count, _BIN_CHUNKS))
+    per_chunk = np.zeros((chunks, tiles_y), np.int64)
+    for chunk in numba.prange(chunks):
+        for s in range(chunk * count // chunks, (chunk + 1) * count // chunks):
+            for row in range(first_row[s], last_row[s] + 1):
+                per_chunk[chunk, row] += 1
+    row_start = np.zeros(tiles_y + 1, np.int64)
+    running = 0
+    for row in range(tiles_y):
+        row_start[row] = running
+        for chunk in range(chunks):
+            count_here = per_chunk[chunk, row]
+            per_chunk[chunk, row] = running
+            running += count_here
+    row_start[tiles_y] = running
+    row_members = np.empty(running, np.int32)
+    for chunk in numba.prange(chunks):
+        cursor = per_chunk[chunk].copy()
+        for s in range(chunk * count // chunks, (chunk + 1) * count // chunks):
+            for row in range(first_row[s], last_row[s] + 1):
+                row_members[cursor[row]] = s
+                cursor[row] += 1
     # room for every (sample, tile) candidate of each row, before culling
     room = np.zeros(tiles_y + 1, np.int64)
     for row in numba.prange(tiles_y):

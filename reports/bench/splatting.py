@@ -86,11 +86,14 @@ def add_arguments(parser):
                              "empty for none)")
     parser.add_argument("--level-samplings", default="1",
                         help="extra 'both' rows with per-level irradiance sampling at these "
-                             "pitches in pixels, at every epsilon (comma-separated; empty "
-                             "for none)")
-    parser.add_argument("--no-profile-upsampling", action="store_true",
-                        help="leave out the rows with profile upsampling (see "
-                             "translucent.fast.splatting.upsampling_profile_factors)")
+                             "pitches in pixels (comma-separated; empty for none)")
+    parser.add_argument("--levels-list", default="5",
+                        help="extra 'both' rows with this many splatting levels, alone and "
+                             "with each level sampling (comma-separated; empty for none)")
+    parser.add_argument("--no-published", action="store_true",
+                        help="leave out the row with Eq. 17 as published (no profile "
+                             "factors; see translucent.fast.splatting."
+                             "upsampling_profile_factors)")
 
 
 def relative_error(test: np.ndarray, reference: np.ndarray, axis=None):
@@ -105,22 +108,23 @@ def _strided(buffer: splatting.SurfaceBuffer, stride: int) -> splatting.SurfaceB
         "position", "normal", "uv", "depth", "valid", "footprint")))
 
 
-def _rows(names, epsilons, pitches, profile_upsampling):
+def _rows(names, epsilons, pitches, level_counts, published):
+    """Return the ablation rows, then 'both' with one accuracy knob changed at a time."""
     rows = {name: dict(SETTINGS[name]) for name in names}
-    for upsampling in [False] + ([True] if profile_upsampling else []):
+    both = SETTINGS["both"]
+    if published:
+        rows["both, Eq. 17 as published"] = {**both, "profile_upsampling": False}
+    for epsilon in epsilons:
+        rows[f"both, epsilon {epsilon:g}"] = {**both, "epsilon": epsilon}
+    for levels in [None] + [int(count) for count in level_counts]:
         for pitch in [0.0] + pitches:
-            for epsilon in [None] + epsilons:
-                if not upsampling and pitch == 0.0 and epsilon is None:
-                    continue
-                label = ", ".join(part for part in (
-                    "both", None if epsilon is None else f"epsilon {epsilon:g}",
-                    None if pitch == 0.0 else f"level sampling {pitch:g}",
-                    "profile upsampling" if upsampling else None) if part)
-                knobs = {**SETTINGS["both"], "level_sampling": pitch,
-                         "profile_upsampling": upsampling}
-                if epsilon is not None:
-                    knobs["epsilon"] = epsilon
-                rows[label] = knobs
+            if levels is None and pitch == 0.0:
+                continue
+            label = ", ".join(part for part in (
+                "both", None if levels is None else f"{levels} levels",
+                None if pitch == 0.0 else f"level sampling {pitch:g}") if part)
+            rows[label] = {**both, "level_sampling": pitch,
+                           **({} if levels is None else {"levels": levels})}
     return rows
 
 
@@ -154,6 +158,10 @@ def run(args) -> int:
                          value=unknown)
     epsilons = _numbers(args.epsilons, "--epsilons")
     pitches = _numbers(args.level_samplings, "--level-samplings")
+    level_counts = _numbers(args.levels_list, "--levels-list")
+    if any(count != int(count) or not 1 <= count <= 12 for count in level_counts):
+        raise InputError("must be integers in [1, 12]", field="--levels-list",
+                         value=args.levels_list)
     if args.validation_stride < 1:
         raise InputError("must be >= 1", field="--validation-stride",
                          value=args.validation_stride)
@@ -175,8 +183,8 @@ def run(args) -> int:
     results = {}
     warm = False
     load_before = os.getloadavg()
-    for name, knobs in _rows(names, epsilons, pitches,
-                                       not args.no_profile_upsampling).items():
+    for name, knobs in _rows(names, epsilons, pitches, level_counts,
+                             not args.no_published).items():
         state = splatting.precompute(full, **common, **knobs)
         # Eq. 14's table depends on the material alone: the paper precomputes it
         splatting.rendering_radius_table(material, state.knobs["epsilon"])

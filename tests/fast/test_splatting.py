@@ -639,12 +639,12 @@ def test_approx_command_writes_an_exr(tmp_path):
     out = tmp_path / "het.exr"
     code = main(["approx", "splatting", str(CATALOGUE_DIR / "heterogeneous.toml"), "--out",
                  str(out), "--irradiance-resolution", "32", "--material", "checker",
-                 "--level-sampling", "1", "--profile-upsampling"])
+                 "--level-sampling", "1", "--no-profile-upsampling"])
     assert code == 0
     image = read_exr(out)
     assert image.metadata["producer"] == "splatting" and image.rgb.sum() > 0
     knobs = image.metadata["knobs"]
-    assert knobs["level_sampling"] == 1.0 and knobs["profile_upsampling"] is True
+    assert knobs["level_sampling"] == 1.0 and knobs["profile_upsampling"] is False
 
 
 @pytest.mark.parametrize("view", ["camera", "point light", "directional light"])
