@@ -741,8 +741,7 @@ def _splat_tiled(samples, bounds_low, bounds_high, level, level_texel, material,
         np.ascontiguousarray(samples.flux[index] * scale, dtype=np.float32), low2, high2,
         start, members)
     visited = len(members) * kernels.TILE ** 2
-    return (kernels.untile(out, tiles_y, tiles_x, height, width).astype(np.float64),
-            [visited, int(used.sum())])
+    return (kernels.untile_float64(out, tiles_x, height, width), [visited, int(used.sum())])
 
 
 @functools.lru_cache(maxsize=16)

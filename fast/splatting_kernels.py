@@ -80,6 +80,7 @@ __all__ = [
     "segment_table",
     "tile_layout",
     "untile",
+    "untile_float64",
     "bin_samples",
     "splat_tiles",
     "TILE",
@@ -183,8 +184,8 @@ def tile_layout(position: np.ndarray, texel: np.ndarray, valid: np.ndarray):
 
     Parameters
     ----------
-    position : ndarray (3, H, W) float32
-        Surface points, scene units.
+    position : ndarray (3, H, W)
+        Surface points, scene units (any float type and strides; stored as float32).
     texel : ndarray (H, W) int
         Each pixel's SubEdit texel.
     valid : ndarray (H, W) bool
@@ -201,26 +202,55 @@ def tile_layout(position: np.ndarray, texel: np.ndarray, valid: np.ndarray):
     """
     height, width = valid.shape
     tiles_y, tiles_x = -(-height // TILE), -(-width // TILE)
-    pad_y, pad_x = tiles_y * TILE - height, tiles_x * TILE - width
-    padded = np.pad(np.asarray(position, np.float32), ((0, 0), (0, pad_y), (0, pad_x)))
-    labels = np.pad(np.where(valid, texel, -1), ((0, pad_y), (0, pad_x)), constant_values=-1)
-    tiled_position = np.ascontiguousarray(
-        padded.reshape(3, tiles_y, TILE, tiles_x, TILE).transpose(1, 3, 0, 2, 4)
-        .reshape(tiles_y * tiles_x, 3, TILE * TILE))
-    tiled_texel = np.ascontiguousarray(
-        labels.reshape(tiles_y, TILE, tiles_x, TILE).transpose(0, 2, 1, 3)
-        .reshape(tiles_y * tiles_x, TILE * TILE), dtype=np.int32)
-    inside = (tiled_texel >= 0)[:, None, :]
-    low = np.where(inside, tiled_position, np.float32(np.inf)).min(axis=2)
-    high = np.where(inside, tiled_position, np.float32(-np.inf)).max(axis=2)
-    bounds = np.ascontiguousarray(np.concatenate([low, high], axis=1), dtype=np.float32)
+    tiled_position = np.empty((tiles_y * tiles_x, 3, TILE * TILE), np.float32)
+    tiled_texel = np.empty((tiles_y * tiles_x, TILE * TILE), np.int32)
+    bounds = np.empty((tiles_y * tiles_x, 6), np.float32)
+    _fill_tiles(position, np.asarray(texel), np.asarray(valid, np.bool_), tiles_x,
+                tiled_position, tiled_texel, bounds)
     return tiled_position, tiled_texel, bounds, tiles_y, tiles_x
+
+
+@numba.njit(parallel=True, cache=True)
+def _fill_tiles(position, texel, valid, tiles_x, tiled_position, tiled_texel, bounds):
+    """Fill the arrays of :func:`tile_layout`, in parallel over tiles (padding: 0, texel -1)."""
+    height, width = valid.shape
+    for tile in numba.prange(tiled_texel.shape[0]):
+        top = (tile // tiles_x) * TILE
+        left = (tile % tiles_x) * TILE
+        for c in range(3):
+            bounds[tile, c] = np.inf
+            bounds[tile, 3 + c] = -np.inf
+        for i in range(TILE * TILE):
+            y = top + i // TILE
+            x = left + i % TILE
+            inside = y < height and x < width
+            counted = inside and valid[y, x]
+            tiled_texel[tile, i] = texel[y, x] if counted else -1
+            for c in range(3):
+                value = np.float32(position[c, y, x]) if inside else np.float32(0.0)
+                tiled_position[tile, c, i] = value
+                if counted:
+                    bounds[tile, c] = min(bounds[tile, c], value)
+                    bounds[tile, 3 + c] = max(bounds[tile, 3 + c], value)
 
 
 def untile(tiled: np.ndarray, tiles_y: int, tiles_x: int, height: int, width: int):
     """Return the (H, W, 3) image of per-tile values ``tiled`` (tiles, 3, TILE * TILE)."""
     return tiled.reshape(tiles_y, tiles_x, 3, TILE, TILE).transpose(0, 3, 1, 4, 2).reshape(
         tiles_y * TILE, tiles_x * TILE, 3)[:height, :width]
+
+
+@numba.njit(parallel=True, cache=True)
+def untile_float64(tiled, tiles_x, height, width):
+    """Return :func:`untile` as a new float64 (H, W, 3) array, filled in parallel over rows."""
+    out = np.empty((height, width, 3))
+    for y in numba.prange(height):
+        for x in range(width):
+            tile = (y // TILE) * tiles_x + x // TILE
+            i = (y % TILE) * TILE + x % TILE
+            for c in range(3):
+                out[y, x, c] = tiled[tile, c, i]
+    return out
 
 
 @numba.njit(inline="always", fastmath=True, cache=True)
@@ -665,7 +695,7 @@ def _median_child(depth, valid, row, col):
     return order[(count - 1) // 2]
 
 
-@numba.njit(cache=True)
+@numba.njit(parallel=True, cache=True)
 def median_depth_level(position, normal, uv, depth, valid, footprint):
     """One level of the splatting buffer's mipmap: the median-depth texel of each 2 x 2 block.
 
@@ -686,7 +716,7 @@ def median_depth_level(position, normal, uv, depth, valid, footprint):
     out_depth = np.zeros((height, width), depth.dtype)
     out_valid = np.zeros((height, width), np.bool_)
     out_footprint = np.zeros((height, width), footprint.dtype)
-    for row in range(height):
+    for row in numba.prange(height):  # rows are independent: the same bits on any threads
         for col in range(width):
             child = _median_child(depth, valid, row, col)
             out_valid[row, col] = child >= 0
@@ -703,7 +733,7 @@ def median_depth_level(position, normal, uv, depth, valid, footprint):
     return out_position, out_normal, out_uv, out_depth, out_valid, out_footprint
 
 
-@numba.njit(cache=True)
+@numba.njit(parallel=True, cache=True)
 def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, depth_max,
                      valid):
     """One level of the irradiance buffer's mipmap (Sect. 4 of Chen et al. 2012).
@@ -728,7 +758,7 @@ def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, d
     out_min = np.full((height, width), np.inf)
     out_max = np.full((height, width), -np.inf)
     out_valid = np.zeros((height, width), np.bool_)
-    for row in range(height):
+    for row in numba.prange(height):  # rows are independent: the same bits on any threads
         for col in range(width):
             count = 0
             for child in range(4):
@@ -772,7 +802,7 @@ def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, d
 
 
 # ====================================================================== accumulation
-@numba.njit(fastmath=True, cache=True)
+@numba.njit(parallel=True, fastmath=True, cache=True)
 def bilateral_upsample_level(coarse, coarse_depth, coarse_valid, coarse_range, fine_depth,
                              fine_valid, fine_range, depth_scale, range_scale):
     r"""Eq. 17 of Chen et al. 2012: bilateral upsampling of :math:`B^{k+1}` to level k.
@@ -789,7 +819,7 @@ def bilateral_upsample_level(coarse, coarse_depth, coarse_valid, coarse_range, f
     height, width = fine_valid.shape
     coarse_height, coarse_width = coarse_valid.shape
     out = np.zeros((height, width, 3))
-    for row in range(height):
+    for row in numba.prange(height):  # rows are independent: the same bits on any threads
         fy = (row + 0.5) / 2.0 - 0.5
         y0 = min(max(int(math.floor(fy)), 0), coarse_height - 1)
         y1 = min(y0 + 1, coarse_height - 1)

@@ -170,6 +170,9 @@ def test_tile_layout_round_trips_and_bounds_the_valid_points(height, width, seed
     tiled, labels, bounds, tiles_y, tiles_x = kernels.tile_layout(position, texel, valid)
     assert np.array_equal(kernels.untile(tiled, tiles_y, tiles_x, height, width),
                           np.moveaxis(position, 0, -1))
+    widened = kernels.untile_float64(tiled, tiles_x, height, width)
+    assert widened.dtype == np.float64
+    assert np.array_equal(widened, np.moveaxis(position, 0, -1))
     values = kernels.untile(np.repeat(labels[:, None, :], 3, axis=1), tiles_y, tiles_x,
                             height, width)[..., 0]
     assert np.array_equal(values, np.where(valid, texel, -1))
