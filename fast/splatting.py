@@ -708,39 +708,41 @@ def splat_level(samples: IrradianceSamples, bounds_low: np.ndarray, bounds_high:
 
 def _splat_tiled(samples, bounds_low, bounds_high, level, level_texel, material, mm_per_unit,
                  scale, index, centre_x, centre_y, radius, gpu=False):
-    """Run the tiled kernel of :func:`splat_level` (numba on the CPU, or CUDA).
+    """Run the tiled kernels of :func:`splat_level` (numba on the CPU, or CUDA).
 
-    Samples are binned to tiles on the CPU, then :func:`.splatting_kernels.splat_tiles` or
-    :func:`.splatting_cuda.splat_tiles` splats them.
+    Samples are binned to tiles (:func:`.splatting_kernels.bin_samples`), then splatted
+    (:func:`.splatting_kernels.splat_tiles`); with ``gpu`` both run on the device
+    (:func:`.splatting_cuda.bin_and_splat_tiles`).
     """
     from . import splatting_kernels as kernels
 
-    if gpu:
-        from .splatting_cuda import splat_tiles
-    else:
-        splat_tiles = kernels.splat_tiles
     height, width = level.shape
     position, texel, tile_bounds, tiles_y, tiles_x = kernels.tile_layout(
         np.moveaxis(level.position, -1, 0), level_texel, level.valid)
     sample_position = np.ascontiguousarray(samples.position[index].T, dtype=np.float32)
     low2 = np.square(bounds_low[index]).astype(np.float32)
     high2 = np.square(bounds_high[index]).astype(np.float32)
-    start, members = kernels.bin_samples(
-        tile_bounds, tiles_y, tiles_x, sample_position, centre_x.astype(np.float32),
-        centre_y.astype(np.float32),
-        # the surface point of a pixel of a coarser level is one of its finest children's:
-        # it projects inside the pixel, within sqrt(2)/2 of its centre; 1e-3 and 1e-5 cover
-        # the float32 rounding of the bound
-        (radius * (1.0 + 1e-5) + (0.5 * math.sqrt(2.0) + 1e-3)).astype(np.float32),
-        low2, high2)
+    window = (centre_x.astype(np.float32), centre_y.astype(np.float32),
+              # the surface point of a pixel of a coarser level is one of its finest
+              # children's: it projects inside the pixel, within sqrt(2)/2 of its centre;
+              # 1e-3 and 1e-5 cover the float32 rounding of the bound
+              (radius * (1.0 + 1e-5) + (0.5 * math.sqrt(2.0) + 1e-3)).astype(np.float32))
+    profile = (_segment_table(material),
+               np.float32(material.segments / (material.r_s / mm_per_unit)), sample_position,
+               samples.texel[index].astype(np.int32),
+               np.ascontiguousarray(samples.flux[index] * scale, dtype=np.float32), low2, high2)
     out = np.empty(position.shape, dtype=np.float32)
-    used = splat_tiles(
-        out, position, texel, _segment_table(material),
-        np.float32(material.segments / (material.r_s / mm_per_unit)), sample_position,
-        samples.texel[index].astype(np.int32),
-        np.ascontiguousarray(samples.flux[index] * scale, dtype=np.float32), low2, high2,
-        start, members)
-    visited = len(members) * kernels.TILE ** 2
+    if gpu:
+        from .splatting_cuda import bin_and_splat_tiles
+
+        used, binned = bin_and_splat_tiles(out, position, texel, tile_bounds, tiles_x,
+                                           *profile, *window)
+    else:
+        start, members = kernels.bin_samples(tile_bounds, tiles_y, tiles_x, sample_position,
+                                             *window, low2, high2)
+        used = kernels.splat_tiles(out, position, texel, *profile, start, members)
+        binned = len(members)
+    visited = binned * kernels.TILE ** 2
     return (kernels.untile_float64(out, tiles_x, height, width), [visited, int(used.sum())])
 
 

@@ -1,16 +1,23 @@
 r"""CUDA kernels of the multiresolution splatting method (Chen et al. 2012), via numba.cuda.
 
-The GPU counterpart of :func:`translucent.fast.splatting_kernels.splat_tiles` (Eq. 12,
-backend ``"cuda"`` of :func:`translucent.fast.splatting.splat_level`): one thread block
-per tile of :data:`~translucent.fast.splatting_kernels.TILE` x ``TILE`` pixels, one thread
-per pixel. The block walks the samples binned to its tile
-(:func:`~translucent.fast.splatting_kernels.bin_samples`, on the CPU) in chunks staged in
-shared memory; each thread tests its pixel's distance against the sample's
+The GPU counterpart of :func:`translucent.fast.splatting_kernels.bin_samples` and
+:func:`~translucent.fast.splatting_kernels.splat_tiles` (Eq. 12, backend ``"cuda"`` of
+:func:`translucent.fast.splatting.splat_level`). Binning: one thread per sample walks the
+tiles of its window, culls them against each tile's box with the CPU kernel's own
+functions compiled for the device, and counts, then fills, each tile's list. Splatting:
+one thread block per tile of :data:`~translucent.fast.splatting_kernels.TILE` x ``TILE``
+pixels, one thread per pixel; the block walks its tile's samples in chunks staged in
+shared memory, each thread tests its pixel's distance against the sample's
 :math:`[R^k_{min}, R^k_{max})` and adds :math:`\sqrt{P_{x_o}(d)P_{x_i}(d)}\,\Phi_s`
-(Eq. 8-9) in registers. Each thread owns its pixel and visits the samples in the CPU
-kernel's order, so both add the same float32 terms in the same order; they differ by the
-exponential (the GPU's ``__expf`` under fastmath, relative error of a few 1e-6 over the
-profile's range) and by where multiply-adds are fused.
+(Eq. 8-9, float32 terms) to float64 sums in registers. The terms are the CPU kernel's;
+they differ by the exponential (the GPU's ``__expf`` under fastmath, relative error of a
+few 1e-6 over the profile's range), by where multiply-adds are fused, and by the order of
+the sums (the CPU adds in float32 in sample order).
+
+Measured on an NVIDIA H100 (heterogeneous scene, 800 x 600, 512^2, both accelerations,
+111 million pairs in range): the splat kernels take 0.42, 1.10 and 5.93 ms at levels 0, 1
+and 2 (7.5 ms a frame, against 0.6-1.0 CPU seconds for the compiled CPU kernel on two
+cores); the frame is bound by the stages that run on the CPU.
 
 Without a GPU the same kernels run in numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``),
 which is how they are tested on machines without one.
@@ -29,12 +36,15 @@ import numpy as np
 from numba import cuda, float32, float64, int32
 
 from ..errors import InputError
+from . import splatting_kernels as _cpu
 
-__all__ = ["available", "splat_tiles", "gather_samples", "SAMPLES_PER_CHUNK"]
+__all__ = ["available", "bin_and_splat_tiles", "gather_samples", "SAMPLES_PER_CHUNK"]
 
 #: Samples staged in shared memory at a time by :func:`splat_tiles` (one per thread of an
 #: 8 x 8 tile: each thread loads one).
 SAMPLES_PER_CHUNK = 64
+#: Threads per block of the binning (one thread per sample).
+_BIN_THREADS = 128
 #: Threads per block of the brute-force gather.
 _GATHER_THREADS = 128
 
@@ -52,6 +62,45 @@ def _require():
         raise InputError("backend 'cuda' needs a CUDA GPU that numba.cuda can use (or "
                          "NUMBA_ENABLE_CUDASIM=1 for the simulator); use backend 'numba'",
                          field="backend", value="cuda")
+
+
+# the CPU binning's own functions, compiled for the device (one source for both)
+_culled = cuda.jit(device=True, inline=True)(_cpu._culled.py_func)
+_disc_columns = cuda.jit(device=True, inline=True)(_cpu._disc_columns.py_func)
+
+
+@cuda.jit(fastmath=True)
+def _count_tiles(bounds, sample_position, centre_x, centre_y, radius, low2, high2, tiles_y,
+                 tiles_x, per_tile):
+    s = cuda.grid(1)
+    if s >= centre_x.shape[0]:
+        return
+    first_row = max(int(math.floor((centre_y[s] - radius[s]) / _cpu.TILE)), 0)
+    last_row = min(int(math.floor((centre_y[s] + radius[s]) / _cpu.TILE)), tiles_y - 1)
+    for row in range(first_row, last_row + 1):
+        first, last = _disc_columns(row, centre_x[s], centre_y[s], radius[s], tiles_x)
+        for column in range(first, last + 1):
+            tile = row * tiles_x + column
+            if not _culled(bounds, tile, sample_position[0, s], sample_position[1, s],
+                           sample_position[2, s], low2[s], high2[s]):
+                cuda.atomic.add(per_tile, tile, 1)
+
+
+@cuda.jit(fastmath=True)
+def _fill_tiles(bounds, sample_position, centre_x, centre_y, radius, low2, high2, tiles_y,
+                tiles_x, start, cursor, members):
+    s = cuda.grid(1)
+    if s >= centre_x.shape[0]:
+        return
+    first_row = max(int(math.floor((centre_y[s] - radius[s]) / _cpu.TILE)), 0)
+    last_row = min(int(math.floor((centre_y[s] + radius[s]) / _cpu.TILE)), tiles_y - 1)
+    for row in range(first_row, last_row + 1):
+        first, last = _disc_columns(row, centre_x[s], centre_y[s], radius[s], tiles_x)
+        for column in range(first, last + 1):
+            tile = row * tiles_x + column
+            if not _culled(bounds, tile, sample_position[0, s], sample_position[1, s],
+                           sample_position[2, s], low2[s], high2[s]):
+                members[start[tile] + cuda.atomic.add(cursor, tile, 1)] = s
 
 
 @cuda.jit(fastmath=True)
@@ -72,9 +121,10 @@ def _splat(out, used, position, texel, table, step_inverse, sample_position,
     label = texel[tile, lane]
     segments = table.shape[1]
     support = float32(segments)
-    red = float32(0.0)
-    green = float32(0.0)
-    blue = float32(0.0)
+    # float64 sums: the binning orders a tile's samples as its threads arrive
+    red = float64(0.0)
+    green = float64(0.0)
+    blue = float64(0.0)
     pairs = 0
     first = start[tile]
     last = start[tile + 1]
@@ -177,41 +227,76 @@ def _table_on_device(table: np.ndarray):
     return entry[1]
 
 
-def splat_tiles(out, position, texel, table, step_inverse, sample_position, sample_texel,
-                sample_flux, low2, high2, start, members):
-    r"""Eq. 12 of Chen et al. 2012 on the GPU; arguments and result as the CPU kernel's.
+def bin_and_splat_tiles(out, position, texel, tile_bounds, tiles_x, table, step_inverse,
+                        sample_position, sample_texel, sample_flux, low2, high2, centre_x,
+                        centre_y, radius):
+    r"""Bin samples to tiles and splat them (Eq. 12 of Chen et al. 2012), all on the GPU.
 
-    See :func:`translucent.fast.splatting_kernels.splat_tiles` for the arrays (host numpy
-    arrays here; ``table`` is uploaded once and kept on the device).
+    The binning is :func:`translucent.fast.splatting_kernels.bin_samples`' (the same disc
+    of tiles, the same culling against each tile's box: its functions compiled for the
+    device), counted per tile, then filled, by one thread per sample; the splat is
+    :func:`translucent.fast.splatting_kernels.splat_tiles`'. The fill orders a tile's
+    samples as the threads arrive, so each pixel sums its terms in float64 (the float32
+    result then hardly depends on that order: it changes in the last bit only where the sum
+    lies within about 1e-12 of a rounding boundary).
+
+    Parameters
+    ----------
+    out : ndarray (tiles, 3, TILE * TILE) float32
+        Written.
+    position, texel, tile_bounds, tiles_x
+        :func:`~translucent.fast.splatting_kernels.tile_layout`.
+    table, step_inverse, sample_position, sample_texel, sample_flux, low2, high2
+        As :func:`~translucent.fast.splatting_kernels.splat_tiles` (``table`` is uploaded
+        once and kept on the device).
+    centre_x, centre_y, radius : ndarray (N,) float32
+        Each sample's window, as :func:`~translucent.fast.splatting_kernels.bin_samples`.
 
     Returns
     -------
-    ndarray (tiles,) int64
-        Sample-pixel pairs within range per tile; ``out`` is written.
+    used : ndarray (tiles,) int64
+        Sample-pixel pairs within range per tile.
+    binned : int
+        Sample-tile pairs binned.
     """
     _require()
     tiles, _, lanes = position.shape
-    if tiles == 0:
-        return np.zeros(0, np.int64)
-    if lanes > SAMPLES_PER_CHUNK and lanes % SAMPLES_PER_CHUNK:
-        raise InputError("tile lanes must be at most, or a multiple of, SAMPLES_PER_CHUNK",
-                         field="position.shape[2]", value=lanes)
-    if len(members) == 0:  # nothing binned: no launch (and no empty transfers)
+    count = len(sample_texel)
+    if tiles == 0 or count == 0:
         out[...] = 0.0
-        return np.zeros(tiles, np.int64)
+        return np.zeros(tiles, np.int64), 0
+    tiles_y = tiles // tiles_x
     stream = cuda.stream()
+
+    def upload(array):
+        return cuda.to_device(np.ascontiguousarray(array), stream=stream)
+
+    window = [upload(array) for array in (tile_bounds, sample_position, centre_x, centre_y,
+                                          radius, low2, high2)]
+    per_tile = cuda.to_device(np.zeros(tiles, np.int64), stream=stream)
+    blocks = -(-count // _BIN_THREADS)
+    _count_tiles[blocks, _BIN_THREADS, stream](*window, tiles_y, tiles_x, per_tile)
+    start = np.zeros(tiles + 1, np.int64)
+    np.cumsum(per_tile.copy_to_host(stream=stream), out=start[1:])  # synchronises
+    binned = int(start[-1])
+    if binned == 0:
+        out[...] = 0.0
+        return np.zeros(tiles, np.int64), 0
+    device_start = upload(start)
+    members = cuda.device_array(binned, np.int32, stream=stream)
+    cursor = cuda.to_device(np.zeros(tiles, np.int64), stream=stream)
+    _fill_tiles[blocks, _BIN_THREADS, stream](*window, tiles_y, tiles_x, device_start, cursor,
+                                              members)
     device_out = cuda.device_array(out.shape, np.float32, stream=stream)
     used = cuda.to_device(np.zeros(tiles, np.int64), stream=stream)
-    arguments = [cuda.to_device(np.ascontiguousarray(array), stream=stream) for array in (
-        position, texel)]
-    samples = [cuda.to_device(np.ascontiguousarray(array), stream=stream) for array in (
-        sample_position, sample_texel, sample_flux, low2, high2, start, members)]
-    _splat[tiles, lanes, stream](device_out, used, *arguments, _table_on_device(table),
-                                np.float32(step_inverse), *samples)
+    _splat[tiles, lanes, stream](device_out, used, upload(position), upload(texel),
+                                 _table_on_device(table), np.float32(step_inverse),
+                                 window[1], upload(sample_texel), upload(sample_flux),
+                                 window[5], window[6], device_start, members)
     device_out.copy_to_host(out, stream=stream)
     counts = used.copy_to_host(stream=stream)
     stream.synchronize()
-    return counts
+    return counts, binned
 
 
 def gather_samples(out, pixel_position, pixel_texel, table, step_inverse, sample_position,
