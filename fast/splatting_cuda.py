@@ -70,8 +70,10 @@ _disc_columns = cuda.jit(device=True, inline=True)(_cpu._disc_columns.py_func)
 
 
 @cuda.jit(fastmath=True)
-def _count_tiles(bounds, sample_position, centre_x, centre_y, radius, low2, high2, tiles_y,
-                 tiles_x, per_tile):
+def _bin_tiles(bounds, sample_position, centre_x, centre_y, radius, low2, high2, tiles_y,
+               tiles_x, counter, start, members, fill):
+    # one thread per sample; counts its tiles into ``counter`` or, with ``fill``, takes a
+    # slot of each tile's list (``counter`` zeroed again) and writes itself there
     s = cuda.grid(1)
     if s >= centre_x.shape[0]:
         return
@@ -81,26 +83,12 @@ def _count_tiles(bounds, sample_position, centre_x, centre_y, radius, low2, high
         first, last = _disc_columns(row, centre_x[s], centre_y[s], radius[s], tiles_x)
         for column in range(first, last + 1):
             tile = row * tiles_x + column
-            if not _culled(bounds, tile, sample_position[0, s], sample_position[1, s],
-                           sample_position[2, s], low2[s], high2[s]):
-                cuda.atomic.add(per_tile, tile, 1)
-
-
-@cuda.jit(fastmath=True)
-def _fill_tiles(bounds, sample_position, centre_x, centre_y, radius, low2, high2, tiles_y,
-                tiles_x, start, cursor, members):
-    s = cuda.grid(1)
-    if s >= centre_x.shape[0]:
-        return
-    first_row = max(int(math.floor((centre_y[s] - radius[s]) / _cpu.TILE)), 0)
-    last_row = min(int(math.floor((centre_y[s] + radius[s]) / _cpu.TILE)), tiles_y - 1)
-    for row in range(first_row, last_row + 1):
-        first, last = _disc_columns(row, centre_x[s], centre_y[s], radius[s], tiles_x)
-        for column in range(first, last + 1):
-            tile = row * tiles_x + column
-            if not _culled(bounds, tile, sample_position[0, s], sample_position[1, s],
-                           sample_position[2, s], low2[s], high2[s]):
-                members[start[tile] + cuda.atomic.add(cursor, tile, 1)] = s
+            if _culled(bounds, tile, sample_position[0, s], sample_position[1, s],
+                       sample_position[2, s], low2[s], high2[s]):
+                continue
+            slot = cuda.atomic.add(counter, tile, 1)
+            if fill:
+                members[start[tile] + slot] = s
 
 
 @cuda.jit(fastmath=True)
@@ -273,20 +261,22 @@ def bin_and_splat_tiles(out, position, texel, tile_bounds, tiles_x, table, step_
 
     window = [upload(array) for array in (tile_bounds, sample_position, centre_x, centre_y,
                                           radius, low2, high2)]
-    per_tile = cuda.to_device(np.zeros(tiles, np.int64), stream=stream)
+    counter = cuda.to_device(np.zeros(tiles, np.int64), stream=stream)
     blocks = -(-count // _BIN_THREADS)
-    _count_tiles[blocks, _BIN_THREADS, stream](*window, tiles_y, tiles_x, per_tile)
     start = np.zeros(tiles + 1, np.int64)
-    np.cumsum(per_tile.copy_to_host(stream=stream), out=start[1:])  # synchronises
+    nothing = cuda.device_array(1, np.int64, stream=stream)
+    _bin_tiles[blocks, _BIN_THREADS, stream](*window, tiles_y, tiles_x, counter, nothing,
+                                             nothing, False)
+    np.cumsum(counter.copy_to_host(stream=stream), out=start[1:])  # synchronises
     binned = int(start[-1])
     if binned == 0:
         out[...] = 0.0
         return np.zeros(tiles, np.int64), 0
     device_start = upload(start)
     members = cuda.device_array(binned, np.int32, stream=stream)
-    cursor = cuda.to_device(np.zeros(tiles, np.int64), stream=stream)
-    _fill_tiles[blocks, _BIN_THREADS, stream](*window, tiles_y, tiles_x, device_start, cursor,
-                                              members)
+    counter = cuda.to_device(np.zeros(tiles, np.int64), stream=stream)
+    _bin_tiles[blocks, _BIN_THREADS, stream](*window, tiles_y, tiles_x, counter, device_start,
+                                             members, True)
     device_out = cuda.device_array(out.shape, np.float32, stream=stream)
     used = cuda.to_device(np.zeros(tiles, np.int64), stream=stream)
     _splat[tiles, lanes, stream](device_out, used, upload(position), upload(texel),
