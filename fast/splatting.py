@@ -251,8 +251,8 @@ def irradiance_mipmap(buffer: SurfaceBuffer, flux: np.ndarray, cosine: np.ndarra
     pyramid = [level]
     for _ in range(1, levels):
         level = IrradianceLevel(*irradiance_level(
-            *(np.ascontiguousarray(np.nan_to_num(getattr(level, name)), dtype=np.float64)
-              for name in ("position", "normal", "uv", "cosine", "footprint", "flux")),
+            *(getattr(level, name) for name in ("position", "normal", "uv", "cosine",
+                                                "footprint", "flux")),
             level.depth_min, level.depth_max, level.valid))
         pyramid.append(level)
     return pyramid

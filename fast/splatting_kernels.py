@@ -113,6 +113,8 @@ _OUTSIDE = np.float32(-1000.0)
 #: Chunks of samples listed per row in parallel by :func:`bin_samples` (a constant, so that
 #: the kernel can be cached; several per thread up to 16 threads).
 _BIN_CHUNKS = 64
+#: The largest float64, what ``numpy.nan_to_num`` gives infinities.
+_LARGEST = np.finfo(np.float64).max
 #: Samples per block of the brute-force gather (its scratch stays in the L1/L2 caches).
 _GATHER_BLOCK = 1024
 
@@ -733,6 +735,18 @@ def median_depth_level(position, normal, uv, depth, valid, footprint):
     return out_position, out_normal, out_uv, out_depth, out_valid, out_footprint
 
 
+@numba.njit(inline="always", cache=True)
+def _finite(value):
+    """``numpy.nan_to_num`` of one float64: NaN to 0, infinities to the largest floats."""
+    if value != value:
+        return 0.0
+    if value > _LARGEST:
+        return _LARGEST
+    if value < -_LARGEST:
+        return -_LARGEST
+    return float(value)
+
+
 @numba.njit(parallel=True, cache=True)
 def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, depth_max,
                      valid):
@@ -740,7 +754,8 @@ def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, d
 
     Position, normal (renormalised), uv, cosine and footprint average the valid children
     (a standard mipmap; the footprint then doubles); flux sums them; the depth range is
-    the min / max of the children's (a min/max mipmap).
+    the min / max of the children's (a min/max mipmap). Those six inputs are read as
+    ``numpy.nan_to_num`` of them, in float64.
 
     Returns
     -------
@@ -767,19 +782,19 @@ def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, d
                 if y >= valid.shape[0] or x >= valid.shape[1]:
                     continue
                 for c in range(3):
-                    out_flux[row, col, c] += flux[y, x, c]
+                    out_flux[row, col, c] += _finite(flux[y, x, c])
                 out_min[row, col] = min(out_min[row, col], depth_min[y, x])
                 out_max[row, col] = max(out_max[row, col], depth_max[y, x])
                 if not valid[y, x]:
                     continue
                 count += 1
                 for c in range(3):
-                    out_position[row, col, c] += position[y, x, c]
-                    out_normal[row, col, c] += normal[y, x, c]
-                out_uv[row, col, 0] += uv[y, x, 0]
-                out_uv[row, col, 1] += uv[y, x, 1]
-                out_cosine[row, col] += cosine[y, x]
-                out_footprint[row, col] += footprint[y, x]
+                    out_position[row, col, c] += _finite(position[y, x, c])
+                    out_normal[row, col, c] += _finite(normal[y, x, c])
+                out_uv[row, col, 0] += _finite(uv[y, x, 0])
+                out_uv[row, col, 1] += _finite(uv[y, x, 1])
+                out_cosine[row, col] += _finite(cosine[y, x])
+                out_footprint[row, col] += _finite(footprint[y, x])
             if count == 0:
                 continue
             out_valid[row, col] = True
