@@ -418,6 +418,25 @@ def test_irradiance_mipmap_conserves_flux_and_bounds_depth(rng):
     assert level1.valid[0, 1] == valid[0:2, 2:4].any()
 
 
+def test_irradiance_level_reads_non_finite_inputs_as_nan_to_num(rng):
+    shape = (9, 7)
+    valid = rng.random(shape) > 0.3
+    arrays = [rng.normal(size=shape + (3,)), rng.normal(size=shape + (3,)),
+              rng.random(shape + (2,)), rng.random(shape), rng.random(shape),
+              rng.random(shape + (3,))]
+    for array in arrays:
+        flat = array.reshape(-1)
+        flat[rng.random(flat.size) < 0.1] = np.nan
+        flat[rng.random(flat.size) < 0.05] = np.inf
+        flat[rng.random(flat.size) < 0.05] = -np.inf
+    depth = rng.random(shape)
+    bounds = (np.where(valid, depth, np.inf), np.where(valid, depth, -np.inf), valid)
+    raw = kernels.irradiance_level(*arrays, *bounds)
+    cleaned = kernels.irradiance_level(*(np.nan_to_num(array) for array in arrays), *bounds)
+    for a, b in zip(raw, cleaned, strict=True):
+        assert np.array_equal(a, b)
+
+
 def test_median_depth_mipmap_copies_the_median_texel():
     depth = np.array([[1.0, 5.0], [3.0, 9.0]])
     valid = np.array([[True, True], [True, False]])
