@@ -1064,14 +1064,15 @@ def light_view(buffer: SurfaceBuffer, to_light: np.ndarray, normal_irradiance: n
     eta : float
         Relative index of refraction.
     """
-    cosine = np.abs(np.einsum("...k,...k->...", buffer.normal, np.broadcast_to(
-        to_light, buffer.normal.shape)))
-    cosine = np.where(buffer.valid, np.clip(np.nan_to_num(cosine), 0.0, 1.0), 0.0)
-    transmittance = fresnel_transmittance(eta, cosine)
-    footprint = np.where(buffer.valid, np.nan_to_num(buffer.footprint), 0.0)
-    flux = (transmittance * footprint**2)[..., None] * np.broadcast_to(
-        normal_irradiance, buffer.valid.shape + (3,))
-    return LightView(buffer, np.where(buffer.valid[..., None], flux, 0.0), cosine)
+    from .splatting_kernels import delta_light_flux
+
+    shape = buffer.valid.shape + (3,)
+    # broadcast views: the kernel reads them per pixel, nothing is copied
+    flux, cosine = delta_light_flux(
+        buffer.normal, buffer.valid, buffer.footprint,
+        np.broadcast_to(np.asarray(to_light, np.float64), shape),
+        np.broadcast_to(np.asarray(normal_irradiance, np.float64), shape), float(eta))
+    return LightView(buffer, flux, cosine)
 
 
 @functools.lru_cache(maxsize=16)
@@ -1217,15 +1218,10 @@ def gather_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list
 
 def _exitant_radiance(exitance, buffer: SurfaceBuffer, camera: CameraModel, eta: float):
     r"""Eq. 7 of Chen et al. 2012: :math:`L = F_t(\omega_o) B / \pi` at valid pixels."""
-    radiance = np.zeros(buffer.shape + (3,))
-    rows, cols = np.nonzero(buffer.valid)
-    to_camera = camera.origin - buffer.position[rows, cols]
-    to_camera /= np.maximum(np.linalg.norm(to_camera, axis=-1, keepdims=True), 1e-300)
-    cosine = np.clip(np.abs(np.einsum("...k,...k->...", buffer.normal[rows, cols],
-                                      to_camera)), 0.0, 1.0)
-    radiance[rows, cols] = np.nan_to_num(fresnel_transmittance(eta, np.nan_to_num(cosine))[
-        ..., None] * exitance[rows, cols] / np.pi)
-    return radiance
+    from .splatting_kernels import exitant_radiance
+
+    return exitant_radiance(np.asarray(exitance, np.float64), buffer.position, buffer.normal,
+                            buffer.valid, np.asarray(camera.origin, np.float64), float(eta))
 
 
 def as_subedit(material) -> SubEditProfiles:
@@ -1362,12 +1358,11 @@ class RasterView:
 
         mesh = scene.objects[object_index].mesh
         uv = mesh.uv if mesh.uv is not None else np.zeros((0, 2))
-        valid, position, normal, uv = interpolate_surface(
-            self.triangle, self.barycentric, int(self.face_offsets[object_index]),
-            int(self.face_offsets[object_index + 1]), mesh.vertices, mesh.faces,
-            mesh.normals, np.asarray(uv, dtype=np.float64))
-        return SurfaceBuffer(position, normal, uv, np.where(valid, self.depth, 0.0), valid,
-                             np.where(valid, self.footprint, 0.0))
+        valid, position, normal, uv, depth, footprint = interpolate_surface(
+            self.triangle, self.barycentric, self.depth, self.footprint,
+            int(self.face_offsets[object_index]), int(self.face_offsets[object_index + 1]),
+            mesh.vertices, mesh.faces, mesh.normals, np.asarray(uv, dtype=np.float64))
+        return SurfaceBuffer(position, normal, uv, depth, valid, footprint)
 
 
 def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None,
@@ -1384,7 +1379,7 @@ def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None
     """
     # the ray-cast G-buffers' own image frames, so that both kinds of buffer agree
     from ..scenes.raycast import NEAR_CLIP, camera_frame, default_up
-    from .splatting_kernels import rasterize
+    from .splatting_kernels import perspective_footprint, rasterize
 
     meshes = [item.mesh for item in scene.objects]
     vertex_offsets = np.cumsum([0] + [len(m.vertices) for m in meshes])
@@ -1415,10 +1410,7 @@ def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None
     if orthographic:
         footprint = np.full((height, width), 2.0 * tan_x / width)
     else:
-        sx = tan_x * (1.0 - 2.0 * (np.arange(width) + 0.5) / width)
-        sy = tan_y * (1.0 - 2.0 * (np.arange(height) + 0.5) / height)
-        cosine = 1.0 / np.sqrt(1.0 + sx[None, :] ** 2 + sy[:, None] ** 2)
-        footprint = np.where(triangle >= 0, depth, 0.0) * (2.0 * tan_x / width) * cosine**1.5
+        footprint = perspective_footprint(triangle, depth, tan_x, tan_y)
     return RasterView(triangle, barycentric, depth, footprint, face_offsets)
 
 
@@ -1562,10 +1554,12 @@ class SplattingState:
             else:
                 view = gbuffer_from_point(scene, light.position, towards, fov, size)
                 buffer = _surface_buffer(view, index, uv, _perspective_footprint(view))
-            offset = light.position - np.where(buffer.valid[..., None], buffer.position, 0.0)
-            squared = np.maximum(np.einsum("...k,...k->...", offset, offset), 1e-300)
-            to_light = offset / np.sqrt(squared)[..., None]
-            irradiance = light.intensity / squared[..., None]
+            from .splatting_kernels import point_light_flux
+
+            flux, cosine = point_light_flux(buffer.position, buffer.normal, buffer.valid,
+                                            buffer.footprint, light.position,
+                                            light.intensity, float(eta))
+            return LightView(buffer, flux, cosine)
         else:
             if raster:
                 buffer = rasterize_view(scene, direction=light.direction, size=size,
