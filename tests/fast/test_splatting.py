@@ -745,25 +745,31 @@ def _rasterize_args(vertices, faces, eye, forward, width, height, orthographic):
 
 @settings(max_examples=15, deadline=None)
 @given(st.integers(min_value=0, max_value=2**31 - 1), st.booleans())
-def test_rasterizer_bits_do_not_depend_on_bands_or_threads(seed, orthographic):
+def test_rasterizer_bits_do_not_depend_on_bands_outlines_or_threads(seed, orthographic):
     # random overlapping triangles around an eye inside the cloud: some behind it, some
-    # through the near plane (the whole image is their box), and ten exact duplicates,
-    # whose later copy must never win its tie
+    # through the near plane (the whole image is their box), five slivers (a corner within
+    # 1e-9 of the opposite edge), and ten exact duplicates, whose later copy must never
+    # win its tie
     rng = np.random.default_rng(seed)
     vertices = rng.uniform(-1.0, 1.0, (60, 3))
     faces = np.array([rng.choice(60, 3, replace=False) for _ in range(40)], np.int64)
-    faces = np.concatenate([faces, faces[:10]])
+    sliver = 0.5 * (vertices[faces[:5, 0]] + vertices[faces[:5, 1]]) + \
+        1e-9 * rng.normal(size=(5, 3))
+    vertices = np.concatenate([vertices, sliver])
+    slivers = np.stack([faces[:5, 0], faces[:5, 1], 60 + np.arange(5)], axis=1)
+    faces = np.concatenate([faces, faces[:10], slivers])
     args = _rasterize_args(vertices, faces, [0.0, 0.0, -0.5], [0.1, 0.0, 1.0], 23, 17,
                            orthographic)
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
-        # one band: every pixel tests every triangle in index order, in one thread
-        single_pass = kernels.rasterize(*args, 17)
+        # one band, no outline test: every pixel of each triangle's box tests its ray
+        # against the triangle, triangles in index order, in one thread
+        single_pass = kernels.rasterize(*args, 17, -1.0)
     finally:
         numba.set_num_threads(threads)
     assert (single_pass[0] >= 0).any()
-    assert not (single_pass[0] >= 40).any()
+    assert not ((single_pass[0] >= 40) & (single_pass[0] < 50)).any()
     for band_rows in (1, 3, 8):
         banded = kernels.rasterize(*args, band_rows)
         for ours, reference in zip(banded, single_pass, strict=True):
