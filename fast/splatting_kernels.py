@@ -118,7 +118,7 @@ _OUTSIDE = np.float32(-1000.0)
 #: Samples per block of the brute-force gather (its scratch stays in the L1/L2 caches).
 _GATHER_BLOCK = 1024
 #: Image rows per band of :func:`rasterize`, the unit of its parallel loop.
-RASTER_BAND_ROWS = 8
+RASTER_BAND_ROWS = 4
 #: Pixels by which :func:`rasterize` widens each triangle's projected outline before it
 #: tests a pixel's ray: the projection and Möller-Trumbore's decisions both round at about
 #: 1e-13 pixels (float64 eps times coordinates of 1e3 pixels), so no hit is lost.
@@ -820,6 +820,30 @@ def bilateral_upsample_level(coarse, coarse_depth, coarse_valid, coarse_range, f
 
 # ====================================================================== G-buffers
 @numba.njit(cache=True)
+def _spread(count):
+    """``range(count)`` in bit-reversed order: any run of consecutive entries spreads over it.
+
+    numba's ``prange`` gives each thread one consecutive chunk of the iterations; taken in
+    this order (0, 4, 2, 6, 1, 5, 3, 7 for eight), each chunk holds rows from the whole
+    image, whatever the number of threads, not one thread the empty sky and another the
+    object.
+    """
+    bits = 0
+    while (1 << bits) < count:
+        bits += 1
+    order = np.empty(count, np.int64)
+    at = 0
+    for index in range(1 << bits):
+        reversed_index = 0
+        for bit in range(bits):
+            reversed_index |= ((index >> bit) & 1) << (bits - 1 - bit)
+        if reversed_index < count:
+            order[at] = reversed_index
+            at += 1
+    return order
+
+
+@numba.njit(cache=True)
 def _triangle_box(a, b, c, eye, forward, left, up, tan_x, tan_y, width, height, near,
                   orthographic, projected):
     """Pixel rows and columns ``(y_first, y_last, x_first, x_last)`` a triangle may cover.
@@ -956,24 +980,6 @@ def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, heig
     triangle = np.full((height, width), -1, np.int64)
     barycentric = np.zeros((height, width, 2))
     depth = np.full((height, width), np.inf)
-    # each pixel's unit direction and near-plane distance, computed once rather than for
-    # every triangle whose box covers the pixel (the same operations, so the same bits)
-    ray = np.empty((height, width, 4)) if not orthographic else np.empty((0, 0, 4))
-    for y in numba.prange(ray.shape[0]):
-        sy = tan_y * (1.0 - 2.0 * (y + 0.5) / height)
-        for x in range(ray.shape[1]):
-            sx = tan_x * (1.0 - 2.0 * (x + 0.5) / width)
-            dx = forward[0] + sx * left[0] + sy * up[0]
-            dy = forward[1] + sx * left[1] + sy * up[1]
-            dz = forward[2] + sx * left[2] + sy * up[2]
-            norm = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
-            dx *= norm
-            dy *= norm
-            dz *= norm
-            ray[y, x, 0] = dx
-            ray[y, x, 1] = dy
-            ray[y, x, 2] = dz
-            ray[y, x, 3] = near / (dx * forward[0] + dy * forward[1] + dz * forward[2])
     count = faces.shape[0]
     box = np.empty((count, 4), np.int64)
     projected = np.empty((count, 6))
@@ -1000,7 +1006,31 @@ def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, heig
             for band in range(box[f, 0] // band_rows, box[f, 1] // band_rows + 1):
                 members[cursor[band]] = f
                 cursor[band] += 1
-    for band in numba.prange(bands):
+    order = _spread(bands)
+    for i in numba.prange(bands):
+        band = order[i]
+        if band_start[band] == band_start[band + 1]:
+            continue
+        first_row = band * band_rows
+        # each pixel's unit direction and near-plane distance, computed once for the band
+        # rather than for every triangle whose box covers the pixel (the same operations,
+        # so the same bits); a band's table stays in the cache
+        ray = np.empty((0 if orthographic else min(band_rows, height - first_row), width, 4))
+        for row in range(ray.shape[0]):
+            sy = tan_y * (1.0 - 2.0 * (first_row + row + 0.5) / height)
+            for x in range(width):
+                sx = tan_x * (1.0 - 2.0 * (x + 0.5) / width)
+                dx = forward[0] + sx * left[0] + sy * up[0]
+                dy = forward[1] + sx * left[1] + sy * up[1]
+                dz = forward[2] + sx * left[2] + sy * up[2]
+                norm = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+                dx *= norm
+                dy *= norm
+                dz *= norm
+                ray[row, x, 0] = dx
+                ray[row, x, 1] = dy
+                ray[row, x, 2] = dz
+                ray[row, x, 3] = near / (dx * forward[0] + dy * forward[1] + dz * forward[2])
         for j in range(band_start[band], band_start[band + 1]):
             f = members[j]
             a = vertices[faces[f, 0]]
@@ -1033,8 +1063,9 @@ def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, heig
                         start = 0.0
                     else:
                         ox, oy, oz = eye[0], eye[1], eye[2]
-                        dx, dy, dz = ray[y, x, 0], ray[y, x, 1], ray[y, x, 2]
-                        start = ray[y, x, 3]
+                        row = y - first_row
+                        dx, dy, dz = ray[row, x, 0], ray[row, x, 1], ray[row, x, 2]
+                        start = ray[row, x, 3]
                     if _ray_hit(ox, oy, oz, dx, dy, dz, a, e1x, e1y, e1z, e2x, e2y, e2z,
                                 start, depth, barycentric, y, x):
                         triangle[y, x] = f
@@ -1066,7 +1097,9 @@ def interpolate_surface(triangle, barycentric, depth, footprint, first_face, las
     out_depth = np.zeros((height, width))
     out_footprint = np.zeros((height, width))
     has_uv = uv.shape[0] == vertices.shape[0]
-    for y in numba.prange(height):
+    rows = _spread(height)
+    for i in numba.prange(height):
+        y = rows[i]
         for x in range(width):
             f = triangle[y, x]
             if f < first_face or f >= last_face:
@@ -1122,7 +1155,9 @@ def perspective_footprint(triangle, depth, tan_x, tan_y):
     height, width = triangle.shape
     footprint = np.zeros((height, width))
     pixel = 2.0 * tan_x / width
-    for y in numba.prange(height):
+    rows = _spread(height)
+    for i in numba.prange(height):
+        y = rows[i]
         sy = tan_y * (1.0 - 2.0 * (y + 0.5) / height)
         for x in range(width):
             if triangle[y, x] >= 0:
@@ -1211,7 +1246,9 @@ def delta_light_flux(normal, valid, footprint, to_light, normal_irradiance, eta)
     height, width = valid.shape
     flux = np.zeros((height, width, 3))
     cosine = np.zeros((height, width))
-    for y in numba.prange(height):
+    rows = _spread(height)
+    for i in numba.prange(height):
+        y = rows[i]
         for x in range(width):
             if valid[y, x]:
                 _pixel_flux(flux, cosine, y, x, normal[y, x, 0], normal[y, x, 1],
@@ -1236,7 +1273,9 @@ def point_light_flux(position, normal, valid, footprint, light_position, intensi
     height, width = valid.shape
     flux = np.zeros((height, width, 3))
     cosine = np.zeros((height, width))
-    for y in numba.prange(height):
+    rows = _spread(height)
+    for i in numba.prange(height):
+        y = rows[i]
         for x in range(width):
             if not valid[y, x]:
                 continue
@@ -1262,7 +1301,9 @@ def exitant_radiance(exitance, position, normal, valid, origin, eta):
     """
     height, width = valid.shape
     radiance = np.zeros((height, width, 3))
-    for y in numba.prange(height):
+    rows = _spread(height)
+    for i in numba.prange(height):
+        y = rows[i]
         for x in range(width):
             if not valid[y, x]:
                 continue
