@@ -977,9 +977,10 @@ def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, heig
     depth : ndarray (H, W)
         Distance from the eye (perspective) or the image plane along the ray.
     """
-    triangle = np.full((height, width), -1, np.int64)
-    barycentric = np.zeros((height, width, 2))
-    depth = np.full((height, width), np.inf)
+    # filled band by band inside the parallel loop, so that memory is first touched there
+    triangle = np.empty((height, width), np.int64)
+    barycentric = np.empty((height, width, 2))
+    depth = np.empty((height, width))
     count = faces.shape[0]
     box = np.empty((count, 4), np.int64)
     projected = np.empty((count, 6))
@@ -1009,13 +1010,17 @@ def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, heig
     order = _spread(bands)
     for i in numba.prange(bands):
         band = order[i]
+        first_row = band * band_rows
+        last_row = min(first_row + band_rows, height)
+        triangle[first_row:last_row] = -1
+        barycentric[first_row:last_row] = 0.0
+        depth[first_row:last_row] = np.inf
         if band_start[band] == band_start[band + 1]:
             continue
-        first_row = band * band_rows
         # each pixel's unit direction and near-plane distance, computed once for the band
         # rather than for every triangle whose box covers the pixel (the same operations,
         # so the same bits); a band's table stays in the cache
-        ray = np.empty((0 if orthographic else min(band_rows, height - first_row), width, 4))
+        ray = np.empty((0 if orthographic else last_row - first_row, width, 4))
         for row in range(ray.shape[0]):
             sy = tan_y * (1.0 - 2.0 * (first_row + row + 0.5) / height)
             for x in range(width):
@@ -1090,16 +1095,24 @@ def interpolate_surface(triangle, barycentric, depth, footprint, first_face, las
         depth (H, W), footprint (H, W)``.
     """
     height, width = triangle.shape
-    valid = np.zeros((height, width), np.bool_)
-    position = np.zeros((height, width, 3))
-    normal = np.zeros((height, width, 3))
-    out_uv = np.zeros((height, width, 2))
-    out_depth = np.zeros((height, width))
-    out_footprint = np.zeros((height, width))
+    # zeroed row by row inside the parallel loop: the first touch of the memory is
+    # parallel too (a serial np.zeros of these 39 MB at 800 x 600 takes 3 ms)
+    valid = np.empty((height, width), np.bool_)
+    position = np.empty((height, width, 3))
+    normal = np.empty((height, width, 3))
+    out_uv = np.empty((height, width, 2))
+    out_depth = np.empty((height, width))
+    out_footprint = np.empty((height, width))
     has_uv = uv.shape[0] == vertices.shape[0]
     rows = _spread(height)
     for i in numba.prange(height):
         y = rows[i]
+        valid[y] = False
+        position[y] = 0.0
+        normal[y] = 0.0
+        out_uv[y] = 0.0
+        out_depth[y] = 0.0
+        out_footprint[y] = 0.0
         for x in range(width):
             f = triangle[y, x]
             if f < first_face or f >= last_face:
@@ -1153,11 +1166,12 @@ def perspective_footprint(triangle, depth, tan_x, tan_y):
     The pixel centres are those of :func:`rasterize`. Rows in parallel.
     """
     height, width = triangle.shape
-    footprint = np.zeros((height, width))
+    footprint = np.empty((height, width))
     pixel = 2.0 * tan_x / width
     rows = _spread(height)
     for i in numba.prange(height):
         y = rows[i]
+        footprint[y] = 0.0
         sy = tan_y * (1.0 - 2.0 * (y + 0.5) / height)
         for x in range(width):
             if triangle[y, x] >= 0:
@@ -1244,11 +1258,13 @@ def delta_light_flux(normal, valid, footprint, to_light, normal_irradiance, eta)
         ``flux (H, W, 3), cosine (H, W)``.
     """
     height, width = valid.shape
-    flux = np.zeros((height, width, 3))
-    cosine = np.zeros((height, width))
+    flux = np.empty((height, width, 3))
+    cosine = np.empty((height, width))
     rows = _spread(height)
     for i in numba.prange(height):
         y = rows[i]
+        flux[y] = 0.0
+        cosine[y] = 0.0
         for x in range(width):
             if valid[y, x]:
                 _pixel_flux(flux, cosine, y, x, normal[y, x, 0], normal[y, x, 1],
@@ -1271,11 +1287,13 @@ def point_light_flux(position, normal, valid, footprint, light_position, intensi
         ``flux (H, W, 3), cosine (H, W)``.
     """
     height, width = valid.shape
-    flux = np.zeros((height, width, 3))
-    cosine = np.zeros((height, width))
+    flux = np.empty((height, width, 3))
+    cosine = np.empty((height, width))
     rows = _spread(height)
     for i in numba.prange(height):
         y = rows[i]
+        flux[y] = 0.0
+        cosine[y] = 0.0
         for x in range(width):
             if not valid[y, x]:
                 continue
@@ -1300,10 +1318,11 @@ def exitant_radiance(exitance, position, normal, valid, origin, eta):
     :func:`translucent.fast.splatting._exitant_radiance`). Rows in parallel.
     """
     height, width = valid.shape
-    radiance = np.zeros((height, width, 3))
+    radiance = np.empty((height, width, 3))
     rows = _spread(height)
     for i in numba.prange(height):
         y = rows[i]
+        radiance[y] = 0.0
         for x in range(width):
             if not valid[y, x]:
                 continue
