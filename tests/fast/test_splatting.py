@@ -809,8 +809,9 @@ def test_light_view_kernels_equal_the_numpy_formula(seed, eta, point):
         squared = np.maximum(np.einsum("...k,...k->...", offset, offset), 1e-300)
         to_light = offset / np.sqrt(squared)[..., None]
         irradiance = intensity / squared[..., None]
-        flux, cosine = kernels.point_light_flux(position, normal, valid, footprint, light,
-                                                intensity, eta)
+        flux, cosine = kernels.light_flux(position, normal, valid, footprint,
+                                          light.reshape(1, 1, 3), intensity.reshape(1, 1, 3),
+                                          eta, True)
     else:
         to_light = rng.normal(size=3)
         to_light /= np.linalg.norm(to_light)
@@ -833,8 +834,8 @@ def test_light_view_kernel_reads_nan_as_nothing():
     valid[:] = True
     normal[0, 0] = np.nan
     footprint[1, 1] = np.nan
-    flux, cosine = kernels.delta_light_flux(normal, valid, footprint, np.broadcast_to(
-        [0.0, 0.0, 1.0], normal.shape), np.ones(normal.shape), 1.3)
+    flux, cosine = kernels.light_flux(position, normal, valid, footprint, np.broadcast_to(
+        [0.0, 0.0, 1.0], normal.shape), np.ones(normal.shape), 1.3, False)
     expected_flux, expected_cosine = _numpy_flux(normal, valid, footprint,
                                                  np.array([0.0, 0.0, 1.0]), np.ones(3), 1.3)
     assert np.all(np.isfinite(flux)) and np.all(np.isfinite(cosine))
