@@ -885,3 +885,18 @@ def test_perspective_footprint_kernel_equals_the_numpy_formula(seed):
     expected = np.where(triangle >= 0, depth, 0.0) * (2.0 * tan_x / width) * cosine**1.5
     assert np.allclose(footprint, expected, rtol=ROUNDOFF, atol=0.0)
     assert np.all(footprint[triangle < 0] == 0.0)
+
+
+def test_interpolated_normals_fall_back_to_the_face_normal():
+    # vertex normals that cancel (here all zero) leave the face's own normal
+    vertices = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]])
+    faces = np.array([[0, 1, 2]], np.int64)
+    args = _rasterize_args(vertices, faces, [0.0, 0.0, -2.0], [0.0, 0.0, 1.0], 9, 9, True)
+    triangle, barycentric, depth = kernels.rasterize(*args)
+    valid, position, normal, uv, *_ = kernels.interpolate_surface(
+        triangle, barycentric, depth, np.ones(depth.shape), 0, 1, vertices, faces,
+        np.zeros((3, 3)), np.zeros((0, 2)))
+    assert valid.any() and np.array_equal(valid, triangle == 0)
+    assert np.allclose(normal[valid], [0.0, 0.0, 1.0])
+    assert np.allclose(position[valid][:, 2], 0.0) and np.all(uv == 0.0)
+    assert np.all(normal[~valid] == 0.0)
