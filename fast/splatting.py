@@ -978,8 +978,7 @@ def upsampling_profile_factors(material: SubEditProfiles, inner: float) -> np.nd
     energy = np.cumsum(material.mean_normalized_profile(grid) * grid)
     median = np.interp(0.5 * energy[-1], energy, grid) if energy[-1] > 0 else grid[0]
     radius = median * float(np.median(material.effective_scattering_range))
-    texels = np.arange(material.texel_count)
-    factors = np.sqrt(material.profile(np.full(material.texel_count, radius), texels))
+    factors = np.sqrt(material.profile(radius, np.arange(material.texel_count)))
     return np.where(factors > 0, factors, 1.0)
 
 

@@ -223,6 +223,14 @@ class SubEditProfiles:
         """
         r = np.asarray(r, dtype=np.float64)
         texel = np.asarray(texel, dtype=np.int64)
+        if r.ndim == 0:  # one radius: one segment and weight for every texel (same bits)
+            position = float(np.nan_to_num(r, nan=np.inf)) * (self.segments / self.r_s)
+            if not 0 <= position < self.segments:
+                return np.full(texel.shape + (3,), LOG_FLOOR)
+            k = min(int(position), self.segments - 1)
+            weight = position - k
+            table = self.flat_log_profile
+            return (1.0 - weight) * table[texel, k] + weight * table[texel, k + 1]
         r, texel = np.broadcast_arrays(r, texel)
         position = np.nan_to_num(r, nan=np.inf) * (self.segments / self.r_s)
         inside = (position >= 0) & (position < self.segments)

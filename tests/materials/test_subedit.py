@@ -299,3 +299,15 @@ def test_material_type_subedit_rejects_bad_tables():
         material_from_dict({"type": "subedit", "measured": "Marble", "squares": 2})
     with pytest.raises(InputError, match="made in code"):
         material_to_dict(SubEditProfiles(np.zeros((3, 3)), 1.0))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.one_of(st.floats(min_value=-1.0, max_value=30.0),
+                 st.sampled_from([0.0, np.inf, -np.inf, np.nan])))
+def test_one_radius_for_every_texel_equals_the_broadcast_radius(radius):
+    material = builtin_subedit("checker", resolution=8)
+    texels = np.arange(material.texel_count)
+    for r in (radius, material.r_s):
+        one = material.log_profile_at(r, texels)
+        each = material.log_profile_at(np.full(material.texel_count, r), texels)
+        assert np.array_equal(one, each)
