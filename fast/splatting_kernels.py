@@ -88,6 +88,7 @@ __all__ = [
     "bin_samples",
     "splat_tiles",
     "TILE",
+    "TILE_CHUNK",
     "NARROW_WIDTH",
     "FEWEST_IN_VECTORS",
     "gather_samples",
@@ -106,6 +107,10 @@ __all__ = [
 #: float32 vectors of AVX-512 per pass. Measured on the heterogeneous scene: 8 visits about
 #: half as many out-of-range pairs as rows of 16 and needs fewer samples per tile than 16.
 TILE = 8
+#: Tiles a thread takes at a time in :func:`splat_tiles`'s parallel loop (numba's
+#: ``parallel_chunksize``, set by the caller; 0 would give each thread an equal static
+#: share, however unequal the tiles' work). See the module docstring for what was measured.
+TILE_CHUNK = 1
 #: Annulus width (:math:`\sqrt{high2} - \sqrt{low2}`, in profile segments) below which
 #: :func:`splat_tiles` looks for a sample whose pixels in a tile fall into at most two
 #: segments, evaluated in vectors without a list. Measured on the heterogeneous scene: the
