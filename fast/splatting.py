@@ -78,9 +78,11 @@ matrix-vector product and the rasteriser's per-pixel rays took a frame with both
 accelerations from 1.80-1.94 to 1.40-1.67 CPU seconds (four before/after pairs run back to
 back, load average 3.1-4.0; the same images to 1.2e-7). Buffer generation and Eq. 7 as
 compiled kernels, rows in parallel (:func:`rasterize_view`, :func:`light_view`): per frame
-0.102-0.114 and 0.031-0.041 s to 0.057-0.064 and 0.009-0.010 s on one thread, to
-0.028-0.029 and 0.004-0.006 s on two (``NUMBA_NUM_THREADS``; two before/after pairs each,
-load average 1.0; the same float32 frame).
+0.102-0.129 and 0.030-0.041 s to 0.046-0.060 and 0.008-0.011 s on one thread, and to
+0.026-0.029 and 0.004-0.006 s on two (``NUMBA_NUM_THREADS``; four before/after pairs each,
+load average 0.8-1.4; the same float32 frame). With another process busy on the second
+core, two threads took 0.106-0.119 s for the buffers, more than one: each parallel loop
+waits for its slowest thread.
 
 Units: positions in scene units, profiles in mm^-2 (``scene.mm_per_unit`` converts);
 radiance in the units of the lights per scene unit squared, as the reference renders.

@@ -922,3 +922,16 @@ def test_interpolated_normals_fall_back_to_the_face_normal():
     assert np.allclose(normal[valid], [0.0, 0.0, 1.0])
     assert np.allclose(position[valid][:, 2], 0.0) and np.all(uv == 0.0)
     assert np.all(normal[~valid] == 0.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(min_value=0, max_value=2000))
+def test_parallel_row_order_visits_every_row_once(count):
+    order = kernels._spread(count)
+    assert np.array_equal(np.sort(order), np.arange(count))
+    if count >= 32:
+        # each of four threads' consecutive chunks reaches into every quarter of the rows
+        # (not so for a few counts below 32, whose chunks hold four or five rows)
+        for thread in range(4):
+            chunk = order[thread * count // 4:(thread + 1) * count // 4]
+            assert len(np.unique(chunk * 4 // count)) == 4
