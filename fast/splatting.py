@@ -719,8 +719,6 @@ def _splat_tiled(samples, bounds_low, bounds_high, level, level_texel, material,
     (:func:`.splatting_kernels.splat_tiles`); with ``gpu`` both run on the device
     (:func:`.splatting_cuda.bin_and_splat_tiles`).
     """
-    import numba
-
     from . import splatting_kernels as kernels
 
     height, width = level.shape
@@ -747,10 +745,7 @@ def _splat_tiled(samples, bounds_low, bounds_high, level, level_texel, material,
     else:
         start, members = kernels.bin_samples(tile_bounds, tiles_y, tiles_x, sample_position,
                                              *window, low2, high2)
-        # tiles differ in work by orders of magnitude (the object's centre against its
-        # edge): handed out dynamically, TILE_CHUNK at a time, not in equal static shares
-        with numba.parallel_chunksize(kernels.TILE_CHUNK):
-            used = kernels.splat_tiles(out, position, texel, *profile, start, members)
+        used = kernels.splat_tiles(out, position, texel, *profile, start, members)
         binned = len(members)
     visited = binned * kernels.TILE ** 2
     return (kernels.untile_float64(out, tiles_x, height, width), [visited, int(used.sum())])

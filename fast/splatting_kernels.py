@@ -55,7 +55,9 @@ exponentials too little to measure. Tried:
   0.67; values kept in pixel order with the exponentials and the accumulation over all
   64 pixels in vectors: 0.70 against 0.70; table rows padded to 8 floats so that each
   read is a 4-wide vector: 0.82 against 0.68; dynamic scheduling of the tiles
-  (``numba.parallel_chunksize`` 4 or 16): no change beyond noise. All dropped.
+  (``numba.parallel_chunksize`` 1, 4 or 16): no change beyond noise, here nor with 16
+  threads on a 16-core machine (250-267 ms for the three levels at 0, 1, 4 or 16). All
+  dropped.
 
 :func:`bin_samples` culls each (sample, tile) once instead of twice (count then fill) and
 only in the tiles of each row that meet the sample's disc: 0.123 to 0.091 CPU seconds a
@@ -88,7 +90,6 @@ __all__ = [
     "bin_samples",
     "splat_tiles",
     "TILE",
-    "TILE_CHUNK",
     "NARROW_WIDTH",
     "FEWEST_IN_VECTORS",
     "gather_samples",
@@ -107,10 +108,6 @@ __all__ = [
 #: float32 vectors of AVX-512 per pass. Measured on the heterogeneous scene: 8 visits about
 #: half as many out-of-range pairs as rows of 16 and needs fewer samples per tile than 16.
 TILE = 8
-#: Tiles a thread takes at a time in :func:`splat_tiles`'s parallel loop (numba's
-#: ``parallel_chunksize``, set by the caller; 0 would give each thread an equal static
-#: share, however unequal the tiles' work). See the module docstring for what was measured.
-TILE_CHUNK = 1
 #: Annulus width (:math:`\sqrt{high2} - \sqrt{low2}`, in profile segments) below which
 #: :func:`splat_tiles` looks for a sample whose pixels in a tile fall into at most two
 #: segments, evaluated in vectors without a list. Measured on the heterogeneous scene: the
