@@ -653,33 +653,16 @@ def splat_level(samples: IrradianceSamples, bounds_low: np.ndarray, bounds_high:
     """
     height, width = level.shape
     exitance = np.zeros((height * width, 3), dtype=np.float64)
-    active = (bounds_high > bounds_low) & (samples.flux.max(axis=1) > 0)
-    if not active.any() or not level.valid.any():
+    if not len(samples) or not level.valid.any():
         return exitance.reshape(height, width, 3)
-    index = np.flatnonzero(active)
-    x, y, z = camera.project(samples.position[index], width, height)
-    reach = bounds_high[index]
-    focal = width / (2.0 * camera.tan_half_fov)
+    from .splatting_kernels import splat_windows
+
     limit = max(width, height)
-    # |d x_pixel| <= focal |delta| sqrt(1 + tan^2 of the sample's off-axis angles) / (z - R)
-    # for a point at 3D distance |delta| <= R from the sample (Cauchy-Schwarz), so this disc
-    # holds every pixel within R of it, off axis too
-    spread = np.sqrt(1.0 + ((x - 0.5 * width) / focal) ** 2 + ((y - 0.5 * height) / focal) ** 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        reach_pixels = np.where(z - reach > 1e-9 * np.abs(reach) + 1e-300,
-                                reach * focal * spread / (z - reach), np.inf)
-    radius = np.minimum(np.ceil(reach_pixels) + 1.0, limit)
-    # a disc wholly off screen, or a sample behind the camera whose sphere misses it
-    onscreen = (x + radius >= 0) & (x - radius < width) & (y + radius >= 0) & \
-               (y - radius < height) & np.isfinite(x) & np.isfinite(y)
-    behind = z - reach <= 0
-    centre_x = np.where(behind, 0.5 * width, x)
-    centre_y = np.where(behind, 0.5 * height, y)
-    radius = np.where(behind, limit, radius)
-    reach_pixels = np.where(behind, limit, np.minimum(reach_pixels, limit))
-    keep = onscreen | behind
-    index, centre_x, centre_y, radius = index[keep], centre_x[keep], centre_y[keep], radius[keep]
-    reach_pixels = reach_pixels[keep]
+    index, centre_x, centre_y, radius, reach_pixels = splat_windows(
+        samples.position, samples.flux, bounds_low, bounds_high,
+        *(np.asarray(vector, dtype=np.float64) for vector in (
+            camera.origin, camera.forward, camera.right, camera.up)),
+        float(camera.tan_half_fov), width, height)
     if not len(index):
         return exitance.reshape(height, width, 3)
     scale = float(mm_per_unit) ** 2  # mm^-2 -> per scene unit squared

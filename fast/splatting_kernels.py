@@ -89,6 +89,7 @@ __all__ = [
     "untile_float64",
     "bin_samples",
     "splat_tiles",
+    "splat_windows",
     "TILE",
     "NARROW_WIDTH",
     "FEWEST_IN_VECTORS",
@@ -270,6 +271,99 @@ def untile_float64(tiled, tiles_x, height, width):
             for c in range(3):
                 out[y, x, c] = tiled[tile, c, i]
     return out
+
+
+@numba.njit(parallel=True, cache=True)
+def splat_windows(position, flux, low, high, origin, forward, right, up, tan_half_fov, width,
+                  height):
+    r"""Each sample's window on one splatting level: which samples a level splats, and where.
+
+    A sample takes part when its range is not empty (``high > low``) and it carries flux.
+    Its point projects (pinhole, ``origin`` and the unit ``forward``, ``right``, ``up``) to
+    continuous pixel coordinates :math:`(x, y)` at depth :math:`z`; a point within
+    :math:`R` = ``high`` of it projects within ``reach`` pixels, :math:`f R s / (z - R)`
+    with :math:`f` the focal length in pixels and :math:`s = \sqrt{1 + ((x - W/2)/f)^2 +
+    ((y - H/2)/f)^2}` (Cauchy-Schwarz: off axis too); a sample whose sphere reaches the
+    camera plane (:math:`z - R \le 0`) gets the whole level. Samples whose disc lies wholly
+    off the level are dropped. Not fastmath: the same float64 operations, in the same
+    order, as the numpy formulas these replace.
+
+    Parameters
+    ----------
+    position : ndarray (N, 3)
+        Sample points, scene units.
+    flux : ndarray (N, 3)
+    low, high : ndarray (N,)
+        :math:`[R^k_{min}, R^k_{max})`, scene units.
+    origin, forward, right, up : ndarray (3,)
+        The camera.
+    tan_half_fov : float
+        Of the horizontal field of view.
+    width, height : int
+        The level's size in pixels.
+
+    Returns
+    -------
+    index : ndarray (M,) int64
+        The samples splatted, in input order.
+    centre_x, centre_y : ndarray (M,)
+        Window centres, continuous pixel coordinates.
+    radius : ndarray (M,)
+        Whole-pixel radius of the window, ``ceil(reach) + 1`` (at most the level's side).
+    reach : ndarray (M,)
+        The projected reach in pixels (at most the level's side).
+    """
+    count = position.shape[0]
+    focal = width / (2.0 * tan_half_fov)
+    limit = float(max(width, height))
+    keep = np.zeros(count, np.bool_)
+    values = np.empty((count, 4))
+    for i in numba.prange(count):
+        f0, f1, f2 = flux[i, 0], flux[i, 1], flux[i, 2]
+        # as numpy's max: a NaN channel makes the maximum NaN, which is not > 0
+        if not (high[i] > low[i]) or f0 != f0 or f1 != f1 or f2 != f2 or \
+                not (max(f0, f1, f2) > 0):
+            continue
+        rx = position[i, 0] - origin[0]
+        ry = position[i, 1] - origin[1]
+        rz = position[i, 2] - origin[2]
+        z = rx * forward[0] + ry * forward[1] + rz * forward[2]
+        safe = z if abs(z) > 1e-12 else 1e-12
+        x = (rx * right[0] + ry * right[1] + rz * right[2]) / safe * focal + 0.5 * width
+        y = -(rx * up[0] + ry * up[1] + rz * up[2]) / safe * focal + 0.5 * height
+        reach_world = high[i]
+        dx = (x - 0.5 * width) / focal
+        dy = (y - 0.5 * height) / focal
+        spread = math.sqrt(1.0 + dx * dx + dy * dy)
+        gap = z - reach_world
+        if gap > 1e-9 * abs(reach_world) + 1e-300:
+            reach = reach_world * focal * spread / gap
+        else:
+            reach = np.inf
+        radius = min(np.ceil(reach) + 1.0, limit)
+        behind = gap <= 0
+        onscreen = (x + radius >= 0) and (x - radius < width) and (y + radius >= 0) and \
+            (y - radius < height) and np.isfinite(x) and np.isfinite(y)
+        if not (onscreen or behind):
+            continue
+        keep[i] = True
+        values[i, 0] = 0.5 * width if behind else x
+        values[i, 1] = 0.5 * height if behind else y
+        values[i, 2] = limit if behind else radius
+        values[i, 3] = limit if behind else min(reach, limit)
+    index = np.flatnonzero(keep)
+    kept = index.shape[0]
+    centre_x = np.empty(kept)
+    centre_y = np.empty(kept)
+    radius_out = np.empty(kept)
+    reach_out = np.empty(kept)
+    for j in numba.prange(kept):
+        i = index[j]
+        centre_x[j] = values[i, 0]
+        centre_y[j] = values[i, 1]
+        radius_out[j] = values[i, 2]
+        reach_out[j] = values[i, 3]
+    return index, centre_x, centre_y, radius_out, reach_out
 
 
 @numba.njit(inline="always", fastmath=True, cache=True)

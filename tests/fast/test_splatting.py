@@ -935,3 +935,50 @@ def test_parallel_row_order_visits_every_row_once(count):
         for thread in range(4):
             chunk = order[thread * count // 4:(thread + 1) * count // 4]
             assert len(np.unique(chunk * 4 // count)) == 4
+
+
+def _numpy_windows(samples, low, high, camera, width, height):
+    """The windows of splat_level as numpy formulas: the reference of splat_windows."""
+    active = (high > low) & (samples.flux.max(axis=1) > 0)
+    index = np.flatnonzero(active)
+    x, y, z = camera.project(samples.position[index], width, height)
+    reach = high[index]
+    focal = width / (2.0 * camera.tan_half_fov)
+    limit = max(width, height)
+    spread = np.sqrt(1.0 + ((x - 0.5 * width) / focal) ** 2 + ((y - 0.5 * height) / focal) ** 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        reach_pixels = np.where(z - reach > 1e-9 * np.abs(reach) + 1e-300,
+                                reach * focal * spread / (z - reach), np.inf)
+    radius = np.minimum(np.ceil(reach_pixels) + 1.0, limit)
+    onscreen = (x + radius >= 0) & (x - radius < width) & (y + radius >= 0) & \
+        (y - radius < height) & np.isfinite(x) & np.isfinite(y)
+    behind = z - reach <= 0
+    keep = onscreen | behind
+    return (index[keep], np.where(behind, 0.5 * width, x)[keep],
+            np.where(behind, 0.5 * height, y)[keep], np.where(behind, limit, radius)[keep],
+            np.where(behind, limit, np.minimum(reach_pixels, limit))[keep])
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(min_value=0, max_value=2**31 - 1), st.sampled_from([(64, 48), (7, 5)]))
+def test_splat_windows_equal_the_numpy_formulas(seed, size):
+    # samples in front of, around and behind the camera, some without flux or range
+    rng = np.random.default_rng(seed)
+    count = 400
+    camera = CameraModel(np.array([0.3, -0.2, 4.0]), np.array([0.0, 0.0, -1.0]),
+                         np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.4, 64, 48)
+    position = rng.normal(scale=3.0, size=(count, 3))
+    flux = rng.random((count, 3)) * (rng.random((count, 1)) > 0.1)
+    flux[rng.random(count) < 0.02, 1] = np.nan
+    low = rng.random(count) * 0.5
+    high = low + rng.random(count) * 2.0 * (rng.random(count) > 0.1)
+    samples = splatting.IrradianceSamples(position, np.zeros(count, np.int64), flux,
+                                          np.zeros(count, np.int64))
+    width, height = size
+    compiled = kernels.splat_windows(position, flux, low, high, camera.origin, camera.forward,
+                                     camera.right, camera.up, camera.tan_half_fov, width,
+                                     height)
+    for ours, reference in zip(compiled, _numpy_windows(samples, low, high, camera, width,
+                                                        height), strict=True):
+        assert np.array_equal(ours, reference)
+    assert 0 < len(compiled[0]) < count
