@@ -1202,15 +1202,21 @@ def splat_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list[
     diameter = 2.0 * sphere_radius
     accumulated = exitance[-1]
     for k in range(len(pyramid) - 2, -1, -1):
-        coarse_factor = fine_factor = 1.0
+        factors = None
         if knobs["profile_upsampling"] and len(samples):
             factors = upsampling_profile_factors(material, float(np.median(
                 bounds[0][:, k + 1] / np.maximum(bounds[0][:, -1], 1e-300))))
-            coarse_factor, fine_factor = factors[texels[k + 1]], factors[texels[k]]
-        accumulated = exitance[k] + fine_factor * bilateral_upsample(
-            accumulated / coarse_factor, pyramid[k + 1], ranges_mm[texels[k + 1]] / mm_per_unit,
+            accumulated = accumulated / factors[texels[k + 1]]
+        upsampled = bilateral_upsample(
+            accumulated, pyramid[k + 1], ranges_mm[texels[k + 1]] / mm_per_unit,
             pyramid[k], ranges_mm[texels[k]] / mm_per_unit, scene_diameter=diameter,
             lambda_z=knobs["lambda_z"], lambda_m=knobs["lambda_m"])
+        if factors is None:
+            accumulated = exitance[k] + upsampled
+        else:
+            from .splatting_kernels import add_scaled_by_texel
+
+            accumulated = add_scaled_by_texel(exitance[k], upsampled, factors, texels[k])
     lap("accumulation")
     radiance = _exitant_radiance(accumulated, camera_buffer, camera, material.eta)
     lap("radiance")

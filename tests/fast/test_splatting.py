@@ -1005,3 +1005,14 @@ def test_splat_windows_equal_the_numpy_formulas(seed, size):
                                                         height), strict=True):
         assert np.array_equal(ours, reference)
     assert 0 < len(compiled[0]) < count
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(min_value=0, max_value=2**31 - 1))
+def test_add_scaled_by_texel_is_the_numpy_expression(seed):
+    rng = np.random.default_rng(seed)
+    exitance, upsampled = rng.random((2, 5, 7, 3))
+    factors = rng.random((11, 3)) + 0.1
+    texel = rng.integers(0, 11, (5, 7))
+    assert np.array_equal(kernels.add_scaled_by_texel(exitance, upsampled, factors, texel),
+                          exitance + factors[texel] * upsampled)
