@@ -59,30 +59,26 @@ cut into tiles of 8 x 8 pixels, each sample is binned to the tiles its range can
 (the disc bounding its projection, less tiles whose bounding box lies out of range), and
 each tile evaluates Eq. 8-9 in float32 for its samples, tiles in parallel.
 
-Measured with ``translucent bench splatting`` (heterogeneous scene, 800 x 600, 512^2, this
-2-core CPU shared with other work, load average about 3, where wall and CPU times per
-frame are about equal): with both accelerations 1.63 CPU seconds a frame (111 million
-pairs in range; level 2 55 % of it, level 0 16 %, level 1 13 %, buffer generation 9 %;
-2.54 before the tiled kernel), 8.3x less CPU than without acceleration (13.56), at 1.11x its
-error against brute force (0.0264 vs 0.0238). The excess error of the coarse levels
-is Eq. 17's upsampling across the texture's material boundaries, where a coarse pixel's
-texel stands for its children's: upsampled level 2 differs from the same annulus splatted
-at full resolution by 0.7 % of the frame's energy (1 % in blue, the channel with the most
-contrast). A tighter epsilon only moves energy back to level 0 (at 1e-4: 1.03x the error
-at 3.8x less CPU); ``profile_upsampling`` removes it (0.0237, 0.995x, at 8.1x less CPU),
-and with ``level_sampling`` = 1 as well 0.0238 (0.998x) at 9.2x less CPU (1.47 CPU
-seconds). The paper's 10 frames per second are out of reach on this CPU: 0.61 frames per
-CPU second with both accelerations, 0.74 at best (``level_sampling`` = 1, 1.11x the error).
-The two-segment path of the splat kernel, the one-pass binning, the projection without a
-matrix-vector product and the rasteriser's per-pixel rays took a frame with both
-accelerations from 1.80-1.94 to 1.40-1.67 CPU seconds (four before/after pairs run back to
-back, load average 3.1-4.0; the same images to 1.2e-7). Buffer generation and Eq. 7 as
-compiled kernels, rows in parallel (:func:`rasterize_view`, :func:`light_view`): per frame
-0.102-0.129 and 0.030-0.041 s to 0.046-0.060 and 0.008-0.011 s on one thread, and to
-0.026-0.029 and 0.004-0.006 s on two (``NUMBA_NUM_THREADS``; four before/after pairs each,
-load average 0.8-1.4; the same float32 frame). With another process busy on the second
-core, two threads took 0.106-0.119 s for the buffers, more than one: each parallel loop
-waits for its slowest thread.
+Measured with ``translucent bench splatting`` (heterogeneous scene, 800 x 600, 512^2;
+tables and the GPU figures in docs/splatting.md). On this 2-core CPU (load average
+1.0-1.4) the defaults render 1.16 frames per second (0.86 s, 1.39 CPU s a frame; 111
+million pairs in range, the three splat levels 0.74 s of the frame, level 2 0.52 s),
+14.5x faster in wall time (12.1x in CPU time) than without acceleration (16.8 CPU s) at
+0.995x its error against brute force (0.0237 vs 0.0238). With Eq. 17 as published the
+error is 1.11x (0.0264): the excess is Eq. 17's upsampling across the texture's material
+boundaries, where a coarse pixel's texel stands for its children's (upsampled level 2
+differs from the same annulus splatted at full resolution by 0.7 % of the frame's energy,
+1 % in blue); ``profile_upsampling`` removes it. Five levels with ``level_sampling`` = 1:
+1.96 frames per second at 0.991x the error (24x faster than no acceleration). The
+target of 10 frames per second on this CPU is not reached (5.1x short at best). On a GPU
+(backend ``"cuda"``, :mod:`.splatting_cuda`) the splats take milliseconds and the frame,
+0.21 s on an H100 machine, is bound by the stages that stay on the CPU.
+
+Each change to the frame's code kept its bits unless its commit says otherwise:
+rasterising and Eq. 7 as compiled kernels (rows in parallel), the mipmaps, Eq. 17, the
+tile layout and each sample's splat window as parallel compiled passes. With another
+process busy on the second core, parallel loops wait for their slowest thread: two
+threads can then be slower than one (0.106-0.119 s for the buffers against 0.046-0.060).
 
 Units: positions in scene units, profiles in mm^-2 (``scene.mm_per_unit`` converts);
 radiance in the units of the lights per scene unit squared, as the reference renders.
