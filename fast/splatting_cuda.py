@@ -19,8 +19,7 @@ Measured on an NVIDIA H100 (heterogeneous scene, 800 x 600, 512^2, both accelera
 and 2 with float32 sums and CPU binning (7.5 ms a frame, against about 0.6 CPU-bound
 seconds for the compiled CPU kernel on two cores); with the binning on the GPU, binning,
 splatting and the transfers take 38 ms a frame. The frame (0.21 s, 4.8 frames per second
-with 16 CPU cores beside it) is bound by the stages that run on the CPU; numba's
-``cuda.jit`` needs numba-cuda where numba no longer ships it.
+with 16 CPU cores beside it) is bound by the stages that run on the CPU.
 
 Without a GPU the same kernels run in numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``),
 which is how they are tested on machines without one.
