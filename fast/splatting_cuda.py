@@ -71,6 +71,19 @@ _culled = cuda.jit(device=True, inline=True)(_cpu._culled.py_func)
 _disc_columns = cuda.jit(device=True, inline=True)(_cpu._disc_columns.py_func)
 
 
+@cuda.jit(device=True, inline=True, fastmath=True)
+def _pair(table, label, own, at):
+    # Eq. 8-9: sqrt(P_o(d) P_i(d)) per channel, float32, at ``at`` segments from the sample
+    k = int32(at)
+    w = at - float32(k)
+    return (math.exp((table[label, k, 0] + table[own, k, 0]) +
+                     w * (table[label, k, 3] + table[own, k, 3])),
+            math.exp((table[label, k, 1] + table[own, k, 1]) +
+                     w * (table[label, k, 4] + table[own, k, 4])),
+            math.exp((table[label, k, 2] + table[own, k, 2]) +
+                     w * (table[label, k, 5] + table[own, k, 5])))
+
+
 @cuda.jit(fastmath=True)
 def _bin_tiles(bounds, sample_position, centre_x, centre_y, radius, low2, high2, tiles_y,
                tiles_x, counter, start, members, fill):
@@ -144,17 +157,10 @@ def _splat(out, used, position, texel, table, step_inverse, sample_position,
             at = math.sqrt(d2) * step_inverse
             if at >= support:
                 continue
-            k = int32(at)
-            w = at - float32(k)
-            own = shared_texel[m]
-            red += math.exp((table[label, k, 0] + table[own, k, 0]) +
-                            w * (table[label, k, 3] + table[own, k, 3])) * shared_flux[m, 0]
-            green += math.exp((table[label, k, 1] + table[own, k, 1]) +
-                              w * (table[label, k, 4] + table[own, k, 4])) * \
-                shared_flux[m, 1]
-            blue += math.exp((table[label, k, 2] + table[own, k, 2]) +
-                             w * (table[label, k, 5] + table[own, k, 5])) * \
-                shared_flux[m, 2]
+            r, g, b = _pair(table, label, shared_texel[m], at)
+            red += r * shared_flux[m, 0]
+            green += g * shared_flux[m, 1]
+            blue += b * shared_flux[m, 2]
             pairs += 1
     out[tile, 0, lane] = red
     out[tile, 1, lane] = green
@@ -185,15 +191,10 @@ def _gather(out, pixel_position, pixel_texel, table, step_inverse, sample_positi
         at = math.sqrt(dx * dx + dy * dy + dz * dz) * step_inverse
         if at >= support:
             continue
-        k = int32(at)
-        w = at - float32(k)
-        own = sample_texel[s]
-        red += math.exp((table[label, k, 0] + table[own, k, 0]) +
-                        w * (table[label, k, 3] + table[own, k, 3])) * sample_flux[0, s]
-        green += math.exp((table[label, k, 1] + table[own, k, 1]) +
-                          w * (table[label, k, 4] + table[own, k, 4])) * sample_flux[1, s]
-        blue += math.exp((table[label, k, 2] + table[own, k, 2]) +
-                         w * (table[label, k, 5] + table[own, k, 5])) * sample_flux[2, s]
+        r, g, b = _pair(table, label, sample_texel[s], at)
+        red += r * sample_flux[0, s]
+        green += g * sample_flux[1, s]
+        blue += b * sample_flux[2, s]
     out[pixel, 0] = red
     out[pixel, 1] = green
     out[pixel, 2] = blue
