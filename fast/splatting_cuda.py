@@ -32,6 +32,7 @@ objects using multiresolution splatting. The Visual Computer (2012).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -64,6 +65,28 @@ def _require():
         raise InputError("backend 'cuda' needs a CUDA GPU that numba.cuda can use (or "
                          "NUMBA_ENABLE_CUDASIM=1 for the simulator); use backend 'numba'",
                          field="backend", value="cuda")
+    problem = _compile_problem()
+    if problem is not None:
+        raise InputError(f"numba.cuda sees a GPU but cannot compile a kernel ({problem}); "
+                         "see docs/splatting.md for a known numba-cuda / numpy clash, or "
+                         "use backend 'numba'", field="backend", value="cuda")
+
+
+@functools.lru_cache(maxsize=1)
+def _compile_problem() -> str | None:
+    """Compile and run a one-thread kernel once: None, or what went wrong."""
+    try:
+        probe = cuda.device_array(1, np.float32)
+        _probe[1, 1](probe)
+        cuda.synchronize()
+    except Exception as error:  # noqa: BLE001 - whatever the toolchain raises is reported
+        return f"{type(error).__name__}: {error}"
+    return None
+
+
+@cuda.jit
+def _probe(out):
+    out[0] = float32(1.0)
 
 
 # the CPU binning's own functions, compiled for the device (one source for both)

@@ -88,3 +88,16 @@ def test_cuda_backend_without_a_gpu_says_so():
     with pytest.raises(InputError, match="backend = 'cuda'.*needs a CUDA GPU"):
         state.render()
     assert np.isfinite(splatting.precompute(scene, irradiance_resolution=8).render().rgb).all()
+
+
+def test_cuda_backend_that_cannot_compile_says_why(monkeypatch):
+    # a GPU that numba.cuda sees but whose toolchain fails (numba-cuda against a numpy it
+    # predates, say): the message names the cause instead of a traceback deep in numba
+    monkeypatch.setattr(splatting_cuda, "available", lambda: True)
+    monkeypatch.setattr(splatting_cuda, "_compile_problem",
+                        lambda: "AttributeError: module 'numpy' has no attribute 'row_stack'")
+    with pytest.raises(InputError, match="cannot compile a kernel.*row_stack"):
+        splatting_cuda.gather_samples(np.zeros((1, 3)), np.zeros((3, 1), np.float32),
+                                      np.zeros(1, np.int32), np.zeros((1, 1, 6), np.float32),
+                                      np.float32(1.0), np.zeros((3, 1), np.float32),
+                                      np.zeros(1, np.int32), np.zeros((3, 1), np.float32))
