@@ -949,7 +949,7 @@ def upsampling_profile_factors(material: SubEditProfiles, inner: float) -> np.nd
     15) over :math:`[\rho, 1]`, in units of the median effective range (the distances the
     coarser levels render, weighted as they contribute). For a homogeneous material the
     factors are equal and the upsampling is Eq. 17's. Not in the paper (the knob
-    ``profile_upsampling``, off by default).
+    ``profile_upsampling``, on by default).
 
     Parameters
     ----------

@@ -22,8 +22,10 @@ effective range (95 % of its energy, Eq. 13), about 2.4 % of the frame on the
 heterogeneous scene; the accelerations add to it. The comparison "at equal error" is
 therefore made over a sweep of the accelerated method's accuracy knobs: ``--epsilons``
 (Eq. 14's tolerance), ``--level-samplings`` (the per-level irradiance sampling of
-:func:`translucent.fast.splatting.level_sample_masks`), and Eq. 17 with or without the
-profile factors of :func:`translucent.fast.splatting.upsampling_profile_factors`. Among
+:func:`translucent.fast.splatting.level_sample_masks`), ``--levels-list`` (splatting levels
+beyond the paper's three), one knob changed at a time from the defaults, and Eq. 17 as
+published (without the profile factors of
+:func:`translucent.fast.splatting.upsampling_profile_factors`, which the defaults use). Among
 the rows with both accelerations, the fastest whose error is at most
 :data:`EQUAL_ERROR_RATIO` times that of no acceleration is compared with no acceleration,
 in CPU seconds per frame (the steadier figure on a shared machine) and in wall seconds.
