@@ -17,7 +17,7 @@ from translucent.fitting.results import ParameterSummary
 from translucent.materials.dipole_pca import DipolePCABasis
 from translucent.reports import stress
 from translucent.reports.cli import main
-from translucent.reports.stress import diffusion, fits, pca, radiosity, wavelets
+from translucent.reports.stress import diffusion, fits, pca, radiosity, splatting, wavelets
 
 #: Coefficients inside both preset grids (area_normalised: sigma_s' in [0.02, 25],
 #: sigma_a in [1e-4, 5] mm^-1), where the bases are built to work.
@@ -40,6 +40,9 @@ TINY = {
     "finite-object diffusion gain":
         functools.partial(diffusion.finite_object_gain_sweep, sigma_as=(1e-8, 1e-2),
                           sigma_s_primes=(0.5, 1e3), etas=(1.0, 2.0)),
+    "splatting over profile supports and light angles":
+        functools.partial(splatting.splatting_sweep, supports=(1e-2, 10.0),
+                          elevations=(90.0, 0.5)),
 }
 
 
@@ -188,3 +191,11 @@ def test_a_capture_with_nan_pixels_is_fitted_with_finite_medians():
     assert case["outcome"] == "fitted"
     assert all(np.isfinite(v) for v in case["medians"].values())
     assert result.passed
+
+
+def test_splatting_sweep_compares_resolved_supports_and_blacks_out_an_empty_view():
+    result = splatting.splatting_sweep(supports=(1e-2, 10.0), elevations=(30.0,))
+    compared = [case for case in result.details if "relative_error" in case]
+    assert [case["support_mm"] for case in compared] == [10.0]
+    assert 0 < compared[0]["relative_error"] <= result.bound
+    assert result.details[-1] == {"camera": "turned away", "nonzero_pixels": 0}
