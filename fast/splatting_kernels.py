@@ -126,8 +126,6 @@ _OUTSIDE = np.float32(-1000.0)
 #: Chunks of samples listed per row in parallel by :func:`bin_samples` (a constant, so that
 #: the kernel can be cached; several per thread up to 16 threads).
 _BIN_CHUNKS = 64
-#: The largest float64, what ``numpy.nan_to_num`` gives infinities.
-_LARGEST = np.finfo(np.float64).max
 #: Samples per block of the brute-force gather (its scratch stays in the L1/L2 caches).
 _GATHER_BLOCK = 1024
 #: Image rows per band of :func:`rasterize`, the unit of its parallel loop.
@@ -845,18 +843,6 @@ def median_depth_level(position, normal, uv, depth, valid, footprint):
             out_depth[row, col] = depth[y, x]
             out_footprint[row, col] = 2.0 * footprint[y, x]
     return out_position, out_normal, out_uv, out_depth, out_valid, out_footprint
-
-
-@numba.njit(inline="always", cache=True)
-def _finite(value):
-    """``numpy.nan_to_num`` of one float64: NaN to 0, infinities to the largest floats."""
-    if value != value:
-        return 0.0
-    if value > _LARGEST:
-        return _LARGEST
-    if value < -_LARGEST:
-        return -_LARGEST
-    return float(value)
 
 
 @numba.njit(parallel=True, cache=True)
