@@ -290,9 +290,10 @@ def bin_and_splat_tiles(out, position, texel, tile_bounds, tiles_x, table, step_
     counter = cuda.to_device(np.zeros(tiles, np.int64), stream=stream)
     blocks = -(-count // _BIN_THREADS)
     start = np.zeros(tiles + 1, np.int64)
-    nothing = cuda.device_array(1, np.int64, stream=stream)
-    _bin_tiles[blocks, _BIN_THREADS, stream](*window, tiles_y, tiles_x, counter, nothing,
-                                             nothing, False)
+    # the counting pass writes no list: one-element stand-ins of the fill pass's types
+    _bin_tiles[blocks, _BIN_THREADS, stream](
+        *window, tiles_y, tiles_x, counter, cuda.device_array(1, np.int64, stream=stream),
+        cuda.device_array(1, np.int32, stream=stream), False)
     np.cumsum(counter.copy_to_host(stream=stream), out=start[1:])  # synchronises
     binned = int(start[-1])
     if binned == 0:
