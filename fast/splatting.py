@@ -1352,8 +1352,9 @@ def precompute(scene, **knobs) -> SplattingState:
 
     The method needs no precomputation: every buffer is rebuilt each frame from the current
     mesh, so a deforming mesh costs nothing extra and nothing can go stale. The only
-    tables (the SubEdit conversion of a dipole and Eq. 14's lookup table) depend on the
-    material alone and are built on first use.
+    tables (the SubEdit conversion of a dipole, Eq. 14's lookup table and the mean
+    profile's energy of the profile upsampling) depend on the material alone and are built
+    on first use.
     """
     refuse_inapplicable(scene, applies_to(scene), _REFUSAL)
     return SplattingState(scene, _check_knobs(knobs))
