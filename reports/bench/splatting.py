@@ -14,7 +14,9 @@ error tolerances (``--epsilons``), and prints for each:
   on every ``--validation-stride``-th pixel of the timed frame itself (so the levels and
   samples are exactly those timed; its cost is those pixels x every irradiance texel),
   and on a whole frame at a small size (``--validation-width``,
-  ``--validation-irradiance``), as a check of the silhouettes at low resolution.
+  ``--validation-irradiance``), as a check of the silhouettes at low resolution;
+* for each built-in heterogeneous material (``--materials``), the relative error and
+  HDR-FLIP of the defaults against brute force on that small whole frame.
 
 Error is the relative L1 difference ``sum |test - truth| / sum truth`` over the pixels'
 RGB values. Most of it is common to every setting: each profile is splatted only up to its
@@ -43,6 +45,7 @@ import numpy as np
 
 from ...atomic import atomic_write_text
 from ...fast import splatting
+from ...materials.subedit import BUILTIN_SUBEDIT
 from ...scenes import load_scene
 from . import with_size
 
@@ -92,6 +95,10 @@ def add_arguments(parser):
     parser.add_argument("--levels-list", default="5",
                         help="extra 'both' rows with this many splatting levels, alone and "
                              "with each level sampling (comma-separated; empty for none)")
+    parser.add_argument("--materials", default=",".join(BUILTIN_SUBEDIT),
+                        help="built-in heterogeneous SubEdit materials rendered on the small "
+                             "frame with the defaults against brute force: relative error "
+                             "and HDR-FLIP (comma-separated; empty for none)")
     parser.add_argument("--no-published", action="store_true",
                         help="leave out the row with Eq. 17 as published (no profile "
                              "factors; see translucent.fast.splatting."
@@ -164,6 +171,10 @@ def run(args) -> int:
     if any(count != int(count) or not 1 <= count <= 12 for count in level_counts):
         raise InputError("must be integers in [1, 12]", field="--levels-list",
                          value=args.levels_list)
+    materials = [name.strip() for name in args.materials.split(",") if name.strip()]
+    if any(name not in BUILTIN_SUBEDIT for name in materials):
+        raise InputError(f"unknown material; valid: {', '.join(BUILTIN_SUBEDIT)}",
+                         field="--materials", value=args.materials)
     if args.validation_stride < 1:
         raise InputError("must be >= 1", field="--validation-stride",
                          value=args.validation_stride)
@@ -211,6 +222,7 @@ def run(args) -> int:
               f"{results[name]['relative error']:.4f}", flush=True)
     load = {"before": list(load_before), "after": list(os.getloadavg())}
     _report(args, results, truth, truth_seconds, camera_buffer.valid.sum(), small, load)
+    per_material = _materials(small, small_common, materials)
     out = args.json or "bench_splatting.json"
     atomic_write_text(out, json.dumps({
         "scene": base.name, "width": args.width, "height": args.height,
@@ -221,9 +233,34 @@ def run(args) -> int:
                        "brute force seconds": truth_seconds,
                        "small frame": [small.camera.width, small.camera.height],
                        "small irradiance_resolution": args.validation_irradiance},
-        "results": results}, indent=2, default=str))
+        "results": results, "materials": per_material}, indent=2, default=str))
     print(f"wrote {out}")
     return 0
+
+
+def _materials(small, small_common, names) -> dict:
+    """Each built-in heterogeneous material with the defaults against brute force (Eq. 5).
+
+    On the whole small frame: relative L1 error and HDR-FLIP (brute force the reference).
+    """
+    from ...materials.subedit import builtin_subedit
+    from ..metrics import flip_map
+
+    out = {}
+    for name in names:
+        state = splatting.precompute(small, **small_common)
+        material = builtin_subedit(name)
+        image = state.render(material=material).rgb
+        truth = state.render_ground_truth(material=material).rgb
+        out[name] = {"relative error": float(relative_error(image, truth)),
+                     "hdr-flip": flip_map(truth, image)[0]}
+    if out:
+        print(f"\nbuilt-in heterogeneous materials, defaults against brute force on the whole "
+              f"{small.camera.width} x {small.camera.height} frame:")
+        for name, row in out.items():
+            print(f"  {name:16s} relative error {row['relative error']:.4f}  HDR-FLIP "
+                  f"{row['hdr-flip']:.4f}")
+    return out
 
 
 def _millions(counts) -> float:

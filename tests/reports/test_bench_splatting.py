@@ -13,8 +13,13 @@ TINY = ["bench", "splatting", "--width", "32", "--height", "24", "--irradiance-r
 def test_tiny_bench_writes_every_row_with_its_error(tmp_path, capsys):
     out = tmp_path / "bench.json"
     assert main(TINY + ["--settings", "no acceleration,both", "--level-samplings", "1",
-                        "--levels-list", "4", "--json", str(out)]) == 0
-    results = json.loads(out.read_text())["results"]
+                        "--levels-list", "4", "--materials", "checker,wax_gradient",
+                        "--json", str(out)]) == 0
+    written = json.loads(out.read_text())
+    results = written["results"]
+    assert list(written["materials"]) == ["checker", "wax_gradient"]
+    for row in written["materials"].values():
+        assert 0 < row["relative error"] < 1 and 0 < row["hdr-flip"] < 1
     assert list(results) == ["no acceleration", "both", "both, Eq. 17 as published",
                              "both, level sampling 1", "both, 4 levels",
                              "both, 4 levels, level sampling 1"]
@@ -29,6 +34,7 @@ def test_tiny_bench_writes_every_row_with_its_error(tmp_path, capsys):
     ("--levels-list", "0", "--levels-list = '0': must be integers in [1, 12]"),
     ("--level-samplings", "a", "--level-samplings = 'a': must be comma-separated numbers"),
     ("--settings", "fast", "unknown setting"),
+    ("--materials", "jade", "--materials = 'jade': unknown material"),
 ])
 def test_bench_refuses_bad_options(flag, value, message, capsys):
     assert main(TINY + [flag, value]) == 2
