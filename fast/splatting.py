@@ -564,15 +564,11 @@ class CameraModel:
     def project(self, points: np.ndarray, width: int, height: int):
         """Continuous pixel coordinates (x, y) at a level of size width x height, and depth z."""
         relative = self._relative(points)
-
-        def along(axis):
-            return self._along(relative, axis)
-
-        z = along(self.forward)
+        z = self._along(relative, self.forward)
         safe = np.where(np.abs(z) > 1e-12, z, 1e-12)
         focal = width / (2.0 * self.tan_half_fov)
-        x = along(self.right) / safe * focal + 0.5 * width
-        y = -along(self.up) / safe * focal + 0.5 * height
+        x = self._along(relative, self.right) / safe * focal + 0.5 * width
+        y = -self._along(relative, self.up) / safe * focal + 0.5 * height
         return x, y, z
 
 
