@@ -422,6 +422,31 @@ def test_level_sample_masks_keep_every_selection_a_partition():
     assert np.all(masks[2][pyramid[2].valid])
 
 
+def test_sample_selector_ids_name_the_same_samples_over_several_lights():
+    buffer, model, view, material = small_setup(width=64, resolution=32)
+    other = light_view(plane_light_buffer(16), np.array([0.6, 0, 0.8]), np.full(3, 2.0),
+                       material.eta)
+    pyramids = [irradiance_mipmap(v.buffer, v.flux, v.cosine, 3) for v in (view, other)]
+    knobs = dict(mm_per_unit=MM_PER_UNIT, z0=0.03, alpha=15.0)
+    selector = splatting.SampleSelector(pyramids, material, **knobs)
+    for level, pitch in ((None, None), (1, 1.0), (2, 8.0)):
+        coarse = None if level is None else selector.level_masks(model, level, pitch)
+        ids = selector.select(coarse)
+        assert len(np.unique(ids)) == len(ids) and ids.max() < selector.size
+        together = selector.samples(ids)
+        # light by light, the samples (and their order) of one pyramid selected alone
+        alone = splatting.IrradianceSamples.concatenate(
+            select_irradiance_samples(
+                pyramid, material, **knobs,
+                coarse_enough=None if level is None
+                else splatting.level_sample_masks(pyramid, model, level, pitch))
+            for pyramid in pyramids)
+        for name in ("position", "texel", "flux", "level"):
+            assert np.array_equal(getattr(together, name), getattr(alone, name))
+        assert np.allclose(together.flux.sum(axis=0),
+                           view.flux.sum(axis=(0, 1)) + other.flux.sum(axis=(0, 1)))
+
+
 # ---------------------------------------------------------------------------- mipmaps
 def test_irradiance_mipmap_conserves_flux_and_bounds_depth(rng):
     buffer = plane_light_buffer(13)  # odd size: padding with invalid texels
