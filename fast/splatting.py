@@ -61,16 +61,16 @@ each tile evaluates Eq. 8-9 in float32 for its samples, tiles in parallel.
 
 Measured with ``translucent bench splatting`` (heterogeneous scene, 800 x 600, 512^2;
 tables and the GPU figures in docs/splatting.md). On this 2-core CPU (load average
-1.0-1.4) the defaults render 1.16 frames per second (0.86 s, 1.39 CPU s a frame; 111
-million pairs in range, the three splat levels 0.74 s of the frame, level 2 0.52 s),
-14.5x faster in wall time (12.1x in CPU time) than without acceleration (16.8 CPU s) at
+0.8-1.3) the defaults render 1.19 frames per second (0.84 s, 1.41 CPU s a frame; 111
+million pairs in range, the three splat levels 0.74 s of the frame, level 2 0.53 s),
+11.9x faster in wall time (10.0x in CPU time) than without acceleration (14.1 CPU s) at
 0.995x its error against brute force (0.0237 vs 0.0238). With Eq. 17 as published the
 error is 1.11x (0.0264): the excess is Eq. 17's upsampling across the texture's material
 boundaries, where a coarse pixel's texel stands for its children's (upsampled level 2
 differs from the same annulus splatted at full resolution by 0.7 % of the frame's energy,
-1 % in blue); ``profile_upsampling`` removes it. Five levels with ``level_sampling`` = 1:
-1.96 frames per second at 0.991x the error (24x faster than no acceleration). The
-target of 10 frames per second on this CPU is not reached (5.1x short at best). On a GPU
+1 % in blue); ``profile_upsampling`` removes it. Five levels with ``level_sampling`` = 1.5:
+2.60 frames per second at 0.996x the error (26x faster than no acceleration). The
+target of 10 frames per second on this CPU is not reached (3.8x short at equal error). On a GPU
 (backend ``"cuda"``, :mod:`.splatting_cuda`) the splats take milliseconds and the frame,
 0.21 s on an H100 machine, is bound by the stages that stay on the CPU.
 

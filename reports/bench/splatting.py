@@ -89,7 +89,7 @@ def add_arguments(parser):
     parser.add_argument("--epsilons", default="0.00025,0.0001",
                         help="extra 'both' rows at these Eq. 14 tolerances (comma-separated; "
                              "empty for none)")
-    parser.add_argument("--level-samplings", default="1",
+    parser.add_argument("--level-samplings", default="1,1.5,2",
                         help="extra 'both' rows with per-level irradiance sampling at these "
                              "pitches in pixels (comma-separated; empty for none)")
     parser.add_argument("--levels-list", default="5",
