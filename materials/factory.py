@@ -21,8 +21,10 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import os
 import pkgutil
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -59,6 +61,9 @@ class MaterialType:
         of a material.
     to_dict : callable, optional
         ``material -> table`` (without ``type``), the inverse of ``constructor``.
+    path_keys : tuple of str
+        Keys whose values are file paths: relative ones are read from the folder of the
+        file the table came from (:func:`material_from_dict`).
     """
 
     name: str
@@ -67,6 +72,7 @@ class MaterialType:
     required: tuple[str, ...]
     material_class: type | None = None
     to_dict: Callable[[Any], dict] | None = None
+    path_keys: tuple[str, ...] = ()
 
 
 #: type name -> MaterialType. Add entries with :func:`register_material_type`.
@@ -77,7 +83,7 @@ MATERIAL_TYPES: dict[str, MaterialType] = {}
 def register_material_type(name: str, constructor: Callable[..., Any], *,
                            material_class: type | None = None,
                            to_dict: Callable[[Any], dict] | None = None,
-                           keys=None) -> MaterialType:
+                           keys=None, path_keys=()) -> MaterialType:
     """Add a material type to :data:`MATERIAL_TYPES` (replacing one of the same name).
 
     Parameters
@@ -98,6 +104,9 @@ def register_material_type(name: str, constructor: Callable[..., Any], *,
         parameters read as attributes of the material.
     keys : iterable of str, optional
         The accepted keys (default: the constructor's keyword parameters).
+    path_keys : iterable of str, optional
+        Accepted keys that hold file paths; :func:`material_from_dict` hands the
+        constructor these resolved against the table's folder.
 
     Returns
     -------
@@ -112,7 +121,8 @@ def register_material_type(name: str, constructor: Callable[..., Any], *,
     required = tuple(p.name for p in named if p.default is p.empty and p.name in accepted)
     if material_class is None and isinstance(constructor, type):
         material_class = constructor
-    entry = MaterialType(name, constructor, accepted, required, material_class, to_dict)
+    entry = MaterialType(name, constructor, accepted, required, material_class, to_dict,
+                         tuple(path_keys))
     MATERIAL_TYPES[name] = entry
     return entry
 
@@ -128,7 +138,7 @@ def _load_plugins() -> None:
         importlib.import_module(f"{__package__}.{module.name}")
 
 
-def material_from_dict(table: dict, *, file=None, field: str = "material"):
+def material_from_dict(table: dict, *, file=None, field: str = "material", base_dir=None):
     """Build a material from a table such as ``{type = "measured", name = "marble"}``.
 
     Parameters
@@ -141,6 +151,9 @@ def material_from_dict(table: dict, *, file=None, field: str = "material"):
     field : str
         Where the table sits in that file (``"objects[2].material"``); error messages
         name ``field.key``.
+    base_dir : str or os.PathLike, optional
+        Folder that relative paths (the type's ``path_keys``) start from; default the
+        folder of ``file``, else the current folder.
 
     Returns
     -------
@@ -175,6 +188,14 @@ def material_from_dict(table: dict, *, file=None, field: str = "material"):
     if missing:
         raise InputError(f"a {kind} material needs {', '.join(missing)}", file=file,
                          field=f"{field}.{missing[0]}")
+    if entry.path_keys:
+        base = Path(base_dir) if base_dir is not None else \
+            (Path(file).parent if file is not None else None)
+        for key in entry.path_keys:
+            value = arguments.get(key)
+            if base is not None and isinstance(value, str | os.PathLike) \
+                    and not Path(value).is_absolute():
+                arguments[key] = str(base / value)
     try:
         return entry.constructor(**arguments)
     except InputError as error:

@@ -718,7 +718,12 @@ def subedit_from_spec(spec: dict, *, file=None) -> SubEditProfiles:
         path = Path(value)
         if file is not None and not path.is_absolute():
             path = Path(file).parent / path
-        return load_subedit(path)
+        try:
+            return load_subedit(path)
+        except InputError as error:  # named by the key that holds the path
+            reason = error.reason if error.file == str(path) and error.field == "path" \
+                else str(error)
+            raise InputError(reason, file=file, field="file", value=str(path)) from error
     unknown = sorted(set(spec) - {"segments", "r_s"})
     if unknown:
         raise InputError("unknown option; valid: segments, r_s", file=file, field="material",
@@ -750,7 +755,7 @@ def _register() -> None:
     from .factory import register_material_type
 
     register_material_type("subedit", _from_table, material_class=SubEditProfiles,
-                           to_dict=_to_table, keys=SPEC_KEYS)
+                           to_dict=_to_table, keys=SPEC_KEYS, path_keys=("file",))
 
 
 _register()

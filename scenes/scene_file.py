@@ -272,7 +272,8 @@ def scene_from_dict(table: dict, *, file=None, base_dir=None) -> Scene:
             raise InputError("must be a non-empty string", file=file, field=f"{field}.name",
                              value=name)
         mesh = _mesh(entry["mesh"], name, file=file, field=f"{field}.mesh", base_dir=base)
-        material = material_from_dict(entry["material"], file=file, field=f"{field}.material")
+        material = material_from_dict(entry["material"], file=file, field=f"{field}.material",
+                                      base_dir=base)
         objects.append(SceneObject(name, mesh, material))
     light_tables = table.get("lights", [])
     if not isinstance(light_tables, list):

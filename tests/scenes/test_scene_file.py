@@ -149,6 +149,32 @@ def test_mesh_file_paths_and_transforms(tmp_path):
     np.testing.assert_allclose(upper, [1.0, 2.0, 2.0], atol=1e-12)
 
 
+
+def test_subedit_texture_file_is_relative_to_the_scene_file(tmp_path, monkeypatch):
+    from translucent.materials.subedit import builtin_subedit, load_subedit, save_subedit
+
+    texture = load_subedit(save_subedit(tmp_path / "textures" / "checker.npz",
+                                        builtin_subedit("checker", resolution=4)))
+    text = with_lines(MINIMAL, 'material = { type = "measured", name = "marble" }',
+                      'material = { type = "subedit", file = "textures/checker.npz" }')
+    path = tmp_path / "scenes" / "textured.toml"
+    path.parent.mkdir()
+    path.write_text(text.replace('"textures/', '"../textures/'))
+    elsewhere = tmp_path / "elsewhere" / "deeper"  # ../textures does not exist from here
+    elsewhere.mkdir(parents=True)
+    monkeypatch.chdir(elsewhere)
+    material = load_scene(path).object("ball").material
+    np.testing.assert_array_equal(material.log_profile, texture.log_profile)
+    # written elsewhere, the scene still finds its texture
+    back = load_scene(save_scene(load_scene(path), tmp_path / "copy" / "copy.toml"))
+    np.testing.assert_array_equal(back.object("ball").material.log_profile,
+                                  texture.log_profile)
+    # a missing texture names the scene file and the material's key
+    path.write_text(text.replace('"textures/', '"../missing/'))
+    with pytest.raises(InputError) as error:
+        load_scene(path)
+    assert "textured.toml" in str(error.value) and "objects[0].material.file" in str(error.value)
+
 def test_cornell_box_part_and_generator_parameters():
     text = with_lines(MINIMAL, 'mesh = { type = "icosphere", subdivisions = 1, radius = 1.0 }',
                       'mesh = { type = "cornell_box", part = "left_wall", size = 4.0 }')
