@@ -700,6 +700,15 @@ def test_applies_to_and_knob_errors(heterogeneous_scene):
         splatting.precompute(heterogeneous_scene, sampling_range="red")
     with pytest.raises(InputError, match=r"level_sampling = -1: must be a finite number >= 0"):
         splatting.precompute(heterogeneous_scene, level_sampling=-1)
+    # values of the wrong type are input errors too, not TypeError or ValueError
+    with pytest.raises(InputError, match=r"alpha = 'many': must be a finite number"):
+        splatting.precompute(heterogeneous_scene, alpha="many")
+    with pytest.raises(InputError, match=r"levels = 'three': must be an integer"):
+        splatting.precompute(heterogeneous_scene, levels="three")
+    with pytest.raises(InputError, match=r"irradiance_resolution = inf: must be an integer"):
+        splatting.precompute(heterogeneous_scene, irradiance_resolution=math.inf)
+    with pytest.raises(InputError, match=r"epsilon = True: must be a finite number"):
+        splatting.precompute(heterogeneous_scene, epsilon=True)
 
 
 def test_approx_command_writes_an_exr(tmp_path):
@@ -709,7 +718,8 @@ def test_approx_command_writes_an_exr(tmp_path):
     out = tmp_path / "het.exr"
     code = main(["approx", "splatting", str(CATALOGUE_DIR / "heterogeneous.toml"), "--out",
                  str(out), "--irradiance-resolution", "32", "--material", "checker",
-                 "--level-sampling", "1", "--no-profile-upsampling"])
+                 "--level-sampling", "1", "--no-profile-upsampling", "--epsilon", "0.002",
+                 "--sampling-range", "luminance"])
     assert code == 0
     image = read_exr(out)
     assert image.metadata["producer"] == "splatting" and image.rgb.sum() > 0
