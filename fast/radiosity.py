@@ -1918,8 +1918,8 @@ def _resolve_knobs(scene, knobs: dict) -> dict:
     for name in ("tolerance", "sample_falloff", "centroid_beyond", "transfer_budget_mb"):
         if not float(resolved[name]) > 0:
             raise InputError("must be > 0", field=name, value=resolved[name])
-    for name in ("self_samples", "voxels_per_axis", "profile_samples", "max_iterations",
-                 "light_samples", "mix_points"):
+    for name in ("rays_per_patch", "self_samples", "voxels_per_axis", "profile_samples",
+                 "max_iterations", "light_samples", "mix_points"):
         check_count(resolved[name], name)
     check_count(resolved["diffusion_voxels_per_axis"], "diffusion_voxels_per_axis", minimum=4)
     if not isinstance(resolved["finite_object_energy"], bool):

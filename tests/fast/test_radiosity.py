@@ -930,3 +930,14 @@ def test_image_weights_of_a_sheet_show_the_face_towards_the_camera(eye):
     assert np.abs(got - expected).max() <= RECOMPUTED_RTOL * np.abs(expected).max()
     # from above the camera sees the front face (normal up), from below the back face
     assert set(behind.reshape(-1)[pixels]) == {eye[1] < 1.0}
+
+
+def test_form_factor_rays_are_checked_where_no_form_factors_are_needed():
+    # a single convex object needs no form factors, but a bad count is still bad input
+    block = box((1.0, 1.0, 1.0), subdivisions=1)
+    scene = Scene([SceneObject("block", block, measured_medium("Skin1"))],
+                  (PointLight([1.0, 3.0, 1.0], 20.0),), CAMERA, mm_per_unit=10.0)
+    for rays in (0, -3, 2.5):
+        with pytest.raises(InputError, match="rays_per_patch.*must be an integer >= 1"):
+            precompute(scene, rays_per_patch=rays)
+
