@@ -1936,6 +1936,9 @@ def _resolve_knobs(scene, knobs: dict) -> dict:
     elif not float(resolved["max_distance_mm"]) > 0:
         raise InputError("must be > 0 mm", field="max_distance_mm",
                          value=resolved["max_distance_mm"])
+    elif not math.isfinite(float(resolved["max_distance_mm"])):
+        raise InputError("must be a finite distance > 0 mm (or None: from the profiles)",
+                         field="max_distance_mm", value=resolved["max_distance_mm"])
     diffuse_samples = resolved["diffuse_light_samples"]
     if diffuse_samples is not None and (int(diffuse_samples) != diffuse_samples
                                         or diffuse_samples < 1):

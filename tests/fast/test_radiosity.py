@@ -941,3 +941,7 @@ def test_form_factor_rays_are_checked_where_no_form_factors_are_needed():
         with pytest.raises(InputError, match="rays_per_patch.*must be an integer >= 1"):
             precompute(scene, rays_per_patch=rays)
 
+
+def test_an_infinite_cut_off_is_named_as_the_knob():
+    with pytest.raises(InputError, match=r"max_distance_mm = inf: must be a finite"):
+        precompute(_block_scene(), max_distance_mm=float("inf"))
