@@ -10,6 +10,8 @@ import os
 import tempfile
 from pathlib import Path
 
+from .errors import InputError
+
 __all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text"]
 
 
@@ -19,12 +21,29 @@ def atomic_path(target, suffix: str | None = None):
 
     On an exception the temporary file is removed and ``target`` is left untouched.
     ``suffix`` defaults to the target's own (some writers pick a format from it).
+
+    Raises
+    ------
+    InputError
+        When ``target`` is a folder, or its folder cannot be created or written, before
+        anything is written.
     """
     target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
+    if target.is_dir():
+        raise InputError("is a folder; give a file name", file=target, field="path",
+                         value=str(target))
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError, PermissionError) as error:
+        raise InputError(f"cannot create the folder {target.parent} ({error.strerror})",
+                         file=target, field="path", value=str(target)) from error
     suffix = target.suffix if suffix is None else suffix
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{suffix}",
-                               dir=target.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{suffix}",
+                                   dir=target.parent)
+    except PermissionError as error:
+        raise InputError(f"the folder {target.parent} is not writable", file=target,
+                         field="path", value=str(target)) from error
     os.close(fd)
     tmp = Path(tmp)
     # mkstemp creates 0600; give the result the permissions an ordinary file would have

@@ -28,3 +28,24 @@ def test_a_failing_save_leaves_nothing(tmp_path, monkeypatch):
         atomic_save_figure(tmp_path / "f.png", figure)
     assert not any(tmp_path.iterdir())
     plt.close(figure)
+
+
+def test_a_folder_as_target_is_bad_input_and_nothing_is_written(tmp_path):
+    from translucent.atomic import atomic_write_text
+    from translucent.errors import InputError
+
+    (tmp_path / "out").mkdir()
+    with pytest.raises(InputError, match="out: path = .*is a folder"):
+        atomic_write_text(tmp_path / "out", "text")
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+    assert not any((tmp_path / "out").iterdir())
+
+
+def test_a_file_in_the_way_of_the_folder_is_bad_input(tmp_path):
+    from translucent.atomic import atomic_write_text
+    from translucent.errors import InputError
+
+    (tmp_path / "plain").write_text("a file")
+    with pytest.raises(InputError, match="cannot create the folder"):
+        atomic_write_text(tmp_path / "plain" / "sub" / "x.txt", "text")
+    assert (tmp_path / "plain").read_text() == "a file"
