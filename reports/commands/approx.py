@@ -8,6 +8,7 @@ Each method adds its own options (``--material``, ``--gamma``, ...) through
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 
 from ...fast.base import METHODS
 
@@ -35,12 +36,19 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    """Load the scene, render it with the method, write the EXR atomically."""
+    """Load the scene, check the output path, render with the method, write the EXR atomically."""
+    from ...errors import InputError
     from ...scenes import load_scene
 
+    if args.out is not None and Path(args.out).suffix.lower() != ".exr":
+        raise InputError("the output must be an OpenEXR file ending in .exr", field="--out",
+                         value=args.out)
     scene = load_scene(args.scene)
-    image = args.approx_module.approx(scene, args)
     out = args.out or f"{scene.name}_{args.method}.exr"
+    if Path(out).is_dir():
+        raise InputError("is a folder; give a file name ending in .exr", field="--out",
+                         value=str(out))
+    image = args.approx_module.approx(scene, args)
     image.write(out)
     seconds = image.metadata.get("seconds")
     timing = f" in {seconds:.3g} s" if isinstance(seconds, (int, float)) else ""
