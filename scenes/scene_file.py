@@ -432,7 +432,9 @@ def scene_to_toml(scene: Scene, mesh_files: dict[str, str],
 def save_scene(scene: Scene, path) -> Path:
     """Write ``scene`` as a scene file, its meshes (``.npz``) and environment maps beside it.
 
-    Meshes are written exactly (``<stem>.<object>.npz``), so a scene whose geometry was
+    Meshes are written exactly (``<stem>.<object>.npz``; characters other than letters,
+    digits, ``-`` and ``_`` become ``_``, and a name that then clashes with an earlier
+    object's gets ``-<index>``), so a scene whose geometry was
     deformed or generated in code can be stored and loaded back unchanged. All files are
     written atomically.
 
@@ -452,8 +454,14 @@ def save_scene(scene: Scene, path) -> Path:
 
     path = Path(path)
     mesh_files = {}
-    for item in scene.objects:
+    taken = set()
+    for index, item in enumerate(scene.objects):
         safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in item.name)
+        stem = safe
+        while safe.lower() in taken:  # "a b" and "a_b" (or "A" and "a") would share a file
+            safe = f"{stem}-{index}"
+            index += len(scene.objects)
+        taken.add(safe.lower())
         mesh_files[item.name] = f"{path.stem}.{safe}.npz"
         save_mesh(item.mesh, path.parent / mesh_files[item.name])
     environment_files = {}

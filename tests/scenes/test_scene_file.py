@@ -318,3 +318,16 @@ def test_scene_text_with_comments_is_documented_format():
     example = text.split("```toml", 1)[1].split("```", 1)[0]
     scene = loads_scene(textwrap.dedent(example))
     assert scene.objects and scene.lights
+
+
+def test_save_scene_keeps_objects_whose_names_differ_only_in_odd_characters(tmp_path):
+    scene = loads_scene(with_lines(
+        MINIMAL, "[[lights]]",
+        '[[objects]]\nname = "ball!"\nmesh = { type = "icosphere", subdivisions = 1, '
+        'radius = 3.0 }\nmaterial = { type = "lambertian", albedo = 0.5 }\n'
+        '[[objects]]\nname = "ball_"\nmesh = { type = "box", size = 0.5 }\n'
+        'material = { type = "lambertian", albedo = 0.5 }\n[[lights]]'))
+    back = load_scene(save_scene(scene, tmp_path / "three.toml"))
+    for name in ("ball", "ball!", "ball_"):
+        np.testing.assert_array_equal(back.object(name).mesh.vertices,
+                                      scene.object(name).mesh.vertices)
