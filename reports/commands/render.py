@@ -47,10 +47,13 @@ def run(args) -> int:
         raise InputError("the output must be an OpenEXR file ending in .exr", field="--out",
                          value=args.out)
     scene = load_scene(args.scene)
+    out = Path(args.out or f"{scene.name}_reference.exr")
+    if out.is_dir():
+        raise InputError("is a folder; give a file name ending in .exr", field="--out",
+                         value=str(out))
     image = render(scene, spp=args.spp, passes=args.passes, seed=args.seed,
                    integrator=args.integrator, per_channel=args.per_channel,
                    cache=not args.no_cache)
-    out = Path(args.out or f"{scene.name}_reference.exr")
     image.write(out)
     meta = image.metadata
     print(f"wrote {out} ({image.shape[1]} x {image.shape[0]}, {meta['spp']} spp x "

@@ -101,3 +101,17 @@ def test_bench_reference_refuses_bad_counts(scene_file, tmp_path, capsys):
                  "--json", str(tmp_path / "b.json")]) == 2
     assert "--repeats = 0: must be >= 1" in capsys.readouterr().err
     assert not (tmp_path / "b.json").exists()
+
+
+def test_an_output_folder_is_refused_before_rendering(scene_file, tmp_path, capsys,
+                                                      monkeypatch):
+    import translucent.reference
+
+    def render(*args, **kwargs):
+        raise AssertionError("rendered before the output path was checked")
+
+    monkeypatch.setattr(translucent.reference, "render", render)
+    (tmp_path / "folder.exr").mkdir()
+    assert main(["render", str(scene_file), "--out", str(tmp_path / "folder.exr")]) == 2
+    assert "--out = " in capsys.readouterr().err
+    assert not any((tmp_path / "folder.exr").iterdir())
