@@ -80,6 +80,8 @@ OBJECT_KEYS = ("name", "mesh", "material")
 TOP_LEVEL_KEYS = ("scene", "camera", "objects", "lights")
 #: Keys of a mesh table besides the generator's own parameters.
 TRANSFORM_KEYS = ("scale", "rotate", "translate")
+#: Keys of a mesh table that hold a string (all others hold numbers).
+MESH_STRING_KEYS = ("type", "file", "part", "shape", "normal")
 
 
 def _check_keys(table, allowed, *, file, field):
@@ -90,6 +92,25 @@ def _check_keys(table, allowed, *, file, field):
         if key not in allowed:
             raise InputError(f"unknown key; valid keys: {', '.join(allowed)}", file=file,
                              field=f"{field}.{key}" if field else key, value=table[key])
+
+
+def _check_types(table: dict, string_keys, *, file, field):
+    """Raise InputError for a string where a number belongs, or the other way round.
+
+    Every key of the scene, camera, mesh and light tables holds a number or a list of
+    numbers, except ``string_keys`` (type names, file paths, ...), which hold a string.
+    """
+    for key, value in table.items():
+        where = f"{field}.{key}" if field else key
+        if key in string_keys:
+            if not isinstance(value, str):
+                raise InputError("must be a string", file=file, field=where, value=value)
+            continue
+        items = value if isinstance(value, list) else [value]
+        if not all(isinstance(item, (int, float)) and not isinstance(item, bool)
+                   for item in items):
+            raise InputError("must be a number or a list of numbers", file=file, field=where,
+                             value=value)
 
 
 def _rewrap(error: InputError, *, file, prefix: str) -> InputError:
@@ -114,6 +135,7 @@ def _mesh(table: dict, name: str, *, file, field: str, base_dir: Path):
     if ("type" in table) == ("file" in table):
         raise InputError("give exactly one of 'type' (procedural mesh) or 'file'", file=file,
                          field=field, value=sorted(table))
+    _check_types(table, MESH_STRING_KEYS, file=file, field=field)
     parameters = {key: value for key, value in table.items()
                   if key not in TRANSFORM_KEYS + ("type", "file")}
     if "file" in table:
@@ -194,6 +216,7 @@ def _light(table: dict, *, file, field: str, base_dir: Path):
     if cls is ImageEnvironment:
         accepted = ["file" if key == "radiance" else key for key in accepted]
     _check_keys(table, ("type", *accepted), file=file, field=field)
+    _check_types(table, ("type", "file"), file=file, field=field)
     arguments = {key: value for key, value in table.items() if key != "type"}
     if cls is ImageEnvironment:
         if "file" not in arguments:
@@ -239,15 +262,13 @@ def scene_from_dict(table: dict, *, file=None, base_dir=None) -> Scene:
     _check_keys(table, TOP_LEVEL_KEYS, file=file, field="")
     header = table.get("scene", {})
     _check_keys(header, SCENE_KEYS, file=file, field="scene")
-    for key in ("name", "description"):
-        if key in header and not isinstance(header[key], str):
-            raise InputError("must be a string", file=file, field=f"scene.{key}",
-                             value=header[key])
+    _check_types(header, ("name", "description"), file=file, field="scene")
     if "camera" not in table:
         raise InputError("a scene needs a [camera] table (origin, target, ...)", file=file,
                          field="camera")
     camera_table = table["camera"]
     _check_keys(camera_table, CAMERA_KEYS, file=file, field="camera")
+    _check_types(camera_table, (), file=file, field="camera")
     try:
         camera = Camera(**camera_table)
     except InputError as error:

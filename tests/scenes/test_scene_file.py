@@ -331,3 +331,36 @@ def test_save_scene_keeps_objects_whose_names_differ_only_in_odd_characters(tmp_
     for name in ("ball", "ball!", "ball_"):
         np.testing.assert_array_equal(back.object(name).mesh.vertices,
                                       scene.object(name).mesh.vertices)
+
+
+WRONG_TYPES = {
+    "camera width as a string": (("width = 16", 'width = "wide"'),
+                                 r"bad\.toml: camera\.width = 'wide': must be a number"),
+    "camera width as a boolean": (("width = 16", "width = true"),
+                                  r"camera\.width = True: must be a number"),
+    "camera fov as a string": (("width = 16", 'width = 16\nfov = "35"'),
+                               r"camera\.fov = '35': must be a number"),
+    "camera up with a string": (("width = 16", 'width = 16\nup = ["a", 1.0, 0.0]'),
+                                r"camera\.up = \['a', 1\.0, 0\.0\]: must be a number"),
+    "mm_per_unit as a string": (("mm_per_unit = 2.0", 'mm_per_unit = "2 mm"'),
+                                r"scene\.mm_per_unit = '2 mm': must be a number"),
+    "mesh radius as a string": (("radius = 1.0 }", 'radius = "1" }'),
+                                r"objects\[0\]\.mesh\.radius = '1': must be a number"),
+    "mesh file as a number": (('type = "icosphere", subdivisions = 1, radius = 1.0', "file = 3"),
+                              r"objects\[0\]\.mesh\.file = 3: must be a string"),
+    "light intensity as a string": (("intensity = [1.0, 2.0, 3.0]", 'intensity = "bright"'),
+                                    r"lights\[0\]\.intensity = 'bright': must be a number"),
+    "environment file as a number": (('type = "point"\nposition = [1.0, 2.0, 3.0]\n'
+                                      'intensity = [1.0, 2.0, 3.0]',
+                                      'type = "image_env"\nfile = 1'),
+                                     r"lights\[0\]\.file = 1: must be a string"),
+}
+
+
+@pytest.mark.parametrize("case", list(WRONG_TYPES))
+def test_values_of_the_wrong_type_name_file_and_key(case, tmp_path):
+    (old, new), match = WRONG_TYPES[case]
+    path = tmp_path / "bad.toml"
+    path.write_text(with_lines(MINIMAL, old, new))
+    with pytest.raises(InputError, match=match):
+        load_scene(path)
