@@ -456,7 +456,8 @@ class Camera:
         object.__setattr__(self, "fov", fov)
         for name in ("width", "height"):
             value = getattr(self, name)
-            if int(value) != value or not 1 <= int(value) <= 16384:
+            if isinstance(value, bool) or not np.isfinite(float(value)) \
+                    or int(value) != value or not 1 <= int(value) <= 16384:
                 raise InputError("must be an integer in [1, 16384]", field=f"camera.{name}",
                                  value=value)
             object.__setattr__(self, name, int(value))

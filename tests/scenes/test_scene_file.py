@@ -364,3 +364,9 @@ def test_values_of_the_wrong_type_name_file_and_key(case, tmp_path):
     path.write_text(with_lines(MINIMAL, old, new))
     with pytest.raises(InputError, match=match):
         load_scene(path)
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_camera_size_not_finite_names_the_key(value):
+    with pytest.raises(InputError, match=r"camera\.height = -?(nan|inf): must be an integer"):
+        loads_scene(with_lines(MINIMAL, "height = 12", f"height = {value}"))
