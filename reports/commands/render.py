@@ -12,6 +12,7 @@ output file left behind.
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from ...errors import InputError
@@ -30,8 +31,10 @@ def add_arguments(parser):
                         "(default 0)")
     parser.add_argument("--integrator", choices=INTEGRATORS, default=None,
                         help="default: volpath with media, path without")
-    parser.add_argument("--per-channel", action="store_true",
-                        help="render R, G and B separately (media of one channel each)")
+    parser.add_argument("--per-channel", action=argparse.BooleanOptionalAction, default=None,
+                        help="render R, G and B separately (media of one channel each); "
+                        "default: where a medium is chromatic and of albedo near 1, as the "
+                        "reference recommends")
     parser.add_argument("--no-cache", action="store_true",
                         help="render even when the reference is cached, and do not cache it")
     parser.add_argument("--out", "-o", default=None,

@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 from translucent.image import read_exr
 from translucent.reports.cli import main
@@ -115,3 +116,22 @@ def test_an_output_folder_is_refused_before_rendering(scene_file, tmp_path, caps
     assert main(["render", str(scene_file), "--out", str(tmp_path / "folder.exr")]) == 2
     assert "--out = " in capsys.readouterr().err
     assert not any((tmp_path / "folder.exr").iterdir())
+
+
+@pytest.mark.parametrize(("flags", "expected"), [([], None), (["--per-channel"], True),
+                                                 (["--no-per-channel"], False)])
+def test_per_channel_is_left_to_the_reference_unless_asked(scene_file, tmp_path, monkeypatch,
+                                                          flags, expected):
+    import translucent.reference
+    from translucent.image import Image
+
+    seen = {}
+
+    def render(scene, **kwargs):
+        seen.update(kwargs)
+        return Image(np.zeros((6, 8, 3)), None, {"spp": 1, "passes": 1, "integrator": "path",
+                                                 "seconds": 0.0})
+
+    monkeypatch.setattr(translucent.reference, "render", render)
+    assert main(["render", str(scene_file), *flags, "--out", str(tmp_path / "x.exr")]) == 0
+    assert seen["per_channel"] is expected
