@@ -80,15 +80,24 @@ class Image:
         return read_exr(path)
 
 
+def _json_default(value):
+    """JSON for what ``json`` cannot encode: numpy scalars and arrays as numbers, else str."""
+    if isinstance(value, (np.generic, np.ndarray)):
+        return value.tolist()
+    return str(value)
+
+
 def _header_value(value):
     """Header attributes OpenEXR can hold natively (str, int, float); JSON otherwise."""
+    if isinstance(value, np.generic):
+        value = value.item()
     if isinstance(value, bool):
         return int(value)
     if isinstance(value, (str, int)):
         return value
     if isinstance(value, float) and math.isfinite(value):
         return value
-    return json.dumps(value, sort_keys=True)
+    return json.dumps(value, sort_keys=True, default=_json_default)
 
 
 def write_exr(path, image: Image) -> Path:
@@ -109,7 +118,8 @@ def write_exr(path, image: Image) -> Path:
     header = {
         "compression": OpenEXR.ZIP_COMPRESSION,
         "type": OpenEXR.scanlineimage,
-        METADATA_ATTRIBUTE: json.dumps(image.metadata, sort_keys=True, default=str),
+        METADATA_ATTRIBUTE: json.dumps(image.metadata, sort_keys=True,
+                                         default=_json_default),
     }
     for key, value in image.metadata.items():
         header[f"translucent:{key}"] = _header_value(value)

@@ -69,3 +69,11 @@ def test_failed_write_leaves_nothing(tmp_path, monkeypatch):
     with pytest.raises(OSError):
         write_exr(tmp_path / "out.exr", Image(np.zeros((2, 2, 3))))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_numpy_metadata_is_written_as_plain_numbers(tmp_path):
+    metadata = {"spp": np.int64(4), "white": np.float32(0.5),
+                "knobs": {"terms": np.int32(12), "range": np.arange(3)}}
+    path = Image(np.ones((2, 2, 3)), metadata=metadata).write(tmp_path / "n.exr")
+    assert read_exr(path).metadata == {"spp": 4, "white": 0.5,
+                                       "knobs": {"terms": 12, "range": [0, 1, 2]}}
