@@ -54,6 +54,11 @@ def run(args) -> int:
     if out.is_dir():
         raise InputError("is a folder; give a file name ending in .exr", field="--out",
                          value=str(out))
+    try:  # before rendering: a folder that cannot be made would lose the whole render
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"cannot create the output folder ({error.strerror or error})",
+                         field="--out", value=str(out)) from error
     image = render(scene, spp=args.spp, passes=args.passes, seed=args.seed,
                    integrator=args.integrator, per_channel=args.per_channel,
                    cache=not args.no_cache)

@@ -135,3 +135,17 @@ def test_per_channel_is_left_to_the_reference_unless_asked(scene_file, tmp_path,
     monkeypatch.setattr(translucent.reference, "render", render)
     assert main(["render", str(scene_file), *flags, "--out", str(tmp_path / "x.exr")]) == 0
     assert seen["per_channel"] is expected
+
+
+def test_an_output_folder_that_cannot_be_made_is_refused_before_rendering(scene_file, tmp_path,
+                                                                         capsys, monkeypatch):
+    import translucent.reference
+
+    def render(*args, **kwargs):
+        raise AssertionError("rendered before the output folder was checked")
+
+    monkeypatch.setattr(translucent.reference, "render", render)
+    (tmp_path / "plain_file").write_text("not a folder")
+    out = tmp_path / "plain_file" / "x.exr"
+    assert main(["render", str(scene_file), "--out", str(out)]) == 2
+    assert f"--out = '{out}': cannot create the output folder" in capsys.readouterr().err
