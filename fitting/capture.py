@@ -181,6 +181,14 @@ def _linear_to_srgb(value):
 # --- the sidecar -----------------------------------------------------------------------------
 
 
+def _as_float(value) -> float:
+    """``float(value)``; a JSON integer beyond float range becomes +-inf (refused as infinite)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
+
+
 def _number(data, key, path, *, minimum=None, strict=False, maximum=None, allow_null=False):
     value = data.get(key)
     if value is None:
@@ -190,7 +198,7 @@ def _number(data, key, path, *, minimum=None, strict=False, maximum=None, allow_
                          value=value)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError("must be a number", file=path, field=key, value=value)
-    value = float(value)
+    value = _as_float(value)
     if not math.isfinite(value):
         raise InputError("must be finite", file=path, field=key, value=value)
     if minimum is not None and (value <= minimum if strict else value < minimum):
@@ -265,7 +273,7 @@ def sidecar_from_dict(data, *, path=None) -> CaptureSpec:
     incident = data["incident_px"]
     if (not isinstance(incident, (list, tuple)) or len(incident) != 2
             or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in incident)
-            or not all(math.isfinite(float(v)) for v in incident)):
+            or not all(math.isfinite(_as_float(v)) for v in incident)):
         raise InputError("must be [x, y], two finite numbers (pixels)", file=path,
                          field="incident_px", value=incident)
     side = _choice(data, "side", path, _SIDES, "reflection")

@@ -145,3 +145,16 @@ def test_tiny_and_all_nan_images(tmp_path):
     path = write_capture(tmp_path / "capture.json", np.full((9, 9, 3), np.nan), spec)
     with pytest.raises(InputError, match="no finite pixel"):
         read_capture(path)
+
+
+@pytest.mark.parametrize("key, literal", [("pixel_size_mm", "1" + "0" * 400),
+                                          ("incident_px", "[1" + "0" * 400 + ", 3]")])
+def test_integers_too_large_for_a_float_are_input_errors(write_sidecar, sidecar_data, key,
+                                                         literal):
+    path = write_sidecar(sidecar_data)
+    text = json.dumps({**sidecar_data, key: "HUGE"}).replace('"HUGE"', literal)
+    path.write_text(text)
+    with pytest.raises(InputError, match="finite") as error:
+        read_capture(path)
+    assert error.value.field == key
+    assert error.value.file == str(path)
