@@ -357,12 +357,20 @@ def _read_tiff(path: Path) -> np.ndarray:
     import tifffile
 
     try:
-        array = tifffile.imread(str(path))
+        with tifffile.TiffFile(str(path)) as tiff:
+            series = tiff.series[0]
+            array, axes = series.asarray(), series.axes
     except Exception as error:  # tifffile raises several types on corrupt files
         raise InputError(f"not a readable TIFF file ({error})", file=path,
                          field="image") from error
-    if array.ndim == 2:
+    if axes in ("SYX", "CYX"):  # planar configuration: one plane per sample
+        array = np.moveaxis(array, 0, -1)
+    elif axes == "YX":
         array = array[..., None]
+    elif axes not in ("YXS", "YXC"):
+        raise InputError(f"a capture is one image of H x W pixels with 1 to 4 samples (this "
+                         f"TIFF's axes are {axes})", file=path, field="shape",
+                         value=array.shape)
     return _to_rgb(array, path)
 
 

@@ -158,3 +158,19 @@ def test_integers_too_large_for_a_float_are_input_errors(write_sidecar, sidecar_
         read_capture(path)
     assert error.value.field == key
     assert error.value.file == str(path)
+
+
+def test_planar_rgb_tiff_reads_as_rgb_and_a_stack_is_refused(tmp_path, sidecar_data):
+    import tifffile
+
+    rgb = (np.arange(8 * 9 * 3, dtype=np.uint16) * 200).reshape(8, 9, 3)
+    tifffile.imwrite(tmp_path / "planar.tif", np.moveaxis(rgb, -1, 0), photometric="rgb",
+                     planarconfig="separate")
+    path = tmp_path / "capture.json"
+    path.write_text(json.dumps({**sidecar_data, "image": "planar.tif", "incident_px": [4, 4]}))
+    np.testing.assert_array_equal(read_capture(path).pixels, rgb)
+    tifffile.imwrite(tmp_path / "stack.tif", np.stack([rgb, rgb]), photometric="rgb")
+    path.write_text(json.dumps({**sidecar_data, "image": "stack.tif", "incident_px": [4, 4]}))
+    with pytest.raises(InputError, match="one image") as error:
+        read_capture(path)
+    assert error.value.field == "shape"
