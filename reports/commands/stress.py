@@ -7,6 +7,7 @@ its bound.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 from ...atomic import atomic_write_text
 
@@ -25,6 +26,9 @@ def run(args) -> int:
     from ...errors import InputError
     from ..stress import all_kernels
 
+    if Path(args.json).is_dir():
+        raise InputError("is a folder; give a file name for the results", field="--json",
+                         value=args.json)
     kernels = all_kernels()
     if args.only:
         kernels = {n: k for n, k in kernels.items() if any(o in n for o in args.only)}
