@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+from pathlib import Path
 
 from .. import bench as bench_package
 
@@ -35,5 +36,10 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    """Run the chosen benchmark."""
+    """Check the shared options, then run the chosen benchmark."""
+    from ...errors import InputError
+
+    if args.json is not None and Path(args.json).is_dir():
+        raise InputError("is a folder; give a file name for the figures", field="--json",
+                         value=args.json)
     return args.bench_run(args)
