@@ -33,7 +33,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..atomic import atomic_path
-from ..errors import InputError, check_finite
+from ..errors import InputError, check_count, check_finite
 from .catalogue import measured_medium
 from .homogeneous import Dipole
 
@@ -567,6 +567,7 @@ def _converted_pair(first: str, second: str, segments: int):
 
 
 def _texel_centres(resolution: int):
+    resolution = check_count(resolution, "resolution", 1)
     centres = (np.arange(resolution) + 0.5) / resolution
     return np.meshgrid(centres, centres)  # u varies along columns, v along rows
 
@@ -578,6 +579,7 @@ def checker_material(resolution: int = 64, squares: int = 8, first: str = "Marbl
     The heterogeneous "marble chessboard" of Chen et al. 2012, Fig. 8, made from the
     measured table.
     """
+    squares = check_count(squares, "squares", 1)
     a, b = _converted_pair(first, second, segments)
     u, v = _texel_centres(resolution)
     weight = ((np.floor(u * squares) + np.floor(v * squares)) % 2).astype(np.float64)
@@ -593,6 +595,7 @@ def veined_marble_material(resolution: int = 128, seed: int = 7, base: str = "Ma
     four octaves of seeded value noise as turbulence; ``ln P`` interpolates between the two
     converted dipoles (Song et al. 2009 edit profiles in the log domain).
     """
+    seed = check_count(seed, "seed", 0)
     a, b = _converted_pair(base, vein, segments)
     u, v = _texel_centres(resolution)
     rng = np.random.default_rng(seed)

@@ -311,3 +311,15 @@ def test_one_radius_for_every_texel_equals_the_broadcast_radius(radius):
         one = material.log_profile_at(r, texels)
         each = material.log_profile_at(np.full(material.texel_count, r), texels)
         assert np.array_equal(one, each)
+
+
+@pytest.mark.parametrize(("name", "options", "message"), [
+    ("checker", {"resolution": 0}, r"resolution = 0: must be an integer >= 1"),
+    ("wax_gradient", {"resolution": -3}, r"resolution = -3: must be an integer >= 1"),
+    ("veined_marble", {"resolution": 2.5}, r"resolution = 2\.5: must be an integer >= 1"),
+    ("checker", {"resolution": 4, "squares": 0}, r"squares = 0: must be an integer >= 1"),
+    ("veined_marble", {"resolution": 4, "seed": -1}, r"seed = -1: must be an integer >= 0"),
+])
+def test_builtin_options_out_of_range_name_the_option(name, options, message):
+    with pytest.raises(InputError, match=message):
+        builtin_subedit(name, **options)
