@@ -677,6 +677,13 @@ def load_subedit(path) -> SubEditProfiles:
     for key in ("format", "version", "log_profile", "r_s"):
         if key not in fields:
             raise InputError("missing field", file=path, field=key)
+    for key, integer in (("version", True), ("r_s", False), ("eta", False)):
+        value = fields.get(key)
+        if value is not None and (value.shape != () or not np.issubdtype(
+                value.dtype, np.integer if integer else np.number)
+                or np.issubdtype(value.dtype, np.complexfloating)):
+            raise InputError("must be an integer" if integer else "must be a number",
+                             file=path, field=key, value=value)
     if str(fields["format"]) != FORMAT_NAME:
         raise InputError(f"must be '{FORMAT_NAME}'", file=path, field="format",
                          value=str(fields["format"]))
@@ -684,7 +691,11 @@ def load_subedit(path) -> SubEditProfiles:
         raise InputError(f"unsupported version; this reader knows {FORMAT_VERSION}", file=path,
                          field="version", value=int(fields["version"]))
     table = fields["log_profile"]
-    if table.ndim != 4 or table.shape[2] < 2 or table.shape[3] != 3:
+    if not np.issubdtype(table.dtype, np.floating) and not np.issubdtype(table.dtype,
+                                                                         np.integer):
+        raise InputError("must hold numbers (float32)", file=path, field="log_profile",
+                         value=str(table.dtype))
+    if table.ndim != 4 or table.shape[2] < 2 or table.shape[3] != 3 or 0 in table.shape:
         raise InputError("must have shape (H, W, n + 1 >= 2, 3)", file=path,
                          field="log_profile", value=table.shape)
     if np.isnan(table).any():

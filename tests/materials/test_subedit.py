@@ -323,3 +323,18 @@ def test_one_radius_for_every_texel_equals_the_broadcast_radius(radius):
 def test_builtin_options_out_of_range_name_the_option(name, options, message):
     with pytest.raises(InputError, match=message):
         builtin_subedit(name, **options)
+
+
+@pytest.mark.parametrize(("fields", "message"), [
+    ({"version": np.array("one")}, r"bad\.npz: version = 'one': must be an integer"),
+    ({"version": np.array([1, 1])}, r"bad\.npz: version = \[1, 1\]: must be an integer"),
+    ({"r_s": np.array("wide")}, r"bad\.npz: r_s = 'wide': must be a number"),
+    ({"r_s": np.array([1.0, 2.0])}, r"bad\.npz: r_s = \[1\.0, 2\.0\]: must be a number"),
+    ({"eta": np.array([1.3, 1.4])}, r"bad\.npz: eta = \[1\.3, 1\.4\]: must be a number"),
+    ({"log_profile": np.full((1, 1, 3, 3), "a")}, r"bad\.npz: log_profile = .*numbers"),
+    ({"log_profile": np.zeros((0, 1, 3, 3))}, r"bad\.npz: log_profile = \(0, 1, 3, 3\): "
+                                              r"must have shape"),
+])
+def test_load_rejects_fields_of_the_wrong_type_or_size(tmp_path, fields, message):
+    with pytest.raises(InputError, match=message):
+        load_subedit(write_archive(tmp_path / "bad.npz", **fields))
