@@ -17,6 +17,7 @@ from translucent.materials.subedit import (
     save_subedit,
     segment_moment,
     subedit_from_dipole,
+    subedit_from_spec,
 )
 
 #: The closed-form segment integrals are exact; scipy's quad reaches ~1e-10 relative on
@@ -338,3 +339,8 @@ def test_builtin_options_out_of_range_name_the_option(name, options, message):
 def test_load_rejects_fields_of_the_wrong_type_or_size(tmp_path, fields, message):
     with pytest.raises(InputError, match=message):
         load_subedit(write_archive(tmp_path / "bad.npz", **fields))
+
+
+def test_subedit_file_that_is_not_a_string_names_the_key(tmp_path):
+    with pytest.raises(InputError, match=r"scene\.toml: file = 5: must be a string"):
+        subedit_from_spec({"type": "subedit", "file": 5}, file=tmp_path / "scene.toml")
