@@ -393,7 +393,7 @@ class ImageEnvironment:
     Parameters
     ----------
     radiance : ndarray, shape (H, W, 3), W sr^-1 m^-2, or a path to an EXR
-    scale : float, multiplies the radiance
+    scale : float, >= 0, multiplies the radiance
     """
 
     radiance: Any
@@ -412,8 +412,12 @@ class ImageEnvironment:
         check_finite(value, "radiance")
         if (value < 0).any():
             raise InputError("radiance must be >= 0", field="radiance", value=float(value.min()))
+        scale = float(check_finite(self.scale, "scale"))
+        if scale < 0:
+            raise InputError("must be >= 0 (it multiplies the radiance)", field="scale",
+                             value=self.scale)
         object.__setattr__(self, "radiance", _readonly(value))
-        object.__setattr__(self, "scale", float(check_finite(self.scale, "scale")))
+        object.__setattr__(self, "scale", scale)
 
 
 Light = Union[PointLight, SpotLight, DirectionalLight, RectangularAreaLight, SphereAreaLight,

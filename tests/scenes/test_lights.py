@@ -29,3 +29,12 @@ def test_spot_falloff_takes_batches_and_a_hard_edge():
                       cutoff_angle=5.0, beam_width=5.0)
     directions = np.stack([_direction_at(a) for a in (0.0, 4.9, 5.1)])
     assert light.falloff(directions).tolist() == [1.0, 1.0, 0.0]
+
+
+@pytest.mark.parametrize("scale", [-1.0, float("nan")])
+def test_image_environment_scale_must_be_a_nonnegative_number(scale):
+    from translucent.errors import InputError
+    from translucent.scenes import ImageEnvironment
+
+    with pytest.raises(InputError, match=r"scale = (-1\.0|nan): must be"):
+        ImageEnvironment(np.ones((4, 8, 3)), scale=scale)
