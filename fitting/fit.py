@@ -10,6 +10,7 @@ per channel for SubEdit),
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,7 @@ from .results import ParameterSummary, summaries_to_json, summarise_posterior, w
 from .sampler import ChainResult, run_chain
 
 __all__ = ["FitResult", "default_moves", "fit_capture", "fit_dipole", "fit_subedit",
-           "write_outputs", "MODELS"]
+           "output_folder", "write_outputs", "MODELS"]
 
 #: Fits ``translucent fit --model`` offers.
 MODELS = ("dipole", "subedit")
@@ -255,6 +256,26 @@ def material_is_absolute(result: FitResult) -> bool:
     return result.capture.spec.exposure is not None
 
 
+def output_folder(out_dir) -> Path:
+    """Create the output folder ``out_dir`` (and its parents) and check it can be written.
+
+    Raises
+    ------
+    InputError
+        When it is a file, cannot be created or is not writable.
+    """
+    out_dir = Path(out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"cannot create the output folder ({error.strerror})",
+                         field="out_dir", value=str(out_dir)) from error
+    if not os.access(out_dir, os.W_OK | os.X_OK):
+        raise InputError("the output folder is not writable", field="out_dir",
+                         value=str(out_dir))
+    return out_dir
+
+
 def write_outputs(result: FitResult, out_dir) -> dict[str, Path]:
     """Write the summary, material file, corner plot, profile plot and samples of a fit.
 
@@ -265,8 +286,7 @@ def write_outputs(result: FitResult, out_dir) -> dict[str, Path]:
     """
     from .plots import corner_plot, profile_plot
 
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = output_folder(out_dir)
     kind = result.kind
     paths = {"summary": out_dir / f"{kind}_summary.json",
              "material": out_dir / f"{kind}_material.toml",
@@ -317,7 +337,8 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
     models : sequence of str
         Among :data:`MODELS`.
     out_dir : path, optional
-        Where to write (default: nothing is written).
+        Where to write (default: nothing is written); created, and checked to be
+        writable, before any chain runs.
     seed : int, optional
     progress : bool
     **options
@@ -334,6 +355,8 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
         raise InputError(f"unknown model; valid: {', '.join(MODELS)}", field="model",
                          value=unknown[0])
     capture = read_capture(path)
+    if out_dir is not None:  # before the chains run, not after
+        out_dir = output_folder(out_dir)
     profile = measure_profile(capture, r_min_mm=options.pop("r_min_mm", 0.0) or 0.0)
     results = {}
     for kind in models:

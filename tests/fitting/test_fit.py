@@ -184,3 +184,15 @@ def test_command_line_bad_input_exits_2(tmp_path, capsys):
     assert "required key is missing" in capsys.readouterr().err
     assert main(["capture", "unobtainium", "--generator", "dipole"]) == 2
     assert "unknown measured material" in capsys.readouterr().err
+
+
+def test_an_output_folder_that_cannot_be_made_is_refused_before_fitting(tmp_path, capsys):
+    data = capture(size=24)
+    sidecar = write_capture(tmp_path / "c.json", data.pixels, data.spec)
+    (tmp_path / "taken").write_text("a file, not a folder")
+    code = main(["fit", str(sidecar), "--out", str(tmp_path / "taken"), "--walkers", "16",
+                 "--max-steps", "200", "--no-progress"])
+    captured = capsys.readouterr()
+    assert code == 2 and "out_dir" in captured.err and "taken" in captured.err
+    assert "converged" not in captured.out  # refused before the chain ran
+
