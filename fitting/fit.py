@@ -19,7 +19,7 @@ import emcee
 import numpy as np
 
 from ..atomic import atomic_path, atomic_write_text
-from ..errors import InputError
+from ..errors import InputError, check_count
 from ..materials.subedit import save_subedit
 from .capture import Capture, read_capture
 from .models import DipoleModel, SubEditModel
@@ -151,6 +151,11 @@ def _as_capture(capture) -> Capture:
     return capture if isinstance(capture, Capture) else read_capture(capture)
 
 
+def _checked_seed(seed):
+    """``seed`` as given, or :class:`InputError` unless None or an integer >= 0 (NumPy's rule)."""
+    return None if seed is None else check_count(seed, "seed", minimum=0)
+
+
 def _medians(summaries):
     return {s.name: s.median for s in summaries}
 
@@ -179,6 +184,7 @@ def fit_dipole(capture, *, fit_eta: bool | None = None, walkers: int | None = No
     -------
     FitResult
     """
+    seed = _checked_seed(seed)
     capture = _as_capture(capture)
     profile = measure_profile(capture) if profile is None else profile
     model = DipoleModel(profile, capture.spec, fit_eta=fit_eta)
@@ -227,6 +233,7 @@ def fit_subedit(capture, *, segments: int = 8, r_s_mm: float | None = None,
     -------
     FitResult
     """
+    seed = _checked_seed(seed)
     capture = _as_capture(capture)
     profile = measure_profile(capture) if profile is None else profile
     options = {"segments": segments, "r_s_mm": r_s_mm}

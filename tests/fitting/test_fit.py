@@ -196,3 +196,11 @@ def test_an_output_folder_that_cannot_be_made_is_refused_before_fitting(tmp_path
     assert code == 2 and "out_dir" in captured.err and "taken" in captured.err
     assert "converged" not in captured.out  # refused before the chain ran
 
+
+@pytest.mark.parametrize("model", ["dipole", "subedit"])
+def test_a_negative_seed_is_an_input_error(tmp_path, capsys, model):
+    data = capture(size=24)
+    sidecar = write_capture(tmp_path / "c.json", data.pixels, data.spec)
+    code = main(["fit", str(sidecar), "--model", model, "--seed", "-1", "--walkers", "16",
+                 "--max-steps", "200", "--no-progress", "--out", str(tmp_path / "fit")])
+    assert code == 2 and "seed = -1: must be an integer >= 0" in capsys.readouterr().err
