@@ -466,8 +466,14 @@ def _tilt_directions(directions: np.ndarray) -> np.ndarray:
 
 def _ray_batch(origins, directions, tmax):
     """Validate and broadcast a batch; directions normalised."""
-    origins = np.asarray(origins, dtype=np.float64)
-    directions = np.asarray(directions, dtype=np.float64)
+    arrays = {}
+    for name, value in (("origins", origins), ("directions", directions), ("tmax", tmax)):
+        try:
+            arrays[name] = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError) as error:
+            raise InputError("must be numbers (an array of shape (N, 3), or (N,) for tmax)",
+                             field=name, value=value) from error
+    origins, directions, tmax = arrays["origins"], arrays["directions"], arrays["tmax"]
     if origins.shape[-1:] != (3,) or directions.shape[-1:] != (3,):
         raise InputError("origins and directions must be arrays of shape (N, 3)",
                          field="origins", value=(origins.shape, directions.shape))
@@ -479,7 +485,10 @@ def _ray_batch(origins, directions, tmax):
     if (length == 0).any():
         raise InputError("ray directions must be non-zero", field="directions",
                          value=int(np.flatnonzero(length[:, 0] == 0)[0]))
-    tmax = np.broadcast_to(np.asarray(tmax, dtype=np.float64), (len(origins),))
+    if tmax.size != 1 and tmax.shape != (len(origins),):
+        raise InputError(f"tmax must be one value, or one per ray ({len(origins)})",
+                         field="tmax", value=tmax.shape)
+    tmax = np.broadcast_to(tmax.reshape(-1) if tmax.size == 1 else tmax, (len(origins),))
     if np.isnan(tmax).any() or (tmax < 0).any():
         raise InputError("tmax must be >= 0 (inf for unbounded)", field="tmax",
                          value=float(tmax[np.isnan(tmax) | (tmax < 0)][0]))

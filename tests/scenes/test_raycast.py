@@ -441,3 +441,12 @@ def test_occluded_unit_answers_as_occluded_for_a_checked_batch(name, sphere_scen
     unit = engine.occluded_unit(origins.astype(np.float32), directions.astype(np.float32),
                                 tmax.astype(np.float32))
     assert np.array_equal(unit, blocked)
+
+
+def test_trace_refuses_tmax_of_another_length_and_non_numeric_rays(sphere_scene):
+    origins = np.array([[0.0, 0.0, 5.0]] * 3)
+    with pytest.raises(InputError,
+                       match=r"tmax = \(2,\): tmax must be one value, or one per ray \(3\)"):
+        trace(sphere_scene, origins, [0.0, 0.0, -1.0], tmax=[1.0, 2.0])
+    with pytest.raises(InputError, match=r"directions = 'down': must be numbers"):
+        trace(sphere_scene, origins, "down")
