@@ -268,6 +268,7 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
     height, width = (size, size) if np.isscalar(size) else size
     if incident_px is None:
         incident_px = (width / 2.0, height / 2.0)
+    incident_px = _check_incident(incident_px, width, height)
     profile_fn = material_profile_function(material, side=side, thickness_mm=thickness_mm)
     exitance = exitance_image(profile_fn, (height, width), pixel_size_mm, incident_px,
                               beam_radius_mm)
@@ -278,6 +279,19 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
                          beam_radius_mm=beam_radius_mm, exposure=exposure, eta_known=eta_known,
                          generator="dipole")
     return stored, spec
+
+
+def _check_incident(incident_px, width, height):
+    """Return ``incident_px`` as floats; :class:`InputError` unless it lies inside the image.
+
+    The capture format takes an incident point inside the image only (the fitter refuses
+    any other), so a generator must not write one.
+    """
+    x, y = (float(v) for v in incident_px)
+    if not (0.0 <= x <= width and 0.0 <= y <= height):
+        raise InputError(f"must lie inside the {width} x {height} image (x in [0, {width}], "
+                         f"y in [0, {height}])", field="incident_px", value=(x, y))
+    return x, y
 
 
 def _capture_spec(material, camera, *, image_name, pixel_size_mm, incident_px, side,

@@ -110,3 +110,11 @@ def test_both_backends_agree_on_the_profile():
     error = np.hypot(tallies[0].reflectance_se[:, 0], tallies[1].reflectance_se[:, 0])
     # independent estimates of the same profile: within 4 combined standard errors
     assert np.all(np.abs(difference) < 4 * error), difference / error
+
+
+def test_walk_capture_refuses_an_incident_point_outside_the_image():
+    medium = Dipole(sigma_a=0.3, sigma_s_prime=1.0, eta=1.3, name="test")
+    with pytest.raises(InputError, match="must lie inside the 24 x 24 image") as error:
+        walk_capture(medium, size=24, pixel_size_mm=0.2, incident_px=(30.0, 5.0),
+                     photons=100, rotations=1)
+    assert error.value.field == "incident_px"
