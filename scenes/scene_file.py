@@ -321,9 +321,43 @@ def loads_scene(text: str, *, file=None, base_dir=None) -> Scene:
     return scene_from_dict(table, file=file, base_dir=base_dir)
 
 
+def _stamp(path: Path):
+    """``(modification time, size)`` of a file, or None when it cannot be read."""
+    try:
+        stat = path.stat()
+    except OSError:
+        return None
+    return stat.st_mtime_ns, stat.st_size
+
+
+def _referenced_file_stamps(path: Path) -> tuple:
+    """Stamps of the files a scene file names (meshes, textures, environment maps).
+
+    A scene loaded before one of them changed must not be served from the cache. A file
+    that does not parse gives no stamps: loading it raises anyway.
+    """
+    try:
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return ()
+    tables = []
+    for entry in table.get("objects", []) if isinstance(table.get("objects"), list) else []:
+        if isinstance(entry, dict):
+            tables += [entry.get("mesh"), entry.get("material")]
+    lights = table.get("lights")
+    tables += lights if isinstance(lights, list) else []
+    stamps = []
+    for item in tables:
+        if isinstance(item, dict) and isinstance(item.get("file"), str):
+            referenced = path.parent / item["file"]
+            stamps.append((str(referenced), _stamp(referenced)))
+    return tuple(stamps)
+
+
 @functools.lru_cache(maxsize=16)
-def _load_file(path: str, modified_ns: int, size: int) -> Scene:
-    # keyed by modification time and size as well: an edited file is read again
+def _load_file(path: str, modified_ns: int, size: int, referenced: tuple = ()) -> Scene:
+    # keyed by modification time and size, of the file and of the files it names: an
+    # edited file, or a scene whose mesh or texture was rewritten, is read again
     try:
         text = Path(path).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
@@ -360,8 +394,9 @@ def load_scene(name_or_path) -> Scene:
     Returns
     -------
     Scene
-        Loading the same unchanged file again returns the same (immutable) object, so
-        geometry-keyed caches (ray engines, precomputations) are shared.
+        Loading the same unchanged file again (the mesh, texture and environment files
+        it names unchanged too) returns the same (immutable) object, so geometry-keyed
+        caches (ray engines, precomputations) are shared.
 
     Raises
     ------
@@ -376,7 +411,8 @@ def load_scene(name_or_path) -> Scene:
     if not path.is_file():
         raise InputError("no such scene file", file=path, field="scene", value=text)
     stat = path.stat()
-    return _load_file(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    return _load_file(str(path.resolve()), stat.st_mtime_ns, stat.st_size,
+                      _referenced_file_stamps(path))
 
 
 def builtin_scene_names() -> list[str]:

@@ -370,3 +370,15 @@ def test_values_of_the_wrong_type_name_file_and_key(case, tmp_path):
 def test_camera_size_not_finite_names_the_key(value):
     with pytest.raises(InputError, match=r"camera\.height = -?(nan|inf): must be an integer"):
         loads_scene(with_lines(MINIMAL, "height = 12", f"height = {value}"))
+
+
+def test_load_scene_reads_again_when_a_mesh_file_it_names_changes(tmp_path):
+    from translucent.scenes.meshes import box, save_mesh
+
+    save_mesh(box(1.0), tmp_path / "brick.npz")
+    path = tmp_path / "brick.toml"
+    path.write_text(with_lines(MINIMAL, 'type = "icosphere", subdivisions = 1, radius = 1.0',
+                               'file = "brick.npz"'))
+    assert np.ptp(load_scene(path).object("ball").mesh.vertices[:, 0]) == 1.0
+    save_mesh(box((3.0, 1.0, 1.0)), tmp_path / "brick.npz")  # the scene file is unchanged
+    assert np.ptp(load_scene(path).object("ball").mesh.vertices[:, 0]) == 3.0
