@@ -14,6 +14,7 @@ truth goes into the sidecar's ``synthetic`` object. See docs/capture-format.md.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 
@@ -96,6 +97,9 @@ def run(args) -> int:
                     exposure_known=args.known_exposure, file_format=args.format)
     if args.size < 16:
         raise InputError("must be >= 16 pixels", field="--size", value=args.size)
+    if not math.isfinite(args.photons):
+        raise InputError("must be a finite number of photons per channel", field="--photons",
+                         value=args.photons)
     pixel = args.pixel_size if args.pixel_size is not None else \
         default_pixel_size(material, args.size)
     if not pixel > 0:
