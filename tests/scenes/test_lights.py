@@ -38,3 +38,12 @@ def test_image_environment_scale_must_be_a_nonnegative_number(scale):
 
     with pytest.raises(InputError, match=r"scale = (-1\.0|nan): must be"):
         ImageEnvironment(np.ones((4, 8, 3)), scale=scale)
+
+
+def test_image_environment_needs_two_rows():
+    from translucent.errors import InputError
+    from translucent.scenes import ImageEnvironment
+
+    with pytest.raises(InputError, match=r"radiance = \(1, 4, 3\): must have at least 2 rows"):
+        ImageEnvironment(np.ones((1, 4, 3)))
+    assert ImageEnvironment(np.ones((2, 1, 3))).radiance.shape == (2, 1, 3)
