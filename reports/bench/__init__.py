@@ -39,3 +39,43 @@ def with_size(scene, width: int, height: int):
     from dataclasses import replace
 
     return scene.with_camera(replace(scene.camera, width=width, height=height))
+
+
+def count_list(text: str, field: str, *, allow_empty: bool = False) -> list[int]:
+    """Parse a comma-separated option of counts (``"16384,65536"``).
+
+    Parameters
+    ----------
+    text : str
+        The option's value.
+    field : str
+        The option's name, for the message (``"--samples"``).
+    allow_empty : bool
+        Whether no count at all is accepted (an option whose empty value skips a step).
+
+    Returns
+    -------
+    list of int
+        The counts, each >= 1.
+
+    Raises
+    ------
+    InputError
+        A part that is not an integer >= 1, or no count where one is needed.
+    """
+    from ...errors import InputError
+
+    parts = [part.strip() for part in str(text).split(",") if part.strip()]
+    counts = []
+    for part in parts:
+        try:
+            count = int(part)
+        except ValueError:
+            count = 0
+        if count < 1:
+            break
+        counts.append(count)
+    if len(counts) != len(parts) or not (counts or allow_empty):
+        raise InputError("must be comma-separated integers >= 1"
+                         + ("" if allow_empty else " (at least one)"), field=field, value=text)
+    return counts

@@ -39,9 +39,11 @@ import numpy as np
 
 from ...atomic import atomic_save_figure, atomic_write_text
 from ...cache import private_cache
+from ...errors import check_count
 from ...fast import prt
 from ...materials import Dipole, measured_medium
 from ...scenes import Camera, PointLight, Scene, SceneObject, geometry_image, icosphere
+from . import count_list
 
 #: Targets of the task on this 2-core machine.
 TARGET_EDIT_FPS = 500.0
@@ -338,7 +340,10 @@ def _status(value: float, target: float) -> str:
 
 def run(args) -> int:
     """Run the benchmark, print the figures, write the JSON (and the sweep figure)."""
-    counts = [int(c) for c in str(args.samples).split(",") if c.strip()]
+    counts = count_list(args.samples, "--samples")
+    for name in ("frames", "edits", "error_vertices"):
+        check_count(getattr(args, name), f"--{name.replace('_', '-')}")
+    check_count(args.spatial_rows, "--spatial-rows", minimum=0, why=" (0: skip)")
     bandwidth = memory_bandwidth()
     print(f"memory bandwidth: copy {bandwidth['copy_gb_per_s']:.1f} GB/s, read "
           f"{bandwidth['read_gb_per_s']:.1f} GB/s (CPU time: "

@@ -1,5 +1,6 @@
 """``translucent bench``: options every benchmark shares, checked before it runs."""
 
+import pytest
 from translucent.reports.bench import prt as bench_prt
 from translucent.reports.cli import main
 
@@ -11,3 +12,22 @@ def test_a_json_path_that_is_a_folder_is_refused_before_the_benchmark_runs(tmp_p
     assert main(["bench", "prt", "--json", str(tmp_path)]) == 2
     assert ran == []
     assert "--json" in capsys.readouterr().err
+
+
+def _never(*args, **kwargs):
+    raise AssertionError("measured before the options were checked")
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--frames", "0"], "--frames = 0: must be an integer >= 1"),
+    (["--edits", "0"], "--edits = 0: must be an integer >= 1"),
+    (["--error-vertices", "0"], "--error-vertices = 0: must be an integer >= 1"),
+    (["--samples", "abc"], "--samples = 'abc': must be comma-separated"),
+    (["--samples", ","], "--samples = ',': must be comma-separated"),
+    (["--spatial-rows", "-1"], "--spatial-rows = -1: must be an integer >= 0"),
+])
+def test_bench_prt_checks_its_options_first(monkeypatch, capsys, arguments, message):
+    monkeypatch.setattr(bench_prt, "memory_bandwidth", _never)
+    assert main(["bench", "prt", *arguments]) == 2
+    assert message in capsys.readouterr().err
+
