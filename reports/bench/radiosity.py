@@ -44,11 +44,13 @@ import time
 import numpy as np
 
 from ...atomic import atomic_write_text
+from ...errors import check_count
 from ...fast import radiosity
 from ...materials import Dipole, measured_medium
 from ...scenes import RectangularAreaLight, SceneObject
 from ...scenes.raycast import embree_available, ray_engine
 from ...scenes.scene_file import builtin_scene_path, loads_scene
+from . import count_list
 
 #: The paper's Table 1, Cornell box (24,640 polygons, GTX 590).
 PAPER = {"relighting fps": 14.0, "translucency change fps": 4.0,
@@ -403,7 +405,7 @@ def low_rank_global_operator(S_c, F, rank: int, rng) -> tuple[np.ndarray, np.nda
 
 def _low_rank(state, args, out):
     """Measure a low-rank relighting operator instead of T: error, speed, as a starting guess."""
-    ranks = [int(r) for r in args.low_rank.split(",") if r.strip()]
+    ranks = count_list(args.low_rank, "--low-rank", allow_empty=True)
     if not ranks:
         return
     F = state.form_factors.astype(np.float64)
@@ -479,6 +481,8 @@ def _sampling(out):
 
 def run(args) -> int:
     """Measure everything, print the tables, write the JSON."""
+    check_count(args.frames, "--frames")
+    count_list(args.low_rank, "--low-rank", allow_empty=True)
     baseline, bandwidth = _baseline()
     print(f"baseline: 256 MB copy {baseline * 1e3:.1f} ms ({bandwidth:.1f} GB/s read + write)")
     out = {"baseline seconds": baseline, "bandwidth GB/s": bandwidth, "paper": PAPER}

@@ -2,6 +2,7 @@
 
 import pytest
 from translucent.reports.bench import prt as bench_prt
+from translucent.reports.bench import radiosity as bench_radiosity
 from translucent.reports.cli import main
 
 
@@ -29,5 +30,16 @@ def _never(*args, **kwargs):
 def test_bench_prt_checks_its_options_first(monkeypatch, capsys, arguments, message):
     monkeypatch.setattr(bench_prt, "memory_bandwidth", _never)
     assert main(["bench", "prt", *arguments]) == 2
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--frames", "0"], "--frames = 0: must be an integer >= 1"),
+    (["--low-rank", "32,abc"], "--low-rank = '32,abc': must be comma-separated"),
+    (["--low-rank", "0"], "--low-rank = '0': must be comma-separated"),
+])
+def test_bench_radiosity_checks_its_options_first(monkeypatch, capsys, arguments, message):
+    monkeypatch.setattr(bench_radiosity, "_baseline", _never)
+    assert main(["bench", "radiosity", *arguments]) == 2
     assert message in capsys.readouterr().err
 
