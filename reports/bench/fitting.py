@@ -29,6 +29,7 @@ import time
 import numpy as np
 
 from ...atomic import atomic_write_text
+from ...errors import check_count
 
 #: Targets of the task, seconds.
 TARGET_DIPOLE_SECONDS = 60.0
@@ -129,8 +130,10 @@ def _bias_table(args) -> int:
 
 def run(args) -> int:
     """Run the three timings, print them against the targets, write the JSON."""
+    check_count(args.size, "--size", minimum=16)
     if args.bias_table:
         return _bias_table(args)
+    check_count(args.segments, "--segments", minimum=2)
     from ...fitting.capture import Capture
     from ...fitting.fit import fit_dipole, fit_subedit
     from ...fitting.models import DipoleModel

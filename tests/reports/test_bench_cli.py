@@ -43,3 +43,14 @@ def test_bench_radiosity_checks_its_options_first(monkeypatch, capsys, arguments
     assert main(["bench", "radiosity", *arguments]) == 2
     assert message in capsys.readouterr().err
 
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--size", "0"], "--size = 0: must be an integer >= 16"),
+    (["--segments", "1"], "--segments = 1: must be an integer >= 2"),
+])
+def test_bench_fitting_checks_its_options_first(monkeypatch, capsys, arguments, message):
+    import translucent.fitting.synthetic
+
+    monkeypatch.setattr(translucent.fitting.synthetic, "dipole_capture", _never)
+    assert main(["bench", "fitting", *arguments]) == 2
+    assert message in capsys.readouterr().err
