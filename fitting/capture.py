@@ -442,6 +442,9 @@ def write_capture(path, pixels, spec: CaptureSpec) -> Path:
     if pixels.ndim != 3 or pixels.shape[2] != 3:
         raise InputError("must be H x W x 3", field="pixels", value=pixels.shape)
     image_path = path.parent / spec.image
+    if image_path.resolve() == path.resolve():
+        raise InputError("the sidecar would overwrite the image: give the sidecar its own "
+                         "name (.json)", file=path, field="image", value=spec.image)
     suffix = image_path.suffix.lower()
     if suffix == ".exr":
         import OpenEXR

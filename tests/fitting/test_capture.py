@@ -174,3 +174,11 @@ def test_planar_rgb_tiff_reads_as_rgb_and_a_stack_is_refused(tmp_path, sidecar_d
     with pytest.raises(InputError, match="one image") as error:
         read_capture(path)
     assert error.value.field == "shape"
+
+
+def test_a_sidecar_named_like_its_image_is_refused(tmp_path):
+    spec = CaptureSpec(image="c.exr", pixel_size_mm=0.1, incident_px=(4, 4))
+    with pytest.raises(InputError, match="would overwrite the image") as error:
+        write_capture(tmp_path / "c.exr", np.ones((8, 8, 3)), spec)
+    assert error.value.field == "image"
+    assert not (tmp_path / "c.exr").exists()
