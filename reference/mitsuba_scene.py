@@ -404,14 +404,14 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     if integrator is not None and integrator not in INTEGRATORS:
         raise InputError(f"unknown integrator; valid: {', '.join(INTEGRATORS)}",
                          field="integrator", value=integrator)
-    if channel is not None and channel not in (0, 1, 2):
+    if channel is not None and (not isinstance(channel, (int, np.integer))
+                                or isinstance(channel, bool) or channel not in (0, 1, 2)):
         raise InputError("must be 0, 1, 2 (R, G, B) or None", field="channel", value=channel)
     check_count(spp, "spp")
     if max_depth is None:
         max_depth = DEFAULT_MAX_DEPTH
-    if int(max_depth) != max_depth or (max_depth < 1 and max_depth != -1):
-        raise InputError("must be -1 (unbounded) or an integer >= 1", field="max_depth",
-                         value=max_depth)
+    if max_depth != -1:
+        check_count(max_depth, "max_depth", 1, why=" (or -1: unbounded)")
     if not 0 < delta_light_size < 0.5:
         raise InputError("must be in (0, 0.5)", field="delta_light_size",
                          value=delta_light_size)
@@ -442,8 +442,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
                          file=scene.source, field="integrator", value=integrator)
     if rr_depth is None:
         rr_depth = NO_RUSSIAN_ROULETTE if max_albedo > RR_ALBEDO_THRESHOLD else DEFAULT_RR_DEPTH
-    if int(rr_depth) != rr_depth or rr_depth < 1:
-        raise InputError("must be an integer >= 1", field="rr_depth", value=rr_depth)
+    check_count(rr_depth, "rr_depth", 1)
     substitute = blocks_delta if substitute_delta_lights is None else bool(substitute_delta_lights)
 
     notes: list[str] = []

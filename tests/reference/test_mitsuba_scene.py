@@ -277,3 +277,15 @@ def test_delta_light_on_a_surface_is_refused():
     scene = _scene(measured_medium("Skin1"), (PointLight(on_surface, 1.0),))
     with pytest.raises(InputError, match="delta light on a surface"):
         convert_scene(scene)
+
+
+@pytest.mark.parametrize(("field", "options"), [
+    ("max_depth", {"max_depth": float("nan")}),
+    ("max_depth", {"max_depth": "deep"}),
+    ("rr_depth", {"rr_depth": float("inf")}),
+    ("channel", {"channel": 1.0}),
+    ("channel", {"channel": True}),
+])
+def test_options_of_the_wrong_type_are_refused(field, options):
+    with pytest.raises(InputError, match=f"{field} = "):
+        convert_scene(_scene(Lambertian(0.5)), **options)
