@@ -75,6 +75,23 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=int, default=None)
 
 
+def _check_out(sidecar: Path, image: Path) -> None:
+    """Refuse an output the capture could not be written to, before the generator runs."""
+    from ...errors import InputError
+
+    if sidecar.is_dir():
+        raise InputError("is a folder; give the sidecar's file name (.json)", field="--out",
+                         value=str(sidecar))
+    if image.resolve() == sidecar.resolve():
+        raise InputError(f"the sidecar would overwrite the image {image.name}: give the "
+                         "sidecar its own name (.json)", field="--out", value=str(sidecar))
+    try:
+        sidecar.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"cannot create the folder {sidecar.parent} ({error.strerror})",
+                         field="--out", value=str(sidecar)) from error
+
+
 def run(args) -> int:
     """Generate the capture and write the image and sidecar."""
     from dataclasses import replace
@@ -91,6 +108,7 @@ def run(args) -> int:
     name = (material.name or Path(args.material).stem).lower()
     out = Path(args.out) if args.out else Path(f"{name}_capture.json")
     suffix = {"exr": ".exr", "png": ".png", "tiff": ".tif"}[args.format]
+    _check_out(out, out.with_suffix(suffix))
     camera = Camera(peak_signal=args.peak_signal, gain=args.gain, read_noise=args.read_noise,
                     black_level=args.black_level, saturation_level=args.saturation_level,
                     encoding="srgb" if args.srgb else "linear",

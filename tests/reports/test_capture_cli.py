@@ -11,3 +11,32 @@ def test_a_non_finite_photon_count_is_an_input_error(tmp_path, capsys, photons):
     assert code == 2
     assert f"--photons = {float(photons)!r}" in capsys.readouterr().err
     assert not (tmp_path / "c.json").exists()
+
+
+@pytest.fixture
+def generators_run(monkeypatch):
+    """Fail if a generator runs (it must not, on a bad --out)."""
+    from translucent.fitting import random_walk, synthetic
+
+    def generate(*args, **kwargs):
+        raise AssertionError("the generator ran before --out was checked")
+
+    monkeypatch.setattr(synthetic, "dipole_capture", generate)
+    monkeypatch.setattr(random_walk, "walk_capture", generate)
+
+
+@pytest.mark.parametrize("generator", ["walk", "dipole"])
+@pytest.mark.parametrize("name, message", [
+    ("folder", "is a folder"),
+    ("c.exr", "would overwrite the image"),
+    ("file/c.json", "cannot create the folder"),
+])
+def test_a_bad_out_is_refused_before_the_generator_runs(tmp_path, capsys, generators_run,
+                                                        generator, name, message):
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "file").write_text("not a folder")
+    code = main(["capture", "skin1", "--generator", generator, "--size", "16",
+                 "--out", str(tmp_path / name)])
+    assert code == 2
+    error = capsys.readouterr().err
+    assert message in error and "--out" in error
