@@ -600,17 +600,21 @@ class TabulatedProfile(RadialProfile):
         if not path.is_file():
             raise InputError("no such file", file=path, field="path", value=str(path))
         rows = []
-        with open(path, newline="") as handle:
-            for number, row in enumerate(csv.reader(handle), start=1):
-                cells = [cell.strip() for cell in row if cell.strip()]
-                if not cells or cells[0].startswith("#"):
-                    continue
-                try:
-                    rows.append([float(cell) for cell in cells])
-                except ValueError as error:
-                    if rows:  # only the first row may be a header
-                        raise InputError("not a number", file=path, field=f"line {number}",
-                                         value=row) from error
+        try:
+            with open(path, newline="", encoding="utf-8") as handle:
+                for number, row in enumerate(csv.reader(handle), start=1):
+                    cells = [cell.strip() for cell in row if cell.strip()]
+                    if not cells or cells[0].startswith("#"):
+                        continue
+                    try:
+                        rows.append([float(cell) for cell in cells])
+                    except ValueError as error:
+                        if rows:  # only the first row may be a header
+                            raise InputError("not a number", file=path,
+                                             field=f"line {number}", value=row) from error
+        except (UnicodeDecodeError, csv.Error) as error:
+            raise InputError(f"not a text (UTF-8) CSV file ({error})", file=path,
+                             field="path", value=str(path)) from error
         if not rows:
             raise InputError("no numeric rows", file=path, field="rows", value=0)
         widths = {len(row) for row in rows}

@@ -346,3 +346,10 @@ def test_cache_keys_tell_profiles_apart():
     b = DipoleProfile(measured_medium("Apple"), entry_fresnel=False).cache_key()
     assert a != b
     assert SlabProfile(measured_medium("Apple"), 1.0).cache_key()["thickness"] == 1.0
+
+
+def test_from_file_refuses_a_file_that_is_not_text(tmp_path):
+    path = tmp_path / "binary.csv"
+    path.write_bytes(b"\xff\xfe\x00r,R\n")
+    with pytest.raises(InputError, match=r"binary\.csv: .*not a text \(UTF-8\) CSV file"):
+        TabulatedProfile.from_file(path)
