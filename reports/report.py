@@ -783,6 +783,20 @@ def _methods(methods) -> list[str]:
     return chosen
 
 
+def _check_distinct_names(scenes) -> None:
+    """Refuse two scenes of one name: metrics.json and the baseline key results by name."""
+    seen: dict[str, Any] = {}
+    for scene in scenes:
+        if scene.name in seen:
+            sources = [str(getattr(s, "source", None) or "given as a Scene")
+                       for s in (seen[scene.name], scene)]
+            raise InputError(f"two scenes are named {scene.name!r} ({sources[0]}; "
+                             f"{sources[1]}); results are kept by scene name: give each "
+                             "scene once, with a name of its own", field="scenes",
+                             value=scene.name)
+        seen[scene.name] = scene
+
+
 def _slug(name: str, taken: set[str]) -> str:
     slug = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "scene"
     candidate, count = slug, 2
@@ -858,6 +872,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     else:
         names, excluded = default_scenes()
     loaded = [name if isinstance(name, Scene) else load_scene(name) for name in names]
+    _check_distinct_names(loaded)
     versions = backend_versions()
     fingerprint = _source_fingerprint()
     reference_settings = {"spp": spp if spp is not None else

@@ -428,3 +428,18 @@ def test_every_built_method_on_the_tiny_scene(tmp_path):
     assert set(methods) == set(fast_base.METHODS)
     for entry in methods.values():
         assert entry["status"] == "ok" or entry["reason"]
+
+
+def test_two_scenes_of_one_name_are_refused_before_anything_runs(tmp_path, monkeypatch):
+    # metrics.json and the baseline key results by scene name: one would hide the other
+    def never():
+        raise AssertionError("the run started with two scenes of one name")
+
+    monkeypatch.setattr(report_module, "backend_versions", never)
+    copy = tmp_path / "copy.toml"
+    copy.write_text(TINY_SCENE)
+    for scenes in ([_tiny_scene(tmp_path), copy], ["sphere", "sphere"]):
+        with pytest.raises(InputError, match="scenes = .*two scenes are named"):
+            make_report([str(s) for s in scenes], tmp_path / "r", methods=["prt"],
+                        serial=True, progress=False)
+    assert not (tmp_path / "r").exists()
