@@ -520,10 +520,13 @@ def save_scene(scene: Scene, path) -> Path:
             index += len(scene.objects)
         taken.add(safe.lower())
         mesh_files[item.name] = f"{path.stem}.{safe}.npz"
+    environment_files = {index: f"{path.stem}.environment{index}.exr"
+                         for index, light in enumerate(scene.lights)
+                         if isinstance(light, ImageEnvironment)}
+    # the text first: a material that cannot be written refuses before any file is made
+    text = scene_to_toml(scene, mesh_files, environment_files)
+    for item in scene.objects:
         save_mesh(item.mesh, path.parent / mesh_files[item.name])
-    environment_files = {}
-    for index, light in enumerate(scene.lights):
-        if isinstance(light, ImageEnvironment):
-            environment_files[index] = f"{path.stem}.environment{index}.exr"
-            Image(light.radiance).write(path.parent / environment_files[index])
-    return atomic_write_text(path, scene_to_toml(scene, mesh_files, environment_files))
+    for index, name in environment_files.items():
+        Image(scene.lights[index].radiance).write(path.parent / name)
+    return atomic_write_text(path, text)

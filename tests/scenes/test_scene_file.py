@@ -382,3 +382,13 @@ def test_load_scene_reads_again_when_a_mesh_file_it_names_changes(tmp_path):
     assert np.ptp(load_scene(path).object("ball").mesh.vertices[:, 0]) == 1.0
     save_mesh(box((3.0, 1.0, 1.0)), tmp_path / "brick.npz")  # the scene file is unchanged
     assert np.ptp(load_scene(path).object("ball").mesh.vertices[:, 0]) == 3.0
+
+
+def test_save_scene_writes_nothing_when_a_material_cannot_be_written(tmp_path):
+    from translucent.materials.subedit import SubEditProfiles
+
+    scene = loads_scene(MINIMAL)
+    scene = scene.with_material("ball", SubEditProfiles(np.zeros((3, 3)), 1.0))
+    with pytest.raises(InputError, match="made in code"):
+        save_scene(scene, tmp_path / "out" / "made.toml")
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
