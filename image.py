@@ -52,6 +52,9 @@ class Image:
         rgb = np.ascontiguousarray(self.rgb, dtype=np.float32)
         if rgb.ndim != 3 or rgb.shape[2] != 3:
             raise InputError("an image must be H x W x 3", field="rgb", value=rgb.shape)
+        if rgb.size == 0:
+            raise InputError("an image needs at least one pixel (H, W >= 1)", field="rgb",
+                             value=rgb.shape)
         object.__setattr__(self, "rgb", rgb)
         if self.variance is not None:
             variance = np.ascontiguousarray(self.variance, dtype=np.float32)

@@ -77,3 +77,9 @@ def test_numpy_metadata_is_written_as_plain_numbers(tmp_path):
     path = Image(np.ones((2, 2, 3)), metadata=metadata).write(tmp_path / "n.exr")
     assert read_exr(path).metadata == {"spp": 4, "white": 0.5,
                                        "knobs": {"terms": 12, "range": [0, 1, 2]}}
+
+
+def test_an_empty_image_is_refused_on_construction():
+    for shape in ((0, 4, 3), (4, 0, 3)):
+        with pytest.raises(InputError, match=r"rgb = \(.*\): an image needs at least one pixel"):
+            Image(np.zeros(shape))
