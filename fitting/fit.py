@@ -36,6 +36,9 @@ MODELS = ("dipole", "subedit")
 #: 9 knots in ~4000; the budgets leave room for hard captures.
 DIPOLE_MAX_STEPS = 20000
 SUBEDIT_MAX_STEPS = 40000
+#: Keyword options of :func:`fit_capture`.
+FIT_OPTIONS = ("r_min_mm", "fit_eta", "walkers", "max_steps", "segments", "r_s_mm",
+               "smoothness")
 
 
 def default_moves():
@@ -350,7 +353,8 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
     progress : bool
     **options
         ``r_min_mm`` (profile); ``fit_eta``, ``walkers``, ``max_steps`` (dipole);
-        ``segments``, ``r_s_mm``, ``smoothness`` (SubEdit).
+        ``segments``, ``r_s_mm``, ``smoothness`` (SubEdit); any other key is an
+        :class:`InputError`.
 
     Returns
     -------
@@ -361,6 +365,10 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
     if unknown:
         raise InputError(f"unknown model; valid: {', '.join(MODELS)}", field="model",
                          value=unknown[0])
+    unknown = [key for key in options if key not in FIT_OPTIONS]
+    if unknown:
+        raise InputError(f"unknown option; valid: {', '.join(FIT_OPTIONS)}", field=unknown[0],
+                         value=options[unknown[0]])
     capture = read_capture(path)
     if out_dir is not None:  # before the chains run, not after
         out_dir = output_folder(out_dir)

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 import tomllib
+from translucent.errors import InputError
 from translucent.fitting.capture import Capture, CaptureSpec, read_capture, write_capture
 from translucent.fitting.fit import fit_capture, fit_dipole, fit_subedit, write_outputs
 from translucent.fitting.synthetic import Camera, apply_camera, dipole_capture, exitance_image
@@ -204,3 +205,11 @@ def test_a_negative_seed_is_an_input_error(tmp_path, capsys, model):
     code = main(["fit", str(sidecar), "--model", model, "--seed", "-1", "--walkers", "16",
                  "--max-steps", "200", "--no-progress", "--out", str(tmp_path / "fit")])
     assert code == 2 and "seed = -1: must be an integer >= 0" in capsys.readouterr().err
+
+
+def test_fit_capture_refuses_an_option_it_does_not_take(tmp_path):
+    data = capture(size=24)
+    sidecar = write_capture(tmp_path / "c.json", data.pixels, data.spec)
+    with pytest.raises(InputError, match="unknown option; valid: r_min_mm, fit_eta") as error:
+        fit_capture(sidecar, walker=16, max_steps=200)  # "walker" for "walkers"
+    assert error.value.field == "walker"
