@@ -7,7 +7,9 @@ functions, ``add_arguments(parser)`` and ``run(args) -> int``; the CLI is thin a
 happens in the library.
 
 ``TRANSLUCENT_OPTIONS`` (environment) is split like a shell line and put before the
-arguments, so a CI suite can change behaviour in one place.
+arguments of the command (after its name, and after the method or benchmark name of
+``approx`` and ``bench``), so a CI suite can change behaviour in one place; an option given
+on the command line wins over the same option from the environment.
 """
 
 from __future__ import annotations
@@ -61,14 +63,39 @@ def _build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _command_end(parser: argparse.ArgumentParser, argv: list[str]) -> int:
+    """Return the index in ``argv`` just after the command's name(s) (``bench prt``: 2)."""
+    index = 0
+    while True:
+        choices = next((action.choices for action in parser._actions
+                        if isinstance(action, argparse._SubParsersAction)), None)
+        if not choices:
+            return index
+        names = [i for i in range(index, len(argv)) if not argv[i].startswith("-")]
+        if not names or argv[names[0]] not in choices:
+            return index
+        index = names[0] + 1
+        parser = choices[argv[names[0]]]
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    argv = shlex.split(os.environ.get("TRANSLUCENT_OPTIONS", "")) + argv
+    text = os.environ.get("TRANSLUCENT_OPTIONS", "")
+    try:
+        options = shlex.split(text)
+    except ValueError as error:
+        print(f"translucent: error: TRANSLUCENT_OPTIONS = {text!r}: {error}", file=sys.stderr)
+        return 2
     parser = _build_parser()
+    end = _command_end(parser, argv)
+    argv = argv[:end] + options + argv[end:]
     try:
         args = parser.parse_args(argv)
     except SystemExit as exit_:
+        if exit_.code and options:
+            print(f"translucent: note: TRANSLUCENT_OPTIONS = {text!r} was put before the "
+                  "command's arguments", file=sys.stderr)
         return int(exit_.code or 0)
     if not getattr(args, "run", None):
         parser.print_help()
