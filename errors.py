@@ -48,10 +48,16 @@ def _short_repr(value: Any, limit: int = 120) -> str:
 
 
 def check_finite(value, field: str, *, file=None):
-    """Return ``value`` as a float64 array, raising :class:`InputError` on NaN or Inf."""
+    """Return ``value`` as a float64 array; :class:`InputError` on NaN, Inf or non-numbers."""
     import numpy as np
 
-    array = np.asarray(value, dtype=np.float64)
+    if isinstance(value, str | bytes):  # numpy would parse "1.5" as a number
+        raise InputError("must be a number, not text", file=file, field=field, value=value)
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise InputError("must be a number or an array of numbers", file=file, field=field,
+                         value=value) from error
     if not np.all(np.isfinite(array)):
         raise InputError("must be finite (no NaN or Inf)", file=file, field=field, value=value)
     return array
