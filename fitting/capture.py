@@ -383,6 +383,17 @@ def _to_rgb(array: np.ndarray, path: Path) -> np.ndarray:
     raise InputError("expected 1 to 4 channels", file=path, field="channels", value=planes)
 
 
+def _check_beam(spec: CaptureSpec, shape, path) -> None:
+    """:class:`InputError` when the beam is wider than the image's diagonal."""
+    diagonal_mm = math.hypot(*shape[:2]) * spec.pixel_size_mm
+    if spec.beam_radius_mm > diagonal_mm:
+        # the profile would be the beam's own shape, and the forward model's grid (out to
+        # six beam radii) would not fit in memory; a radius in um is the usual cause
+        raise InputError(f"must be at most the image's diagonal ({diagonal_mm:.3g} mm): a "
+                         "wider beam leaves no scattering profile to fit (is it in mm?)",
+                         file=path, field="beam_radius_mm", value=spec.beam_radius_mm)
+
+
 def read_capture(path) -> Capture:
     """Read a capture: the sidecar at ``path`` and the image it names.
 
@@ -399,7 +410,8 @@ def read_capture(path) -> Capture:
     ------
     InputError
         Bad sidecar (see :func:`read_sidecar`); a missing, unreadable or 8-bit image; an
-        ``incident_px`` outside the image; an image with no finite pixel.
+        ``incident_px`` outside the image; a ``beam_radius_mm`` beyond the image's diagonal;
+        an image with no finite pixel.
     """
     path = Path(path)
     spec = read_sidecar(path)
@@ -413,6 +425,7 @@ def read_capture(path) -> Capture:
     if not (0.0 <= x <= width and 0.0 <= y <= height):
         raise InputError(f"must lie inside the image (x in [0, {width}], y in [0, {height}])",
                          file=path, field="incident_px", value=list(spec.incident_px))
+    _check_beam(spec, (height, width), path)
     if not np.isfinite(pixels).any():
         raise InputError("no finite pixel in the image", file=image_path, field="pixels")
     return Capture(spec=spec, pixels=pixels, path=path)
@@ -441,6 +454,7 @@ def write_capture(path, pixels, spec: CaptureSpec) -> Path:
     pixels = np.asarray(pixels)
     if pixels.ndim != 3 or pixels.shape[2] != 3:
         raise InputError("must be H x W x 3", field="pixels", value=pixels.shape)
+    _check_beam(spec, pixels.shape, path)  # read_capture would refuse it
     image_path = path.parent / spec.image
     if image_path.resolve() == path.resolve():
         raise InputError("the sidecar would overwrite the image: give the sidecar its own "

@@ -182,3 +182,18 @@ def test_a_sidecar_named_like_its_image_is_refused(tmp_path):
         write_capture(tmp_path / "c.exr", np.ones((8, 8, 3)), spec)
     assert error.value.field == "image"
     assert not (tmp_path / "c.exr").exists()
+
+
+def test_a_beam_wider_than_the_image_is_refused(write_sidecar, sidecar_data):
+    # 32 x 32 pixels of 0.1 mm: the diagonal is 4.53 mm; 200 is a radius given in um
+    path = write_sidecar({**sidecar_data, "beam_radius_mm": 200.0})
+    with pytest.raises(InputError, match=r"at most the image's diagonal \(4.53 mm\)") as error:
+        read_capture(path)
+    assert error.value.field == "beam_radius_mm" and error.value.file == str(path)
+    path = write_sidecar({**sidecar_data, "beam_radius_mm": 4.5})
+    assert read_capture(path).spec.beam_radius_mm == 4.5
+    spec = CaptureSpec(image="w.exr", pixel_size_mm=0.1, incident_px=(16, 16),
+                       beam_radius_mm=200.0)
+    with pytest.raises(InputError, match="at most the image's diagonal"):
+        write_capture(path.with_name("w.json"), np.ones((32, 32, 3)), spec)
+    assert not path.with_name("w.json").exists()
