@@ -455,8 +455,12 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
         keep &= ~too_close
         used[:, c] = keep
     if (used.sum(axis=0) < 4).all():
-        raise InputError("no channel has 4 usable annuli (saturated, below black or too "
-                         "few pixels everywhere)", file=capture.path, field="image",
+        why = "saturated, below black or too few pixels everywhere"
+        if any(dropped["inside_r_min"]):
+            why += (f"; r_min_mm = {r_min_mm:g} mm leaves out "
+                    f"{max(dropped['inside_r_min'])} otherwise usable annuli")
+        raise InputError(f"no channel has 4 usable annuli ({why})", file=capture.path,
+                         field="image",
                          value={"used_annuli": used.sum(axis=0).tolist(), **dropped})
 
     # the forward operator: beam convolution, then the exact pixel-footprint average

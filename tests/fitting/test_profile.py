@@ -147,3 +147,11 @@ def test_operator_agrees_with_the_independent_dipole_generator():
     for c in range(3):
         mean, _, _ = profile.observations(c)
         np.testing.assert_allclose(predicted[c], mean, rtol=GENERATOR_AGREEMENT)
+
+
+def test_an_r_min_beyond_the_data_is_named_in_the_error():
+    values = gaussian_pixels((24, 24), (12.0, 12.0), 4.0) * 1e4 + 1.0
+    noisy = values + np.random.default_rng(3).normal(0.0, 0.5, values.shape)
+    with pytest.raises(InputError, match=r"r_min_mm = 100 mm leaves out") as error:
+        measure_profile(capture_of(noisy, (12.0, 12.0)), r_min_mm=100.0)
+    assert error.value.value["inside_r_min"][0] > 0
