@@ -310,8 +310,8 @@ def write_outputs(result: FitResult, out_dir) -> dict[str, Path]:
     if result.kind == "subedit":  # the texture file the scene files' "subedit" type loads
         paths["texture"] = out_dir / f"{kind}_profile.npz"
         save_subedit(paths["texture"], result.model.texture(_medians(result.parameters)))
-        # absolute: the factory resolves a relative file against the working folder
-        material = {"type": "subedit", "file": str(paths["texture"].resolve())}
+        # relative to the material file, from whose folder the factory reads it
+        material = {"type": "subedit", "file": paths["texture"].name}
         if not material_is_absolute(result):
             diagnostics += ("; the exposure was unknown: P is relative (scale it before "
                             "rendering)")

@@ -213,3 +213,15 @@ def test_fit_capture_refuses_an_option_it_does_not_take(tmp_path):
     with pytest.raises(InputError, match="unknown option; valid: r_min_mm, fit_eta") as error:
         fit_capture(sidecar, walker=16, max_steps=200)  # "walker" for "walkers"
     assert error.value.field == "walker"
+
+
+def test_subedit_material_file_names_its_texture_relative_to_itself(tmp_path):
+    # docs/capture-format.md: file = "subedit_profile.npz"; the folder can then be moved
+    data = capture(size=24, camera=Camera(peak_signal=40000, exposure_known=True))
+    result = fit_subedit(data, segments=2, walkers=6, max_steps=200, seed=1)
+    write_outputs(result, tmp_path / "fit")
+    (tmp_path / "fit").rename(tmp_path / "moved")
+    path = tmp_path / "moved" / "subedit_material.toml"
+    table = tomllib.loads(path.read_text())
+    assert table["file"] == "subedit_profile.npz"
+    material_from_dict(table, file=path)
