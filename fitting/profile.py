@@ -3,8 +3,9 @@ r"""Radial profiles of a capture, and the operator that predicts them from a mod
 Measurement (:func:`measure_profile`):
 
 1. Pixels are masked per channel and counted: NaN/Inf, saturated (stored value at or above
-   ``saturation_level``) and below black (stored value below ``black_level``, or at the
-   floor 0 of an integer encoding, where the noise has been clipped).
+   ``saturation_level``, or at the top code 65535 of an integer encoding) and below black
+   (stored value below ``black_level``, or at the floor 0 of an integer encoding, where
+   the noise has been clipped).
 2. The incident point is refined to sub-pixel precision (:func:`refine_incident_point`).
 3. Pixels are grouped into annuli about it (:func:`annulus_edges`): at least
    :data:`MIN_PIXELS_PER_ANNULUS` pixels each, 1 px wide near the centre, widening
@@ -60,6 +61,8 @@ ANNULUS_GROWTH = 0.05
 #: phi(z) sigma for a fraction Phi(-z); at 0.1 % (z = 3.1) that is 0.003 sigma per pixel,
 #: negligible against the annulus's standard error.
 BELOW_BLACK_FRACTION = 1e-3
+#: Top code of the 16-bit PNG/TIFF captures: a pixel there was clipped by the encoding.
+INTEGER_CEILING = 65535.0
 #: Iterations and tolerance (pixels) of the thresholded-centroid refinement.
 CENTROID_ITERATIONS = 50
 CENTROID_TOLERANCE_PX = 1e-4
@@ -328,9 +331,11 @@ def _channel_masks(capture: Capture):
     stored = capture.pixels
     finite = np.isfinite(stored)
     with np.errstate(invalid="ignore"):
-        saturated = finite & (stored >= spec.saturation_level)
-        integer_floor = spec.image.lower().endswith((".png", ".tif", ".tiff"))
-        below = finite & ((stored < spec.black_level) | (integer_floor & (stored <= 0.0)))
+        integer = spec.image.lower().endswith((".png", ".tif", ".tiff"))
+        # a 16-bit file clips at its top code whatever saturation_level says
+        saturated = finite & ((stored >= spec.saturation_level)
+                              | (integer & (stored >= INTEGER_CEILING)))
+        below = finite & ((stored < spec.black_level) | (integer & (stored <= 0.0)))
     return finite, saturated, below
 
 

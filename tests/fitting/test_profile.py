@@ -124,6 +124,18 @@ def test_integer_floor_counts_as_below_black():
     assert profile.masked["below_black"][0] == int((image <= 0).sum()) > 0
 
 
+@pytest.mark.parametrize("image_name", ["c.png", "c.tif"])
+def test_integer_ceiling_counts_as_saturated(image_name):
+    # a 16-bit file clips at 65535 whatever saturation_level the sidecar gives
+    centre = (16.0, 16.0)
+    image = np.minimum(np.rint(2e5 * gaussian_pixels((32, 32), centre, 3.0)) + 10.0, 65535.0)
+    capture = capture_of(image, centre, image=image_name, black_level=0.0,
+                         saturation_level=1e9)
+    profile = measure_profile(capture)
+    assert profile.masked["saturated"][0] == int((image >= 65535).sum()) > 0
+    assert profile.dropped["saturated"][0] > 0
+
+
 #: The fitter's operator and the independent dipole-forward generator (24x / 64x
 #: supersampled pixels near the centre, 6x elsewhere) agree on annulus means to their
 #: combined discretisation errors, ~1e-4 each (GRID_RATIO and MAX_LOG_STEP, midpoint rule).
