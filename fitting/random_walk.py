@@ -40,7 +40,7 @@ import numpy as np
 from ..errors import InputError
 from ..materials import Dipole
 from ..materials.fresnel import fresnel_reflectance
-from .synthetic import Camera, _capture_spec, _check_incident, apply_camera
+from .synthetic import Camera, _capture_spec, _check_geometry, _check_incident, apply_camera
 
 __all__ = ["Film", "WalkTally", "photon_random_walk", "walk_capture"]
 
@@ -410,6 +410,7 @@ def walk_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
     if incident_px is None:
         incident_px = (width / 2.0, height / 2.0)
     incident_px = _check_incident(incident_px, width, height)
+    _check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm)
     if side == "transmission" and thickness_mm is None:
         raise InputError("transmission needs a finite thickness", field="thickness_mm",
                          value=None)

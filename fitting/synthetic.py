@@ -269,6 +269,7 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
     if incident_px is None:
         incident_px = (width / 2.0, height / 2.0)
     incident_px = _check_incident(incident_px, width, height)
+    _check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm)
     profile_fn = material_profile_function(material, side=side, thickness_mm=thickness_mm)
     exitance = exitance_image(profile_fn, (height, width), pixel_size_mm, incident_px,
                               beam_radius_mm)
@@ -279,6 +280,19 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
                          beam_radius_mm=beam_radius_mm, exposure=exposure, eta_known=eta_known,
                          generator="dipole")
     return stored, spec
+
+
+def _check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm):
+    """:class:`InputError` naming the first length that is not finite or out of range (mm)."""
+    if not (np.isfinite(pixel_size_mm) and pixel_size_mm > 0):
+        raise InputError("must be finite and > 0, mm", field="pixel_size_mm",
+                         value=pixel_size_mm)
+    if thickness_mm is not None and not (np.isfinite(thickness_mm) and thickness_mm > 0):
+        raise InputError("must be finite and > 0, mm (None: a semi-infinite slab)",
+                         field="thickness_mm", value=thickness_mm)
+    if not (np.isfinite(beam_radius_mm) and beam_radius_mm >= 0):
+        raise InputError("must be finite and >= 0, mm (0: a pencil beam)",
+                         field="beam_radius_mm", value=beam_radius_mm)
 
 
 def _check_incident(incident_px, width, height):

@@ -14,3 +14,18 @@ def test_an_incident_point_outside_the_image_is_refused(incident):
     with pytest.raises(InputError, match="must lie inside the 16 x 12 image") as error:
         dipole_capture(MEDIUM, size=(12, 16), pixel_size_mm=0.2, incident_px=incident)
     assert error.value.field == "incident_px"
+
+
+@pytest.mark.parametrize("option, field", [
+    ({"pixel_size_mm": float("inf")}, "pixel_size_mm"),
+    ({"pixel_size_mm": 0.0}, "pixel_size_mm"),
+    ({"thickness_mm": float("inf")}, "thickness_mm"),
+    ({"beam_radius_mm": float("inf")}, "beam_radius_mm"),
+    ({"beam_radius_mm": float("nan")}, "beam_radius_mm"),
+])
+def test_non_finite_geometry_names_its_field(option, field):
+    # it failed later as "the exitance image is black", a field the caller never gave
+    options = {"size": 16, "pixel_size_mm": 0.2, **option}
+    with pytest.raises(InputError, match="finite") as error:
+        dipole_capture(MEDIUM, **options)
+    assert error.value.field == field
