@@ -86,10 +86,12 @@ class Camera:
     def __post_init__(self):
         for name in ("peak_signal", "saturation_level"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise InputError("must be > 0", field=name, value=getattr(self, name))
+                raise InputError("must be finite and > 0", field=name,
+                                 value=getattr(self, name))
         for name in ("gain", "read_noise", "black_level"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
-                raise InputError("must be >= 0", field=name, value=getattr(self, name))
+                raise InputError("must be finite and >= 0", field=name,
+                                 value=getattr(self, name))
         if self.file_format not in ("exr", "png", "tiff"):
             raise InputError("must be 'exr', 'png' or 'tiff'", field="file_format",
                              value=self.file_format)

@@ -29,3 +29,14 @@ def test_non_finite_geometry_names_its_field(option, field):
     with pytest.raises(InputError, match="finite") as error:
         dipole_capture(MEDIUM, **options)
     assert error.value.field == field
+
+
+@pytest.mark.parametrize("field", ["peak_signal", "saturation_level", "gain", "read_noise",
+                                   "black_level"])
+def test_an_infinite_camera_setting_is_called_not_finite(field):
+    from translucent.fitting.synthetic import Camera
+
+    # "inf: must be > 0" told the user nothing
+    with pytest.raises(InputError, match="must be finite and >") as error:
+        Camera(**{field: float("inf")})
+    assert error.value.field == field
