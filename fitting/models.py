@@ -241,11 +241,15 @@ class DipoleModel(ProfileModel):
     profile : RadialProfile
     spec : CaptureSpec
     fit_eta : bool, optional
-        Fit eta even if the sidecar gives it (default: fit only when it is null).
+        Fit eta even if the sidecar gives it (default: fit only when it is null; False
+        with a null eta is an :class:`InputError`).
     """
 
     def __init__(self, profile: RadialProfile, spec: CaptureSpec, *, fit_eta: bool | None = None):
         super().__init__(profile, spec)
+        if fit_eta is not None and not fit_eta and spec.eta is None:
+            raise InputError("the capture's eta is unknown (null): it must be fitted",
+                             field="fit_eta", value=fit_eta)
         self.fit_eta = spec.eta is None if fit_eta is None else bool(fit_eta)
         self.fit_exposure = spec.exposure is None
         params = []
@@ -275,7 +279,7 @@ class DipoleModel(ProfileModel):
             eta = theta[:, index]
             index += 1
         else:
-            eta = np.full(theta.shape[0], self.spec.eta if self.spec.eta is not None else 1.3)
+            eta = np.full(theta.shape[0], self.spec.eta)
         exposure = np.exp(theta[:, index]) if self.fit_exposure else \
             np.full(theta.shape[0], self.spec.exposure)
         return sigma_a, sigma_s_prime, eta, exposure

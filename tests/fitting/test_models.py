@@ -120,3 +120,15 @@ def test_subedit_bad_options(small_capture):
         SubEditModel(profile, capture.spec, smoothness=0.0)
     with pytest.raises(InputError, match="must be > 0"):
         SubEditModel(profile, capture.spec, r_s_mm=-1.0)
+
+
+def test_an_unknown_eta_cannot_be_left_unfitted(small_capture):
+    from dataclasses import replace
+
+    capture, profile, _ = small_capture
+    spec = replace(capture.spec, eta=None)
+    # it silently assumed eta = 1.3 and wrote it into the material as if measured
+    with pytest.raises(InputError, match="eta is unknown") as error:
+        DipoleModel(profile, spec, fit_eta=False)
+    assert error.value.field == "fit_eta"
+    assert DipoleModel(profile, spec).fit_eta
