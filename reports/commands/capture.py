@@ -133,7 +133,8 @@ def run(args) -> int:
         from ...fitting.volpath_capture import DEFAULT_PASS_SPP, volpath_capture
 
         stored, spec, render = volpath_capture(
-            material, spp=args.spp, pass_spp=args.pass_spp or DEFAULT_PASS_SPP,
+            material, spp=args.spp,
+            pass_spp=DEFAULT_PASS_SPP if args.pass_spp is None else args.pass_spp,
             sensor=args.sensor.replace("-", " "), channels=args.channels, progress=True,
             **options)
         detail = (f"volpath {render.spp} spp in {render.passes} passes on {render.variant}, "

@@ -40,3 +40,11 @@ def test_a_bad_out_is_refused_before_the_generator_runs(tmp_path, capsys, genera
     assert code == 2
     error = capsys.readouterr().err
     assert message in error and "--out" in error
+
+
+def test_pass_spp_0_is_refused_not_replaced_by_the_default(tmp_path, capsys):
+    # "--pass-spp 0" ran with the default 1024 samples per pass
+    code = main(["capture", "skin1", "--generator", "volpath", "--size", "16", "--spp", "16",
+                 "--pass-spp", "0", "--out", str(tmp_path / "c.json")])
+    assert code == 2
+    assert "pass_spp = 0: must be an integer >= 1" in capsys.readouterr().err
