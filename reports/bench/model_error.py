@@ -46,6 +46,7 @@ import numpy as np
 from ...atomic import atomic_write_text
 from ...errors import InputError, check_count
 from ...materials import Dipole, measured_medium, measured_medium_names
+from . import check_output_folder
 
 __all__ = [
     "DEFAULT_ETA",
@@ -479,7 +480,7 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
     if not names:
         raise InputError("no medium given", field="--media", value="")
     chosen = [index_matched(name, eta) for name in names]  # every name checked up front
-    out = Path(out)
+    out = check_output_folder(out, "--out")
     json_path = out / JSON_NAME if json_path is None else Path(json_path)
     images = out / "images" if pngs else None
     scene = bench_scene(size)

@@ -274,3 +274,19 @@ def test_model_error_table_against_mitsuba(tmp_path):
         assert entry["status"] == "ok", entry["reason"]
         assert 0 < entry["hdr_flip"] <= 1
         assert math.isfinite(entry["relative_mse"]) and entry["relative_mse_raw"] >= 0
+
+
+def test_an_out_that_is_a_file_is_refused_before_any_medium_is_measured(tmp_path, capsys,
+                                                                         monkeypatch):
+    def never(*args, **kwargs):
+        raise AssertionError("measured before --out was checked")
+
+    monkeypatch.setattr(model_error, "measure_medium", never)
+    a_file = tmp_path / "a_file"
+    a_file.write_text("keep me")
+    for out, message in ((a_file, "exists and is not a folder"),
+                         (a_file / "sub", "is not a folder")):
+        assert main(["bench", "model_error", "--out", str(out), "--media", "marble",
+                     "--methods", "prt", "--size", "11", "--no-progress"]) == 2
+        assert message in capsys.readouterr().err
+    assert a_file.read_text() == "keep me"
