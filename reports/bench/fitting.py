@@ -30,6 +30,7 @@ import numpy as np
 
 from ...atomic import atomic_write_text
 from ...errors import check_count
+from . import check_output_folder
 
 #: Targets of the task, seconds.
 TARGET_DIPOLE_SECONDS = 60.0
@@ -87,11 +88,9 @@ def _chain_line(chain) -> str:
 
 def _bias_table(args) -> int:
     """Run the model-bias study, writing JSON and Markdown after every medium."""
-    from pathlib import Path
-
     from ...fitting.validation import bias_table_text, model_bias_table
 
-    out = Path(args.out)
+    out = check_output_folder(args.out, "--out")
     json_path, text_path = out / f"bias_{args.generator}.json", out / f"bias_{args.generator}.md"
     rows = []
     began = time.perf_counter()

@@ -54,3 +54,15 @@ def test_bench_fitting_checks_its_options_first(monkeypatch, capsys, arguments, 
     monkeypatch.setattr(translucent.fitting.synthetic, "dipole_capture", _never)
     assert main(["bench", "fitting", *arguments]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_bench_fitting_bias_table_refuses_an_out_that_is_a_file(tmp_path, capsys, monkeypatch):
+    import translucent.fitting.validation
+
+    monkeypatch.setattr(translucent.fitting.validation, "model_bias_table", _never)
+    a_file = tmp_path / "a_file"
+    a_file.write_text("keep me")
+    assert main(["bench", "fitting", "--bias-table", "--out", str(a_file), "--materials",
+                 "skin1"]) == 2
+    assert "--out = " in capsys.readouterr().err
+    assert a_file.read_text() == "keep me"
