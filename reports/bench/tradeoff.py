@@ -561,6 +561,9 @@ def run(args) -> int:
     methods = None
     if args.methods is not None:
         methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    if args.plot is not None and Path(args.plot).is_dir():
+        raise InputError("is a folder; give a file name for the PNG", field="--plot",
+                         value=args.plot)
     figures = sweep(args.scene or list(DEFAULT_SCENES), methods=methods,
                     scheduler=args.scheduler, serial=args.serial, size=args.size,
                     max_spp=args.max_spp, reference_spp=args.reference_spp,

@@ -140,3 +140,15 @@ def test_the_command_writes_json_and_plot(tmp_path, monkeypatch):
     assert data["time_baseline"].startswith("the 1-spp path-traced render")
     assert "tradeoff_tiny" in data["scenes"]
     assert out.with_suffix(".png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_plot_path_that_is_a_folder_is_refused_before_the_sweep(tmp_path, capsys,
+                                                                   monkeypatch):
+    def never(*args, **kwargs):
+        raise AssertionError("swept before --plot was checked")
+
+    monkeypatch.setattr(tradeoff, "sweep", never)
+    assert main(["bench", "tradeoff", "--plot", str(tmp_path), "--json",
+                 str(tmp_path / "t.json")]) == 2
+    assert "--plot = " in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
