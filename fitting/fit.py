@@ -305,7 +305,10 @@ def write_outputs(result: FitResult, out_dir) -> dict[str, Path]:
              "samples": out_dir / f"{kind}_samples.npz"}
     atomic_write_text(paths["summary"], json.dumps(result.summary(), indent=2) + "\n")
     source = "" if result.capture.path is None else result.capture.path.name
-    diagnostics = "; ".join(chain.message for chain in result.chains)
+    messages = [chain.message for chain in result.chains]
+    # the notes say what the values are when they are not plain medians (heaviest mode,
+    # a channel left to its prior)
+    diagnostics = "; ".join(messages + [n for n in result.notes if n not in messages])
     material = result.material
     if result.kind == "subedit":  # the texture file the scene files' "subedit" type loads
         paths["texture"] = out_dir / f"{kind}_profile.npz"

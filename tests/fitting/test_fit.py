@@ -225,3 +225,14 @@ def test_subedit_material_file_names_its_texture_relative_to_itself(tmp_path):
     table = tomllib.loads(path.read_text())
     assert table["file"] == "subedit_profile.npz"
     material_from_dict(table, file=path)
+
+
+def test_the_material_file_carries_the_fit_notes(tmp_path):
+    # docs/capture-format.md: with several modes the material file takes the heaviest
+    # mode's medians "and says so"; it said only "Values are posterior medians"
+    result = fit_dipole(capture(size=24), seed=1, walkers=QUICK_WALKERS, max_steps=200)
+    note = ("the material file holds the medians of the heaviest mode (60% of the samples), "
+            "not of the whole posterior")
+    result.notes.append(note)
+    text = write_outputs(result, tmp_path)["material"].read_text()
+    assert any(line.startswith("#") and note in line for line in text.splitlines())
