@@ -173,8 +173,8 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
         When the value is beyond the bound (or NaN); the message gives the value, the
         bound and the folder holding the error maps.
     InputError
-        Bad images (different sizes, NaN pixels, an unreadable file) or an unknown
-        metric.
+        Bad images (different sizes, NaN pixels, an unreadable file), an unknown metric or
+        a bound that is not a finite number.
     TypeError
         A missing bound, or a bound on the wrong side for the metric.
     """
@@ -189,6 +189,11 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
         kind = "an error" if definition.lower_is_better else "a similarity"
         raise TypeError(f"assert_image_close(metric={definition.name!r}) needs {bound_name}= "
                         f"and only that bound ({definition.name} is {kind})")
+    if isinstance(bound, bool) or not isinstance(bound, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(bound):
+        from ..errors import InputError
+
+        raise InputError("must be a finite number", field=bound_name, value=bound)
     test_image, reference_image = _as_image(test, "test"), _as_image(reference, "reference")
     comparison = evaluate(reference_image, test_image)
     value = getattr(comparison.metrics, definition.field)

@@ -175,3 +175,10 @@ def test_a_stored_reference_is_read_and_regenerated_on_request(pytester):
 def test_the_options_are_registered(pytestconfig):
     assert pytestconfig.getoption("translucent_regenerate") is False
     assert pytestconfig.getoption("translucent_artifacts") is None
+
+
+@pytest.mark.parametrize("bound", [float("nan"), "0.05", True])
+def test_a_bound_that_is_not_a_finite_number_is_bad_input(tmp_path, bound):
+    with pytest.raises(InputError, match=r"max = .*: must be a finite number"):
+        assert_image_close(gradient(), gradient(), "rmse", max=bound, artifacts=tmp_path)
+    assert not any(tmp_path.iterdir())
