@@ -228,7 +228,8 @@ def annulus_average_matrix(pairs, annulus_of_pixel, valid, n_annuli, grid_px):
     n = grid_px.size
     matrix = (np.bincount(annulus * n + ring, area * (1.0 - t), minlength=n_annuli * n)
               + np.bincount(annulus * n + ring + 1, area * t, minlength=n_annuli * n))
-    matrix = matrix[: n_annuli * n].reshape(n_annuli, n)
+    # float even with no valid pixel (bincount of empty weights is an integer array)
+    matrix = matrix[: n_annuli * n].reshape(n_annuli, n).astype(np.float64)
     totals = matrix.sum(axis=1, keepdims=True)
     return np.divide(matrix, totals, out=np.zeros_like(matrix), where=totals > 0)
 

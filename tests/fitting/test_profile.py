@@ -167,3 +167,16 @@ def test_an_r_min_beyond_the_data_is_named_in_the_error():
     with pytest.raises(InputError, match=r"r_min_mm = 100 mm leaves out") as error:
         measure_profile(capture_of(noisy, (12.0, 12.0)), r_min_mm=100.0)
     assert error.value.value["inside_r_min"][0] > 0
+
+
+def test_a_channel_with_no_valid_pixel_is_left_out_not_a_crash():
+    # a red-laser capture in a PNG: green and blue at the integer floor 0 everywhere
+    centre = (16.0, 16.0)
+    image = np.rint(2e4 * gaussian_pixels((32, 32), centre, 3.0)) + 100.0
+    capture = capture_of(image, centre, image="c.png", saturation_level=65535)
+    pixels = capture.pixels.copy()
+    pixels[..., 1:] = 0.0
+    profile = measure_profile(Capture(capture.spec, pixels))
+    assert profile.used[:, 0].sum() >= 4 and not profile.used[:, 1:].any()
+    assert profile.masked["valid"][1:] == [0, 0]
+    assert profile.operator.matrices[1].shape[0] == 0
