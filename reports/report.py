@@ -543,9 +543,12 @@ def load_baseline(path, *, required: bool = False) -> dict:
     Raises
     ------
     InputError
-        A missing file (when required), invalid JSON or an unknown layout.
+        A folder, a missing file (when required), invalid JSON or an unknown layout.
     """
     path = Path(path)
+    if path.is_dir():
+        raise InputError("is a folder; give the baseline's JSON file", file=path,
+                         field="--baseline", value=str(path))
     if not path.is_file():
         if required:
             raise InputError("no such baseline file (run with --update-baseline to create it)",

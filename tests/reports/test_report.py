@@ -443,3 +443,16 @@ def test_two_scenes_of_one_name_are_refused_before_anything_runs(tmp_path, monke
             make_report([str(s) for s in scenes], tmp_path / "r", methods=["prt"],
                         serial=True, progress=False)
     assert not (tmp_path / "r").exists()
+
+
+def test_a_baseline_that_is_a_folder_is_refused_before_anything_runs(tmp_path, monkeypatch):
+    def never():
+        raise AssertionError("the run started with a folder as its baseline")
+
+    monkeypatch.setattr(report_module, "backend_versions", never)
+    for update in (True, False):
+        with pytest.raises(InputError, match="--baseline = .*: is a folder"):
+            make_report([str(_tiny_scene(tmp_path))], tmp_path / "r", methods=["prt"],
+                        baseline=tmp_path, update_baseline=update, serial=True,
+                        progress=False)
+    assert not (tmp_path / "r").exists()
