@@ -1478,17 +1478,23 @@ def add_approx_arguments(parser) -> None:
 def approx(scene, args) -> Image:
     """Precompute (or load) and render ``scene`` for ``translucent approx brdf_pca``."""
     started = time.perf_counter()
-    state = precompute(scene, gather_samples=args.gather_samples, bounces=args.bounces,
-                       n_basis=args.basis, subarea=not args.no_subarea)
+    # the edit is checked against the scene before the (slow) precomputation
+    glossy = [o.name for o in scene.objects if _is_glossy(o.material)]
     name = args.object
     if name is None and args.gamma is not None:
-        if len(state.glossy_objects) != 1:
+        if len(glossy) != 1:
             raise InputError("several objects have an analytic BRDF: name one with --object "
-                             f"({', '.join(state.glossy_objects)})", field="object",
-                             value=None)
-        name = state.glossy_objects[0]
+                             f"({', '.join(glossy)})", field="object", value=None)
+        name = glossy[0]
     if name is not None and args.gamma is None:
         raise InputError("--object needs --gamma", field="gamma", value=None)
+    if name is not None:
+        if name not in glossy:
+            raise InputError(f"not an object with an analytic BRDF; editable: "
+                             f"{', '.join(glossy)}", field="object", value=name)
+        scene.object(name).material.with_gamma(args.gamma)  # range-checked
+    state = precompute(scene, gather_samples=args.gather_samples, bounces=args.bounces,
+                       n_basis=args.basis, subarea=not args.no_subarea)
     image = state.edit(name, args.gamma) if name is not None else state.render()
     for sentence in state.log.skipped:
         print(f"skipped: {sentence}")

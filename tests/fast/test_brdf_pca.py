@@ -407,3 +407,25 @@ def test_indirect_light_brings_it_closer_to_the_exact_reference(gamma):
     flip = {name: evaluate(exact, image).metrics.hdr_flip
             for name, image in (("full", full), ("direct", direct))}
     assert error["full"] < error["direct"] and flip["full"] < flip["direct"], (error, flip)
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--object", "nosuch", "--gamma", "3"], "object = 'nosuch': not an object with an "
+                                              "analytic BRDF; editable: floor, sphere, box"),
+    (["--object", "back_wall", "--gamma", "3"], "object = 'back_wall': not an object"),
+    (["--object", "sphere", "--gamma", "5"], "gamma = 5.0: must be in [0.05, 2]"),
+    (["--gamma", "5"], "several objects have an analytic BRDF"),
+    (["--object", "floor"], "--object needs --gamma"),
+])
+def test_approx_checks_the_edit_before_precomputing(tmp_path, capsys, monkeypatch, arguments,
+                                                    message):
+    from translucent.reports.cli import main
+
+    def never(*args, **kwargs):
+        raise AssertionError("precomputed before the edit was checked")
+
+    monkeypatch.setattr(bp, "precompute", never)
+    assert main(["approx", "brdf_pca", "glossy", *arguments, "--out",
+                 str(tmp_path / "g.exr")]) == 2
+    assert message in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
