@@ -38,7 +38,7 @@ from ...fast import brdf_pca
 from ...materials.brdf_pca import pca_analysis
 from ...materials.brdfs import GAMMA_RANGES, MODELS, AnalyticBRDF
 from ...scenes import PointLight, load_scene
-from . import with_size
+from . import check_output_folder, with_size
 
 #: Targets of the task (frames per second on this machine).
 TARGET_EDIT_FPS = 20.0
@@ -323,6 +323,8 @@ def run(args) -> int:
         if value < 1:
             raise InputError("must be >= 1", field=f"--{name.replace('_', '-')}", value=value)
     folder = Path(args.out)
+    if args.analysis or args.validate:
+        check_output_folder(folder, "--out")
     out = {"performance": _performance(args)}
     if args.analysis:
         out["analysis"] = _analysis(folder)

@@ -66,3 +66,15 @@ def test_bench_fitting_bias_table_refuses_an_out_that_is_a_file(tmp_path, capsys
                  "skin1"]) == 2
     assert "--out = " in capsys.readouterr().err
     assert a_file.read_text() == "keep me"
+
+
+def test_bench_brdf_pca_refuses_an_out_that_is_a_file_before_measuring(tmp_path, capsys,
+                                                                       monkeypatch):
+    from translucent.reports.bench import brdf_pca as bench_brdf_pca
+
+    monkeypatch.setattr(bench_brdf_pca, "_performance", _never)
+    a_file = tmp_path / "a_file"
+    a_file.write_text("keep me")
+    assert main(["bench", "brdf_pca", "--validate", "--out", str(a_file)]) == 2
+    assert "--out = " in capsys.readouterr().err
+    assert a_file.read_text() == "keep me"
