@@ -74,7 +74,8 @@ def run(args) -> int:
               f"{profile['dropped_annuli']}")
         for summary in result.parameters:
             print("  " + summary.describe().strip())
-        for note in result.profile.notes:
+        messages = [chain.message for chain in result.chains]  # printed above
+        for note in [n for n in result.notes if n not in messages] + result.profile.notes:
             print(f"  note: {note}")
         status = max(status, 0 if result.converged else 1)
     print(f"wrote {out_dir}/")

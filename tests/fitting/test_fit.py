@@ -236,3 +236,24 @@ def test_the_material_file_carries_the_fit_notes(tmp_path):
     result.notes.append(note)
     text = write_outputs(result, tmp_path)["material"].read_text()
     assert any(line.startswith("#") and note in line for line in text.splitlines())
+
+
+def test_command_line_prints_the_fit_notes(tmp_path, capsys, monkeypatch):
+    from types import SimpleNamespace
+
+    from translucent.fitting import fit
+
+    chain = SimpleNamespace(message="converged: 400 steps", acceptance_fraction=np.ones(2))
+    profile = SimpleNamespace(notes=["incident point moved"], summary=lambda: {
+        "centre_px": [1.0, 2.0], "used_annuli": [9, 9, 0], "dropped_annuli": {},
+        "masked_pixels": {"saturated": [0] * 3, "below_black": [0] * 3, "nan": [0] * 3}})
+    result = SimpleNamespace(
+        profile=profile, converged=True, seconds=1.0, log_prob_calls=10, chains=[chain],
+        parameters=[], notes=["channel B has no usable annulus: its parameters are the "
+                              "prior's", chain.message])
+    monkeypatch.setattr(fit, "fit_capture", lambda *args, **kwargs: {"dipole": result})
+    assert main(["fit", str(tmp_path / "c.json"), "--no-progress"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "  note: channel B has no usable annulus: its parameters are the prior's" in lines
+    assert "  note: incident point moved" in lines
+    assert not any(line.startswith("  note: converged") for line in lines)  # said once
