@@ -70,6 +70,9 @@ def _scene(args):
     if args.size < 0:
         raise InputError("must be >= 0 (0: the scene's own size)", field="--size",
                          value=args.size)
+    if args.integrators and args.passes < 2:
+        raise InputError("must be >= 2 with --integrators (the spread of the passes gives "
+                         "the variance compared)", field="--passes", value=args.passes)
     return at_width(scene, args.size)
 
 

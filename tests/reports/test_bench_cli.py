@@ -78,3 +78,11 @@ def test_bench_brdf_pca_refuses_an_out_that_is_a_file_before_measuring(tmp_path,
     assert main(["bench", "brdf_pca", "--validate", "--out", str(a_file)]) == 2
     assert "--out = " in capsys.readouterr().err
     assert a_file.read_text() == "keep me"
+
+
+def test_bench_reference_integrators_needs_two_passes_before_rendering(capsys, monkeypatch):
+    import translucent.reference
+
+    monkeypatch.setattr(translucent.reference, "render", _never)
+    assert main(["bench", "reference", "--integrators", "marble", "--passes", "1"]) == 2
+    assert "--passes = 1: must be >= 2" in capsys.readouterr().err
