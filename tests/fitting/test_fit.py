@@ -215,7 +215,16 @@ def test_fit_capture_refuses_an_option_it_does_not_take(tmp_path):
     assert error.value.field == "walker"
 
 
-def test_subedit_material_file_names_its_texture_relative_to_itself(tmp_path):
+@pytest.fixture
+def no_plots(monkeypatch):
+    """Skip the corner and profile plots (slow to draw) in ``write_outputs``."""
+    from translucent.fitting import plots
+
+    monkeypatch.setattr(plots, "corner_plot", lambda *args, **kwargs: None)
+    monkeypatch.setattr(plots, "profile_plot", lambda *args, **kwargs: None)
+
+
+def test_subedit_material_file_names_its_texture_relative_to_itself(tmp_path, no_plots):
     # docs/capture-format.md: file = "subedit_profile.npz"; the folder can then be moved
     data = capture(size=24, camera=Camera(peak_signal=40000, exposure_known=True))
     result = fit_subedit(data, segments=2, walkers=6, max_steps=200, seed=1)
@@ -227,7 +236,7 @@ def test_subedit_material_file_names_its_texture_relative_to_itself(tmp_path):
     material_from_dict(table, file=path)
 
 
-def test_the_material_file_carries_the_fit_notes(tmp_path):
+def test_the_material_file_carries_the_fit_notes(tmp_path, no_plots):
     # docs/capture-format.md: with several modes the material file takes the heaviest
     # mode's medians "and says so"; it said only "Values are posterior medians"
     result = fit_dipole(capture(size=24), seed=1, walkers=QUICK_WALKERS, max_steps=200)
