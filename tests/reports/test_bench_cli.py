@@ -86,3 +86,10 @@ def test_bench_reference_integrators_needs_two_passes_before_rendering(capsys, m
     monkeypatch.setattr(translucent.reference, "render", _never)
     assert main(["bench", "reference", "--integrators", "marble", "--passes", "1"]) == 2
     assert "--passes = 1: must be >= 2" in capsys.readouterr().err
+
+
+def test_bench_prt_refuses_a_sweep_figure_path_that_is_a_folder(tmp_path, capsys,
+                                                                 monkeypatch):
+    monkeypatch.setattr(bench_prt, "memory_bandwidth", _never)
+    assert main(["bench", "prt", "--sweep", "--png", str(tmp_path)]) == 2
+    assert "--png = " in capsys.readouterr().err
