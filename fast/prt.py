@@ -1503,8 +1503,12 @@ def material_from_arguments(args) -> Dipole | None:
     Raises
     ------
     InputError
-        ``--sigma-a`` without ``--sigma-s-prime`` (or the reverse), bad coefficients.
+        ``--sigma-a`` without ``--sigma-s-prime`` (or the reverse), ``--sigma-s-prime``
+        with ``--material``, bad coefficients.
     """
+    if args.material and args.sigma_s_prime is not None:
+        raise InputError("give --material or --sigma-a/--sigma-s-prime, not both",
+                         field="sigma_s_prime", value=args.sigma_s_prime)
     if args.material:
         medium = measured_medium(args.material)
         if args.eta is None:

@@ -390,6 +390,15 @@ def test_approx_command_rejects_half_a_material(tmp_path, capsys):
     assert code == 2
 
 
+def test_approx_command_refuses_a_material_with_a_coefficient_it_would_ignore(tmp_path,
+                                                                              capsys):
+    code = main(["approx", "prt", "sphere", "--samples", "1024", "--material", "Marble",
+                 "--sigma-s-prime", "9", "9", "9", "--out", str(tmp_path / "x.exr")])
+    assert code == 2
+    assert "--sigma-s-prime" in capsys.readouterr().err
+    assert not (tmp_path / "x.exr").exists()
+
+
 @pytest.mark.parametrize("knobs, message", [
     ({"samples": 1000}, "samples.*parts x 4\\^n"),
     ({"parts": 0}, "parts.*integer"),
