@@ -2061,7 +2061,11 @@ def approx(scene, args) -> Image:
     elif args.material:
         material = measured_medium(args.material)
     if material is not None:
-        for name in _materials_of(scene, material):
+        targets = _materials_of(scene, material)
+        if not targets:
+            raise InputError(f"no translucent object in scene {scene.name!r} to give it to",
+                             field="material", value=args.material)
+        for name in targets:
             scene = scene.with_material(name, material)
     state = precompute(scene, solver=args.solver, rays_per_patch=args.rays,
                        max_distance_mm=args.max_distance,

@@ -945,3 +945,16 @@ def test_form_factor_rays_are_checked_where_no_form_factors_are_needed():
 def test_an_infinite_cut_off_is_named_as_the_knob():
     with pytest.raises(InputError, match=r"max_distance_mm = inf: must be a finite"):
         precompute(_block_scene(), max_distance_mm=float("inf"))
+
+
+def test_approx_refuses_a_material_no_object_would_take(tmp_path, capsys, monkeypatch):
+    from translucent.reports.cli import main
+
+    def never(*args, **kwargs):
+        raise AssertionError("precomputed with --material ignored")
+
+    monkeypatch.setattr(radiosity, "precompute", never)
+    assert main(["approx", "radiosity", "furnace_sphere", "--material", "Marble", "--out",
+                 str(tmp_path / "f.exr")]) == 2
+    assert "material = 'Marble': no translucent object" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
