@@ -110,14 +110,20 @@ class FitResult:
     def truths(self) -> np.ndarray | None:
         """Return the true values in the sampling space (synthetic dipole captures), or None."""
         truth = self.capture.spec.synthetic
-        if self.kind != "dipole" or "sigma_a" not in truth:
+        if self.kind != "dipole":
             return None
-        values = list(np.log(truth["sigma_a"])) + list(np.log(truth["sigma_s_prime"]))
-        if self.model.fit_eta:
-            values.append(truth["eta"])
-        if self.model.fit_exposure:
-            values.append(np.log(truth["exposure"]))
-        return np.asarray(values, dtype=np.float64)
+        # the sidecar's "synthetic" object may hold anything: use it only when it is whole
+        try:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                values = [np.log(np.asarray(truth[key], dtype=np.float64).reshape(3))
+                          for key in ("sigma_a", "sigma_s_prime")]
+                if self.model.fit_eta:
+                    values.append([float(truth["eta"])])
+                if self.model.fit_exposure:
+                    values.append([np.log(float(truth["exposure"]))])
+        except (KeyError, TypeError, ValueError):
+            return None
+        return np.concatenate(values)
 
     def summary(self) -> dict:
         """Everything a person or a script needs, JSON-able."""

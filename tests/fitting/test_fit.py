@@ -266,3 +266,25 @@ def test_command_line_prints_the_fit_notes(tmp_path, capsys, monkeypatch):
     assert "  note: channel B has no usable annulus: its parameters are the prior's" in lines
     assert "  note: incident point moved" in lines
     assert not any(line.startswith("  note: converged") for line in lines)  # said once
+
+
+@pytest.fixture(scope="module")
+def short_fit():
+    """A short dipole fit of a small capture (not converged; its outputs are what count)."""
+    return fit_dipole(capture(size=24), seed=1, walkers=QUICK_WALKERS, max_steps=200)
+
+
+@pytest.mark.parametrize("synthetic", [{"sigma_a": [0.1, 0.2, 0.3]},
+                                       {"sigma_a": "unknown", "sigma_s_prime": 1},
+                                       {"sigma_a": [1, 2], "sigma_s_prime": [1, 2],
+                                        "eta": 1.3, "exposure": 1.0}])
+def test_a_synthetic_object_of_any_shape_does_not_stop_the_outputs(tmp_path, no_plots,
+                                                                    short_fit, synthetic):
+    # docs/capture-format.md: "synthetic" is any JSON object, never read by the fitter
+    from dataclasses import replace
+
+    data = short_fit.capture
+    result = replace(short_fit, capture=Capture(replace(data.spec, synthetic=synthetic),
+                                                data.pixels))
+    assert result.truths() is None
+    assert write_outputs(result, tmp_path)["material"].is_file()
