@@ -33,9 +33,10 @@ def add_arguments(parser):
                        help="fail (exit 1) when the metric is above this (error metrics)")
     bound.add_argument("--min", type=float, default=None, dest="minimum",
                        help="fail (exit 1) when the metric is below this (psnr, ssim)")
-    parser.add_argument("--maps", default=None, metavar="DIR",
-                        help="folder for the error maps (default: beside the test image)")
-    parser.add_argument("--no-maps", action="store_true", help="write no error maps")
+    maps = parser.add_mutually_exclusive_group()
+    maps.add_argument("--maps", default=None, metavar="DIR",
+                      help="folder for the error maps (default: beside the test image)")
+    maps.add_argument("--no-maps", action="store_true", help="write no error maps")
 
 
 def _threshold(args):

@@ -207,3 +207,10 @@ def test_unknown_map_name_lists_the_valid_ones(tmp_path):
     with pytest.raises(InputError, match="name = 'blur': unknown map; valid: flip, "
                                          "relative_error, ciede2000, ssim, p_value"):
         write_map(tmp_path, "x", np.zeros((2, 2)), "blur")
+
+
+def test_maps_and_no_maps_together_are_bad_usage(pair, tmp_path, capsys):
+    assert main(["compare", str(pair[0]), str(pair[1]), "--no-maps", "--maps",
+                 str(tmp_path / "maps")]) == 2
+    assert "not allowed with" in capsys.readouterr().err
+    assert not (tmp_path / "maps").exists()
