@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .atomic import atomic_path
+from .errors import InputError
 
 __all__ = ["cache_dir", "content_hash", "private_cache", "Cache"]
 
@@ -115,8 +116,20 @@ class Cache:
             return None
 
     def store_pickle(self, key: str, value) -> Path:
-        """Store ``value`` under ``key`` atomically and return the path."""
+        """Store ``value`` under ``key`` atomically and return the path.
+
+        Raises
+        ------
+        InputError
+            When the cache folder cannot be written; the message names
+            ``TRANSLUCENT_CACHE``, the setting that moves it.
+        """
         path = self.path(key, ".pkl")
-        with atomic_path(path) as tmp, open(tmp, "wb") as handle:
-            pickle.dump(value, handle, protocol=pickle.HIGHEST_PROTOCOL)
+        try:
+            with atomic_path(path) as tmp, open(tmp, "wb") as handle:
+                pickle.dump(value, handle, protocol=pickle.HIGHEST_PROTOCOL)
+        except InputError as error:
+            raise InputError(f"the cache cannot be written ({error.reason}); point "
+                             "TRANSLUCENT_CACHE at a writable folder", field="TRANSLUCENT_CACHE",
+                             value=str(self.root)) from error
         return path

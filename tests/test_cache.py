@@ -41,3 +41,16 @@ def test_private_cache_is_empty_then_removed_and_restores_the_setting(tmp_path, 
         (folder / "entry").write_text("x")
     assert not folder.exists()
     assert cache_dir() == tmp_path
+
+
+def test_a_cache_that_cannot_be_written_names_translucent_cache(tmp_path, monkeypatch):
+    import pytest
+    from translucent.errors import InputError
+
+    a_file = tmp_path / "a_file"
+    a_file.write_text("keep me")
+    monkeypatch.setenv("TRANSLUCENT_CACHE", str(a_file))
+    with pytest.raises(InputError, match=r"TRANSLUCENT_CACHE = '.*a_file': the cache cannot "
+                                         r"be written"):
+        Cache("unit").store_pickle(content_hash("x"), 1)
+    assert a_file.read_text() == "keep me"
