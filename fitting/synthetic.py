@@ -36,6 +36,9 @@ __all__ = ["Camera", "apply_camera", "default_pixel_size", "dipole_capture", "ex
 #: :data:`CENTRAL_PIXELS` of the incident point (where the dipole peaks on the scale of
 #: its source depth, often well below a pixel).
 SUPERSAMPLE = 6
+#: Shot noise above this mean (electrons) is drawn from the Gaussian limit of the Poisson
+#: law (relative skewness 1e-6 there); numpy's Poisson sampler refuses means near 1e19.
+POISSON_MEAN_LIMIT = 1e12
 CENTRAL_SUPERSAMPLE = 64
 CENTRAL_PIXELS = 2.5
 #: Pixels within this many pixels of the incident point (and beyond the central ones) use
@@ -129,7 +132,12 @@ def apply_camera(exitance, camera: Camera, rng, *, exposure: float | None = None
         exposure = camera.peak_signal / peak
     signal = exposure * exitance
     if camera.gain > 0:
-        signal = rng.poisson(np.clip(signal, 0, None) * camera.gain) / camera.gain
+        electrons = np.clip(signal, 0, None) * camera.gain
+        huge = electrons > POISSON_MEAN_LIMIT
+        counts = rng.poisson(np.where(huge, 0.0, electrons)).astype(np.float64)
+        if huge.any():  # numpy refuses such means; the Gaussian limit is exact enough there
+            counts[huge] = rng.normal(electrons[huge], np.sqrt(electrons[huge]))
+        signal = counts / camera.gain
     if camera.read_noise > 0:
         signal = signal + rng.normal(0.0, camera.read_noise, size=signal.shape)
     if camera.encoding == "srgb":

@@ -40,3 +40,17 @@ def test_an_infinite_camera_setting_is_called_not_finite(field):
     with pytest.raises(InputError, match="must be finite and >") as error:
         Camera(**{field: float("inf")})
     assert error.value.field == field
+
+
+@pytest.mark.parametrize("peak_signal, gain", [(1e20, 1.0), (1e6, 1e14)])
+def test_shot_noise_of_a_huge_signal_is_simulated_not_a_crash(peak_signal, gain):
+    import numpy as np
+    from translucent.fitting.synthetic import Camera
+
+    # numpy's Poisson sampler refuses means beyond ~9e18 ("lam value too large")
+    stored, spec = dipole_capture(MEDIUM, size=16, pixel_size_mm=0.2, seed=1,
+                                  camera=Camera(peak_signal=peak_signal, gain=gain,
+                                                saturation_level=1e30))
+    signal = stored - spec.black_level
+    assert np.all(np.isfinite(stored))
+    assert signal.max() == pytest.approx(peak_signal, rel=1e-3)
