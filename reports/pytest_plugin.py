@@ -90,7 +90,8 @@ def artifacts_root(config=None) -> Path:
     Returns
     -------
     Path
-        ``--translucent-artifacts`` when given; otherwise ``translucent-artifacts`` under
+        ``--translucent-artifacts`` when given (a relative folder is taken from where
+        pytest was started); otherwise ``translucent-artifacts`` under
         pytest's base temporary folder, or under the system temporary folder outside
         pytest.
     """
@@ -98,7 +99,8 @@ def artifacts_root(config=None) -> Path:
     if config is not None:
         chosen = config.getoption("translucent_artifacts", default=None)
         if chosen:
-            return Path(chosen).resolve()
+            # relative to where pytest was started, not to a folder a test moved into
+            return (Path(config.invocation_params.dir) / Path(chosen).expanduser()).resolve()
         factory = getattr(config, "_tmp_path_factory", None)
         if factory is not None:
             return factory.getbasetemp() / "translucent-artifacts"
