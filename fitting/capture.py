@@ -343,7 +343,9 @@ def _read_png(path: Path) -> np.ndarray:
     import png
 
     try:
-        width, height, rows, info = png.Reader(filename=str(path)).asDirect()
+        # read(), not asDirect(): asDirect rescales to an sBIT chunk's depth, and the
+        # sidecar's levels are in the file's own codes (16-bit files have no palette)
+        width, height, rows, info = png.Reader(filename=str(path)).read()
         dtype = np.uint16 if info["bitdepth"] > 8 else np.uint8
         array = np.vstack([np.asarray(row, dtype=dtype) for row in rows])
     except (png.Error, OSError, ValueError) as error:

@@ -197,3 +197,25 @@ def test_a_beam_wider_than_the_image_is_refused(write_sidecar, sidecar_data):
     with pytest.raises(InputError, match="at most the image's diagonal"):
         write_capture(path.with_name("w.json"), np.ones((32, 32, 3)), spec)
     assert not path.with_name("w.json").exists()
+
+
+def test_a_16_bit_png_with_an_sbit_chunk_keeps_its_stored_codes(tmp_path, sidecar_data):
+    # an sBIT chunk (12 significant bits, as cameras write) made the reader rescale the
+    # codes to 12 bits, 16 times below the black and saturation levels of the sidecar
+    import io
+    import struct
+    import zlib
+
+    import png
+
+    grey = (np.arange(64, dtype=np.uint16) * 1000).reshape(8, 8)
+    buffer = io.BytesIO()
+    png.Writer(8, 8, greyscale=True, bitdepth=16).write(buffer, grey)
+    data = buffer.getvalue()
+    chunk = b"sBIT" + bytes([12])
+    sbit = struct.pack(">I", 1) + chunk + struct.pack(">I", zlib.crc32(chunk))
+    header_end = 8 + 8 + 13 + 4  # signature, IHDR length and type, IHDR data, CRC
+    (tmp_path / "s.png").write_bytes(data[:header_end] + sbit + data[header_end:])
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps({**sidecar_data, "image": "s.png", "incident_px": [4, 4]}))
+    np.testing.assert_array_equal(read_capture(path).pixels[..., 0], grey)
