@@ -543,7 +543,8 @@ def load_baseline(path, *, required: bool = False) -> dict:
     Raises
     ------
     InputError
-        A folder, a missing file (when required), invalid JSON or an unknown layout.
+        A folder, a missing file (when required), invalid JSON, an unknown layout or a
+        gated metric that is not a finite number.
     """
     path = Path(path)
     if path.is_dir():
@@ -564,7 +565,31 @@ def load_baseline(path, *, required: bool = False) -> dict:
         raise InputError(f"not a baseline of format {BASELINE_FORMAT} (a JSON object with "
                          f"'format' and 'entries')", file=path, field="format",
                          value=data.get("format") if isinstance(data, dict) else type(data))
+    for scene_name, entry in data["entries"].items():
+        _check_baseline_entry(path, f"entries.{scene_name}", entry)
     return data
+
+
+def _check_baseline_entry(path: Path, where: str, entry) -> None:
+    """Refuse an entry the comparison could not read (a hand edit, a foreign file)."""
+    if not isinstance(entry, dict):
+        raise InputError("must be an object with scene_hash, reference and methods",
+                         file=path, field=where, value=entry)
+    for key in ("reference", "methods"):
+        if not isinstance(entry.get(key, {}), dict):
+            raise InputError("must be an object", file=path, field=f"{where}.{key}",
+                             value=entry[key])
+    for method_name, values in entry.get("methods", {}).items():
+        if not isinstance(values, dict):
+            raise InputError("must be an object of metric -> value", file=path,
+                             field=f"{where}.methods.{method_name}", value=values)
+        for metric_name in TOLERANCES:
+            value = values.get(metric_name, 0.0)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value):
+                raise InputError("must be a finite number (a gated metric)", file=path,
+                                 field=f"{where}.methods.{method_name}.{metric_name}",
+                                 value=value)
 
 
 @dataclass(frozen=True)

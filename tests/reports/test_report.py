@@ -456,3 +456,22 @@ def test_a_baseline_that_is_a_folder_is_refused_before_anything_runs(tmp_path, m
                         baseline=tmp_path, update_baseline=update, serial=True,
                         progress=False)
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("value", [None, "0.1", float("nan"), True])
+def test_a_baseline_with_a_gated_metric_that_is_not_a_number_is_refused_on_reading(tmp_path,
+                                                                                   value):
+    path = tmp_path / "baseline.json"
+    path.write_text(json.dumps({"format": 1, "entries": {"sphere": {
+        "scene_hash": "h", "reference": {"spp": 4, "passes": 2},
+        "methods": {"prt": {"hdr_flip": value, "ssim": 0.9}}}}}))
+    with pytest.raises(InputError, match=r"baseline.json: entries.sphere.methods.prt.hdr_flip "
+                                         r"= .*: must be a finite number"):
+        load_baseline(path)
+
+
+def test_a_baseline_entry_that_is_not_an_object_is_refused_on_reading(tmp_path):
+    path = tmp_path / "baseline.json"
+    path.write_text(json.dumps({"format": 1, "entries": {"sphere": {"methods": ["prt"]}}}))
+    with pytest.raises(InputError, match=r"entries.sphere.methods = \['prt'\]: must be"):
+        load_baseline(path)
