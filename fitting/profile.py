@@ -411,7 +411,7 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
     dropped = {"saturated": [0, 0, 0], "noise_floor": [0, 0, 0], "too_few_pixels": [0, 0, 0],
                "inside_r_min": [0, 0, 0]}
     if not (np.isfinite(r_min_mm) and r_min_mm >= 0):
-        raise InputError("must be >= 0", field="r_min_mm", value=r_min_mm)
+        raise InputError("must be finite and >= 0, mm", field="r_min_mm", value=r_min_mm)
     too_close = edges[:-1] * pixel < r_min_mm
     masked = {"nan": [0, 0, 0], "saturated": [0, 0, 0], "below_black": [0, 0, 0],
               "valid": [0, 0, 0]}

@@ -180,3 +180,11 @@ def test_a_channel_with_no_valid_pixel_is_left_out_not_a_crash():
     assert profile.used[:, 0].sum() >= 4 and not profile.used[:, 1:].any()
     assert profile.masked["valid"][1:] == [0, 0]
     assert profile.operator.matrices[1].shape[0] == 0
+
+
+@pytest.mark.parametrize("r_min", [float("inf"), float("nan"), -1.0])
+def test_a_bad_r_min_says_what_is_accepted(r_min):
+    values = gaussian_pixels((24, 24), (12.0, 12.0), 4.0) * 1e4
+    with pytest.raises(InputError, match="must be finite and >= 0") as error:
+        measure_profile(capture_of(values, (12.0, 12.0)), r_min_mm=r_min)
+    assert error.value.field == "r_min_mm"
