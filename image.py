@@ -118,14 +118,15 @@ def write_exr(path, image: Image) -> Path:
     if image.variance is not None:
         for index, name in enumerate("RGB"):
             channels[f"variance.{name}"] = np.ascontiguousarray(image.variance[..., index])
-    header = {
+    header = {f"translucent:{key}": _header_value(value)
+              for key, value in image.metadata.items()}
+    # after the per-key attributes, so that a key named "metadata" cannot replace it
+    header.update({
         "compression": OpenEXR.ZIP_COMPRESSION,
         "type": OpenEXR.scanlineimage,
         METADATA_ATTRIBUTE: json.dumps(image.metadata, sort_keys=True,
-                                         default=_json_default),
-    }
-    for key, value in image.metadata.items():
-        header[f"translucent:{key}"] = _header_value(value)
+                                       default=_json_default),
+    })
     path = Path(path)
     with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
         exr.write(str(tmp))

@@ -83,3 +83,9 @@ def test_an_empty_image_is_refused_on_construction():
     for shape in ((0, 4, 3), (4, 0, 3)):
         with pytest.raises(InputError, match=r"rgb = \(.*\): an image needs at least one pixel"):
             Image(np.zeros(shape))
+
+
+def test_a_metadata_key_named_metadata_does_not_hide_the_others(tmp_path):
+    metadata = {"metadata": {"note": "nested"}, "spp": 4}
+    path = Image(np.ones((2, 2, 3)), metadata=metadata).write(tmp_path / "m.exr")
+    assert read_exr(path).metadata == metadata
