@@ -530,7 +530,8 @@ class SubEditModel(ProfileModel):
         if int(segments) < 2:
             raise InputError("must be >= 2", field="segments", value=segments)
         if not (np.isfinite(smoothness) and smoothness > 0):
-            raise InputError("must be > 0", field="smoothness", value=smoothness)
+            raise InputError("must be > 0 and finite, nats", field="smoothness",
+                             value=smoothness)
         self.segments = int(segments)
         self.smoothness = float(smoothness)
         self.channels = tuple(c for c in channels if self._observations[c][0].size >= 2)
@@ -541,7 +542,7 @@ class SubEditModel(ProfileModel):
             last = max(int(np.flatnonzero(profile.used[:, c])[-1]) for c in self.channels)
             r_s_mm = float(profile.edges_mm[last + 1])
         if not (np.isfinite(r_s_mm) and r_s_mm > 0):
-            raise InputError("must be > 0", field="r_s_mm", value=r_s_mm)
+            raise InputError("must be > 0 and finite, mm", field="r_s_mm", value=r_s_mm)
         self.r_s_mm = float(r_s_mm)
         self.knots = np.linspace(0.0, self.r_s_mm, self.segments + 1)
         self._matrix, self._support = self._interpolation()

@@ -132,3 +132,11 @@ def test_an_unknown_eta_cannot_be_left_unfitted(small_capture):
         DipoleModel(profile, spec, fit_eta=False)
     assert error.value.field == "fit_eta"
     assert DipoleModel(profile, spec).fit_eta
+
+
+@pytest.mark.parametrize("option", ["r_s_mm", "smoothness"])
+def test_an_infinite_subedit_option_is_called_not_finite(small_capture, option):
+    capture, profile, _ = small_capture
+    with pytest.raises(InputError, match="must be > 0 and finite") as error:
+        SubEditModel(profile, capture.spec, **{option: float("inf")})
+    assert error.value.field == option
