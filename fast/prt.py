@@ -1533,4 +1533,6 @@ def approx(scene, args) -> Image:
              "spatial": args.spatial, "progress": not args.no_progress}
     state = precompute(scene, **knobs)
     image = state.render(material=material)
+    for sentence in image.metadata.get("skipped", []):
+        print(f"skipped: {sentence}")
     return image.with_metadata(seconds_precompute=state.log.seconds.get("precompute"))

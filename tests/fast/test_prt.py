@@ -390,6 +390,13 @@ def test_approx_command_rejects_half_a_material(tmp_path, capsys):
     assert code == 2
 
 
+def test_approx_command_says_what_it_skipped(tmp_path, capsys):
+    code = main(["approx", "prt", "sphere", "--samples", "1024", "--no-progress", "--spatial",
+                 "on", "--out", str(tmp_path / "x.exr")])
+    assert code == 0
+    assert "skipped: object 'sphere': no spatial compression" in capsys.readouterr().out
+
+
 def test_approx_command_refuses_a_material_with_a_coefficient_it_would_ignore(tmp_path,
                                                                               capsys):
     code = main(["approx", "prt", "sphere", "--samples", "1024", "--material", "Marble",
