@@ -226,8 +226,9 @@ def _solver_capture(generator, material, *, size, pixel, photons, rotations, spp
 
     fraction = DEFAULT_BEAM_FRACTION if beam_radius_fraction is None else beam_radius_fraction
     beam = fraction * size * pixel
+    pass_spp = DEFAULT_PASS_SPP if pass_spp is None else pass_spp  # 0 is refused, not replaced
     pixels, spec, render = volpath_capture(material, size=size, pixel_size_mm=pixel, spp=spp,
-                                           pass_spp=pass_spp or DEFAULT_PASS_SPP,
+                                           pass_spp=pass_spp,
                                            beam_radius_mm=beam, seed=seed, progress=progress)
     return pixels, spec, {"photons": 0, "generator": "mitsuba volpath", "spp": render.spp,
                           "beam_radius_mm": beam,

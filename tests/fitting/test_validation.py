@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from translucent.errors import InputError
 from translucent.fitting.validation import (
     COVERAGE_TARGET,
     bias_table_text,
@@ -34,3 +35,20 @@ def test_model_bias_table_of_the_measured_media(tmp_path):
     text = bias_table_text(rows)
     assert text.count("\n") == len(rows) + 1
     (tmp_path / "bias.json").write_text(json.dumps([row.to_json() for row in rows]))
+
+
+
+def test_bias_table_hands_pass_spp_0_on_instead_of_the_default(monkeypatch):
+    # pass_spp = 0 became the default 1024 samples per pass; volpath_capture refuses it
+    from translucent.fitting import volpath_capture
+
+    given = []
+
+    def render(material, **options):  # stands in for Mitsuba
+        given.append(options["pass_spp"])
+        raise InputError("stop", field="pass_spp", value=options["pass_spp"])
+
+    monkeypatch.setattr(volpath_capture, "volpath_capture", render)
+    with pytest.raises(InputError, match="stop"):
+        model_bias_table(["skin1"], generator="volpath", size=16, spp=4, pass_spp=0)
+    assert given == [0]
