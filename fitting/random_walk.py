@@ -311,6 +311,9 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
     WalkTally
     """
     began = time.perf_counter()
+    if not np.isfinite(photons):
+        raise InputError("must be a finite number of photons per channel", field="photons",
+                         value=photons)
     photons = int(photons)
     if photons < batches or batches < 2:
         raise InputError(f"need photons >= batches >= 2 (batches = {batches})", field="photons",

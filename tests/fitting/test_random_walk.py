@@ -118,3 +118,11 @@ def test_walk_capture_refuses_an_incident_point_outside_the_image():
         walk_capture(medium, size=24, pixel_size_mm=0.2, incident_px=(30.0, 5.0),
                      photons=100, rotations=1)
     assert error.value.field == "incident_px"
+
+
+@pytest.mark.parametrize("photons", [float("nan"), float("inf")])
+def test_a_non_finite_photon_count_is_an_input_error(photons):
+    medium = Dipole(sigma_a=0.3, sigma_s_prime=1.0, eta=1.3, name="test")
+    with pytest.raises(InputError, match="must be a finite number") as error:
+        photon_random_walk(medium, photons=photons)
+    assert error.value.field == "photons"
