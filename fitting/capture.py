@@ -45,7 +45,8 @@ SIDECAR_FIELDS: dict[str, str] = {
     "side": '"reflection" (camera on the lit side) or "transmission" (the far side)',
     "thickness_mm": "slab thickness in mm, > 0, or null for a semi-infinite slab",
     "eta": "relative index of refraction in [1, 3], or null to fit it",
-    "beam_radius_mm": "1/e^2 radius of the Gaussian beam, mm, >= 0 (0: a pencil beam)",
+    "beam_radius_mm": "1/e^2 radius of the Gaussian beam, mm, >= 0 (0: a pencil beam), at "
+                      "most the image diagonal",
     "black_level": "stored value of zero light, >= 0",
     "saturation_level": "stored value at and above which a pixel is clipped, > black_level",
     "exposure": "stored units per unit of E (mm^2), > 0, or null when unknown",
