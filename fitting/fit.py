@@ -379,9 +379,9 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
         raise InputError(f"unknown option; valid: {', '.join(FIT_OPTIONS)}", field=unknown[0],
                          value=options[unknown[0]])
     capture = read_capture(path)
-    if out_dir is not None:  # before the chains run, not after
-        out_dir = output_folder(out_dir)
     profile = measure_profile(capture, r_min_mm=options.pop("r_min_mm", 0.0) or 0.0)
+    if out_dir is not None:  # before the chains run, not after; not for a refused capture
+        out_dir = output_folder(out_dir)
     results = {}
     for kind in models:
         if kind == "dipole":

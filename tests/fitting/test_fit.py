@@ -288,3 +288,11 @@ def test_a_synthetic_object_of_any_shape_does_not_stop_the_outputs(tmp_path, no_
                                                 data.pixels))
     assert result.truths() is None
     assert write_outputs(result, tmp_path)["material"].is_file()
+
+
+def test_a_capture_refused_by_the_profile_leaves_no_output_folder(tmp_path):
+    data = capture(size=24)
+    sidecar = write_capture(tmp_path / "c.json", data.pixels, data.spec)
+    with pytest.raises(InputError, match="no channel has 4 usable annuli"):
+        fit_capture(sidecar, out_dir=tmp_path / "fit", r_min_mm=1000.0)
+    assert not (tmp_path / "fit").exists()
