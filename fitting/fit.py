@@ -378,6 +378,7 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
     if unknown:
         raise InputError(f"unknown option; valid: {', '.join(FIT_OPTIONS)}", field=unknown[0],
                          value=options[unknown[0]])
+    seed = _checked_seed(seed)
     capture = read_capture(path)
     profile = measure_profile(capture, r_min_mm=options.pop("r_min_mm", 0.0) or 0.0)
     if out_dir is not None:  # before the chains run, not after; not for a refused capture

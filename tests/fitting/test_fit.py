@@ -205,6 +205,7 @@ def test_a_negative_seed_is_an_input_error(tmp_path, capsys, model):
     code = main(["fit", str(sidecar), "--model", model, "--seed", "-1", "--walkers", "16",
                  "--max-steps", "200", "--no-progress", "--out", str(tmp_path / "fit")])
     assert code == 2 and "seed = -1: must be an integer >= 0" in capsys.readouterr().err
+    assert not (tmp_path / "fit").exists()
 
 
 def test_fit_capture_refuses_an_option_it_does_not_take(tmp_path):
