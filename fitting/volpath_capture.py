@@ -575,21 +575,22 @@ def _check_inputs(material, *, shape, pixel_size_mm, incident_px, side, thicknes
     if int(height) < 1 or int(width) < 1:
         raise InputError("must be at least 1 x 1 pixels", field="size", value=shape)
     if not (np.isfinite(pixel_size_mm) and pixel_size_mm > 0):
-        raise InputError("must be > 0", field="pixel_size_mm", value=pixel_size_mm)
+        raise InputError("must be > 0 and finite, mm", field="pixel_size_mm",
+                         value=pixel_size_mm)
     if not (0.0 <= incident_px[0] <= width and 0.0 <= incident_px[1] <= height):
         raise InputError(f"must lie inside the {width} x {height} image", field="incident_px",
                          value=tuple(incident_px))
     if side not in ("reflection", "transmission"):
         raise InputError("must be 'reflection' or 'transmission'", field="side", value=side)
     if thickness_mm is not None and not (np.isfinite(thickness_mm) and thickness_mm > 0):
-        raise InputError("must be > 0 or None (semi-infinite)", field="thickness_mm",
+        raise InputError("must be > 0 or None (semi-infinite), and finite", field="thickness_mm",
                          value=thickness_mm)
     if side == "transmission" and thickness_mm is None:
         raise InputError("transmission needs a finite thickness", field="thickness_mm",
                          value=None)
     if not (np.isfinite(beam_radius_mm) and beam_radius_mm > 0):
-        raise InputError("must be > 0 for volpath captures: camera paths cannot find a "
-                         "pencil beam (use the walk or dipole generator for one)",
+        raise InputError("must be > 0 and finite for volpath captures: camera paths cannot "
+                         "find a pencil beam (use the walk or dipole generator for one)",
                          field="beam_radius_mm", value=beam_radius_mm)
     check_count(spp, "spp", 2, why=" (two passes at least, for the standard error)")
     check_count(pass_spp, "pass_spp")

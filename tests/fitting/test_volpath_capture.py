@@ -283,3 +283,13 @@ def test_bias_table_from_volpath_captures(tmp_path):
     assert code == (0 if row["converged"] else 1)
     assert np.all(np.isfinite(row["fit_sigma_s_prime"]))
     assert (tmp_path / "bias_volpath.md").read_text().count("Ketchup") == 1
+
+
+@pytest.mark.parametrize("field", ["pixel_size_mm", "thickness_mm", "beam_radius_mm"])
+def test_an_infinite_length_is_called_not_finite(field):
+    # "inf: must be > 0" told the user nothing
+    options = dict(shape=(16, 16), pixel_size_mm=0.1, beam_radius_mm=0.2, spp=4)
+    options[field] = float("inf")
+    with pytest.raises(InputError, match="finite") as error:
+        render_exitance(Dipole(**SHORT_PATHS), **options)
+    assert error.value.field == field
