@@ -232,7 +232,8 @@ class SubEditProfiles:
             table = self.flat_log_profile
             return (1.0 - weight) * table[texel, k] + weight * table[texel, k + 1]
         r, texel = np.broadcast_arrays(r, texel)
-        position = np.nan_to_num(r, nan=np.inf) * (self.segments / self.r_s)
+        with np.errstate(over="ignore"):  # a huge r becomes inf: outside the support
+            position = np.nan_to_num(r, nan=np.inf) * (self.segments / self.r_s)
         inside = (position >= 0) & (position < self.segments)
         position = np.where(inside, position, 0.0)
         k = np.minimum(position.astype(np.int64), self.segments - 1)

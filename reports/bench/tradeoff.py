@@ -86,6 +86,12 @@ LADDERS: dict[str, dict[str, list[dict]]] = {
             {"irradiance_resolution": 256}, {},
         ],
         "levels": [{"levels": 5}, {"levels": 4}, {}, {"levels": 2}],
+        # coarse levels splatted from irradiance samples as sparse as their pixels (the
+        # fastest settings at equal error on the heterogeneous scene: docs/splatting.md)
+        "levels and level sampling": [
+            {"levels": 5, "level_sampling": 2.0}, {"levels": 5, "level_sampling": 1.5},
+            {"levels": 5, "level_sampling": 1.0}, {},
+        ],
     },
     "brdf_pca": {
         # gather samples (Sect. 5.1), PCA basis BRDFs (Sect. 4) and Haar coefficients kept
