@@ -12,7 +12,63 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_output_file",
+           "check_output_folder"]
+
+
+def check_output_file(path, field: str, *, file=None, what: str = "a file name") -> Path:
+    """Refuse an output file path that is a folder, before any work is done.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The file to be written (it may not exist yet).
+    field : str
+        The option or key that gave it (``"--out"``), for the message.
+    file : str or PathLike, optional
+        The file the message is about, where it is not ``path`` itself.
+    what : str
+        What to give instead, for the message (``"a file name ending in .exr"``).
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"is a folder; give {what}", file=file, field=field, value=str(path))
+    return path
+
+
+def check_output_folder(path, field: str) -> Path:
+    """Refuse an output-folder option that names a file, or lies under one, before any work.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The folder (it may not exist yet).
+    field : str
+        The option's name, for the message (``"--out"``).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    InputError
+        ``path`` is a file, or the nearest existing folder above it is a file.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError("exists and is not a folder", field=field, value=str(path))
+    ancestor = path.absolute().parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise InputError(f"cannot be created: {ancestor} is not a folder", field=field,
+                         value=str(path))
+    return path
 
 
 @contextlib.contextmanager
@@ -28,10 +84,7 @@ def atomic_path(target, suffix: str | None = None):
         When ``target`` is a folder, or its folder cannot be created or written, before
         anything is written.
     """
-    target = Path(target)
-    if target.is_dir():
-        raise InputError("is a folder; give a file name", file=target, field="path",
-                         value=str(target))
+    target = check_output_file(target, "path", file=target)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError, PermissionError) as error:

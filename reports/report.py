@@ -54,7 +54,7 @@ from typing import Any
 
 import numpy as np
 
-from ..atomic import atomic_write_text
+from ..atomic import atomic_write_text, check_output_folder
 from ..cache import private_cache
 from ..errors import InputError, check_count
 from ..image import Image
@@ -773,18 +773,13 @@ class ReportResult:
 
 def _check_out(out) -> Path:
     """Check ``out`` can take a report before anything is computed."""
-    out = Path(out).expanduser()
-    if out.exists() and not out.is_dir():
-        raise InputError("exists and is not a folder", field="--out", value=str(out))
+    out = check_output_folder(Path(out).expanduser(), "--out")
     if out.is_dir() and any(out.iterdir()) and not (out / "metrics.json").is_file():
         raise InputError("is a folder with other files in it; give a new or empty folder (a "
                          "previous report there is replaced)", field="--out", value=str(out))
     ancestor = out.absolute().parent
     while not ancestor.exists():
         ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        raise InputError(f"cannot be created: {ancestor} is not a folder", field="--out",
-                         value=str(out))
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise InputError(f"cannot be created: {ancestor} is not writable", field="--out",
                          value=str(out))

@@ -79,38 +79,3 @@ def count_list(text: str, field: str, *, allow_empty: bool = False) -> list[int]
         raise InputError("must be comma-separated integers >= 1"
                          + ("" if allow_empty else " (at least one)"), field=field, value=text)
     return counts
-
-
-def check_output_folder(path, field: str):
-    """Refuse an output-folder option that names a file, or lies under one, before any work.
-
-    Parameters
-    ----------
-    path : str or PathLike
-        The folder (it may not exist yet).
-    field : str
-        The option's name, for the message (``"--out"``).
-
-    Returns
-    -------
-    Path
-
-    Raises
-    ------
-    InputError
-        ``path`` is a file, or the nearest existing folder above it is a file.
-    """
-    from pathlib import Path
-
-    from ...errors import InputError
-
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise InputError("exists and is not a folder", field=field, value=str(path))
-    ancestor = path.absolute().parent
-    while not ancestor.exists():
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        raise InputError(f"cannot be created: {ancestor} is not a folder", field=field,
-                         value=str(path))
-    return path

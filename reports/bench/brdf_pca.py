@@ -32,13 +32,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_save_figure, atomic_write_text
+from ...atomic import atomic_save_figure, atomic_write_text, check_output_folder
 from ...errors import InputError
 from ...fast import brdf_pca
 from ...materials.brdf_pca import pca_analysis
 from ...materials.brdfs import GAMMA_RANGES, MODELS, AnalyticBRDF
 from ...scenes import PointLight, load_scene
-from . import check_output_folder, with_size
+from . import with_size
 
 #: Targets of the task (frames per second on this machine).
 TARGET_EDIT_FPS = 20.0

@@ -28,9 +28,8 @@ import time
 
 import numpy as np
 
-from ...atomic import atomic_write_text
+from ...atomic import atomic_write_text, check_output_folder
 from ...errors import check_count
-from . import check_output_folder
 
 #: Targets of the task, seconds.
 TARGET_DIPOLE_SECONDS = 60.0

@@ -43,10 +43,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_write_text
+from ...atomic import atomic_write_text, check_output_folder
 from ...errors import InputError, check_count
 from ...materials import Dipole, measured_medium, measured_medium_names
-from . import check_output_folder
 
 __all__ = [
     "DEFAULT_ETA",

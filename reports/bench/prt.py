@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_save_figure, atomic_write_text
+from ...atomic import atomic_save_figure, atomic_write_text, check_output_file
 from ...cache import private_cache
-from ...errors import InputError, check_count
+from ...errors import check_count
 from ...fast import prt
 from ...materials import Dipole, measured_medium
 from ...scenes import Camera, PointLight, Scene, SceneObject, geometry_image, icosphere
@@ -344,9 +344,8 @@ def run(args) -> int:
     for name in ("frames", "edits", "error_vertices"):
         check_count(getattr(args, name), f"--{name.replace('_', '-')}")
     check_count(args.spatial_rows, "--spatial-rows", minimum=0, why=" (0: skip)")
-    if args.png is not None and Path(args.png).is_dir():
-        raise InputError("is a folder; give a file name for the figure", field="--png",
-                         value=args.png)
+    if args.png is not None:
+        check_output_file(args.png, "--png", what="a file name for the figure")
     bandwidth = memory_bandwidth()
     print(f"memory bandwidth: copy {bandwidth['copy_gb_per_s']:.1f} GB/s, read "
           f"{bandwidth['read_gb_per_s']:.1f} GB/s (CPU time: "

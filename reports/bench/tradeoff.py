@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_save_figure, atomic_write_text
+from ...atomic import atomic_save_figure, atomic_write_text, check_output_file
 from ...errors import InputError, check_count
 from . import at_width
 
@@ -567,9 +567,8 @@ def run(args) -> int:
     methods = None
     if args.methods is not None:
         methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    if args.plot is not None and Path(args.plot).is_dir():
-        raise InputError("is a folder; give a file name for the PNG", field="--plot",
-                         value=args.plot)
+    if args.plot is not None:
+        check_output_file(args.plot, "--plot", what="a file name for the PNG")
     figures = sweep(args.scene or list(DEFAULT_SCENES), methods=methods,
                     scheduler=args.scheduler, serial=args.serial, size=args.size,
                     max_spp=args.max_spp, reference_spp=args.reference_spp,

@@ -37,6 +37,7 @@ def add_arguments(parser):
 
 def run(args) -> int:
     """Load the scene, check the output path, render with the method, write the EXR atomically."""
+    from ...atomic import check_output_file
     from ...errors import InputError
     from ...scenes import load_scene
 
@@ -45,9 +46,7 @@ def run(args) -> int:
                          value=args.out)
     scene = load_scene(args.scene)
     out = args.out or f"{scene.name}_{args.method}.exr"
-    if Path(out).is_dir():
-        raise InputError("is a folder; give a file name ending in .exr", field="--out",
-                         value=str(out))
+    check_output_file(out, "--out", what="a file name ending in .exr")
     image = args.approx_module.approx(scene, args)
     image.write(out)
     seconds = image.metadata.get("seconds")

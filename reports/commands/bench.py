@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
-from pathlib import Path
 
 from .. import bench as bench_package
 
@@ -37,9 +36,8 @@ def add_arguments(parser):
 
 def run(args) -> int:
     """Check the shared options, then run the chosen benchmark."""
-    from ...errors import InputError
+    from ...atomic import check_output_file
 
-    if args.json is not None and Path(args.json).is_dir():
-        raise InputError("is a folder; give a file name for the figures", field="--json",
-                         value=args.json)
+    if args.json is not None:
+        check_output_file(args.json, "--json", what="a file name for the figures")
     return args.bench_run(args)

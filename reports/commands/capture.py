@@ -77,11 +77,10 @@ def add_arguments(parser):
 
 def _check_out(sidecar: Path, image: Path) -> None:
     """Refuse an output the capture could not be written to, before the generator runs."""
+    from ...atomic import check_output_file
     from ...errors import InputError
 
-    if sidecar.is_dir():
-        raise InputError("is a folder; give the sidecar's file name (.json)", field="--out",
-                         value=str(sidecar))
+    check_output_file(sidecar, "--out", what="the sidecar's file name (.json)")
     if image.resolve() == sidecar.resolve():
         raise InputError(f"the sidecar would overwrite the image {image.name}: give the "
                          "sidecar its own name (.json)", field="--out", value=str(sidecar))

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ...atomic import check_output_file
 from ...errors import InputError
 
 
@@ -50,10 +51,8 @@ def run(args) -> int:
         raise InputError("the output must be an OpenEXR file ending in .exr", field="--out",
                          value=args.out)
     scene = load_scene(args.scene)
-    out = Path(args.out or f"{scene.name}_reference.exr")
-    if out.is_dir():
-        raise InputError("is a folder; give a file name ending in .exr", field="--out",
-                         value=str(out))
+    out = check_output_file(args.out or f"{scene.name}_reference.exr", "--out",
+                            what="a file name ending in .exr")
     try:  # before rendering: a folder that cannot be made would lose the whole render
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as error:

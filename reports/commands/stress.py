@@ -7,9 +7,8 @@ its bound.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
-from ...atomic import atomic_write_text
+from ...atomic import atomic_write_text, check_output_file
 
 
 def add_arguments(parser):
@@ -26,9 +25,7 @@ def run(args) -> int:
     from ...errors import InputError
     from ..stress import all_kernels
 
-    if Path(args.json).is_dir():
-        raise InputError("is a folder; give a file name for the results", field="--json",
-                         value=args.json)
+    check_output_file(args.json, "--json", what="a file name for the results")
     kernels = all_kernels()
     if args.only:
         kernels = {n: k for n, k in kernels.items() if any(o in n for o in args.only)}
