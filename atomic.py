@@ -13,7 +13,34 @@ from pathlib import Path
 from .errors import InputError
 
 __all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_output_file",
-           "check_output_folder"]
+           "check_output_folder", "make_output_folder"]
+
+
+def make_output_folder(folder, *, field: str, value, file=None, what: str | None = None
+                       ) -> Path:
+    """Create ``folder`` (and its parents) for an output, or raise :class:`InputError`.
+
+    Parameters
+    ----------
+    folder : str or PathLike
+        The folder to create (existing is fine).
+    field, value, file
+        What the message names: the option or key, its value, the file it is about.
+    what : str, optional
+        How the message calls the folder (default ``"the folder <folder>"``).
+
+    Returns
+    -------
+    Path
+    """
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:  # a file in the way, no permission, a read-only mount, ...
+        what = what or f"the folder {folder}"
+        raise InputError(f"cannot create {what} ({error.strerror or error})", file=file,
+                         field=field, value=value) from error
+    return folder
 
 
 def check_output_file(path, field: str, *, file=None, what: str = "a file name") -> Path:
@@ -85,11 +112,7 @@ def atomic_path(target, suffix: str | None = None):
         anything is written.
     """
     target = check_output_file(target, "path", file=target)
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-    except (FileExistsError, NotADirectoryError, PermissionError) as error:
-        raise InputError(f"cannot create the folder {target.parent} ({error.strerror})",
-                         file=target, field="path", value=str(target)) from error
+    make_output_folder(target.parent, field="path", value=str(target), file=target)
     suffix = target.suffix if suffix is None else suffix
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{suffix}",

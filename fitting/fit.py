@@ -18,7 +18,7 @@ from typing import Any
 import emcee
 import numpy as np
 
-from ..atomic import atomic_path, atomic_write_text
+from ..atomic import atomic_path, atomic_write_text, make_output_folder
 from ..errors import InputError, check_count
 from ..materials.subedit import save_subedit
 from .capture import Capture, read_capture
@@ -280,12 +280,8 @@ def output_folder(out_dir) -> Path:
     InputError
         When it is a file, cannot be created or is not writable.
     """
-    out_dir = Path(out_dir)
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise InputError(f"cannot create the output folder ({error.strerror})",
-                         field="out_dir", value=str(out_dir)) from error
+    out_dir = make_output_folder(out_dir, field="out_dir", value=str(out_dir),
+                                 what="the output folder")
     if not os.access(out_dir, os.W_OK | os.X_OK):
         raise InputError("the output folder is not writable", field="out_dir",
                          value=str(out_dir))

@@ -77,18 +77,14 @@ def add_arguments(parser):
 
 def _check_out(sidecar: Path, image: Path) -> None:
     """Refuse an output the capture could not be written to, before the generator runs."""
-    from ...atomic import check_output_file
+    from ...atomic import check_output_file, make_output_folder
     from ...errors import InputError
 
     check_output_file(sidecar, "--out", what="the sidecar's file name (.json)")
     if image.resolve() == sidecar.resolve():
         raise InputError(f"the sidecar would overwrite the image {image.name}: give the "
                          "sidecar its own name (.json)", field="--out", value=str(sidecar))
-    try:
-        sidecar.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise InputError(f"cannot create the folder {sidecar.parent} ({error.strerror})",
-                         field="--out", value=str(sidecar)) from error
+    make_output_folder(sidecar.parent, field="--out", value=str(sidecar))
 
 
 def run(args) -> int:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ...atomic import check_output_file
+from ...atomic import check_output_file, make_output_folder
 from ...errors import InputError
 
 
@@ -53,11 +53,8 @@ def run(args) -> int:
     scene = load_scene(args.scene)
     out = check_output_file(args.out or f"{scene.name}_reference.exr", "--out",
                             what="a file name ending in .exr")
-    try:  # before rendering: a folder that cannot be made would lose the whole render
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise InputError(f"cannot create the output folder ({error.strerror or error})",
-                         field="--out", value=str(out)) from error
+    # before rendering: a folder that cannot be made would lose the whole render
+    make_output_folder(out.parent, field="--out", value=str(out), what="the output folder")
     image = render(scene, spp=args.spp, passes=args.passes, seed=args.seed,
                    integrator=args.integrator, per_channel=args.per_channel,
                    cache=not args.no_cache)
