@@ -148,7 +148,7 @@ def _numbers(text: str, flag: str) -> list[float]:
 
 def _time_frames(state, frames: int):
     wall, cpu = [], []
-    for _ in range(max(1, frames)):
+    for _ in range(frames):
         clock = time.process_time()
         image = state.render()
         cpu.append(time.process_time() - clock)
@@ -158,7 +158,7 @@ def _time_frames(state, frames: int):
 
 def run(args) -> int:
     """Time each setting, measure its error, print the tables, write the JSON."""
-    from ...errors import InputError
+    from ...errors import InputError, check_count
 
     names = [name.strip() for name in args.settings.split(",") if name.strip()]
     unknown = [name for name in names if name not in SETTINGS]
@@ -175,9 +175,9 @@ def run(args) -> int:
     if any(name not in BUILTIN_SUBEDIT for name in materials):
         raise InputError(f"unknown material; valid: {', '.join(BUILTIN_SUBEDIT)}",
                          field="--materials", value=args.materials)
-    if args.validation_stride < 1:
-        raise InputError("must be >= 1", field="--validation-stride",
-                         value=args.validation_stride)
+    for name in ("frames", "validation_stride", "validation_width", "validation_irradiance",
+                 "width", "height", "irradiance_resolution"):
+        check_count(getattr(args, name), f"--{name.replace('_', '-')}")
     base = load_scene(args.scene)
     full = with_size(base, args.width, args.height)
     small = with_size(base, args.validation_width,

@@ -35,6 +35,9 @@ def test_tiny_bench_writes_every_row_with_its_error(tmp_path, capsys):
     ("--level-samplings", "a", "--level-samplings = 'a': must be comma-separated numbers"),
     ("--settings", "fast", "unknown setting"),
     ("--materials", "jade", "--materials = 'jade': unknown material"),
+    ("--frames", "0", "--frames = 0: must be an integer >= 1"),
+    ("--validation-stride", "0", "--validation-stride = 0: must be an integer >= 1"),
+    ("--validation-width", "-4", "--validation-width = -4: must be an integer >= 1"),
 ])
 def test_bench_refuses_bad_options(flag, value, message, capsys):
     assert main(TINY + [flag, value]) == 2
