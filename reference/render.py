@@ -24,8 +24,8 @@ from ..scenes import Scene
 from .delta_lights import DEFAULT_SIZE
 from .mitsuba_scene import convert_scene
 
-__all__ = ["render", "reference_settings", "reference_key", "load_scenes", "render_sample",
-           "REFERENCE_FORMAT"]
+__all__ = ["render", "render_to_target", "reference_settings", "reference_key", "load_scenes",
+           "render_sample", "REFERENCE_FORMAT", "PROGRESSIVE_SEED_OFFSET"]
 
 #: Bumped whenever the scene conversion or the estimator changes what a reference holds,
 #: so that older cache entries miss.
@@ -34,6 +34,12 @@ REFERENCE_FORMAT = 1
 #: Show a progress bar only for renders that last longer than this (seconds).
 PROGRESS_DELAY_SECONDS = 1.0
 
+#: Progressive pass ``k`` of seed set ``s`` uses the Mitsuba seed
+#: ``PROGRESSIVE_SEED_OFFSET + s * PROGRESSIVE_SEED_STRIDE + k``: above every seed a
+#: fixed-pass render (``seed * passes + k``) uses, so a progressive reference and a quick
+#: fixed-pass render of the same scene are independent estimates.
+PROGRESSIVE_SEED_OFFSET = 2**31
+PROGRESSIVE_SEED_STRIDE = 2**16
 
 
 def reference_settings(*, spp: int, passes: int, seed: int, integrator: str | None,
@@ -216,47 +222,308 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
         scene, spp=spp, per_channel=per_channel, integrator=integrator, max_depth=max_depth,
         rr_depth=rr_depth, substitute_delta_lights=substitute_delta_lights,
         delta_light_size=delta_light_size)
-    per_channel = channels != (None,)
 
     from tqdm.auto import tqdm
 
-    height, width = scene.camera.height, scene.camera.width
-    mean = np.zeros((height, width, 3))
-    sum_squares = np.zeros((height, width, 3))  # Welford's M2: stable for many passes
+    passes_done = PassAccumulator((scene.camera.height, scene.camera.width, 3))
     bar = tqdm(total=passes * len(channels), delay=PROGRESS_DELAY_SECONDS,
                disable=not progress, desc=f"reference {scene.name}", unit="render",
                leave=False, file=sys.stderr)
     try:
         for k in range(passes):
-            sample = render_sample(channels, mitsuba_scenes, spp, seed * passes + k,
-                                   bar.update)
-            delta = sample - mean
-            mean += delta / (k + 1)
-            sum_squares += delta * (sample - mean)
+            passes_done.add(render_sample(channels, mitsuba_scenes, spp, seed * passes + k,
+                                          bar.update))
     finally:
         bar.close()
-    seconds = time.perf_counter() - start
+    image = Image(passes_done.mean, passes_done.variance(),
+                  _metadata(scene, key, settings, conversions, channels, spp=spp,
+                            passes=passes, seed=seed,
+                            seconds=time.perf_counter() - start))
+    if store is not None:
+        image.write(store.path(key, ".exr"))
+    return image
 
-    variance = sum_squares / (passes - 1) / passes if passes > 1 else None
+
+class PassAccumulator:
+    """Mean and spread of independent sample images, one pass at a time (Welford).
+
+    Parameters
+    ----------
+    shape : tuple of int
+        ``(H, W, 3)``.
+    """
+
+    def __init__(self, shape):
+        self.mean = np.zeros(shape)
+        self.sum_squares = np.zeros(shape)  # Welford's M2: stable for many passes
+        self.count = 0
+
+    def add(self, sample: np.ndarray) -> None:
+        """Add one pass's image."""
+        self.count += 1
+        delta = sample - self.mean
+        self.mean += delta / self.count
+        self.sum_squares += delta * (sample - self.mean)
+
+    def variance(self) -> np.ndarray | None:
+        """Variance of the mean (sample variance over passes / passes); None below 2 passes."""
+        if self.count < 2:
+            return None
+        return self.sum_squares / (self.count - 1) / self.count
+
+    def state(self) -> dict:
+        """Arrays and counts to resume from (:meth:`from_state`)."""
+        return {"mean": self.mean, "sum_squares": self.sum_squares,
+                "count": np.array(self.count)}
+
+    @classmethod
+    def from_state(cls, state) -> PassAccumulator:
+        """Rebuild an accumulator saved by :meth:`state`."""
+        accumulator = cls(np.shape(state["mean"]))
+        accumulator.mean = np.array(state["mean"], dtype=np.float64)
+        accumulator.sum_squares = np.array(state["sum_squares"], dtype=np.float64)
+        accumulator.count = int(state["count"])
+        return accumulator
+
+
+def _metadata(scene, key, settings, conversions, channels, **items) -> dict:
+    from ..cache import content_hash
+
     first = conversions[0]
-    metadata = {
+    return {
         "producer": "reference",
         "scene": scene.name,
         "scene_hash": key,
-        "spp": spp,
-        "passes": passes,
-        "seed": seed,
-        "seconds": seconds,
+        # the scene alone, without the renderer's settings and versions: what a committed
+        # reference is checked against when its scene changes
+        "scene_content_hash": content_hash(scene),
+        **items,
         "variant": settings["variant"],
         "mitsuba": settings["mitsuba"],
         "drjit": settings["drjit"],
         "integrator": first.integrator,
         "max_depth": first.max_depth,
         "rr_depth": first.rr_depth,
-        "per_channel": bool(per_channel),
+        "per_channel": channels != (None,),
         "substitutions": list(first.substitutions),
     }
-    image = Image(mean, variance, metadata)
+
+
+def check_noise_target(target_rse, target_p99_rse=None, budget_seconds=None,
+                       *, fields=("--target-rse", "--target-p99", "--budget")):
+    """Validate a noise target and budget; return them as floats (None stays None).
+
+    Raises
+    ------
+    InputError
+        A target outside (0, 1) or a budget that is not a positive number of seconds.
+    """
+    from ..errors import check_finite
+
+    checked = []
+    for value, field in zip((target_rse, target_p99_rse), fields[:2], strict=True):
+        if value is None:
+            checked.append(None)
+            continue
+        value = float(check_finite(value, field))
+        if not 0 < value < 1:
+            raise InputError("a relative standard error must lie in (0, 1), e.g. 0.01 for "
+                             "1 %", field=field, value=value)
+        checked.append(value)
+    if budget_seconds is not None:
+        budget_seconds = float(check_finite(budget_seconds, fields[2]))
+        if not budget_seconds > 0:
+            raise InputError("must be > 0 seconds", field=fields[2], value=budget_seconds)
+    return checked[0], checked[1], budget_seconds
+
+
+def render_to_target(scene: Scene, *, target_rse: float = 0.01,
+                     target_p99_rse: float | None = None,
+                     budget_seconds: float | None = None, spp: int = 64,
+                     min_passes: int = 8, max_passes: int = 4096, seed: int = 0,
+                     mask=None, mask_name: str = "scored", progress: bool = True,
+                     cache: bool = True, integrator: str | None = None,
+                     max_depth: int | None = None, rr_depth: int | None = None,
+                     per_channel: bool | None = None,
+                     substitute_delta_lights: bool | None = None,
+                     delta_light_size: float = DEFAULT_SIZE, on_pass=None) -> Image:
+    """Render a reference of ``scene`` pass after pass until it is as quiet as asked.
+
+    Independent passes of ``spp`` samples per pixel are added until the relative standard
+    error (:func:`translucent.noise.noise_summary`: over the lit pixels, and ``mask``) has a
+    median of at most ``target_rse`` and, if given, a 99th percentile of at most
+    ``target_p99_rse``; or until the next pass would overrun ``budget_seconds``; or
+    ``max_passes``. At least ``min_passes`` are rendered, so that the variance the
+    stopping rule reads is itself estimated from enough passes.
+
+    The state after every pass is kept in the cache, so an interrupted render resumes
+    where it stopped when it is called again with the same scene and settings.
+
+    Parameters
+    ----------
+    scene : Scene
+    target_rse : float
+        Median relative standard error to reach, in (0, 1).
+    target_p99_rse : float, optional
+        99th-percentile relative standard error to reach, in (0, 1).
+    budget_seconds : float, optional
+        Rendering time (seconds, resumed passes included) not to exceed; None: no limit.
+    spp : int
+        Samples per pixel of each pass.
+    min_passes, max_passes : int
+        Bounds on the number of passes (``2 <= min_passes <= max_passes``).
+    seed : int
+        Picks the seed set (``0 <= seed < 2**15``); see :data:`PROGRESSIVE_SEED_OFFSET`.
+    mask : array_like of bool, shape (H, W), optional
+        The pixels the target is about (with the lit pixels), e.g. an object's pixels.
+    mask_name : str
+        How the metadata call ``mask``.
+    progress, cache, integrator, max_depth, rr_depth, per_channel
+        As :func:`render`.
+    substitute_delta_lights, delta_light_size
+        As :func:`render`.
+    on_pass : callable, optional
+        Called after each pass as ``on_pass(passes, seconds, summary)``.
+
+    Returns
+    -------
+    Image
+        The mean of the passes, the variance of the mean, and :func:`render`'s metadata
+        plus ``noise`` (the reached :class:`~translucent.noise.NoiseSummary` as a dict),
+        ``target_rse``, ``target_p99_rse``, ``budget_seconds`` and ``stopped`` (``"target
+        reached"``, ``"budget spent"`` or ``"max passes"``).
+
+    Raises
+    ------
+    InputError
+        Bad counts, a target outside (0, 1), a budget <= 0.
+    """
+    from ..noise import noise_summary
+
+    spp = check_count(spp, "spp", 1)
+    min_passes = check_count(min_passes, "min_passes", 2)
+    max_passes = check_count(max_passes, "max_passes", min_passes,
+                             why=" (at least min_passes)")
+    seed = check_count(seed, "seed", 0)
+    if seed >= PROGRESSIVE_SEED_OFFSET // PROGRESSIVE_SEED_STRIDE:
+        raise InputError(f"must be < {PROGRESSIVE_SEED_OFFSET // PROGRESSIVE_SEED_STRIDE}",
+                         field="seed", value=seed)
+    target_rse, target_p99_rse, budget_seconds = check_noise_target(
+        target_rse, target_p99_rse, budget_seconds,
+        fields=("target_rse", "target_p99_rse", "budget_seconds"))
+    if max_passes > PROGRESSIVE_SEED_STRIDE:
+        raise InputError(f"must be <= {PROGRESSIVE_SEED_STRIDE}", field="max_passes",
+                         value=max_passes)
+    if not isinstance(scene, Scene):
+        raise InputError("expected a translucent.scenes.Scene", field="scene",
+                         value=type(scene).__name__)
+    shape = (scene.camera.height, scene.camera.width)
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != shape:
+            raise InputError(f"must be a boolean image of the camera's size {shape}",
+                             field="mask", value=mask.shape)
+    settings = reference_settings(spp=spp, passes=0, seed=seed, integrator=integrator,
+                                  max_depth=max_depth, rr_depth=rr_depth,
+                                  per_channel=per_channel,
+                                  substitute_delta_lights=substitute_delta_lights,
+                                  delta_light_size=delta_light_size)
+    settings["progressive"] = {"target_rse": target_rse, "target_p99_rse": target_p99_rse,
+                               "budget_seconds": budget_seconds, "min_passes": min_passes,
+                               "max_passes": max_passes,
+                               "mask": None if mask is None else mask}
+    key = reference_key(scene, settings)
+    # the partial state is keyed without the stopping rule: a render resumed with a
+    # tighter target or a larger budget goes on from the passes already made
+    partial_key = reference_key(scene, {**settings, "progressive": None})
+    store = Cache("reference") if cache else None
+    if store is not None:
+        path = store.path(key, ".exr")
+        if path.is_file():
+            try:
+                return read_exr(path)
+            except InputError:
+                pass
+
+    accumulator = PassAccumulator((*shape, 3))
+    seconds_before = 0.0
+    partial = store.path(partial_key, ".partial.npz") if store is not None else None
+    if partial is not None and partial.is_file():
+        try:
+            with np.load(partial) as saved:
+                if saved["mean"].shape == (*shape, 3):
+                    accumulator = PassAccumulator.from_state(saved)
+                    seconds_before = float(saved["seconds"])
+        except Exception:  # an unreadable partial state is started again
+            accumulator, seconds_before = PassAccumulator((*shape, 3)), 0.0
+
+    start = time.perf_counter()
+    channels, conversions, mitsuba_scenes = load_scenes(
+        scene, spp=spp, per_channel=per_channel, integrator=integrator, max_depth=max_depth,
+        rr_depth=rr_depth, substitute_delta_lights=substitute_delta_lights,
+        delta_light_size=delta_light_size)
+
+    def summary():
+        if accumulator.count < 2:
+            return None
+        return noise_summary(accumulator.mean, accumulator.variance(), mask,
+                             mask_name=mask_name)
+
+    def elapsed():
+        return seconds_before + time.perf_counter() - start
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(delay=PROGRESS_DELAY_SECONDS, disable=not progress,
+               desc=f"reference {scene.name}", unit="pass", leave=False, file=sys.stderr)
+    stopped = "max passes"
+    try:
+        while accumulator.count < max_passes:
+            reached = summary()
+            if accumulator.count >= min_passes and reached is not None and \
+                    reached.meets(target_rse, target_p99_rse):
+                stopped = "target reached"
+                break
+            if budget_seconds is not None and accumulator.count >= 2:
+                per_pass = elapsed() / accumulator.count
+                if elapsed() + per_pass > budget_seconds:
+                    stopped = "budget spent"
+                    break
+            accumulator.add(render_sample(
+                channels, mitsuba_scenes, spp,
+                PROGRESSIVE_SEED_OFFSET + seed * PROGRESSIVE_SEED_STRIDE + accumulator.count))
+            if partial is not None:
+                _save_partial(partial, accumulator, elapsed())
+            reached = summary()
+            bar.update()
+            if reached is not None:
+                bar.set_postfix_str(f"median RSE {100 * reached.median:.3g} %")
+            if on_pass is not None:
+                on_pass(accumulator.count, elapsed(), reached)
+        else:
+            reached = summary()
+            if reached is not None and reached.meets(target_rse, target_p99_rse):
+                stopped = "target reached"
+    finally:
+        bar.close()
+    reached = summary()
+    image = Image(accumulator.mean, accumulator.variance(),
+                  _metadata(scene, key, settings, conversions, channels, spp=spp,
+                            passes=accumulator.count, seed=seed, seconds=elapsed(),
+                            seed_offset=PROGRESSIVE_SEED_OFFSET,
+                            noise=reached.as_dict(), target_rse=target_rse,
+                            target_p99_rse=target_p99_rse, budget_seconds=budget_seconds,
+                            stopped=stopped))
     if store is not None:
         image.write(store.path(key, ".exr"))
     return image
+
+
+def _save_partial(path, accumulator: PassAccumulator, seconds: float) -> None:
+    from ..atomic import atomic_path
+
+    try:
+        with atomic_path(path) as tmp, open(tmp, "wb") as handle:
+            np.savez(handle, seconds=np.array(seconds), **accumulator.state())
+    except (InputError, OSError):
+        pass  # resuming is a convenience: a cache that cannot be written costs only that

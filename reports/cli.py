@@ -29,6 +29,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "doctor": ("doctor", "versions, Mitsuba variant, libLLVM, GPU and cache folder"),
     "scenes": ("scenes", "list the built-in scenes"),
     "render": ("render", "render a reference image of a scene with Mitsuba"),
+    "references": ("references", "the built-in scenes' committed references: list, render"),
     "compare": ("compare", "compare a test image with a reference: metrics and error maps"),
     "approx": ("approx", "render a scene with a fast method"),
     "report": ("report", "the main job: fast methods against references, as an HTML report"),

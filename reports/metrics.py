@@ -47,7 +47,14 @@ __all__ = [
     "MetricDefinition",
     "Metrics",
     "Comparison",
+    "NOISE_FLOOR_DRAWS",
+    "NOISE_MARGIN",
+    "RESOLVED",
+    "WITHIN_NOISE",
     "compare",
+    "error_scale",
+    "noise_floor",
+    "noise_verdict",
     "evaluate",
     "metric",
     "relative_mse",
@@ -578,6 +585,131 @@ def compare(reference: Image, test: Image, *, epsilon: float = RELMSE_EPSILON) -
         When an argument is not an :class:`~translucent.image.Image`.
     """
     return evaluate(reference, test, epsilon=epsilon).metrics
+
+
+# --------------------------------------------------------------------------- noise floor
+
+#: Independent draws of the reference's own noise averaged into a noise floor.
+NOISE_FLOOR_DRAWS = 4
+
+#: A metric resolves a method's error when, in its error form (:func:`error_scale`), it
+#: exceeds the noise floor by this factor; below it the verdict is :data:`WITHIN_NOISE`.
+NOISE_MARGIN = 2.0
+
+#: The verdicts of :func:`noise_verdict`.
+RESOLVED = "resolved"
+WITHIN_NOISE = "within reference noise"
+
+#: The metrics that get a noise floor and a verdict.
+NOISE_FLOOR_FIELDS = ("relative_mse", "relative_mse_raw", "rmse", "psnr", "ssim", "hdr_flip",
+                      "ldr_flip", "ciede2000")
+
+
+def noise_floor(reference: Image, *, draws: int = NOISE_FLOOR_DRAWS, seed: int = 0,
+                epsilon: float = RELMSE_EPSILON) -> Metrics | None:
+    r"""Return what every metric gives when the only difference is the reference's noise.
+
+    The reference :math:`r` estimates the converged image :math:`\mu` with per-pixel
+    variance :math:`\sigma^2` (``reference.variance``), so a perfect method, whose image is
+    :math:`\mu`, scores :math:`m(r, \mu)` and not the ideal value. That score is estimated
+    without knowing :math:`\mu`: the reference is compared with itself perturbed by
+    Gaussian noise of its own variance, :math:`m(r, r + n)`, :math:`n \sim
+    \mathcal{N}(0, \sigma^2)` (clipped at zero radiance), averaged over ``draws``
+    independent draws. To the order of the noise, :math:`r + n - r` has the distribution of
+    :math:`\mu - r`; the tests check the estimate against :math:`m(\mu + n, \mu)` on
+    synthetic images of known truth and variance.
+
+    Tested against the exact value: within 15 % for every metric at 1 % and 3 % relative
+    noise, but for SSIM at 3 %, 16 % too low: the perturbed image carries the reference's
+    noise as well as its own, which SSIM's contrast term counts where the noise is large
+    against the local contrast; the SSIM floor is then a lower bound.
+
+    The relative MSE's floor is that of the *raw* relative MSE: the part the discounted
+    value removes. A discounted relative MSE near its floor rests mostly on the discount,
+    that is on the reference's variance estimate, and is not resolved.
+
+    Parameters
+    ----------
+    reference : Image
+        With ``variance``.
+    draws : int
+        Independent noise draws averaged (>= 1).
+    seed : int
+        Seeds the draws (the floor is deterministic).
+    epsilon : float
+        Relative MSE's ``epsilon``.
+
+    Returns
+    -------
+    Metrics or None
+        Each field the mean over the draws (``noise_discounted`` False); None when the
+        reference has no variance.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from translucent.image import Image
+    >>> rng = np.random.default_rng(1)
+    >>> reference = Image(1 + 0.01 * rng.standard_normal((32, 32, 3)),
+    ...                   np.full((32, 32, 3), 1e-4))
+    >>> round(noise_floor(reference).rmse, 3)
+    0.01
+    """
+    if reference.variance is None:
+        return None
+    _check_image(reference, "reference")
+    draws = int(draws)
+    if draws < 1:
+        raise InputError("must be >= 1", field="draws", value=draws)
+    rng = np.random.default_rng(seed)
+    plain = Image(reference.rgb)
+    sigma = np.sqrt(reference.variance.astype(np.float64))
+    values = []
+    for _ in range(draws):
+        perturbed = np.maximum(reference.rgb + sigma * rng.standard_normal(sigma.shape), 0.0)
+        values.append(evaluate(plain, Image(perturbed), epsilon=epsilon).metrics.as_dict())
+    mean = {key: float(np.mean([v[key] for v in values])) for key in values[0]
+            if key != "noise_discounted"}
+    return Metrics(**mean, noise_discounted=False)
+
+
+def error_scale(field: str, value: float) -> float:
+    """Return a metric value in its *error form*: 0 for identical images, growing with error.
+
+    Errors are themselves; SSIM becomes ``1 - SSIM``; PSNR becomes the MSE over the peak
+    squared, ``10**(-PSNR / 10)``.
+    """
+    if field == "ssim":
+        return 1.0 - value
+    if field == "psnr":
+        return 10.0 ** (-value / 10.0)
+    return value
+
+
+def noise_verdict(field: str, value: float, floor: float | None,
+                  margin: float = NOISE_MARGIN) -> str | None:
+    """Say whether a metric's value resolves an error beyond the reference's noise.
+
+    Parameters
+    ----------
+    field : str
+        The :class:`Metrics` field (``"hdr_flip"``, ``"ssim"``, ...).
+    value : float
+        The method's score.
+    floor : float or None
+        The same metric's noise floor (:func:`noise_floor`); None: not known.
+    margin : float
+        How far (a factor, in error form) the value must clear the floor.
+
+    Returns
+    -------
+    str or None
+        :data:`RESOLVED`, :data:`WITHIN_NOISE`, or None when the floor is not known.
+    """
+    if floor is None or not math.isfinite(floor) or not math.isfinite(value):
+        return None
+    error, noise = error_scale(field, value), error_scale(field, floor)
+    return RESOLVED if error > margin * max(noise, 0.0) else WITHIN_NOISE
 
 
 # --------------------------------------------------------------------------- dispatch

@@ -65,10 +65,10 @@ __all__ = [
     "BASELINE_FORMAT",
     "DEFAULT_BASELINE",
     "DEFAULT_PASSES",
-    "DEFAULT_SPP",
+    "DEFAULT_REFERENCE_BUDGET",
+    "DEFAULT_TARGET_RSE",
     "backend_versions",
     "EXCLUDED_SCENES",
-    "SCENE_SPP",
     "TOLERANCES",
     "BaselineCheck",
     "MethodRun",
@@ -82,20 +82,23 @@ __all__ = [
     "updated_baseline",
 ]
 
-#: Samples per pixel of each reference pass, for scenes not in :data:`SCENE_SPP`. Measured
-#: here, a sample per pixel (of one pass) costs the Cornell box about 0.7 CPU seconds (skim
-#: milk is rendered per channel, three renders a pass) and the marble sphere 0.23: 32 x 4
-#: passes keeps the default scenes' references near 2.3 CPU minutes in all, inside a first
-#: run's 10 minutes with the fast methods' precomputations (about 2 CPU minutes).
-DEFAULT_SPP = 32
-
-#: Samples per pixel per pass for scenes whose paths are cheap (measured here: the bowl
-#: 0.02 CPU seconds per spp, the glossy scene 0.003): more samples cost little there and
-#: keep their references' noise well below the methods' errors.
-SCENE_SPP: dict[str, int] = {"bowl": 256, "glossy": 256}
-
-#: Independent reference passes: 4 give the per-pixel variance the relative MSE discounts.
+#: Independent reference passes of a reference rendered with an explicit ``--spp``: 4 give
+#: the per-pixel variance the relative MSE discounts.
 DEFAULT_PASSES = 4
+
+#: A scene without a committed reference (a user's own, or a built-in one given by file)
+#: is rendered progressively (:func:`~translucent.reference.render.render_to_target`) to
+#: this median relative standard error over its lit pixels ...
+DEFAULT_TARGET_RSE = 0.02
+
+#: ... or until this many seconds of rendering are spent, whichever comes first.
+DEFAULT_REFERENCE_BUDGET = 300.0
+
+#: Samples per pixel of each pass of such a progressive reference.
+PROGRESSIVE_SPP = 32
+
+#: A reference whose median relative standard error is above this is warned about.
+NOISE_WARNING_RSE = 0.05
 
 #: The committed baseline of the default scenes.
 DEFAULT_BASELINE = Path(__file__).resolve().parent / "baseline" / "default.json"
@@ -381,18 +384,48 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
                      notes=json_safe(notes), **base)
 
 
-def render_reference(scene, spp: int, passes: int):
+def render_reference(scene, spp: int, passes: int | None, target_rse: float | None = None,
+                     budget_seconds: float | None = None):
     """Render (or load from the cache) the reference of ``scene``; an exception is returned.
 
+    ``passes`` fixed passes of ``spp`` samples; or, with ``passes`` None, passes added until
+    the median relative standard error is ``target_rse`` or ``budget_seconds`` are spent.
     A task for :func:`~translucent.reports.distributed.run_tasks`: a failure comes back as
     the string ``"Type: message"`` so that one scene's failure does not stop the others.
     """
-    from ..reference.render import render
+    from ..reference.render import render, render_to_target
 
     try:
+        if passes is None:
+            return render_to_target(scene, target_rse=target_rse,
+                                    budget_seconds=budget_seconds, spp=spp, progress=False)
         return render(scene, spp=spp, passes=passes, progress=False)
     except Exception as error:  # shown in the page; the other scenes go on
         return f"{type(error).__name__}: {error}"
+
+
+def committed_reference_for(scene):
+    """Return the committed reference of a built-in scene loaded from the catalogue, or None.
+
+    Raises
+    ------
+    InputError
+        When the scene has a committed reference that cannot be used (stale, missing,
+        unreadable, of another size): the message names the file, the scene and the
+        command that renders it again. Never silently re-used, never silently replaced.
+    """
+    from ..reference.committed import PLANS, committed_reference
+    from ..scenes.scene_file import builtin_scene_path
+
+    if scene.name not in PLANS or not scene.source:
+        return None
+    try:
+        builtin = builtin_scene_path(scene.name)
+    except InputError:
+        return None
+    if Path(scene.source).resolve() != Path(builtin).resolve():
+        return None  # a scene file of its own that happens to share the name
+    return committed_reference(scene.name, scene).require()
 
 
 def _task(kind: str, scene, *arguments):
@@ -739,6 +772,14 @@ class SceneReport:
     reference: Image | None = None
     reference_error: str = ""
     reference_cached: bool = False
+    #: "committed", "progressive" or "fixed passes"
+    reference_source: str = ""
+    #: the reference's noise (:class:`~translucent.noise.NoiseSummary`) and its warning
+    reference_noise: Any = None
+    noise_warning: str = ""
+    #: the noise floor of every metric (:func:`~translucent.reports.metrics.noise_floor`)
+    noise_floor: dict | None = None
+    verdicts: dict[str, dict[str, str]] = field(default_factory=dict)
     runs: dict[str, MethodRun] = field(default_factory=dict)
     metrics: dict[str, dict] = field(default_factory=dict)
     metric_errors: dict[str, str] = field(default_factory=dict)
@@ -854,10 +895,13 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     serial : bool
         Run every task in this process, without Dask.
     spp : int, optional
-        Reference samples per pixel per pass for every scene; default :data:`SCENE_SPP`
-        for the scenes it names, :data:`DEFAULT_SPP` for the others.
+        Render every reference afresh in ``passes`` fixed passes of this many samples per
+        pixel. Default: a built-in scene's committed reference
+        (:mod:`translucent.reference.committed`; a stale one is an error), and for any
+        other scene a progressive render to :data:`DEFAULT_TARGET_RSE` within
+        :data:`DEFAULT_REFERENCE_BUDGET` seconds.
     passes : int
-        Reference passes.
+        Reference passes with ``spp``.
     progress : bool
         Progress bars (on stderr).
     stream : file, optional
@@ -871,7 +915,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     ------
     InputError
         Unknown scene or method, bad counts, an ``out`` that cannot hold a report, an
-        unreadable baseline; raised before anything is written.
+        unreadable baseline, a stale or unusable committed reference; raised before
+        anything is written.
     """
     from tqdm.auto import tqdm
 
@@ -898,13 +943,22 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     _check_distinct_names(loaded)
     versions = backend_versions()
     fingerprint = _source_fingerprint()
-    reference_settings = {"spp": spp if spp is not None else
-                          {"default": DEFAULT_SPP, **SCENE_SPP}, "passes": passes, "seed": 0}
+    reference_settings = ({"spp": spp, "passes": passes, "seed": 0} if spp is not None else
+                          {"committed": True, "target_rse": DEFAULT_TARGET_RSE,
+                           "budget_seconds": DEFAULT_REFERENCE_BUDGET,
+                           "spp": PROGRESSIVE_SPP})
 
     taken: set[str] = set()
     reports = [SceneReport(scene.name, _slug(scene.name, taken), scene, content_hash(scene),
-                           spp if spp is not None else SCENE_SPP.get(scene.name, DEFAULT_SPP))
+                           spp if spp is not None else PROGRESSIVE_SPP)
                for scene in loaded]
+    if spp is None:
+        # before any work: a stale committed reference stops the run, naming the fix
+        for report in reports:
+            report.reference = committed_reference_for(report.scene)
+            if report.reference is not None:
+                report.reference_source = "committed"
+                report.reference_cached = True
     run_cache = Cache("report")
     tasks: list[tuple] = []
     owners: list[tuple[SceneReport, str | None, str | None]] = []
@@ -918,12 +972,19 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         return portables[report.slug]
 
     for report in reports:
-        report.reference = _cached_reference(report.scene, report.spp, passes)
-        report.reference_cached = report.reference is not None
+        if report.reference is None and spp is not None:
+            report.reference_source = "fixed passes"
+            report.reference = _cached_reference(report.scene, report.spp, passes)
+            report.reference_cached = report.reference is not None
         if report.reference is None:
             report.reference_error = _unconvertible(report.scene)
         if report.reference is None and not report.reference_error:
-            tasks.append(("reference", portable(report), report.spp, passes))
+            if spp is None:
+                report.reference_source = "progressive"
+                tasks.append(("reference", portable(report), PROGRESSIVE_SPP, None,
+                              DEFAULT_TARGET_RSE, DEFAULT_REFERENCE_BUDGET))
+            else:
+                tasks.append(("reference", portable(report), report.spp, passes))
             owners.append((report, None, None))
         for name in chosen:
             if report.reference_error:
@@ -981,7 +1042,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
             _compare_and_write(report, staging)
         regressions = []
         for report in reports:
-            reference = {"spp": report.spp, "passes": passes}
+            reference = _made_with(report)
             for name in chosen:
                 run = report.runs.get(name)
                 metrics = report.metrics.get(name)
@@ -1015,8 +1076,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
 
     if update_baseline:
         results_for_baseline = [
-            {"name": r.name, "scene_hash": r.scene_hash, "reference": {"spp": r.spp,
-                                                                      "passes": passes},
+            {"name": r.name, "scene_hash": r.scene_hash, "reference": _made_with(r),
              "metrics": r.metrics, "methods_run": chosen}
             for r in reports if r.reference is not None]
         new = updated_baseline(stored_baseline, results_for_baseline, versions)
@@ -1024,6 +1084,12 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     seconds = time.perf_counter() - started
     _print_summary(summary, regressions, out, seconds, update_baseline, baseline_path, stream)
     return ReportResult(exit_code, out, regressions, seconds, summary)
+
+
+def _made_with(report: SceneReport) -> dict:
+    """Return the reference's spp and passes (what a baseline entry records it was made with)."""
+    meta = report.reference.metadata if report.reference is not None else {}
+    return {"spp": meta.get("spp", report.spp), "passes": meta.get("passes")}
 
 
 def _staging_folder(out: Path) -> Path:
@@ -1049,12 +1115,18 @@ def _replace_folder(staging: Path, out: Path) -> None:
 def _compare_and_write(report: SceneReport, folder: Path) -> None:
     """Write the scene's images and error maps; compute the metrics of each method."""
     from .error_maps import write_error_maps, write_linear_png
-    from .metrics import display_white, evaluate
+    from .metrics import NOISE_FLOOR_FIELDS, display_white, evaluate, noise_floor, noise_verdict
 
     scene_folder = folder / report.slug
     scene_folder.mkdir(parents=True, exist_ok=True)
     white = None
     if report.reference is not None:
+        _reference_noise(report)
+        try:
+            floor = noise_floor(report.reference)
+        except InputError:
+            floor = None
+        report.noise_floor = floor.as_dict() if floor is not None else None
         report.reference.write(scene_folder / "reference.exr")
         white = display_white(report.reference.rgb)
         write_linear_png(scene_folder / "reference.png", report.reference, white=white)
@@ -1079,8 +1151,29 @@ def _compare_and_write(report: SceneReport, folder: Path) -> None:
             report.metric_errors[name] = str(error)
             continue
         report.metrics[name] = comparison.metrics.as_dict()
+        floors = report.noise_floor or {}
+        report.verdicts[name] = {
+            key: noise_verdict(key, report.metrics[name][key], floors.get(key))
+            or "no floor (the reference has no variance)" for key in NOISE_FLOOR_FIELDS}
         for map_name, map_files in maps.items():
             files[f"map_{map_name}"] = f"{report.slug}/{map_files.png.name}"
+
+
+def _reference_noise(report: SceneReport) -> None:
+    """Summarise the reference's own noise; warn when it is too noisy to judge by."""
+    from ..noise import noise_summary, resolvable_error
+
+    reference = report.reference
+    if reference.variance is None:
+        report.noise_warning = ("the reference has no variance: its noise is unknown, no "
+                                "noise floor can be given")
+        return
+    summary = noise_summary(reference.rgb, reference.variance)
+    report.reference_noise = summary
+    if summary.pixels and summary.median > NOISE_WARNING_RSE:
+        report.noise_warning = (
+            f"the reference is noisy ({summary.text()}, relative standard error): relative "
+            f"errors below about {100 * resolvable_error(summary):.2g} % cannot be resolved")
 
 
 def _summary(reports: list[SceneReport], chosen: list[str]) -> list[dict]:
@@ -1096,6 +1189,10 @@ def _summary(reports: list[SceneReport], chosen: list[str]) -> list[dict]:
                 "reason": (report.metric_errors.get(name) or (run.reason if run else "")),
                 "hdr_flip": metrics.get("hdr_flip"), "relative_mse": metrics.get("relative_mse"),
                 "ciede2000": metrics.get("ciede2000"), "ssim": metrics.get("ssim"),
+                "noise_floor": {key: (report.noise_floor or {}).get(key)
+                                for key in ("hdr_flip", "relative_mse", "ciede2000", "ssim")},
+                "within_noise": [key for key, verdict in report.verdicts.get(name, {}).items()
+                                 if verdict == "within reference noise"],
                 "precompute_seconds": run.precompute_seconds if run else None,
                 "frame_seconds": run.frame_seconds if run else None,
                 "cached": bool(run and run.cached),
@@ -1112,14 +1209,25 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
             meta = report.reference.metadata
             reference = {key: json_safe(meta.get(key)) for key in (
                 "spp", "passes", "seconds", "integrator", "variant", "mitsuba",
-                "substitutions", "scene_hash")}
+                "substitutions", "scene_hash", "scene_content_hash", "stopped")}
             reference["cached"] = report.reference_cached
+            reference["source"] = report.reference_source
+            reference["noise"] = (report.reference_noise.as_dict()
+                                  if report.reference_noise is not None else None)
+            reference["noise_warning"] = report.noise_warning or None
+            reference["noise_floor"] = json_safe(report.noise_floor)
             reference["files"] = report.files.get("reference", {})
         methods = {}
         for name in chosen:
             run = report.runs.get(name)
             entry = run.as_dict() if run else {"status": "not run"}
             entry["metrics"] = json_safe(report.metrics.get(name))
+            metrics = report.metrics.get(name)
+            entry["noise"] = None if metrics is None else {
+                key: {"value": json_safe(metrics[key]),
+                      "noise_floor": json_safe((report.noise_floor or {}).get(key)),
+                      "verdict": report.verdicts[name][key]}
+                for key in report.verdicts.get(name, {})}
             entry["metrics_error"] = report.metric_errors.get(name, "")
             entry["files"] = report.files.get(name, {})
             check = report.checks.get(name)
@@ -1153,18 +1261,25 @@ def _seconds(value) -> str:
 
 def _print_summary(summary, regressions, out, seconds, updated, baseline_path, stream):
     width = max((len(r["scene"]) for r in summary), default=5)
-    print(f"{'scene':<{width}}  {'method':<10} {'HDR-FLIP':>8} {'relMSE':>9} {'dE2000':>7} "
-          f"{'SSIM':>6} {'precomp':>8} {'frame':>8}  verdict", file=stream)
+    print(f"{'scene':<{width}}  {'method':<10} {'HDR-FLIP':>8} {'(noise)':>7} {'relMSE':>9} "
+          f"{'(noise)':>9} {'dE2000':>7} {'SSIM':>6} {'precomp':>8} {'frame':>8}  verdict",
+          file=stream)
     for row in summary:
         if row["status"] != "ok":
             print(f"{row['scene']:<{width}}  {row['method']:<10} {row['status']}: "
                   f"{row['reason'][:90]}", file=stream)
             continue
         cached = " (cached)" if row["cached"] else ""
+        floor = row["noise_floor"]
+        noisy = (f"; within reference noise: {', '.join(row['within_noise'])}"
+                 if row["within_noise"] else "")
         print(f"{row['scene']:<{width}}  {row['method']:<10} {_format(row['hdr_flip'], 3):>8} "
-              f"{_format(row['relative_mse'], 3):>9} {_format(row['ciede2000'], 3):>7} "
+              f"{_format(floor['hdr_flip'], 2):>7} "
+              f"{_format(row['relative_mse'], 3):>9} {_format(floor['relative_mse'], 2):>9} "
+              f"{_format(row['ciede2000'], 3):>7} "
               f"{_format(row['ssim'], 3):>6} {_seconds(row['precompute_seconds']):>8} "
-              f"{_seconds(row['frame_seconds']):>8}  {row['baseline']}{cached}", file=stream)
+              f"{_seconds(row['frame_seconds']):>8}  {row['baseline']}{cached}{noisy}",
+              file=stream)
     for line in regressions:
         print(f"REGRESSION {line}", file=stream)
     if updated:
@@ -1175,11 +1290,12 @@ def _print_summary(summary, regressions, out, seconds, updated, baseline_path, s
 # ====================================================================== the page
 
 
-def _spp_text(spp) -> str:
-    if isinstance(spp, dict):
-        others = ", ".join(f"{n} {v}" for n, v in spp.items() if n != "default")
-        return f"{spp['default']} spp ({others})" if others else f"{spp['default']} spp"
-    return f"{spp} spp"
+def _reference_text(settings: dict) -> str:
+    if settings.get("committed"):
+        return (f"the committed ones of the built-in scenes, other scenes rendered to a median "
+                f"relative standard error of {100 * settings['target_rse']:g} % (at most "
+                f"{settings['budget_seconds']:g} s each)")
+    return f"{settings['spp']} spp x {settings['passes']} passes, rendered for this run"
 
 
 def _stylesheet() -> str:
@@ -1210,9 +1326,8 @@ def _html(reports: list[SceneReport], chosen: list[str], context: dict) -> str:
         f"<style>{_stylesheet()}</style></head><body>",
         "<h1>Fast methods against their references</h1>",
         f"<p class=meta>Generated {_e(context['generated'])}; Mitsuba {_e(versions['mitsuba'])} "
-        f"({_e(versions['variant'])}), Dr.Jit {_e(versions['drjit'])}; references "
-        f"{_spp_text(context['reference']['spp'])} x {context['reference']['passes']} passes; "
-        "tasks "
+        f"({_e(versions['variant'])}), Dr.Jit {_e(versions['drjit'])}; references: "
+        f"{_e(_reference_text(context['reference']))}; tasks "
         f"on {_e(context['scheduler'])}; whole run {context['seconds']:.1f} s.</p>",
     ]
     regressions = context["regressions"]
@@ -1250,8 +1365,14 @@ def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
             check = report.checks.get(name)
             css = _verdict_class(check.status) if check else "note"
             if metrics is not None:
+                noisy = report.verdicts.get(name, {}).get("hdr_flip") == \
+                    "within reference noise"
+                floor = (report.noise_floor or {}).get("hdr_flip")
+                floor_text = f" (noise {floor:.3f})" if floor is not None else ""
                 text = (f'<a href="#{_e(report.slug)}-{_e(name)}">FLIP '
-                        f"{metrics['hdr_flip']:.3f}</a><br><small>{_e(check.status)}</small>")
+                        f"{metrics['hdr_flip']:.3f}</a>{_e(floor_text)}<br><small>"
+                        f"{'within reference noise; ' if noisy else ''}{_e(check.status)}"
+                        "</small>")
             elif run is not None and run.status in ("not applicable", "not built", "not run"):
                 text, css = f"<small>{_e(run.status)}</small>", "muted"
                 if check is not None and check.status == "regression":
@@ -1268,8 +1389,9 @@ def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
         rows.append(f'<tr><th><a href="#{_e(report.slug)}">{_e(report.name)}</a></th>'
                     + "".join(cells) + "</tr>")
     return (f'<table class=summary><tr><th>scene</th>{head}</tr>{"".join(rows)}</table>'
-            "<p class=meta>HDR-FLIP of each method against the reference (0 is identical) and "
-            "its verdict against the baseline.</p>")
+            "<p class=meta>HDR-FLIP of each method against the reference (0 is identical), "
+            "beside its noise floor (what the reference's own noise alone gives), and its "
+            "verdict against the baseline.</p>")
 
 
 def _legend(styles) -> str:
@@ -1293,6 +1415,15 @@ def _scene_section(report: SceneReport, chosen: list[str]) -> str:
                                                  css="reference") + "</div>")
         for sentence in meta.get("substitutions") or []:
             parts.append(f"<p class=note>Reference: {_e(sentence)}</p>")
+        source = {"committed": "committed with the suite (translucent references)",
+                  "progressive": f"rendered to a noise target ({meta.get('stopped', '?')})",
+                  "fixed passes": "rendered in fixed passes for this run"}.get(
+                      report.reference_source, report.reference_source)
+        noise = (f"; relative standard error {report.reference_noise.text()}"
+                 if report.reference_noise is not None else "")
+        parts.append(f"<p class=meta>Reference {_e(source)}{_e(noise)}.</p>")
+        if report.noise_warning:
+            parts.append(f"<p class=fail>Warning: {_e(report.noise_warning)}.</p>")
     else:
         parts.append(f"<p class=fail>The reference could not be rendered: "
                      f"{_e(report.reference_error)}</p>")
@@ -1344,7 +1475,8 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
                      "</p>")
     metrics = report.metrics.get(name)
     if metrics is not None:
-        parts.append(_metrics_table(metrics, check))
+        parts.append(_metrics_table(metrics, check, report.noise_floor,
+                                    report.verdicts.get(name, {})))
     if run.status == "ok":
         cached = (f" Image and times from the run of {_e(run.measured_at)} (cached: nothing "
                   "it depends on has changed since)." if run.cached else "")
@@ -1368,23 +1500,36 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
     return "\n".join(parts)
 
 
-def _metrics_table(metrics: dict, check: BaselineCheck | None) -> str:
+def _metrics_table(metrics: dict, check: BaselineCheck | None, floors: dict | None = None,
+                   verdicts: dict | None = None) -> str:
     gated = check.metrics if check is not None else {}
+    floors, verdicts = floors or {}, verdicts or {}
     rows = []
     for key in REPORTED_METRICS:
         value = metrics.get(key)
         entry = gated.get(key)
+        noise = verdicts.get(key, "")
+        noise_css = " muted" if noise == "within reference noise" else ""
+        noise_cells = (f"<td>{_format(floors.get(key))}</td>"
+                       f'<td class="{noise_css.strip()}">{_e(noise)}</td>')
         if entry is not None:
             css = {"worse": "bad", "better": "good"}.get(entry["verdict"], "")
             rows.append(f'<tr class="{css}"><td>{_e(METRIC_LABELS[key])}</td>'
-                        f"<td>{_format(value)}</td><td>{_format(entry['baseline'])}</td>"
+                        f"<td>{_format(value)}</td>{noise_cells}"
+                        f"<td>{_format(entry['baseline'])}</td>"
                         f"<td>{_format(entry['limit'])}</td><td>{_e(entry['verdict'])}</td></tr>")
         else:
             tolerance = "gated" if key in TOLERANCES else ""
             rows.append(f"<tr><td>{_e(METRIC_LABELS[key])}</td><td>{_format(value)}</td>"
-                        f"<td>–</td><td>–</td><td>{tolerance}</td></tr>")
-    return ("<table class=metrics><tr><th>metric</th><th>value</th><th>baseline</th>"
-            "<th>worst accepted</th><th>verdict</th></tr>" + "".join(rows) + "</table>")
+                        f"{noise_cells}<td>–</td><td>–</td><td>{tolerance}</td></tr>")
+    return ("<table class=metrics><tr><th>metric</th><th>value</th><th>noise floor</th>"
+            "<th>against the noise</th><th>baseline</th><th>worst accepted</th>"
+            "<th>against the baseline</th></tr>" + "".join(rows) + "</table>"
+            "<p class=meta>Noise floor: what the metric gives when the only difference is the "
+            "reference's own noise (the reference against itself perturbed by noise of its "
+            "variance). 'within reference noise': the value does not clear the floor by a "
+            "factor of 2 (errors; 1 - SSIM; the MSE behind PSNR), so the reference cannot "
+            "tell this method from a perfect one by this metric.</p>")
 
 
 def _tolerance_note() -> str:

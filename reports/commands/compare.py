@@ -6,17 +6,43 @@ error maps (EXR and PNG) next to the test image, or into ``--maps DIR``. With a 
 (``--metric flip --max 0.05``, or ``--min`` for psnr and ssim) it exits 0 when the
 metric is within it and 1 when not; 2 on bad input (a missing or corrupt EXR, no R, G, B
 channels, NaN/Inf pixels, images of different sizes), leaving no output behind.
+
+Where the reference carries its variance, each metric is printed beside its noise floor
+(the value the reference's own noise alone gives, :func:`~translucent.reports.metrics.
+noise_floor`) and a verdict: "resolved" when the value clears the floor by
+:data:`~translucent.reports.metrics.NOISE_MARGIN` in error form, else "within reference
+noise". A reference whose median relative standard error exceeds
+:data:`NOISE_WARNING_RSE` is warned about.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 from ...errors import InputError
 
 #: The metric a bare ``--max`` applies to.
 DEFAULT_METRIC = "hdr-flip"
+
+#: Warn about a reference whose median relative standard error over its lit pixels is
+#: above this.
+NOISE_WARNING_RSE = 0.05
+
+
+def noise_warning(image, what: str = "the reference") -> str | None:
+    """Return a warning when ``image`` is too noisy to judge small errors, else None."""
+    from ...noise import noise_summary, resolvable_error
+
+    if image.variance is None:
+        return None
+    summary = noise_summary(image.rgb, image.variance)
+    if not summary.pixels or summary.median <= NOISE_WARNING_RSE:
+        return None
+    return (f"warning: {what} is noisy: {summary.text()} (relative standard error); "
+            f"relative errors below about {100 * resolvable_error(summary):.2g} % cannot be "
+            f"resolved against it; render more passes (translucent render --target-rse)")
 
 
 def add_arguments(parser):
@@ -58,20 +84,25 @@ def _threshold(args):
     return definition, threshold
 
 
-def _table(metrics, definition, threshold) -> list[str]:
-    from ..metrics import METRICS
+def _table(metrics, definition, threshold, floor=None) -> list[str]:
+    from ..metrics import METRICS, noise_verdict
 
     values = metrics.as_dict()
-    rows = []
+    floors = floor.as_dict() if floor is not None else {}
+    rows = [f"{'metric':<10} {'value':>12}  {'noise floor':>12}  {'verdict':<22}  about"]
     for name, entry in METRICS.items():
         if name == "flip":
             continue  # the same number as hdr-flip
         value = values[entry.field]
+        noise = floors.get(entry.field)
+        verdict = noise_verdict(entry.field, value, noise) or "no floor (no variance)"
         mark = ""
         if threshold is not None and entry.field == definition.field:
-            verdict = "ok" if definition.within(value, threshold) else "FAIL"
-            mark = f"  {'<=' if entry.lower_is_better else '>='} {threshold:g}  {verdict}"
-        rows.append(f"{name:<10} {value:>12.6g}  {entry.description}{mark}")
+            passed = "ok" if definition.within(value, threshold) else "FAIL"
+            mark = f"  {'<=' if entry.lower_is_better else '>='} {threshold:g}  {passed}"
+        noise_text = f"{noise:>12.4g}" if noise is not None else f"{'-':>12}"
+        rows.append(f"{name:<10} {value:>12.6g}  {noise_text}  {verdict:<22}  "
+                    f"{entry.description}{mark}")
     return rows
 
 
@@ -79,12 +110,13 @@ def run(args) -> int:
     """Read both images, compute the metrics, write the maps, print the table."""
     from ...image import read_exr
     from ..error_maps import write_error_maps
-    from ..metrics import evaluate
+    from ..metrics import evaluate, noise_floor
 
     definition, threshold = _threshold(args)
     reference = read_exr(args.reference)
     test = read_exr(args.test)
     comparison = evaluate(reference, test)
+    floor = noise_floor(reference)
     metrics = comparison.metrics
     test_path = Path(args.test)
     files = {}
@@ -96,8 +128,15 @@ def run(args) -> int:
              else "reference has no variance: nothing discounted")
     print(f"{args.test} against {args.reference} ({test.shape[1]} x {test.shape[0]}; "
           f"{noise}; display white {metrics.display_white:.4g})")
-    for row in _table(metrics, definition, threshold):
+    for row in _table(metrics, definition, threshold, floor):
         print(row)
+    if floor is not None:
+        print("noise floor: each metric of the reference against itself perturbed by its own "
+              "noise; 'within reference noise': the value does not clear the floor by a "
+              "factor of 2 (in error form)")
+    warning = noise_warning(reference)
+    if warning:
+        print(warning, file=sys.stderr)
     if files:
         print(f"error maps: {', '.join(str(f.png) for f in files.values())} (and .exr)")
     if threshold is None:

@@ -8,6 +8,13 @@ Mitsuba version, integrator, light substitutions) in the header. References are 
 content: the same scene and settings are never rendered twice (``--no-cache`` renders
 anyway). Exit code 2 on bad input (unknown scene, bad counts, bad scene file), with no
 output file left behind.
+
+``--target-rse R [--target-p99 P] [--budget SECONDS]`` renders progressively instead:
+independent passes of ``--spp`` samples are added until the median relative standard error
+over the lit pixels is at most R (and the 99th percentile at most P), or until the budget is
+spent; which of the two ended it, and the figures reached, are printed and stored in the
+header. An interrupted progressive render resumes from its last pass when run again. A
+reference whose median relative standard error stays above 5 % is warned about.
 """
 
 from __future__ import annotations
@@ -36,6 +43,15 @@ def add_arguments(parser):
                         help="render R, G and B separately (media of one channel each); "
                         "default: where a medium is chromatic and of albedo near 1, as the "
                         "reference recommends")
+    parser.add_argument("--target-rse", type=float, default=None, metavar="R",
+                        help="render progressively until the median relative standard error "
+                        "over the lit pixels is at most R, in (0, 1), e.g. 0.01")
+    parser.add_argument("--target-p99", type=float, default=None, metavar="P",
+                        help="with --target-rse: also the 99th percentile at most P")
+    parser.add_argument("--budget", type=float, default=None, metavar="SECONDS",
+                        help="with --target-rse: stop when the next pass would exceed this "
+                        "many seconds of rendering")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--no-cache", action="store_true",
                         help="render even when the reference is cached, and do not cache it")
     parser.add_argument("--out", "-o", default=None,
@@ -44,9 +60,23 @@ def add_arguments(parser):
 
 def run(args) -> int:
     """Load the scene, render the reference (or take it from the cache), write the EXR."""
-    from ...reference import render
-    from ...scenes import load_scene
+    import sys
 
+    from ...reference import render
+    from ...reference.render import check_noise_target, render_to_target
+    from ...scenes import load_scene
+    from .compare import noise_warning
+
+    progressive = args.target_rse is not None
+    if not progressive:
+        for field, value in (("--target-p99", args.target_p99), ("--budget", args.budget)):
+            if value is not None:
+                raise InputError("goes with --target-rse", field=field, value=value)
+    else:
+        check_noise_target(args.target_rse, args.target_p99, args.budget)
+        if args.passes != 4:
+            raise InputError("with --target-rse the passes are counted by the target; "
+                             "leave --passes out", field="--passes", value=args.passes)
     if args.out is not None and Path(args.out).suffix.lower() != ".exr":
         raise InputError("the output must be an OpenEXR file ending in .exr", field="--out",
                          value=args.out)
@@ -55,14 +85,28 @@ def run(args) -> int:
                             what="a file name ending in .exr")
     # before rendering: a folder that cannot be made would lose the whole render
     make_output_folder(out.parent, field="--out", value=str(out), what="the output folder")
-    image = render(scene, spp=args.spp, passes=args.passes, seed=args.seed,
-                   integrator=args.integrator, per_channel=args.per_channel,
-                   cache=not args.no_cache)
+    common = dict(spp=args.spp, seed=args.seed, integrator=args.integrator,
+                  per_channel=args.per_channel, cache=not args.no_cache,
+                  progress=not args.no_progress)
+    if progressive:
+        image = render_to_target(scene, target_rse=args.target_rse,
+                                 target_p99_rse=args.target_p99,
+                                 budget_seconds=args.budget, **common)
+    else:
+        image = render(scene, passes=args.passes, **common)
     image.write(out)
     meta = image.metadata
     print(f"wrote {out} ({image.shape[1]} x {image.shape[0]}, {meta['spp']} spp x "
           f"{meta['passes']} passes, {meta['integrator']}; rendered in "
           f"{meta['seconds']:.3g} s)")
+    if progressive:
+        from ...noise import NoiseSummary
+
+        print(f"  {meta['stopped']}: relative standard error "
+              f"{NoiseSummary(**meta['noise']).text()}")
     for note in meta.get("substitutions", []):
         print(f"  substituted: {note}")
+    warning = noise_warning(image)
+    if warning:
+        print(warning, file=sys.stderr)
     return 0

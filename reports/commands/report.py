@@ -15,7 +15,12 @@ from __future__ import annotations
 
 def add_arguments(parser):
     """Scenes, output folder, methods, baseline, where tasks run, reference samples."""
-    from ..report import DEFAULT_PASSES, DEFAULT_SPP, SCENE_SPP
+    from ..report import (
+        DEFAULT_PASSES,
+        DEFAULT_REFERENCE_BUDGET,
+        DEFAULT_TARGET_RSE,
+        PROGRESSIVE_SPP,
+    )
 
     parser.add_argument("scenes", nargs="*", metavar="SCENE",
                         help="built-in scene names or scene TOML files (default: the built-in "
@@ -37,25 +42,32 @@ def add_arguments(parser):
                             "(default: local processes)")
     where.add_argument("--serial", action="store_true",
                        help="run every task in this process (no Dask)")
-    cheap = ", ".join(f"{name} {spp}" for name, spp in SCENE_SPP.items())
     parser.add_argument("--spp", type=int, default=None,
-                        help=f"reference samples per pixel per pass, every scene (default "
-                             f"{DEFAULT_SPP}; {cheap})")
+                        help="render every reference afresh with this many samples per pixel "
+                             "per pass (with --passes). Default: the built-in scenes' "
+                             "committed references (`translucent references`; a stale one "
+                             "is an error), and other scenes rendered progressively, "
+                             f"{PROGRESSIVE_SPP} spp a pass, to a median relative standard "
+                             f"error of {100 * DEFAULT_TARGET_RSE:g} % or for at most "
+                             f"{DEFAULT_REFERENCE_BUDGET:g} s, whichever comes first")
     parser.add_argument("--passes", type=int, default=DEFAULT_PASSES,
-                        help=f"independent reference passes (default {DEFAULT_PASSES})")
+                        help=f"independent reference passes with --spp (default "
+                             f"{DEFAULT_PASSES})")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def run(args) -> int:
     """Run the report; the exit code says whether a metric regressed."""
-    from ..report import make_report
+    from ...errors import InputError
+    from ..report import DEFAULT_PASSES, make_report
 
+    if args.spp is None and args.passes != DEFAULT_PASSES:
+        raise InputError("goes with --spp (without it the references are committed or "
+                         "rendered to a noise target)", field="--passes", value=args.passes)
     methods = None
     if args.methods is not None:
         methods = [name for name in args.methods.split(",") if name.strip()]
         if not methods:
-            from ...errors import InputError
-
             raise InputError("give at least one method", field="--methods", value=args.methods)
     result = make_report(args.scenes or None, args.out, methods=methods, baseline=args.baseline,
                          update_baseline=args.update_baseline, scheduler=args.scheduler,

@@ -1,0 +1,127 @@
+"""The built-in scenes' committed references: ``translucent references [render NAME ...]``.
+
+Without a sub-command, lists each built-in scene's committed reference: its file, spp x
+passes, the median and 99th-percentile relative standard error over its lit pixels (the
+pixels the report scores), how long it took to render, and whether it is current (rendered
+from the scene as it loads now). ``--json FILE`` (``-`` for standard output) writes the same
+for scripts. Exit code 1 when any committed reference is missing or stale.
+
+``translucent references render NAME ...`` renders the named references again (``all`` for
+every one): passes are added until the noise target of the scene's plan is met or its budget
+is spent (``--budget SECONDS`` overrides it), and the file is replaced only when the render
+is complete.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from ...errors import InputError
+
+
+def add_arguments(parser):
+    """``[render NAME ...] [--budget S] [--json FILE] [--no-progress]``."""
+    parser.add_argument("action", nargs="?", choices=["list", "render"], default="list",
+                        help="list the committed references (default) or render them again")
+    parser.add_argument("names", nargs="*", metavar="NAME",
+                        help="with render: the scenes to render again, or 'all'")
+    parser.add_argument("--budget", type=float, default=None, metavar="SECONDS",
+                        help="with render: rendering time at most per scene (default: the "
+                        "scene's plan)")
+    parser.add_argument("--json", default=None, metavar="FILE",
+                        help="also write the listing as JSON ('-': standard output)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def _row(name: str) -> dict:
+    from ...noise import noise_summary
+    from ...reference.committed import PLANS, committed_reference, rerender_command
+
+    entry = committed_reference(name)
+    row = {"scene": name, "path": str(entry.path), "current": entry.current,
+           "problem": entry.problem or None, "command": rerender_command(name),
+           "target": {"median": PLANS[name].target_rse, "p99": PLANS[name].target_p99_rse}}
+    image = entry.image
+    if image is not None:
+        meta = image.metadata
+        summary = (noise_summary(image.rgb, image.variance).as_dict()
+                   if image.variance is not None else None)
+        row.update({"spp": meta.get("spp"), "passes": meta.get("passes"),
+                    "seconds": meta.get("seconds"), "integrator": meta.get("integrator"),
+                    "variant": meta.get("variant"), "mitsuba": meta.get("mitsuba"),
+                    "stopped": meta.get("stopped"), "noise": summary})
+        row["meets_target"] = bool(summary and summary["pixels"] and
+                                   summary["median"] <= row["target"]["median"] and
+                                   summary["p99"] <= row["target"]["p99"])
+    return row
+
+
+def _print_rows(rows) -> None:
+    for row in rows:
+        state = "current" if row["current"] else f"NOT CURRENT: {row['problem']}"
+        print(f"{row['scene']}: {state}")
+        print(f"  file: {row['path']}")
+        noise = row.get("noise")
+        if noise and noise.get("pixels"):
+            target = row["target"]
+            met = "meets" if row["meets_target"] else "misses"
+            print(f"  {row['spp']} spp x {row['passes']} passes ({row['integrator']}, "
+                  f"{row['variant']}, Mitsuba {row['mitsuba']}), {row['seconds']:.0f} s, "
+                  f"stopped: {row['stopped']}")
+            print(f"  relative standard error over {noise['pixels']} lit pixels: median "
+                  f"{100 * noise['median']:.3g} %, 99th percentile {100 * noise['p99']:.3g} % "
+                  f"({met} the target {100 * target['median']:g} % / {100 * target['p99']:g} %)")
+        if not row["current"]:
+            print(f"  render it again: {row['command']}")
+
+
+def run(args) -> int:
+    """List the committed references, or render the named ones again."""
+    from ...reference.committed import committed_scene_names, render_committed
+
+    names = committed_scene_names()
+    if args.action == "list":
+        if args.names:
+            raise InputError("names go with 'render'; 'translucent references' lists all",
+                             field="NAME", value=args.names)
+        if args.budget is not None:
+            raise InputError("goes with 'render'", field="--budget", value=args.budget)
+        if args.json not in (None, "-"):
+            from ...atomic import check_output_file
+
+            check_output_file(args.json, "--json", what="a file name for the listing")
+        rows = [_row(name) for name in names]
+        _print_rows(rows)
+        if args.json is not None:
+            text = json.dumps({"references": rows}, indent=2)
+            if args.json == "-":
+                sys.stdout.write(text + "\n")
+            else:
+                from ...atomic import atomic_write_text
+
+                atomic_write_text(args.json, text + "\n")
+        return 0 if all(row["current"] for row in rows) else 1
+
+    if args.json is not None:
+        raise InputError("goes with the listing, not with 'render'", field="--json",
+                         value=args.json)
+    wanted = names if args.names == ["all"] else list(args.names)
+    if not wanted:
+        raise InputError(f"name the scenes to render, or 'all' (planned: {', '.join(names)})",
+                         field="NAME", value=[])
+    unknown = [name for name in wanted if name not in names]
+    if unknown:
+        raise InputError(f"no committed reference is planned for this scene (planned: "
+                         f"{', '.join(names)})", field="NAME", value=unknown[0])
+    if args.budget is not None and not args.budget > 0:
+        raise InputError("must be > 0 seconds", field="--budget", value=args.budget)
+    for name in wanted:
+        image = render_committed(name, budget_seconds=args.budget,
+                                 progress=not args.no_progress)
+        meta = image.metadata
+        noise = meta["noise"]
+        print(f"wrote {name}: {meta['spp']} spp x {meta['passes']} passes in "
+              f"{meta['seconds']:.0f} s ({meta['stopped']}); relative standard error median "
+              f"{100 * noise['median']:.3g} %, 99th percentile {100 * noise['p99']:.3g} %")
+    return 0

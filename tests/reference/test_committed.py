@@ -1,0 +1,176 @@
+"""Committed references: current, converged, consistent with a fresh render; staleness refused.
+
+The consistency check renders each scene afresh at a few samples per pixel (other seeds)
+and asks the suite's own two-sample z-test (Welch's t for estimated variances, Sidak
+correction, 99.75 % of pixel channels accepted) whether both estimate the same image: a
+changed scene converter, integrator or Mitsuba cannot drift from the committed truth
+unnoticed.
+"""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from translucent.cache import content_hash
+from translucent.errors import InputError
+from translucent.image import Image, read_exr
+from translucent.noise import noise_summary
+from translucent.reference import committed as committed_module
+from translucent.reference.committed import (
+    PLANS,
+    committed_path,
+    committed_reference,
+    rerender_command,
+)
+from translucent.reference.render import render
+from translucent.reports.cli import main
+from translucent.reports.statistics import z_test_known_variance
+from translucent.scenes import load_scene
+
+NAMES = list(PLANS)
+
+#: Samples per pixel of each of the 8 passes of the fresh render, per scene: a few seconds.
+FRESH_SPP = {"glossy": 16, "bowl": 16, "sphere": 4, "cornell_block": 2}
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_committed_reference_is_current(name):
+    entry = committed_reference(name)
+    assert entry.current, entry.problem
+    meta = entry.image.metadata
+    assert meta["scene_content_hash"] == content_hash(load_scene(name))
+    for key in ("integrator", "spp", "passes", "seconds", "variant", "mitsuba", "stopped",
+                "noise"):
+        assert meta.get(key) is not None, key
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_committed_reference_meets_its_noise_target(name):
+    image = committed_reference(name).require()
+    plan = PLANS[name]
+    summary = noise_summary(image.rgb, image.variance)  # read from the EXR's variance
+    assert summary.pixels > 0
+    assert summary.median <= plan.target_rse, summary.text()
+    assert summary.p99 <= plan.target_p99_rse, summary.text()
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_a_fresh_render_is_consistent_with_the_committed_reference(name):
+    committed = committed_reference(name).require()
+    fresh = render(load_scene(name), spp=FRESH_SPP[name], passes=8, seed=1, cache=False,
+                   progress=False, integrator=PLANS[name].integrator)
+    result = z_test_known_variance(fresh, committed)
+    assert result.passed, f"{name}: {result.summary()}"
+
+
+def _stale(scene):
+    camera = dataclasses.replace(scene.camera, fov=scene.camera.fov + 1.0)
+    return dataclasses.replace(scene, camera=camera)
+
+
+def test_a_stale_reference_is_refused_naming_the_scene_and_the_command():
+    scene = load_scene("glossy")
+    entry = committed_reference("glossy", _stale(scene))
+    assert not entry.current and "stale" in entry.problem
+    with pytest.raises(InputError) as caught:
+        entry.require()
+    message = str(caught.value)
+    assert "glossy" in message and rerender_command("glossy") in message
+    assert str(committed_path("glossy")) in message
+
+
+@pytest.fixture
+def reference_folder(tmp_path, monkeypatch):
+    monkeypatch.setattr(committed_module, "REFERENCE_FOLDER", tmp_path)
+    return tmp_path
+
+
+def _good_image(name):
+    return read_exr(committed_module.Path(committed_module.__file__).parent / "data"
+                    / f"{name}.exr")
+
+
+def test_missing_corrupt_wrong_size_and_nan_references_are_refused(reference_folder):
+    scene = load_scene("glossy")
+    path = reference_folder / "glossy.exr"
+    assert "missing" in committed_reference("glossy", scene).problem
+
+    path.write_bytes(b"not an exr")
+    assert "cannot be read" in committed_reference("glossy", scene).problem
+
+    good = _good_image("glossy")
+    Image(good.rgb[:8, :8], good.variance[:8, :8], good.metadata).write(path)
+    assert "pixels, the scene's camera" in committed_reference("glossy", scene).problem
+
+    rgb = good.rgb.copy()
+    rgb[3, 4, 1] = np.nan
+    Image(rgb, good.variance, good.metadata).write(path)
+    problem = committed_reference("glossy", scene).problem
+    assert "cannot be read" in problem and "NaN" in problem
+
+    Image(good.rgb, None, good.metadata).write(path)
+    assert "no usable variance" in committed_reference("glossy", scene).problem
+
+    good.write(path)
+    assert committed_reference("glossy", scene).current
+
+
+def test_references_command_lists_and_exits_by_currency(capsys, reference_folder):
+    assert main(["references"]) == 1  # the folder is empty: every reference is missing
+    out = capsys.readouterr().out
+    assert "NOT CURRENT" in out and rerender_command("sphere") in out
+    _good_image("glossy").write(reference_folder / "glossy.exr")
+    assert main(["references", "--json", "-"]) == 1
+    text = capsys.readouterr().out
+    listing = json.loads(text[text.index("{"):])
+    rows = {row["scene"]: row for row in listing["references"]}
+    assert rows["glossy"]["current"] and rows["glossy"]["meets_target"]
+    assert rows["glossy"]["noise"]["median"] <= 0.01
+    assert not rows["bowl"]["current"]
+
+
+def test_references_command_with_the_shipped_files(capsys, tmp_path):
+    code = main(["references", "--json", str(tmp_path / "r.json")])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    rows = json.loads((tmp_path / "r.json").read_text())["references"]
+    assert [row["scene"] for row in rows] == NAMES
+    assert "relative standard error over" in out
+
+
+@pytest.mark.parametrize("arguments, field", [
+    (["render", "nope"], "NAME"),
+    (["render"], "NAME"),
+    (["sphere"], None),  # argparse: not an action
+    (["list", "sphere"], "NAME"),
+    (["--budget", "5"], "--budget"),
+    (["render", "glossy", "--budget", "0"], "--budget"),
+    (["render", "glossy", "--budget", "nan"], "--budget"),
+    (["render", "glossy", "--json", "x.json"], "--json"),
+])
+def test_references_command_bad_usage(capsys, arguments, field):
+    assert main(["references", *arguments]) == 2
+    if field:
+        assert field in capsys.readouterr().err
+
+
+def test_report_refuses_a_stale_committed_reference(reference_folder, tmp_path):
+    from translucent.reports.report import make_report
+
+    image = _good_image("glossy")
+    Image(image.rgb, image.variance, {**image.metadata, "scene_content_hash": "0" * 64}
+          ).write(reference_folder / "glossy.exr")
+    with pytest.raises(InputError) as caught:
+        make_report(["glossy"], tmp_path / "report", methods=["brdf_pca"], serial=True,
+                    progress=False)
+    assert "stale" in str(caught.value) and rerender_command("glossy") in str(caught.value)
+    assert not (tmp_path / "report").exists()
+
+
+def test_the_consistency_check_sees_a_five_percent_drift():
+    committed = committed_reference("glossy").require()
+    fresh = render(load_scene("glossy"), spp=FRESH_SPP["glossy"], passes=8, seed=1,
+                   cache=False, progress=False)
+    drifted = Image(1.05 * committed.rgb, 1.05**2 * committed.variance, committed.metadata)
+    assert not z_test_known_variance(fresh, drifted).passed
