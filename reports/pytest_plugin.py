@@ -7,7 +7,9 @@ project's tests need no conftest. It offers:
     Fails when a metric of :mod:`translucent.reports.metrics` is beyond its bound
     (``max`` for errors, ``min`` for psnr and ssim) and writes the error maps
     (:func:`~translucent.reports.error_maps.write_error_maps`) into a folder the
-    message names.
+    message names. Where the reference carries its variance, the message gives the
+    metric's noise floor and verdict, and a bound tighter than the floor warns
+    (:class:`ReferenceNoiseWarning`).
 ``assert_render_consistent(test, reference_mean, reference_variance, spp=...)``
     Mitsuba 3's per-pixel z-test with Šidák correction
     (:func:`~translucent.reports.statistics.z_test`); on failure writes the p-value
@@ -32,13 +34,18 @@ from __future__ import annotations
 import os
 import re
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 __all__ = ["assert_image_close", "assert_render_consistent", "ImageChecks",
-           "artifacts_root"]
+           "ReferenceNoiseWarning", "artifacts_root"]
+
+
+class ReferenceNoiseWarning(UserWarning):
+    """A check's bound is tighter than what the reference's own noise resolves."""
 
 #: The configs of the pytest runs in progress, innermost last (pytester nests runs).
 _CONFIGS: list = []
@@ -169,11 +176,19 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
     float
         The metric's value (so a test can log it).
 
+    Warns
+    -----
+    ReferenceNoiseWarning
+        When the reference carries a variance and the bound is tighter than the metric's
+        noise floor (:func:`~translucent.reports.metrics.noise_floor`): even a perfect
+        image would score about the floor, so the check judges the reference's noise.
+
     Raises
     ------
     AssertionError
-        When the value is beyond the bound (or NaN); the message gives the value, the
-        bound and the folder holding the error maps.
+        When the value is beyond the bound (or NaN); the message gives the value, its noise
+        floor and verdict where the reference has a variance, the bound and the folder
+        holding the error maps.
     InputError
         Bad images (different sizes, NaN pixels, an unreadable file), an unknown metric or
         a bound that is not a finite number.
@@ -181,7 +196,7 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
         A missing bound, or a bound on the wrong side for the metric.
     """
     __tracebackhide__ = True
-    from .metrics import evaluate
+    from .metrics import error_scale, evaluate, noise_floor, noise_verdict
     from .metrics import metric as metric_definition
 
     definition = metric_definition(metric)
@@ -199,6 +214,17 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
     test_image, reference_image = _as_image(test, "test"), _as_image(reference, "reference")
     comparison = evaluate(reference_image, test_image)
     value = getattr(comparison.metrics, definition.field)
+    floor = noise_floor(reference_image)
+    noise_text = ""
+    if floor is not None:
+        floor_value = getattr(floor, definition.field)
+        verdict = noise_verdict(definition.field, value, floor_value)
+        noise_text = f" (noise floor {floor_value:.4g}: {verdict})"
+        if error_scale(definition.field, bound) < error_scale(definition.field, floor_value):
+            warnings.warn(ReferenceNoiseWarning(
+                f"{definition.name} bound {bound:g} is tighter than the reference's noise "
+                f"floor {floor_value:.4g}: a perfect image would miss it; render the "
+                "reference with more passes"), stacklevel=2)
     if definition.within(value, bound):
         return value
     from .error_maps import write_error_maps
@@ -207,7 +233,7 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
     folder = _new_folder(parent, name or definition.name)
     write_error_maps(reference_image, test_image, folder, comparison=comparison)
     relation = "above the maximum" if definition.lower_is_better else "below the minimum"
-    raise AssertionError(f"{definition.name} = {value:.6g}, {relation} {bound:g} "
+    raise AssertionError(f"{definition.name} = {value:.6g}{noise_text}, {relation} {bound:g} "
                          f"({test_image.shape[1]} x {test_image.shape[0]} pixels); "
                          f"error maps in {folder}")
 

@@ -214,3 +214,43 @@ def test_maps_and_no_maps_together_are_bad_usage(pair, tmp_path, capsys):
                  str(tmp_path / "maps")]) == 2
     assert "not allowed with" in capsys.readouterr().err
     assert not (tmp_path / "maps").exists()
+
+
+def test_each_metric_is_printed_beside_its_noise_floor_and_verdict(tmp_path, capsys, rng):
+    truth = gradient()
+    sigma = 0.03 * truth
+    noisy = truth + sigma * rng.standard_normal(truth.shape).astype(np.float32)
+    write_exr(tmp_path / "ref.exr", Image(noisy, sigma**2))
+    write_exr(tmp_path / "perfect.exr", Image(truth))
+    write_exr(tmp_path / "off.exr", Image(1.3 * truth))
+    assert main(["compare", str(tmp_path / "ref.exr"), str(tmp_path / "perfect.exr"),
+                 "--no-maps"]) == 0
+    out = capsys.readouterr().out
+    assert "noise floor" in out
+    rows = {line.split()[0]: line for line in out.splitlines() if line[:1].isalpha()}
+    for name in ("hdr-flip", "ldr-flip", "rmse", "ciede2000", "ssim", "psnr"):
+        assert "within reference noise" in rows[name], rows[name]
+    assert main(["compare", str(tmp_path / "ref.exr"), str(tmp_path / "off.exr"),
+                 "--no-maps"]) == 0
+    rows = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()
+            if line[:1].isalpha()}
+    for name in ("hdr-flip", "relmse", "rmse", "ciede2000", "psnr"):
+        assert " resolved " in rows[name], rows[name]
+
+
+def test_a_noisy_reference_is_warned_about(tmp_path, capsys):
+    truth = gradient()
+    write_exr(tmp_path / "ref.exr", Image(truth, (0.2 * truth) ** 2))
+    write_exr(tmp_path / "test.exr", Image(truth))
+    assert main(["compare", str(tmp_path / "ref.exr"), str(tmp_path / "test.exr"),
+                 "--no-maps"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the reference is noisy: median 20 %" in err
+
+
+def test_a_reference_without_variance_has_no_floor(tmp_path, capsys):
+    write_exr(tmp_path / "ref.exr", Image(gradient()))
+    write_exr(tmp_path / "test.exr", Image(gradient() * 1.1))
+    assert main(["compare", str(tmp_path / "ref.exr"), str(tmp_path / "test.exr"),
+                 "--no-maps"]) == 0
+    assert "no floor (no variance)" in capsys.readouterr().out

@@ -7,6 +7,7 @@ import pytest
 from translucent.errors import InputError
 from translucent.image import Image
 from translucent.reports.pytest_plugin import (
+    ReferenceNoiseWarning,
     artifacts_root,
     assert_image_close,
     assert_render_consistent,
@@ -49,6 +50,30 @@ def test_a_second_failure_gets_its_own_folder(tmp_path):
         with pytest.raises(AssertionError):
             assert_image_close(reference * 2, reference, "rmse", max=0.0, artifacts=tmp_path)
     assert sorted(path.name for path in tmp_path.iterdir()) == ["rmse", "rmse-2"]
+
+
+def test_a_failure_against_a_noisy_reference_gives_the_noise_floor(tmp_path, rng):
+    truth = gradient()
+    sigma = 0.02 * truth
+    reference = Image(truth + sigma * rng.standard_normal(truth.shape), sigma**2)
+    with pytest.raises(AssertionError, match=r"hdr-flip = [\d.]+ \(noise floor [\d.]+: "
+                                             r"resolved\), above the maximum"):
+        assert_image_close(truth * 1.5, reference, max=0.05, artifacts=tmp_path)
+
+
+def test_a_bound_tighter_than_the_noise_floor_warns(tmp_path, rng):
+    truth = gradient()
+    sigma = 0.05 * truth
+    reference = Image(truth + sigma * rng.standard_normal(truth.shape), sigma**2)
+    with pytest.warns(ReferenceNoiseWarning, match="tighter than the reference's noise"):
+        with pytest.raises(AssertionError, match="within reference noise"):
+            assert_image_close(truth, reference, "rmse", max=1e-4, artifacts=tmp_path)
+    # a bound the noise allows: no warning, and a perfect image passes
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ReferenceNoiseWarning)
+        assert assert_image_close(truth, reference, "rmse", max=0.1) < 0.1
 
 
 def test_similarity_metrics_take_a_minimum(tmp_path):

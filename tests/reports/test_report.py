@@ -187,6 +187,42 @@ def test_tiny_report_shows_every_image_it_wrote(tiny):
     assert not list(tiny["folder"].glob(".report.*")), "a temporary folder was left behind"
 
 
+def test_every_metric_comes_with_its_noise_floor_and_verdict(tiny):
+    from translucent.reports.metrics import NOISE_FLOOR_FIELDS, noise_floor, noise_verdict
+
+    scene = _data(tiny["out"])
+    reference = scene["reference"]
+    assert reference["source"] == "fixed passes"
+    assert reference["noise"]["pixels"] > 0 and reference["noise"]["median"] > 0
+    # 16 spp x 2 passes of a skin sphere: too noisy, and the page says so
+    assert "cannot be resolved" in reference["noise_warning"]
+    flat = scene["methods"]["flat"]
+    assert set(flat["noise"]) == set(NOISE_FLOOR_FIELDS)
+    from translucent.image import read_exr
+
+    floor = noise_floor(read_exr(tiny["out"] / "tiny_sphere" / "reference.exr"))
+    for field, entry in flat["noise"].items():
+        assert entry["noise_floor"] == pytest.approx(getattr(floor, field), rel=1e-4)
+        assert entry["verdict"] == noise_verdict(field, entry["value"], entry["noise_floor"])
+    page = (tiny["out"] / "index.html").read_text()
+    assert "noise floor" in page and "Warning: the reference is noisy" in page
+
+
+def test_a_scene_without_committed_reference_is_rendered_to_a_noise_target(tmp_path,
+                                                                             monkeypatch):
+    monkeypatch.setattr(report_module, "DEFAULT_TARGET_RSE", 0.5)
+    monkeypatch.setattr(report_module, "PROGRESSIVE_SPP", 4)
+    scene_path = _tiny_scene(tmp_path)
+    result = make_report([str(scene_path)], tmp_path / "r", methods=["brdf_pca"],
+                         serial=True, progress=False, baseline=None)
+    reference = json.loads((tmp_path / "r" / "metrics.json").read_text())[
+        "scenes"]["tiny_sphere"]["reference"]
+    assert result.exit_code in (0, 1)
+    assert reference["source"] == "progressive"
+    assert reference["stopped"] in ("target reached", "budget spent")
+    assert reference["noise"]["median"] <= 0.5 or reference["stopped"] == "budget spent"
+
+
 def test_failing_and_unbuilt_methods_are_shown_and_the_run_goes_on(tiny):
     methods = _data(tiny["out"])["methods"]
     assert methods["failing"]["status"] == "failed"
