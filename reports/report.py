@@ -780,6 +780,9 @@ class SceneReport:
     #: the noise floor of every metric (:func:`~translucent.reports.metrics.noise_floor`)
     noise_floor: dict | None = None
     verdicts: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: the pixels scored (those that see an object of the scene) and the whole-image scores
+    scored_mask: Any = None
+    image_metrics: dict[str, dict] = field(default_factory=dict)
     runs: dict[str, MethodRun] = field(default_factory=dict)
     metrics: dict[str, dict] = field(default_factory=dict)
     metric_errors: dict[str, str] = field(default_factory=dict)
@@ -1121,9 +1124,10 @@ def _compare_and_write(report: SceneReport, folder: Path) -> None:
     scene_folder.mkdir(parents=True, exist_ok=True)
     white = None
     if report.reference is not None:
+        report.scored_mask = _scored_pixels(report.scene)
         _reference_noise(report)
         try:
-            floor = noise_floor(report.reference)
+            floor = noise_floor(report.reference, mask=report.scored_mask)
         except InputError:
             floor = None
         report.noise_floor = floor.as_dict() if floor is not None else None
@@ -1147,16 +1151,31 @@ def _compare_and_write(report: SceneReport, folder: Path) -> None:
             comparison = evaluate(report.reference, run.image)
             maps = write_error_maps(report.reference, run.image, scene_folder,
                                     prefix=f"{name}_", comparison=comparison)
+            scored = evaluate(report.reference, run.image, mask=report.scored_mask)
         except (InputError, TypeError) as error:
             report.metric_errors[name] = str(error)
             continue
-        report.metrics[name] = comparison.metrics.as_dict()
+        report.metrics[name] = scored.metrics.as_dict()
+        report.image_metrics[name] = comparison.metrics.as_dict()
         floors = report.noise_floor or {}
         report.verdicts[name] = {
             key: noise_verdict(key, report.metrics[name][key], floors.get(key))
             or "no floor (the reference has no variance)" for key in NOISE_FLOOR_FIELDS}
         for map_name, map_files in maps.items():
             files[f"map_{map_name}"] = f"{report.slug}/{map_files.png.name}"
+
+
+def _scored_pixels(scene):
+    """Return the pixels a method is scored on: those whose centre ray sees an object.
+
+    The background (an environment seen directly, or black) is the same in every method's
+    image and the reference's, so it would only dilute the averages; None (the whole image)
+    when no pixel sees an object.
+    """
+    from ..scenes import gbuffer
+
+    hit = gbuffer(scene).hit
+    return hit if hit.any() else None
 
 
 def _reference_noise(report: SceneReport) -> None:
@@ -1168,7 +1187,8 @@ def _reference_noise(report: SceneReport) -> None:
         report.noise_warning = ("the reference has no variance: its noise is unknown, no "
                                 "noise floor can be given")
         return
-    summary = noise_summary(reference.rgb, reference.variance)
+    summary = noise_summary(reference.rgb, reference.variance, report.scored_mask,
+                            mask_name="scored")
     report.reference_noise = summary
     if summary.pixels and summary.median > NOISE_WARNING_RSE:
         report.noise_warning = (
@@ -1222,6 +1242,8 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
             run = report.runs.get(name)
             entry = run.as_dict() if run else {"status": "not run"}
             entry["metrics"] = json_safe(report.metrics.get(name))
+            entry["pixels_scored"] = ("object" if report.scored_mask is not None else "image")
+            entry["image_metrics"] = json_safe(report.image_metrics.get(name))
             metrics = report.metrics.get(name)
             entry["noise"] = None if metrics is None else {
                 key: {"value": json_safe(metrics[key]),
@@ -1422,6 +1444,12 @@ def _scene_section(report: SceneReport, chosen: list[str]) -> str:
         noise = (f"; relative standard error {report.reference_noise.text()}"
                  if report.reference_noise is not None else "")
         parts.append(f"<p class=meta>Reference {_e(source)}{_e(noise)}.</p>")
+        if report.scored_mask is not None:
+            parts.append(f"<p class=meta>Every metric below is computed over the "
+                         f"{int(report.scored_mask.sum())} pixels that see an object of the "
+                         "scene (the background, the same in every image, is left out); "
+                         "whole-image values are in metrics.json (<code>image_metrics</code>)."
+                         "</p>")
         if report.noise_warning:
             parts.append(f"<p class=fail>Warning: {_e(report.noise_warning)}.</p>")
     else:
@@ -1502,6 +1530,8 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
 
 def _metrics_table(metrics: dict, check: BaselineCheck | None, floors: dict | None = None,
                    verdicts: dict | None = None) -> str:
+    from .metrics import NOISE_MARGIN
+
     gated = check.metrics if check is not None else {}
     floors, verdicts = floors or {}, verdicts or {}
     rows = []
@@ -1527,8 +1557,9 @@ def _metrics_table(metrics: dict, check: BaselineCheck | None, floors: dict | No
             "<th>against the baseline</th></tr>" + "".join(rows) + "</table>"
             "<p class=meta>Noise floor: what the metric gives when the only difference is the "
             "reference's own noise (the reference against itself perturbed by noise of its "
-            "variance). 'within reference noise': the value does not clear the floor by a "
-            "factor of 2 (errors; 1 - SSIM; the MSE behind PSNR), so the reference cannot "
+            f"variance). 'within reference noise': the value does not clear the floor by a "
+            f"factor of {NOISE_MARGIN:g} (errors; 1 - SSIM; the MSE behind PSNR), so the "
+            "reference cannot "
             "tell this method from a perfect one by this metric.</p>")
 
 

@@ -110,7 +110,7 @@ def run(args) -> int:
     """Read both images, compute the metrics, write the maps, print the table."""
     from ...image import read_exr
     from ..error_maps import write_error_maps
-    from ..metrics import evaluate, noise_floor
+    from ..metrics import NOISE_MARGIN, evaluate, noise_floor
 
     definition, threshold = _threshold(args)
     reference = read_exr(args.reference)
@@ -133,7 +133,7 @@ def run(args) -> int:
     if floor is not None:
         print("noise floor: each metric of the reference against itself perturbed by its own "
               "noise; 'within reference noise': the value does not clear the floor by a "
-              "factor of 2 (in error form)")
+              f"factor of {NOISE_MARGIN:g} (in error form)")
     warning = noise_warning(reference)
     if warning:
         print(warning, file=sys.stderr)

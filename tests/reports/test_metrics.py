@@ -396,11 +396,40 @@ def test_noise_floor_is_deterministic():
 def test_noise_verdict():
     from translucent.reports.metrics import RESOLVED, WITHIN_NOISE, noise_verdict
 
-    assert noise_verdict("hdr_flip", 0.1, 0.04) == RESOLVED
-    assert noise_verdict("hdr_flip", 0.07, 0.04) == WITHIN_NOISE
-    assert noise_verdict("ssim", 0.80, 0.95) == RESOLVED       # 0.20 > 2 x 0.05
-    assert noise_verdict("ssim", 0.92, 0.95) == WITHIN_NOISE   # 0.08 < 2 x 0.05
+    assert noise_verdict("hdr_flip", 0.17, 0.04) == RESOLVED
+    assert noise_verdict("hdr_flip", 0.15, 0.04) == WITHIN_NOISE
+    assert noise_verdict("ssim", 0.70, 0.95) == RESOLVED       # 0.30 > 4 x 0.05
+    assert noise_verdict("ssim", 0.85, 0.95) == WITHIN_NOISE   # 0.15 < 4 x 0.05
     assert noise_verdict("psnr", 30.0, 40.0) == RESOLVED       # MSE 10x the floor's
-    assert noise_verdict("psnr", 38.0, 40.0) == WITHIN_NOISE   # 1.6x
+    assert noise_verdict("psnr", 35.0, 40.0) == WITHIN_NOISE   # 3.2x
+    assert noise_verdict("hdr_flip", 0.15, 0.04, margin=2.0) == RESOLVED
     assert noise_verdict("hdr_flip", 0.1, None) is None
     assert noise_verdict("hdr_flip", float("nan"), 0.1) is None
+
+
+def test_a_mask_scores_only_its_pixels():
+    from translucent.reports.metrics import evaluate
+
+    truth = _smooth_truth(32)
+    test = truth.copy()
+    test[:, 16:] *= 1.5  # wrong on the right half only
+    left = np.zeros((32, 32), bool)
+    left[:, :12] = True
+    masked = evaluate(Image(truth), Image(test), mask=left).metrics
+    whole = evaluate(Image(truth), Image(test)).metrics
+    assert masked.pixels_scored == 32 * 12 and whole.pixels_scored == 32 * 32
+    assert masked.relative_mse == 0.0 and masked.rmse == 0.0 and masked.ciede2000 == 0.0
+    assert whole.relative_mse > 0 and whole.rmse > 0
+    assert masked.hdr_flip < 0.1 * whole.hdr_flip  # FLIP's filters reach a few pixels over
+    right = ~left
+    assert evaluate(Image(truth), Image(test), mask=right).metrics.rmse > whole.rmse
+
+
+@pytest.mark.parametrize("mask", [np.zeros((32, 32), bool), np.ones((8, 8), bool),
+                                  np.ones((32, 32))])
+def test_a_bad_mask_is_an_input_error(mask):
+    from translucent.reports.metrics import evaluate
+
+    truth = _smooth_truth(32)
+    with pytest.raises(InputError, match="mask"):
+        evaluate(Image(truth), Image(truth), mask=mask)

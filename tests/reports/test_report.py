@@ -200,7 +200,13 @@ def test_every_metric_comes_with_its_noise_floor_and_verdict(tiny):
     assert set(flat["noise"]) == set(NOISE_FLOOR_FIELDS)
     from translucent.image import read_exr
 
-    floor = noise_floor(read_exr(tiny["out"] / "tiny_sphere" / "reference.exr"))
+    from translucent.scenes import gbuffer, load_scene
+
+    scored = gbuffer(load_scene(str(tiny["scene"]))).hit
+    floor = noise_floor(read_exr(tiny["out"] / "tiny_sphere" / "reference.exr"), mask=scored)
+    assert flat["pixels_scored"] == "object"
+    assert flat["metrics"]["pixels_scored"] == int(scored.sum()) < 24 * 24
+    assert flat["image_metrics"]["pixels_scored"] == 24 * 24
     for field, entry in flat["noise"].items():
         assert entry["noise_floor"] == pytest.approx(getattr(floor, field), rel=1e-4)
         assert entry["verdict"] == noise_verdict(field, entry["value"], entry["noise_floor"])
