@@ -1086,6 +1086,9 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         atomic_write_text(baseline_path, json.dumps(new, indent=2, allow_nan=False) + "\n")
     seconds = time.perf_counter() - started
     _print_summary(summary, regressions, out, seconds, update_baseline, baseline_path, stream)
+    for report in reports:
+        if report.noise_warning:
+            print(f"warning: {report.name}: {report.noise_warning}", file=sys.stderr)
     return ReportResult(exit_code, out, regressions, seconds, summary)
 
 
