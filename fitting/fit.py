@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,7 @@ from ..atomic import atomic_path, atomic_write_text, make_output_folder
 from ..errors import InputError, check_count
 from ..materials.subedit import save_subedit
 from .capture import Capture, read_capture
+from .goodness import DiscrepancyModel, GoodnessOfFit, goodness_of_fit
 from .models import DipoleModel, SubEditModel
 from .profile import RadialProfile, measure_profile
 from .results import ParameterSummary, summaries_to_json, summarise_posterior, write_material
@@ -71,7 +72,15 @@ class FitResult:
     parameters : list of ParameterSummary
     material : dict
         The material table: posterior medians (of the heaviest mode when a parameter is
-        ``multimodal``).
+        ``multimodal``). Where the model misfits, the notes and the file's diagnostics say
+        so: the medians of a model the data reject.
+    goodness : GoodnessOfFit or None
+        The goodness-of-fit tests of the posterior (:mod:`translucent.fitting.goodness`).
+    discrepancy : list of ParameterSummary or None
+        Where the model misfits: the summaries of the posterior with a fractional
+        model-discrepancy term per channel (intervals that allow for the misfit).
+    discrepancy_goodness : GoodnessOfFit or None
+        The same tests of that posterior.
     """
 
     kind: str
@@ -83,21 +92,31 @@ class FitResult:
     parameters: list[ParameterSummary]
     material: dict
     notes: list[str] = field(default_factory=list)
+    goodness: GoodnessOfFit | None = None
+    discrepancy: list[ParameterSummary] | None = None
+    discrepancy_goodness: GoodnessOfFit | None = None
+    discrepancy_chains: list[ChainResult] = field(default_factory=list)
 
     @property
     def converged(self) -> bool:
         """Every chain converged."""
-        return all(chain.converged for chain in self.chains)
+        return all(chain.converged for chain in self.chains + self.discrepancy_chains)
+
+    @property
+    def misfit(self) -> bool:
+        """The goodness-of-fit tests reject the model."""
+        return self.goodness is not None and self.goodness.misfit
 
     @property
     def seconds(self) -> float:
         """Wall-clock seconds of all chains (MAP included)."""
-        return float(sum(chain.seconds for chain in self.chains))
+        return float(sum(chain.seconds for chain in self.chains + self.discrepancy_chains))
 
     @property
     def log_prob_calls(self) -> int:
         """Vectorised log-probability calls of all chains."""
-        return int(sum(chain.log_prob_calls for chain in self.chains))
+        return int(sum(chain.log_prob_calls
+                       for chain in self.chains + self.discrepancy_chains))
 
     def parameter(self, name: str) -> ParameterSummary:
         """Return the summary of the parameter called ``name``."""
@@ -130,8 +149,17 @@ class FitResult:
         return {"kind": self.kind,
                 "capture": None if self.capture.path is None else str(self.capture.path),
                 "converged": self.converged,
+                "verdict": self.goodness.verdict if self.goodness is not None else None,
+                "goodness_of_fit": (self.goodness.summary() if self.goodness is not None
+                                    else None),
                 "chains": [chain.summary() for chain in self.chains],
                 "parameters": summaries_to_json(self.parameters),
+                "parameters_with_discrepancy": (summaries_to_json(self.discrepancy)
+                                                if self.discrepancy is not None else None),
+                "discrepancy_goodness_of_fit": (self.discrepancy_goodness.summary()
+                                                if self.discrepancy_goodness is not None
+                                                else None),
+                "discrepancy_chains": [chain.summary() for chain in self.discrepancy_chains],
                 "material": self.material, "profile": self.profile.summary(),
                 "annulus_means_fitted": self.model.residual_degrees(),
                 "notes": self.notes + self.profile.notes}
@@ -167,6 +195,32 @@ def _checked_seed(seed):
 
 def _medians(summaries):
     return {s.name: s.median for s in summaries}
+
+
+def _misfit_statuses(summaries) -> list[ParameterSummary]:
+    """Model-conditional summaries of a misfit: no interval is claimed to constrain."""
+    return [s if s.status == "nuisance" else replace(s, status="model misfit")
+            for s in summaries]
+
+
+def _misfit_notes(goodness: GoodnessOfFit) -> list[str]:
+    bad = [channel for channel in goodness.channels if channel.misfit]
+    return [f"model misfit (channel {channel.text()}); the model-conditional intervals and "
+            "the material file's medians assume a model the data reject; the intervals with "
+            "the model-discrepancy term are wider, but a misfit of this shape can bias them "
+            "too" for channel in bad]
+
+
+def _discrepancy_chain(model, samples, *, walkers, max_steps, seed, progress, description):
+    """Sample ``model`` with a model-discrepancy term, started at its best sample."""
+    from .goodness import _best_sample
+
+    extended = DiscrepancyModel(model, start=_best_sample(model, samples))
+    if walkers is not None:  # the added coordinates need walkers of their own
+        walkers = max(int(walkers), 2 * extended.ndim)
+    chain = run_chain(extended, walkers=walkers, max_steps=max_steps, seed=seed,
+                      progress=progress, moves=default_moves(), description=description)
+    return extended, chain
 
 
 def fit_dipole(capture, *, fit_eta: bool | None = None, walkers: int | None = None,
@@ -213,8 +267,21 @@ def fit_dipole(capture, *, fit_eta: bool | None = None, walkers: int | None = No
         notes.append(f"the material file holds the medians of the heaviest mode "
                      f"({chain.mode_fractions()[heaviest]:.0%} of the samples), not of the "
                      "whole posterior")
-    return FitResult("dipole", capture, profile, model, [chain], chain.samples, summaries,
-                     model.material(values), notes)
+    goodness = goodness_of_fit(model, chain.samples, seed=0 if seed is None else seed)
+    result = FitResult("dipole", capture, profile, model, [chain], chain.samples, summaries,
+                       model.material(values), notes, goodness)
+    if goodness.misfit:
+        extended, wide = _discrepancy_chain(
+            model, chain.samples, walkers=walkers, max_steps=max_steps, seed=seed,
+            progress=progress, description="dipole posterior with model discrepancy")
+        result.discrepancy = summarise_posterior(extended, wide.samples)
+        result.discrepancy_goodness = goodness_of_fit(extended, wide.samples)
+        result.discrepancy_chains = [wide]
+        result.parameters = _misfit_statuses(summaries)
+        result.notes += _misfit_notes(goodness)
+        if not wide.converged:
+            result.notes.append(wide.message)
+    return result
 
 
 def fit_subedit(capture, *, segments: int = 8, r_s_mm: float | None = None,
@@ -250,7 +317,7 @@ def fit_subedit(capture, *, segments: int = 8, r_s_mm: float | None = None,
         options["smoothness"] = smoothness
     model = SubEditModel(profile, capture.spec, **options)
     options["r_s_mm"] = model.r_s_mm
-    chains, parts = [], []
+    chains, parts, channel_models = [], [], []
     rng = np.random.default_rng(seed)
     for c in model.channels:
         channel_model = SubEditModel(profile, capture.spec, channels=(c,), **options)
@@ -259,12 +326,44 @@ def fit_subedit(capture, *, segments: int = 8, r_s_mm: float | None = None,
                           moves=default_moves(), description=f"SubEdit {'RGB'[c]}")
         chains.append(chain)
         parts.append(chain.samples)
-    length = min(part.shape[0] for part in parts)
-    samples = np.hstack([part[rng.permutation(part.shape[0])[:length]] for part in parts])
+        channel_models.append(channel_model)
+    samples = _stack_channels(parts, rng)
     summaries = summarise_posterior(model, samples)
     notes = [chain.message for chain in chains if not chain.converged]
-    return FitResult("subedit", capture, profile, model, chains, samples, summaries,
-                     model.material(_medians(summaries)), notes)
+    goodness = goodness_of_fit(model, samples, seed=0 if seed is None else seed)
+    result = FitResult("subedit", capture, profile, model, chains, samples, summaries,
+                       model.material(_medians(summaries)), notes, goodness)
+    if goodness.misfit:
+        wide_parts, ln_f = [], []
+        for c, channel_model, part in zip(model.channels, channel_models, parts, strict=True):
+            _, wide = _discrepancy_chain(
+                channel_model, part, walkers=walkers, max_steps=max_steps,
+                seed=int(rng.integers(2**31)), progress=progress,
+                description=f"SubEdit {'RGB'[c]} with model discrepancy")
+            result.discrepancy_chains.append(wide)
+            wide_parts.append(wide.samples)
+        stacked = _stack_channels(wide_parts, rng)
+        # per channel [knots, ln f] -> every channel's knots, then every ln f
+        per_channel = model.segments + 1
+        blocks = [stacked[:, i * (per_channel + 1): (i + 1) * (per_channel + 1)]
+                  for i in range(len(model.channels))]
+        knots = np.hstack([block[:, :per_channel] for block in blocks])
+        ln_f = np.hstack([block[:, per_channel:] for block in blocks])
+        extended = DiscrepancyModel(model)
+        wide_samples = np.hstack([knots, ln_f])
+        result.discrepancy = summarise_posterior(extended, wide_samples)
+        result.discrepancy_goodness = goodness_of_fit(extended, wide_samples)
+        result.parameters = _misfit_statuses(summaries)
+        result.notes += _misfit_notes(goodness)
+        result.notes += [chain.message for chain in result.discrepancy_chains
+                         if not chain.converged]
+    return result
+
+
+def _stack_channels(parts, rng) -> np.ndarray:
+    """Independent per-channel chains side by side, each shuffled, cut to the shortest."""
+    length = min(part.shape[0] for part in parts)
+    return np.hstack([part[rng.permutation(part.shape[0])[:length]] for part in parts])
 
 
 def material_is_absolute(result: FitResult) -> bool:
@@ -324,6 +423,10 @@ def write_outputs(result: FitResult, out_dir) -> dict[str, Path]:
                    diagnostics=diagnostics)
     title = f"{kind} fit of {source or 'capture'}" + ("" if result.converged
                                                       else " (NOT converged)")
+    if result.misfit:
+        bad = "".join(channel.channel for channel in result.goodness.channels
+                      if channel.misfit)
+        title += f" - MODEL MISFIT ({bad})"
     if result.kind == "subedit":  # one corner per channel: the channels are independent
         del paths["corner"]
         per_channel = result.model.segments + 1

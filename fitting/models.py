@@ -222,6 +222,17 @@ class ProfileModel:
         samples = np.atleast_2d(samples)
         return {p.name: p.to_physical(samples[:, i]) for i, p in enumerate(self.parameters)}
 
+    def observations(self, channel: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(mean, stderr, dof)`` of the annulus means of ``channel`` that enter the fit."""
+        return self._observations[channel]
+
+    def residual_scale(self, channel: int, stderr, predicted, theta) -> np.ndarray:
+        """Return the likelihood's scale of each annulus, shaped as ``predicted``.
+
+        The standard errors; a model with a discrepancy term inflates them.
+        """
+        return np.broadcast_to(stderr, np.shape(predicted))
+
     def residual_degrees(self) -> int:
         """Count the annulus means that enter the likelihood."""
         return int(sum(self._observations[c][0].size for c in self.channels))

@@ -51,7 +51,8 @@ class ParameterSummary:
         Median and the 16, 84, 2.5 and 97.5 % quantiles.
     status : str
         ``constrained``, ``upper limit``, ``lower limit``, ``unconstrained``,
-        ``weakly constrained`` or ``nuisance``.
+        ``weakly constrained``, ``multimodal``, ``nuisance``, or ``model misfit`` (the
+        goodness-of-fit tests reject the model: the interval is conditional on it).
     prior : (float, float)
         Prior range, physical units.
     width_ratio : float
@@ -84,6 +85,8 @@ class ParameterSummary:
         elif self.status == "weakly constrained":
             text += (f"  [weakly constrained: 68 % interval {self.high68 - self.low68:.2g} "
                      "nats wide]")
+        elif self.status == "model misfit":
+            text += "  [model misfit: this interval assumes a model the data reject]"
         elif self.status == "multimodal":
             text += "  [multimodal: " + ", ".join(f"{median:.3g} ({share:.0%})"
                                                  for median, share in self.modes) + "]"

@@ -49,12 +49,16 @@ class CoverageResult:
     z : ndarray, shape (captures, 6)
         (ln median - ln truth) / half the 68 % width, for a look at calibration.
     seconds : float
+    misfit : ndarray of bool, shape (captures,)
+        Fits the goodness-of-fit tests flagged as a model misfit: false alarms, since the
+        captures are made by the fitted model itself.
     """
 
     inside: np.ndarray
     converged: np.ndarray
     z: np.ndarray
     seconds: float
+    misfit: np.ndarray | None = None
 
     @property
     def fraction(self) -> float:
@@ -89,6 +93,7 @@ def coverage_study(captures: int = 20, *, seed: int = 0, size: int = 48,
     inside = np.zeros((captures, 6), dtype=bool)
     z = np.zeros((captures, 6))
     converged = np.zeros(captures, dtype=bool)
+    misfit = np.zeros(captures, dtype=bool)
     for index in range(captures):
         sigma_a = np.exp(rng.uniform(*np.log(TRUTH_SIGMA_A), size=3))
         sigma_s_prime = np.exp(rng.uniform(*np.log(TRUTH_SIGMA_S_PRIME), size=3))
@@ -99,12 +104,13 @@ def coverage_study(captures: int = 20, *, seed: int = 0, size: int = 48,
         result = fit_dipole(Capture(spec, pixels), walkers=walkers,
                             seed=int(rng.integers(2**31)), progress=progress)
         converged[index] = result.converged
+        misfit[index] = result.misfit
         truth = np.concatenate([sigma_a, sigma_s_prime])
         for i, summary in enumerate(result.parameters[:6]):
             inside[index, i] = summary.low95 <= truth[i] <= summary.high95
             half = 0.5 * (np.log(summary.high68) - np.log(summary.low68))
             z[index, i] = (np.log(summary.median) - np.log(truth[i])) / half
-    return CoverageResult(inside, converged, z, time.perf_counter() - began)
+    return CoverageResult(inside, converged, z, time.perf_counter() - began, misfit)
 
 
 @dataclass

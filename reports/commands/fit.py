@@ -7,7 +7,14 @@ quantiles, tau, acceptance, masks and dropped annuli), ``<model>_material.toml``
 material table scene files load), ``<model>_corner.png``, ``<model>_profile.png`` (the
 fitted profile over the measured one, with residuals) and ``<model>_samples.npz``.
 
-Exit code 0 when every chain converged, 1 when one did not, 2 for bad input.
+Every fit is tested against its own data (reduced chi-square, posterior-predictive p-value
+and a runs test of the residuals per channel, :mod:`translucent.fitting.goodness`). When
+the tests reject the model the verdict is "model misfit": the model-conditional intervals
+are marked so, and intervals from a posterior with a fractional model-discrepancy term per
+channel are printed beside them (and written to the summary JSON).
+
+Exit code 0 when every chain converged and the model fits, 1 when a chain did not converge
+or the model misfits, 2 for bad input.
 """
 
 from __future__ import annotations
@@ -43,7 +50,7 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    """Fit, write the outputs, print the posterior summary; 1 if a chain did not converge."""
+    """Fit, write the outputs, print the summary; 1 if a chain did not converge or misfit."""
     from ...fitting.fit import fit_capture
 
     capture = Path(args.capture)
@@ -74,9 +81,18 @@ def run(args) -> int:
               f"{profile['dropped_annuli']}")
         for summary in result.parameters:
             print("  " + summary.describe().strip())
+        if result.goodness is not None:
+            print(f"  goodness of fit: {result.goodness.verdict}")
+            for channel in result.goodness.channels:
+                print(f"    {channel.text()}")
+        if result.discrepancy is not None:
+            print("  with a fractional model-discrepancy term per channel (intervals that "
+                  "allow for the misfit):")
+            for summary in result.discrepancy:
+                print("    " + summary.describe().strip())
         messages = [chain.message for chain in result.chains]  # printed above
         for note in [n for n in result.notes if n not in messages] + result.profile.notes:
             print(f"  note: {note}")
-        status = max(status, 0 if result.converged else 1)
+        status = max(status, 0 if result.converged and not result.misfit else 1)
     print(f"wrote {out_dir}/")
     return status

@@ -47,6 +47,12 @@ def test_recovers_dipole_parameters_with_unknown_exposure():
     result = fit_dipole(capture(camera=Camera(peak_signal=40000)), seed=1, walkers=QUICK_WALKERS)
     assert_recovered(result, SKIN)
     assert all(s.status in ("constrained", "nuisance") for s in result.parameters)
+    # a capture of the model itself: the goodness-of-fit tests accept it
+    assert result.goodness.verdict == "fits", result.goodness.summary()
+    assert not result.misfit and result.discrepancy is None
+    for channel in result.goodness.channels:
+        assert 0.5 < channel.reduced_chi_square < 1.6
+        assert channel.predictive_p > result.goodness.threshold
     chain = result.chains[0]
     assert chain.steps > 50 * chain.tau.max()
     assert chain.burn_in == min(int(2 * chain.tau.max()), chain.steps // 2)
