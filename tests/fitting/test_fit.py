@@ -266,7 +266,8 @@ def test_command_line_prints_the_fit_notes(tmp_path, capsys, monkeypatch):
     result = SimpleNamespace(
         profile=profile, converged=True, seconds=1.0, log_prob_calls=10, chains=[chain],
         parameters=[], notes=["channel B has no usable annulus: its parameters are the "
-                              "prior's", chain.message])
+                              "prior's", chain.message], goodness=None, discrepancy=None,
+        misfit=False)
     monkeypatch.setattr(fit, "fit_capture", lambda *args, **kwargs: {"dipole": result})
     assert main(["fit", str(tmp_path / "c.json"), "--no-progress"]) == 0
     lines = capsys.readouterr().out.splitlines()
