@@ -19,13 +19,36 @@ import numpy as np
 from .atomic import atomic_path
 from .errors import InputError
 
-__all__ = ["Image", "read_exr", "write_exr"]
+__all__ = ["Image", "pixel_checksum", "read_exr", "write_exr"]
 
 #: Rec. 709 / linear-sRGB luminance weights (the Y row of the sRGB -> XYZ matrix).
 LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
 
 #: Header attribute holding the metadata as JSON (read back losslessly).
 METADATA_ATTRIBUTE = "translucent:metadata"
+
+#: Header attribute holding the SHA-256 of the pixels as written (:func:`pixel_checksum`):
+#: a file whose pixels were changed or damaged after it was written is refused on reading.
+CHECKSUM_ATTRIBUTE = "translucent:pixels_sha256"
+
+
+def pixel_checksum(rgb, variance=None) -> str:
+    """Return the SHA-256 of an image's float32 pixels (and variance), as hex.
+
+    Parameters
+    ----------
+    rgb : array_like, shape (H, W, 3)
+    variance : array_like, shape (H, W, 3), optional
+    """
+    import hashlib
+
+    digest = hashlib.sha256()
+    for array in (rgb, variance):
+        if array is not None:
+            array = np.ascontiguousarray(array, dtype=np.float32)
+            digest.update(str(array.shape).encode())
+            digest.update(array.tobytes())
+    return digest.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -108,7 +131,9 @@ def write_exr(path, image: Image) -> Path:
 
     Channels ``R, G, B`` hold the radiance, ``variance.R, variance.G, variance.B`` the
     variance where known. The metadata go into the header twice: as one JSON attribute
-    (read back losslessly) and as individual ``translucent:KEY`` attributes for tools.
+    (read back losslessly) and as individual ``translucent:KEY`` attributes for tools. The
+    pixels' SHA-256 (:func:`pixel_checksum`) goes into ``translucent:pixels_sha256``, which
+    :func:`read_exr` checks.
     """
     import OpenEXR
 
@@ -126,6 +151,7 @@ def write_exr(path, image: Image) -> Path:
         "type": OpenEXR.scanlineimage,
         METADATA_ATTRIBUTE: json.dumps(image.metadata, sort_keys=True,
                                        default=_json_default),
+        CHECKSUM_ATTRIBUTE: pixel_checksum(image.rgb, image.variance),
     })
     path = Path(path)
     with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
@@ -139,8 +165,9 @@ def read_exr(path) -> Image:
     Raises
     ------
     InputError
-        When the file is missing, is not a readable EXR, has no R, G and B channels, or
-        holds NaN/Inf pixels; the message names the file and what was found.
+        When the file is missing, is not a readable EXR, has no R, G and B channels, holds
+        NaN/Inf pixels, or holds pixels that do not match the checksum written with them;
+        the message names the file and what was found.
     """
     import OpenEXR
 
@@ -151,6 +178,7 @@ def read_exr(path) -> Image:
         with OpenEXR.File(str(path), separate_channels=True) as exr:
             # the header is a view that empties when the file closes: copy what we need
             metadata_text = exr.header().get(METADATA_ATTRIBUTE)
+            checksum = exr.header().get(CHECKSUM_ATTRIBUTE)
             planes = {name: np.array(ch.pixels, dtype=np.float32)
                       for name, ch in exr.channels().items()}
     except Exception as error:  # OpenEXR raises bare exceptions on corrupt files
@@ -169,6 +197,10 @@ def read_exr(path) -> Image:
     variance = None
     if all(f"variance.{c}" in planes for c in "RGB"):
         variance = np.stack([planes[f"variance.{c}"] for c in "RGB"], axis=-1)
+    if checksum is not None and str(checksum) != pixel_checksum(rgb, variance):
+        raise InputError("the pixels do not match the checksum written with them: the file "
+                         "was changed or damaged after it was written", file=path,
+                         field=CHECKSUM_ATTRIBUTE, value=str(checksum)[:16])
     metadata = {}
     if metadata_text is not None:
         try:

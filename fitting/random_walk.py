@@ -1,7 +1,7 @@
 r"""Synthetic captures traced from the light: a vectorised photon random walk in a slab.
 
 A path-traced camera sees a narrow beam's halo only through the few camera paths that
-reach the beam (DESIGN.md), so slab captures are traced from the light instead, as MCML
+reach the beam (docs/references.md), so slab captures are traced from the light instead, as MCML
 does in biomedical optics (Wang, Jacques & Zheng 1995):
 
 * photons enter at normal incidence, at a point drawn from the Gaussian beam, with unit

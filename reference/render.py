@@ -209,13 +209,9 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
                                   delta_light_size=delta_light_size)
     key = reference_key(scene, settings)
     store = Cache("reference") if cache else None
-    if store is not None:
-        path = store.path(key, ".exr")
-        if path.is_file():
-            try:
-                return read_exr(path)
-            except InputError:
-                pass  # an unreadable entry is a miss: render again and replace it
+    cached = _cached(store, key, scene, passes)
+    if cached is not None:
+        return cached
 
     start = time.perf_counter()
     channels, conversions, mitsuba_scenes = load_scenes(
@@ -235,6 +231,7 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
                                           bar.update))
     finally:
         bar.close()
+    _check_finite_render(scene, passes_done.mean)
     image = Image(passes_done.mean, passes_done.variance(),
                   _metadata(scene, key, settings, conversions, channels, spp=spp,
                             passes=passes, seed=seed,
@@ -242,6 +239,39 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
     if store is not None:
         image.write(store.path(key, ".exr"))
     return image
+
+
+def _cached(store, key, scene, passes) -> Image | None:
+    """Return the cached reference under ``key`` if it is whole, else None (a miss).
+
+    An entry that cannot be read (damaged, its pixels changed after writing: the checksum
+    tells), of another size than the scene's camera, or without the variance its passes
+    give, is rendered again and replaced, never served.
+    """
+    if store is None:
+        return None
+    path = store.path(key, ".exr")
+    if not path.is_file():
+        return None
+    try:
+        image = read_exr(path)
+    except InputError:
+        return None
+    if image.shape != (scene.camera.height, scene.camera.width):
+        return None
+    if passes > 1 and image.variance is None:
+        return None
+    return image
+
+
+def _check_finite_render(scene, mean) -> None:
+    """Refuse a render with NaN or Inf pixels (it is neither written nor cached)."""
+    bad = ~np.isfinite(mean)
+    if bad.any():
+        raise InputError(f"Mitsuba rendered {int(bad.sum())} NaN or Inf pixel channels of "
+                         f"{mean.size}: a material's coefficients are likely too extreme "
+                         "for the renderer's single precision", file=scene.source,
+                         field="scene", value=scene.name)
 
 
 class PassAccumulator:
@@ -437,13 +467,9 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
     # tighter target or a larger budget goes on from the passes already made
     partial_key = reference_key(scene, {**settings, "progressive": None})
     store = Cache("reference") if cache else None
-    if store is not None:
-        path = store.path(key, ".exr")
-        if path.is_file():
-            try:
-                return read_exr(path)
-            except InputError:
-                pass
+    cached = _cached(store, key, scene, 2)
+    if cached is not None:
+        return cached
 
     accumulator = PassAccumulator((*shape, 3))
     seconds_before = 0.0
@@ -507,6 +533,7 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
     finally:
         bar.close()
     reached = summary()
+    _check_finite_render(scene, accumulator.mean)
     image = Image(accumulator.mean, accumulator.variance(),
                   _metadata(scene, key, settings, conversions, channels, spp=spp,
                             passes=accumulator.count, seed=seed, seconds=elapsed(),

@@ -115,7 +115,7 @@ EXCLUDED_SCENES: dict[str, str] = {
                       "environment renders 0.5); it has no translucent object and no analytic "
                       "BRDF, so no fast method has anything to approximate",
     "slab_beam": "the slab-capture set-up for fitting: a narrow beam seen by a camera path "
-                 "tracer is black or very noisy away from the beam (DESIGN.md), so its "
+                 "tracer is black or very noisy away from the beam (docs/references.md), so its "
                  "reference is no usable truth for image metrics; give it by name to run it",
     "glossy_cornell": "the 400 x 400 scene of `translucent bench brdf_pca` (Nguyen et al. "
                       "2010, Table 5): its reference and precomputation alone would take most "
@@ -1364,8 +1364,19 @@ def _html(reports: list[SceneReport], chosen: list[str], context: dict) -> str:
                      + "</ul>")
     else:
         rewritten = " (baseline rewritten from this run)" if context["baseline_updated"] else ""
-        parts.append(f'<p class="verdict ok">No regression against the baseline '
-                     f"<code>{_e(context['baseline'])}</code>{rewritten}.</p>")
+        checks = [check for report in reports for check in report.checks.values()]
+        compared = sum(check.status in ("ok", "improved") for check in checks)
+        unmatched = sum(check.status == "no baseline" for check in checks)
+        baseline = f"<code>{_e(context['baseline'])}</code>"
+        if compared:
+            extra = (f"; {unmatched} result(s) had no baseline entry to compare with"
+                     if unmatched else "")
+            parts.append(f'<p class="verdict ok">No regression in the {compared} result(s) '
+                         f"compared with the baseline {baseline}{extra}{rewritten}.</p>")
+        else:
+            parts.append(f'<p class="verdict fail">Nothing was compared with the baseline '
+                         f"{baseline}: it has no entry for these scenes and methods"
+                         f"{rewritten}; no regression can be told.</p>")
     parts.append(_summary_table(reports, chosen))
     parts.append(_legend(MAP_STYLES))
     if context["excluded"]:

@@ -89,3 +89,42 @@ def test_a_metadata_key_named_metadata_does_not_hide_the_others(tmp_path):
     metadata = {"metadata": {"note": "nested"}, "spp": 4}
     path = Image(np.ones((2, 2, 3)), metadata=metadata).write(tmp_path / "m.exr")
     assert read_exr(path).metadata == metadata
+
+
+def _tamper(path, change):
+    """Rewrite an EXR with its header kept and its pixels changed by ``change``."""
+    import OpenEXR
+
+    with OpenEXR.File(str(path), separate_channels=True) as exr:
+        header = dict(exr.header())
+        channels = {name: np.array(ch.pixels) for name, ch in exr.channels().items()}
+    change(channels)
+    with OpenEXR.File(header, channels) as exr:
+        exr.write(str(path))
+
+
+@pytest.mark.parametrize("change", [
+    lambda c: c["R"].fill(0.0),                        # zeroed pixels
+    lambda c: c["variance.G"].__setitem__((0, 0), 9),  # one variance value
+])
+def test_pixels_changed_after_writing_are_refused(tmp_path, change):
+    from translucent.image import CHECKSUM_ATTRIBUTE
+
+    path = tmp_path / "image.exr"
+    rgb = np.random.default_rng(1).uniform(0.1, 1.0, (6, 5, 3))
+    Image(rgb, 0.01 * rgb, {"producer": "test"}).write(path)
+    assert read_exr(path).metadata == {"producer": "test"}  # intact: read as written
+    _tamper(path, change)
+    with pytest.raises(InputError, match="do not match the checksum") as caught:
+        read_exr(path)
+    assert caught.value.field == CHECKSUM_ATTRIBUTE and str(path) in str(caught.value)
+
+
+def test_an_exr_without_checksum_is_read(tmp_path):
+    import OpenEXR
+
+    path = tmp_path / "foreign.exr"
+    rgb = np.full((4, 4, 3), 0.5, dtype=np.float32)
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, {"RGB": rgb}) as exr:
+        exr.write(str(path))
+    np.testing.assert_array_equal(read_exr(path).rgb, rgb)

@@ -22,7 +22,7 @@ resolve that model error, and more samples (``--spp``, ``--passes``) are needed.
 
 The media are made index-matched (``eta = 1``, ``--eta`` to try others): the built-in
 sphere scene is index-matched because a point light behind a smooth dielectric boundary
-cannot be reached by next-event estimation in ``volpath`` (DESIGN.md), and its reference
+cannot be reached by next-event estimation in ``volpath`` (docs/references.md), and its reference
 at ``eta = 1.5`` stays at a relative standard error of 0.6-0.9 after 256 spp at 48 x 48.
 The dipole takes the same ``eta``, so the table measures the model and the method, not a
 mismatch of boundaries. This measures the dipole model (Jensen et al. 2001) as each method

@@ -181,3 +181,51 @@ center = [2.0, 2.0, 2.0]
 radius = 1.0
 radiance = 5.0
 """
+
+
+def _entry(scene, spp=2, passes=2):
+    from translucent.cache import Cache
+    from translucent.reference.render import reference_key, reference_settings
+
+    settings = reference_settings(spp=spp, passes=passes, seed=0, integrator=None,
+                                  max_depth=None, rr_depth=None, per_channel=None,
+                                  substitute_delta_lights=None, delta_light_size=0.1)
+    return Cache("reference").path(reference_key(scene, settings), ".exr")
+
+
+def test_a_cache_entry_of_another_size_or_with_changed_pixels_is_rendered_again(tmp_path):
+    import OpenEXR
+    from translucent.image import Image
+
+    scene = _scene(0.35)
+    first = render(scene, spp=2, passes=2, progress=False)
+    path = _entry(scene)
+    assert path.is_file()
+    Image(np.ones((4, 4, 3)), np.ones((4, 4, 3)), first.metadata).write(path)
+    again = render(scene, spp=2, passes=2, progress=False)
+    assert again.shape == (SIZE, SIZE)
+    np.testing.assert_array_equal(again.rgb, first.rgb)  # rendered again, same seeds
+    # pixels zeroed behind the header's back: the checksum refuses the entry
+    with OpenEXR.File(str(path), separate_channels=True) as exr:
+        header = dict(exr.header())
+        channels = {name: np.array(ch.pixels) for name, ch in exr.channels().items()}
+    channels["R"][:] = 0.0
+    with OpenEXR.File(header, channels) as exr:
+        exr.write(str(path))
+    served = render(scene, spp=2, passes=2, progress=False)
+    np.testing.assert_array_equal(served.rgb, first.rgb)
+
+
+def test_a_render_with_nan_pixels_is_refused_and_not_cached(monkeypatch):
+    import importlib
+
+    render_module = importlib.import_module("translucent.reference.render")
+    scene = _scene(0.45)
+    monkeypatch.setattr(render_module, "render_sample",
+                        lambda *args, **kwargs: np.full((SIZE, SIZE, 3), np.nan))
+    with pytest.raises(InputError, match="NaN or Inf pixel channels"):
+        render(scene, spp=2, passes=2, progress=False)
+    assert not _entry(scene).is_file()
+    with pytest.raises(InputError, match="NaN or Inf pixel channels"):
+        render_to_target(scene, target_rse=0.1, spp=1, min_passes=2, max_passes=2,
+                         progress=False)

@@ -157,7 +157,8 @@ def test_the_furnace_test_detects_a_wrong_albedo():
 
 
 def test_point_light_behind_a_dielectric_needs_the_stand_in():
-    # the DESIGN.md premise, and its remedy: black with the point light, lit with a sphere
+    # the premise of docs/references.md, and its remedy: black with the point light, lit
+    # with a sphere
     medium = Dipole(sigma_a=[0.03, 0.17, 0.48], sigma_s_prime=[0.74, 0.88, 1.01], eta=1.3)
     scene = Scene((SceneObject("ball", icosphere(2), medium),), (PointLight([2, 2, 3], 50.0),),
                   CAMERA.__class__(CAMERA.origin, CAMERA.target, fov=40, width=16, height=16),

@@ -199,7 +199,6 @@ def test_every_metric_comes_with_its_noise_floor_and_verdict(tiny):
     flat = scene["methods"]["flat"]
     assert set(flat["noise"]) == set(NOISE_FLOOR_FIELDS)
     from translucent.image import read_exr
-
     from translucent.scenes import gbuffer, load_scene
 
     scored = gbuffer(load_scene(str(tiny["scene"]))).hit
@@ -259,6 +258,15 @@ def test_second_run_uses_the_cached_runs_and_passes(tiny, tmp_path):
     assert _data(tmp_path / "again")["reference"]["cached"] is True
     assert "(cached: nothing it depends on has changed since)" in (
         tmp_path / "again" / "index.html").read_text()
+    page = (tmp_path / "again" / "index.html").read_text()
+    assert "No regression in the 1 result(s) compared with the baseline" in page
+
+
+def test_a_run_with_nothing_to_compare_says_so(tiny):
+    # the fixture's run wrote the baseline: there was nothing in it to compare with
+    page = (tiny["out"] / "index.html").read_text()
+    assert "Nothing was compared with the baseline" in page
+    assert "No regression" not in page
 
 
 def _baseline_copy(tiny, tmp_path, change) -> Path:
