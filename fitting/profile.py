@@ -13,11 +13,18 @@ Measurement (:func:`measure_profile`):
 4. Per annulus and channel: the mean of the valid pixels and its standard error from the
    annulus's own scatter, taken about a straight line in radius so that the profile's
    gradient across the annulus is not counted as noise (N - 2 degrees of freedom).
+   Pixels *censored at black* (a float image whose noise was clipped at the black level,
+   as many cameras and HDR merges do: recognised by a pile-up of pixels exactly at it) are
+   not measurements: an annulus holding some is estimated as a censored normal sample
+   (Tobit regression on the same straight line, :func:`censored_line_fit`), which is
+   unbiased where the plain mean of the clipped values is not, and which uses every pixel's
+   footprint.
 5. Annuli are dropped (and counted) where the data are censored: any annulus holding a
    saturated pixel, and every annulus inside it; the first annulus whose below-black
-   fraction exceeds :data:`BELOW_BLACK_FRACTION` (the noise floor), and every annulus
-   outside it; annuli with fewer than :data:`MIN_VALID_PIXELS` valid pixels; on request,
-   annuli reaching inside ``r_min_mm``.
+   fraction exceeds :data:`BELOW_BLACK_FRACTION`, or whose censored fraction exceeds
+   :data:`CENSORED_MAX_FRACTION` (the noise floor), and every annulus outside it; annuli
+   with fewer than :data:`MIN_VALID_PIXELS` valid pixels; on request, annuli reaching
+   inside ``r_min_mm``.
 
 Prediction (:class:`ProfileOperator`): the mean of annulus ``a`` in channel ``c`` is
 ``exposure * (M_c @ f(nodes))[a]`` for a radial exitance profile ``f`` (mm^-2), with
@@ -43,6 +50,7 @@ __all__ = [
     "RadialProfile",
     "annulus_edges",
     "annulus_average_matrix",
+    "censored_line_fit",
     "measure_profile",
     "refine_incident_point",
 ]
@@ -63,6 +71,13 @@ ANNULUS_GROWTH = 0.05
 BELOW_BLACK_FRACTION = 1e-3
 #: Top code of the 16-bit PNG/TIFF captures: a pixel there was clipped by the encoding.
 INTEGER_CEILING = 65535.0
+#: A float channel with at least this many pixels exactly at the black level was clipped
+#: there (noise never lands on one float value by chance): its pixels at or below black
+#: are censored observations, not measurements.
+CENSORED_PILEUP = 8
+#: Beyond this fraction of censored pixels an annulus's censored estimate rests mostly on
+#: the normal model of the noise, not on data: it counts as the noise floor.
+CENSORED_MAX_FRACTION = 0.5
 #: Iterations and tolerance (pixels) of the thresholded-centroid refinement.
 CENTROID_ITERATIONS = 50
 CENTROID_TOLERANCE_PX = 1e-4
@@ -328,6 +343,7 @@ class RadialProfile:
 
 
 def _channel_masks(capture: Capture):
+    """Per-pixel channel masks: finite, saturated, below black, censored at black."""
     spec = capture.spec
     stored = capture.pixels
     finite = np.isfinite(stored)
@@ -337,7 +353,90 @@ def _channel_masks(capture: Capture):
         saturated = finite & ((stored >= spec.saturation_level)
                               | (integer & (stored >= INTEGER_CEILING)))
         below = finite & ((stored < spec.black_level) | (integer & (stored <= 0.0)))
-    return finite, saturated, below
+        censored = np.zeros_like(finite)
+        if not integer:
+            pileup = (finite & (stored == spec.black_level)).sum(axis=(0, 1))
+            clipped = pileup >= CENSORED_PILEUP
+            censored = finite & (stored <= spec.black_level) & clipped[None, None, :]
+            below &= ~censored
+    return finite, saturated, below, censored
+
+
+def censored_line_fit(values, radius, censored_radius, floor: float = 0.0):
+    r"""Mean and standard error of an annulus whose lowest values were clipped at ``floor``.
+
+    Tobit regression: the signal is :math:`v = \mu + b (r - \bar r) + \sigma \epsilon`
+    with normal :math:`\epsilon`; a censored pixel only says :math:`v \le` ``floor``. The
+    log-likelihood
+
+    .. math::
+        \sum_{\text{measured}} \left[\ln \phi(z_i) - \ln \sigma\right]
+        + \sum_{\text{censored}} \ln \Phi(z_j), \qquad
+        z = (v - \mu - b (r - \bar r)) / \sigma
+
+    is maximised over :math:`(\mu, b, \ln \sigma)`, and the standard error of
+    :math:`\mu` read from the inverse of its Hessian (the observed information).
+
+    Parameters
+    ----------
+    values, radius : array_like, shape (n,)
+        The measured pixels' signal and radius.
+    censored_radius : array_like, shape (k,)
+        The radii of the censored pixels.
+    floor : float
+        The clip value in signal units (0: clipped at black).
+
+    Returns
+    -------
+    (float, float)
+        The annulus mean at its mean radius and its standard error; NaN, NaN when the fit
+        fails.
+    """
+    from scipy import optimize, special
+
+    values = np.asarray(values, dtype=np.float64)
+    radius = np.asarray(radius, dtype=np.float64)
+    censored_radius = np.asarray(censored_radius, dtype=np.float64)
+    centre = np.concatenate([radius, censored_radius]).mean()
+    dr, dc = radius - centre, censored_radius - centre
+    if values.size < 3:
+        return float("nan"), float("nan")
+
+    def negative_log_likelihood(x):
+        mu, slope, ln_sigma = x
+        sigma = np.exp(ln_sigma)
+        z = (values - mu - slope * dr) / sigma
+        zc = (floor - mu - slope * dc) / sigma
+        return -(np.sum(-0.5 * z * z - ln_sigma) + np.sum(special.log_ndtr(zc)))
+
+    slope0 = np.polyfit(dr, values, 1)[0] if values.size >= 3 and np.ptp(dr) > 0 else 0.0
+    spread = max(float(np.std(values)), 1e-12)
+    start = np.array([float(np.mean(values)) - 0.5 * spread * dc.size / (dc.size + values.size),
+                      slope0, np.log(spread)])
+    result = optimize.minimize(negative_log_likelihood, start, method="Nelder-Mead",
+                               options={"xatol": 1e-9, "fatol": 1e-10, "maxiter": 4000})
+    if not np.all(np.isfinite(result.x)):
+        return float("nan"), float("nan")
+    x = result.x
+    steps = np.array([max(abs(x[0]), np.exp(x[2])) * 1e-4, max(abs(x[1]), 1e-6) * 1e-3
+                      + np.exp(x[2]) * 1e-4 / max(np.ptp(np.concatenate([dr, dc])), 1e-9),
+                      1e-4])
+    hessian = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            ei, ej = np.eye(3)[i] * steps[i], np.eye(3)[j] * steps[j]
+            hessian[i, j] = (negative_log_likelihood(x + ei + ej)
+                             - negative_log_likelihood(x + ei - ej)
+                             - negative_log_likelihood(x - ei + ej)
+                             + negative_log_likelihood(x - ei - ej)) / (4 * steps[i] * steps[j])
+    try:
+        covariance = np.linalg.inv(hessian)
+    except np.linalg.LinAlgError:
+        return float("nan"), float("nan")
+    variance = covariance[0, 0]
+    if not (np.isfinite(variance) and variance > 0):
+        return float("nan"), float("nan")
+    return float(x[0]), float(np.sqrt(variance))
 
 
 def _grid_spacing(mean, radius_mm, used, pixel_mm) -> float:
@@ -383,9 +482,9 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
     """
     spec = capture.spec
     height, width = capture.shape
-    finite, saturated, below = _channel_masks(capture)
+    finite, saturated, below, censored = _channel_masks(capture)
     signal = capture.linear_signal()
-    valid = finite & ~saturated & ~below
+    valid = finite & ~saturated & ~below & ~censored
     given = tuple(float(v) for v in spec.incident_px)
     centre = given
     if refine_centre:
@@ -414,13 +513,14 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
         raise InputError("must be finite and >= 0, mm", field="r_min_mm", value=r_min_mm)
     too_close = edges[:-1] * pixel < r_min_mm
     masked = {"nan": [0, 0, 0], "saturated": [0, 0, 0], "below_black": [0, 0, 0],
-              "valid": [0, 0, 0]}
+              "censored": [0, 0, 0], "valid": [0, 0, 0]}
     for c in range(3):
         ok = valid[..., c].ravel() & inside
         values = signal[..., c].ravel()
         masked["nan"][c] = int((~finite[..., c]).sum())
         masked["saturated"][c] = int(saturated[..., c].sum())
         masked["below_black"][c] = int(below[..., c].sum())
+        masked["censored"][c] = int(censored[..., c].sum())
         masked["valid"][c] = int(valid[..., c].sum())
         idx = annulus[ok]
         v = values[ok]
@@ -444,14 +544,26 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
         radius_mean[:, c] = rm * pixel
         sat_annuli = annulus[saturated[..., c].ravel() & inside]
         below_count = np.bincount(annulus[below[..., c].ravel() & inside], minlength=n_annuli)
-        has_pixels = (count + below_count
+        cut = censored[..., c].ravel() & inside
+        censored_count = np.bincount(annulus[cut], minlength=n_annuli)
+        has_pixels = (count + below_count + censored_count
                       + np.bincount(sat_annuli, minlength=n_annuli)) > 0
+        censored_fraction = censored_count / np.maximum(count + censored_count, 1)
+        for a in np.flatnonzero((censored_count > 0) & enough
+                                & (censored_fraction <= CENSORED_MAX_FRACTION)):
+            here = idx == a
+            m_a, se_a = censored_line_fit(v[here], r[here], radius_px[cut][annulus[cut] == a])
+            mean[a, c], stderr[a, c] = m_a, se_a
+            dof[a, c] = max(int(count[a] + censored_count[a]) - 3, 0)
+        se = np.where(np.isfinite(stderr[:, c]), stderr[:, c], np.nan)
         # censoring from above: every annulus up to the outermost one with a clipped pixel
         clipped = np.arange(n_annuli) <= (sat_annuli.max() if sat_annuli.size else -1)
         # censoring from below: the noise floor, and everything beyond it
         with np.errstate(invalid="ignore", divide="ignore"):
             fraction = below_count / np.maximum(count + below_count, 1)
-        floor_annuli = np.flatnonzero((fraction > BELOW_BLACK_FRACTION) & ~clipped)
+        floor_annuli = np.flatnonzero(((fraction > BELOW_BLACK_FRACTION)
+                                       | (censored_fraction > CENSORED_MAX_FRACTION))
+                                      & ~clipped)
         floor = np.arange(n_annuli) >= (floor_annuli[0] if floor_annuli.size else n_annuli)
         keep = enough & (se > 0) & ~clipped & ~floor
         dropped["saturated"][c] = int((has_pixels & clipped).sum())
@@ -480,8 +592,9 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
     kernel = beam_convolution_matrix(grid, spec.beam_radius_mm)
     matrices = []
     for c in range(3):
-        average = annulus_average_matrix(pairs, annulus, valid[..., c].ravel(), n_annuli,
-                                         grid_px)
+        # a censored annulus estimates the mean over its censored pixels' footprints too
+        counted = (valid[..., c] | censored[..., c]).ravel()
+        average = annulus_average_matrix(pairs, annulus, counted, n_annuli, grid_px)
         matrices.append(average[used[:, c]] @ kernel)
     notes = []
     shift = float(np.hypot(centre[0] - given[0], centre[1] - given[1]))

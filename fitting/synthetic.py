@@ -75,6 +75,9 @@ class Camera:
         Write the exposure into the sidecar (False: ``null``, a nuisance parameter).
     file_format : str
         ``"exr"``, ``"png"`` or ``"tiff"``.
+    clip_at_black : bool
+        Clip the stored values at the black level, as many cameras and HDR merges do (the
+        noise below black is lost: those pixels are censored observations).
     """
 
     peak_signal: float = 20000.0
@@ -85,6 +88,7 @@ class Camera:
     encoding: str = "linear"
     exposure_known: bool = False
     file_format: str = "exr"
+    clip_at_black: bool = False
 
     def __post_init__(self):
         for name in ("peak_signal", "saturation_level"):
@@ -147,6 +151,8 @@ def apply_camera(exitance, camera: Camera, rng, *, exposure: float | None = None
     else:
         stored = signal + camera.black_level
     stored = np.minimum(stored, camera.saturation_level)
+    if camera.clip_at_black:
+        stored = np.maximum(stored, camera.black_level)
     if camera.file_format != "exr":
         stored = np.clip(np.rint(stored), 0.0, 65535.0)
     return stored, float(exposure)

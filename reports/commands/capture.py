@@ -69,6 +69,9 @@ def add_arguments(parser):
     parser.add_argument("--gain", type=float, default=1.0, help="electrons per stored unit")
     parser.add_argument("--read-noise", type=float, default=4.0, help="stored units")
     parser.add_argument("--black-level", type=float, default=256.0)
+    parser.add_argument("--clip-at-black", action="store_true",
+                        help="clip stored values at the black level, as many cameras and HDR "
+                             "merges do (the fit treats those pixels as censored)")
     parser.add_argument("--saturation-level", type=float, default=65535.0)
     parser.add_argument("--known-exposure", action="store_true",
                         help="write the exposure into the sidecar")
@@ -106,6 +109,7 @@ def run(args) -> int:
     _check_out(out, out.with_suffix(suffix))
     camera = Camera(peak_signal=args.peak_signal, gain=args.gain, read_noise=args.read_noise,
                     black_level=args.black_level, saturation_level=args.saturation_level,
+                    clip_at_black=args.clip_at_black,
                     encoding="srgb" if args.srgb else "linear",
                     exposure_known=args.known_exposure, file_format=args.format)
     if args.size < 16:

@@ -188,3 +188,59 @@ def test_a_bad_r_min_says_what_is_accepted(r_min):
     with pytest.raises(InputError, match="must be finite and >= 0") as error:
         measure_profile(capture_of(values, (12.0, 12.0)), r_min_mm=r_min)
     assert error.value.field == "r_min_mm"
+
+
+# ------------------------------------------------------------------ censored at black
+
+
+def test_censored_line_fit_is_unbiased_and_its_standard_error_calibrated(rng):
+    from translucent.fitting.profile import censored_line_fit
+
+    estimates, errors, plain = [], [], []
+    for _ in range(300):
+        radius = rng.uniform(10.0, 12.0, 60)
+        values = 2.0 + 0.5 * (radius - 11.0) + 3.0 * rng.standard_normal(60)
+        cut = values <= 0.0  # about 30 % censored
+        mean, se = censored_line_fit(values[~cut], radius[~cut], radius[cut])
+        estimates.append(mean)
+        errors.append(se)
+        plain.append(np.maximum(values, 0.0).mean())
+    estimates, errors = np.array(estimates), np.array(errors)
+    spread = estimates.std() / np.sqrt(estimates.size)
+    # the truth at the annulus's mean radius (11 on average) is 2
+    assert abs(estimates.mean() - 2.0) < 4 * spread
+    assert errors.mean() == pytest.approx(estimates.std(), rel=0.15)
+    assert np.mean(plain) - 2.0 > 10 * spread  # the clipped values' mean is biased up
+
+
+def _noisy_capture(rng, *, clip: bool):
+    centre = (24.0, 24.0)
+    signal = 400.0 * gaussian_pixels((48, 48), centre, 6.0)
+    noisy = signal + rng.normal(0.0, 3.0, signal.shape)
+    if clip:
+        noisy = np.maximum(noisy, 0.0)
+    return capture_of(noisy, centre, black_level=0.0, saturation_level=1e9)
+
+
+def test_pixels_clipped_at_black_are_censored_and_estimated_without_bias():
+    clipped = measure_profile(_noisy_capture(np.random.default_rng(5), clip=True),
+                              refine_centre=False)
+    kept = measure_profile(_noisy_capture(np.random.default_rng(5), clip=False),
+                           refine_centre=False)
+    assert clipped.masked["censored"][0] > 0 and kept.masked["censored"][0] == 0
+    both = clipped.used[:, 0] & kept.used[:, 0]
+    assert both.sum() >= 8
+    z = (clipped.mean[both, 0] - kept.mean[both, 0]) / kept.stderr[both, 0]
+    # the same noise draw, censored or not: the censored estimate stays within its errors
+    assert np.abs(z).max() < 3.0
+    assert abs(z.mean()) < 3.0 / np.sqrt(both.sum())
+
+
+def test_noise_below_an_unclipped_black_level_is_not_censored(rng):
+    centre = (16.0, 16.0)
+    image = 100.0 + 500.0 * gaussian_pixels((32, 32), centre, 4.0) \
+        + rng.normal(0.0, 2.0, (32, 32))
+    profile = measure_profile(capture_of(image, centre, black_level=100.0,
+                                         saturation_level=1e9))
+    assert profile.masked["censored"][0] == 0
+    assert profile.masked["below_black"][0] == int((image < 100.0).sum()) > 0
