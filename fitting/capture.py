@@ -45,8 +45,10 @@ SIDECAR_FIELDS: dict[str, str] = {
     "side": '"reflection" (camera on the lit side) or "transmission" (the far side)',
     "thickness_mm": "slab thickness in mm, > 0, or null for a semi-infinite slab",
     "eta": "relative index of refraction in [1, 3], or null to fit it",
-    "beam_radius_mm": "1/e^2 radius of the Gaussian beam, mm, >= 0 (0: a pencil beam), at "
-                      "most the image diagonal",
+    "beam_radius_mm": "1/e^2 radius of the Gaussian beam, or the radius of a top-hat beam, "
+                      "mm, >= 0 (0: a pencil beam), at most the image diagonal",
+    "beam_profile": '"gaussian" (default) or "top_hat" (a uniform disk: a fibre or an '
+                    'aperture)',
     "black_level": "stored value of zero light, >= 0",
     "saturation_level": "stored value at and above which a pixel is clipped, > black_level",
     "exposure": "stored units per unit of E (mm^2), > 0, or null when unknown",
@@ -81,7 +83,10 @@ class CaptureSpec:
     eta : float or None
         Relative index of refraction; None: fitted.
     beam_radius_mm : float
-        1/e^2 radius of the Gaussian beam irradiance, mm (0: pencil beam).
+        1/e^2 radius of the Gaussian beam irradiance, or the radius of a top-hat beam, mm
+        (0: pencil beam).
+    beam_profile : str
+        ``"gaussian"`` or ``"top_hat"``.
     black_level, saturation_level : float
         In stored units (code values for PNG/TIFF).
     exposure : float or None
@@ -99,6 +104,7 @@ class CaptureSpec:
     thickness_mm: float | None = None
     eta: float | None = 1.3
     beam_radius_mm: float = 0.0
+    beam_profile: str = "gaussian"
     black_level: float = 0.0
     saturation_level: float = math.inf
     exposure: float | None = None
@@ -286,6 +292,9 @@ def sidecar_from_dict(data, *, path=None) -> CaptureSpec:
                   allow_null=True)
     beam = _number(data, "beam_radius_mm", path, minimum=0.0) if "beam_radius_mm" in data \
         else 0.0
+    from .beam import BEAM_PROFILES
+
+    beam_profile = _choice(data, "beam_profile", path, BEAM_PROFILES, "gaussian")
     black = _number(data, "black_level", path, minimum=0.0)
     saturation = _number(data, "saturation_level", path, minimum=0.0, strict=True)
     if saturation <= black:
@@ -297,7 +306,8 @@ def sidecar_from_dict(data, *, path=None) -> CaptureSpec:
         raise InputError("must be a JSON object", file=path, field="synthetic", value=synthetic)
     return CaptureSpec(image=image, pixel_size_mm=pixel_size,
                        incident_px=(float(incident[0]), float(incident[1])), side=side,
-                       thickness_mm=thickness, eta=eta, beam_radius_mm=beam, black_level=black,
+                       thickness_mm=thickness, eta=eta, beam_radius_mm=beam,
+                       beam_profile=beam_profile, black_level=black,
                        saturation_level=saturation, exposure=exposure, encoding=encoding,
                        synthetic=dict(synthetic))
 

@@ -589,7 +589,7 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
                        _grid_spacing(mean, radius_mean, used, pixel))
     grid_px = grid.nodes / pixel
     pairs = _pixel_ring_pairs(r_out_mm / pixel + 2.0, centre, grid_px, (height, width))
-    kernel = beam_convolution_matrix(grid, spec.beam_radius_mm)
+    kernel = beam_convolution_matrix(grid, spec.beam_radius_mm, spec.beam_profile)
     matrices = []
     for c in range(3):
         # a censored annulus estimates the mean over its censored pixels' footprints too

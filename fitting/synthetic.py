@@ -178,13 +178,15 @@ def material_profile_function(material: Dipole, *, side="reflection", thickness_
                                         eta, thickness_mm, transmission=False)[0]
 
 
-def _beam_convolved_table(profile_fn, beam_radius_mm, r_max_mm):
+def _beam_convolved_table(profile_fn, beam_radius_mm, r_max_mm, beam_profile="gaussian"):
     """Tabulate the beam-convolved profile on a fine radial table, by polar quadrature."""
     w = beam_radius_mm
     table_r = np.concatenate([[0.0], np.geomspace(1e-4, r_max_mm, 1200)])
     radial, radial_w = np.polynomial.legendre.leggauss(BEAM_RADIAL_POINTS)
-    b = 1.5 * w * (radial + 1.0)  # Gauss-Legendre on [0, 3 w]
-    b_weight = 1.5 * w * radial_w * b * beam_irradiance(b, w)
+    # Gauss-Legendre over the beam: [0, 3 w] for a Gaussian, the disk for a top hat
+    half = 1.5 * w if beam_profile == "gaussian" else 0.5 * w
+    b = half * (radial + 1.0)
+    b_weight = half * radial_w * b * beam_irradiance(b, w, beam_profile)
     phi = np.linspace(0.0, 2.0 * np.pi, BEAM_ANGULAR_POINTS, endpoint=False)
     phi_weight = 2.0 * np.pi / BEAM_ANGULAR_POINTS
     out = np.zeros((table_r.size, 3))
@@ -198,7 +200,8 @@ def _beam_convolved_table(profile_fn, beam_radius_mm, r_max_mm):
     return table_r, out / total
 
 
-def exitance_image(profile_fn, shape, pixel_size_mm, centre_px, beam_radius_mm=0.0):
+def exitance_image(profile_fn, shape, pixel_size_mm, centre_px, beam_radius_mm=0.0,
+                   beam_profile="gaussian"):
     """Pixel-averaged exitance image of a radial profile, optionally convolved with the beam.
 
     Parameters
@@ -211,7 +214,8 @@ def exitance_image(profile_fn, shape, pixel_size_mm, centre_px, beam_radius_mm=0
     centre_px : (float, float)
         Incident point ``(x, y)``, pixels (top-left corner of the image at 0, 0).
     beam_radius_mm : float
-        1/e^2 radius of the Gaussian beam, mm (0: pencil).
+        1/e^2 radius of the Gaussian beam, or a top hat's radius, mm (0: pencil).
+    beam_profile : {"gaussian", "top_hat"}
 
     Returns
     -------
@@ -222,7 +226,8 @@ def exitance_image(profile_fn, shape, pixel_size_mm, centre_px, beam_radius_mm=0
     cx, cy = centre_px
     r_max = np.hypot(max(cx, width - cx), max(cy, height - cy)) * pixel_size_mm * 1.01 + 1e-9
     if beam_radius_mm > 0:
-        table_r, table = _beam_convolved_table(profile_fn, beam_radius_mm, r_max)
+        table_r, table = _beam_convolved_table(profile_fn, beam_radius_mm, r_max,
+                                               beam_profile)
 
         def evaluate(r):
             return np.stack([np.interp(r, table_r, table[:, c]) for c in range(3)], axis=-1)
@@ -252,7 +257,8 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
                    pixel_size_mm: float = 0.1, incident_px=None, side: str = "reflection",
                    thickness_mm: float | None = None, beam_radius_mm: float = 0.0,
                    camera: Camera | None = None, seed: int | None = None,
-                   image_name: str = "capture.exr", eta_known: bool = True):
+                   image_name: str = "capture.exr", eta_known: bool = True,
+                   beam_profile: str = "gaussian"):
     """Make a synthetic capture of the exact dipole/multipole model, with camera defects.
 
     Parameters
@@ -274,6 +280,8 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
         The sidecar's ``image`` (its suffix should match ``camera.file_format``).
     eta_known : bool
         Write eta into the sidecar (False: null, eta is fitted).
+    beam_profile : {"gaussian", "top_hat"}
+        The beam's shape, written into the sidecar.
 
     Returns
     -------
@@ -288,14 +296,14 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
     _check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm)
     profile_fn = material_profile_function(material, side=side, thickness_mm=thickness_mm)
     exitance = exitance_image(profile_fn, (height, width), pixel_size_mm, incident_px,
-                              beam_radius_mm)
+                              beam_radius_mm, beam_profile)
     rng = np.random.default_rng(seed)
     stored, exposure = apply_camera(exitance, camera, rng)
     spec = _capture_spec(material, camera, image_name=image_name, pixel_size_mm=pixel_size_mm,
                          incident_px=incident_px, side=side, thickness_mm=thickness_mm,
                          beam_radius_mm=beam_radius_mm, exposure=exposure, eta_known=eta_known,
                          generator="dipole")
-    return stored, spec
+    return stored, replace(spec, beam_profile=beam_profile)
 
 
 def _check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm):

@@ -75,6 +75,7 @@ BAD_FIELDS = [
     ({"eta": 0.5}, "eta", r"must be >= 1 and <= 3"),
     ({"eta": 4.0}, "eta", "must be <= 3"),
     ({"beam_radius_mm": -0.1}, "beam_radius_mm", "must be >= 0"),
+    ({"beam_profile": "square"}, "beam_profile", "must be one of"),
     ({"black_level": -5}, "black_level", "must be >= 0"),
     ({"saturation_level": 5}, "saturation_level", r"must be > black_level \(10\)"),
     ({"exposure": 0}, "exposure", "must be > 0"),
@@ -192,6 +193,9 @@ def test_a_beam_wider_than_the_image_is_refused(write_sidecar, sidecar_data):
     assert error.value.field == "beam_radius_mm" and error.value.file == str(path)
     path = write_sidecar({**sidecar_data, "beam_radius_mm": 4.5})
     assert read_capture(path).spec.beam_radius_mm == 4.5
+    assert read_capture(path).spec.beam_profile == "gaussian"  # the default
+    path = write_sidecar({**sidecar_data, "beam_radius_mm": 1.0, "beam_profile": "top_hat"})
+    assert read_capture(path).spec.beam_profile == "top_hat"
     spec = CaptureSpec(image="w.exr", pixel_size_mm=0.1, incident_px=(16, 16),
                        beam_radius_mm=200.0)
     with pytest.raises(InputError, match="at most the image's diagonal"):

@@ -105,3 +105,22 @@ def test_a_misspecified_capture_is_flagged_with_wider_intervals(tmp_path, capsys
                 > np.log(narrow[name]["high68"]) - np.log(narrow[name]["low68"])), name
     assert any(wide[f"discrepancy[{c}]"]["median"] > 0.01 for c in "RGB")
     assert summary["discrepancy_goodness_of_fit"]["channels"]
+
+
+@pytest.mark.slow
+def test_a_top_hat_beam_fits_as_a_top_hat_and_misfits_as_a_gaussian():
+    import dataclasses
+
+    from translucent.fitting.fit import fit_dipole
+
+    pixels, spec = dipole_capture(SKIN, size=40, pixel_size_mm=0.25, seed=11,
+                                  camera=Camera(peak_signal=40000), beam_radius_mm=1.0,
+                                  beam_profile="top_hat")
+    right = fit_dipole(Capture(spec, pixels), seed=1, walkers=QUICK_WALKERS)
+    assert right.goodness.verdict == "fits", right.goodness.summary()
+    for kind, values in (("sigma_a", SKIN.sigma_a), ("sigma_s_prime", SKIN.sigma_s_prime)):
+        for c, truth in enumerate(values):
+            summary = right.parameter(f"{kind}[{'RGB'[c]}]")
+            assert summary.low95 <= truth <= summary.high95, summary.describe()
+    wrong = dataclasses.replace(spec, beam_profile="gaussian")
+    assert fit_dipole(Capture(wrong, pixels), seed=1, walkers=QUICK_WALKERS).misfit
