@@ -39,6 +39,9 @@ def add_arguments(parser):
     parser.add_argument("--beam-radius", type=float, default=None,
                         help="1/e^2 radius of the Gaussian beam, mm (default: 0, a pencil; "
                              "volpath needs > 0 and defaults to 5 %% of the field width)")
+    parser.add_argument("--beam-profile", choices=("gaussian", "top_hat"), default="gaussian",
+                        help="the beam's shape (top_hat: a uniform disk of --beam-radius; "
+                             "with --generator dipole only)")
     parser.add_argument("--eta", type=float, default=None, help="override the material's eta")
     parser.add_argument("--unknown-eta", action="store_true",
                         help="write eta as null (the fitter then fits it)")
@@ -124,6 +127,10 @@ def run(args) -> int:
     beam = args.beam_radius
     if beam is None and args.generator != "volpath":
         beam = 0.0
+    if args.beam_profile != "gaussian" and args.generator != "dipole":
+        raise InputError("only the dipole generator makes top-hat beams; the walk and "
+                         "volpath beams are Gaussian", field="--beam-profile",
+                         value=args.beam_profile)
     options = dict(size=args.size, pixel_size_mm=pixel, incident_px=args.incident,
                    side=args.side, thickness_mm=args.thickness,
                    beam_radius_mm=beam, camera=camera, seed=args.seed,
@@ -148,7 +155,7 @@ def run(args) -> int:
         detail = (f"{int(args.photons)} photons per channel in {tally.seconds:.1f} s, "
                   f"total reflectance {tally.total_reflectance.round(4).tolist()}")
     else:
-        stored, spec = dipole_capture(material, **options)
+        stored, spec = dipole_capture(material, beam_profile=args.beam_profile, **options)
         detail = "exact dipole model"
     from ...fitting.capture import write_capture
 

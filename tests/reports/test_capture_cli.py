@@ -48,3 +48,17 @@ def test_pass_spp_0_is_refused_not_replaced_by_the_default(tmp_path, capsys):
                  "--pass-spp", "0", "--out", str(tmp_path / "c.json")])
     assert code == 2
     assert "pass_spp = 0: must be an integer >= 1" in capsys.readouterr().err
+
+
+def test_capture_top_hat_beam(tmp_path):
+    import json
+
+    out = tmp_path / "th.json"
+    assert main(["capture", "skin1", "--generator", "dipole", "--beam-profile", "top_hat",
+                 "--beam-radius", "1", "--size", "24", "--pixel-size", "0.3",
+                 "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["beam_profile"] == "top_hat" and data["beam_radius_mm"] == 1.0
+    assert main(["capture", "skin1", "--beam-profile", "top_hat",
+                 "--out", str(tmp_path / "walk.json")]) == 2
+    assert not (tmp_path / "walk.json").exists()
