@@ -95,7 +95,9 @@ def mitsuba():
     Raises
     ------
     InputError
-        When ``TRANSLUCENT_VARIANT`` names a variant this Mitsuba does not have.
+        When ``TRANSLUCENT_VARIANT`` names a variant this Mitsuba does not have, or one
+        this machine cannot run (a CUDA variant without a usable GPU, an LLVM variant
+        without a working libLLVM).
     """
     configure_libllvm()
     import mitsuba as mi
@@ -105,7 +107,20 @@ def mitsuba():
         if requested not in mi.variants():
             raise InputError(f"not a Mitsuba variant here; available: {', '.join(mi.variants())}",
                              field="TRANSLUCENT_VARIANT", value=requested)
-        mi.set_variant(requested)
+        if requested.startswith("cuda") and not _gpu_usable():
+            raise InputError("this machine has no usable CUDA GPU; unset it to let the suite "
+                             "choose (llvm_ad_rgb on the CPU)", field="TRANSLUCENT_VARIANT",
+                             value=requested)
+        try:
+            mi.set_variant(requested)
+            if not requested.startswith("scalar"):
+                mi.Float(1.0) + 1.0  # noqa: B018
+                import drjit as dr
+
+                dr.eval()
+        except Exception as error:  # the backend's library missing or unable to compile
+            raise InputError(f"Mitsuba cannot run this variant here ({error})",
+                             field="TRANSLUCENT_VARIANT", value=requested) from error
         return mi
     for name in VARIANT_ORDER:
         if name not in mi.variants():

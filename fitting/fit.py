@@ -480,6 +480,10 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
     seed = _checked_seed(seed)
     capture = read_capture(path)
     profile = measure_profile(capture, r_min_mm=options.pop("r_min_mm", 0.0) or 0.0)
+    if "subedit" in models:  # its options checked before any fit writes anything
+        SubEditModel(profile, capture.spec,
+                     **{k: options[k] for k in ("segments", "r_s_mm", "smoothness")
+                        if options.get(k) is not None})
     if out_dir is not None:  # before the chains run, not after; not for a refused capture
         out_dir = output_folder(out_dir)
     results = {}

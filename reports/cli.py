@@ -79,8 +79,20 @@ def _command_end(parser: argparse.ArgumentParser, argv: list[str]) -> int:
         parser = choices[argv[names[0]]]
 
 
+class Terminated(Exception):
+    """SIGTERM, raised where the program is so that temporary files are cleaned up."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; return the exit code."""
+    """Run the command line; return the exit code.
+
+    Ctrl-C (SIGINT) and SIGTERM unwind the command, so that its temporary files are removed
+    and nothing half-written is left, and end it with one line and exit code 130 / 143.
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     text = os.environ.get("TRANSLUCENT_OPTIONS", "")
     try:
@@ -101,11 +113,26 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "run", None):
         parser.print_help()
         return 2
+    import signal
+    import threading
+
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return int(args.run(args) or 0)
     except InputError as error:
         print(f"translucent {args.command}: error: {error}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"translucent {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Terminated:
+        print(f"translucent {args.command}: terminated", file=sys.stderr)
+        return 143
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

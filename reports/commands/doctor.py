@@ -2,7 +2,9 @@
 
 Python, Mitsuba and Dr.Jit versions, the variant chosen, the libLLVM path, whether a GPU
 is usable (by Mitsuba, and by numba.cuda for the splatting backend ``cuda``), and the cache
-folder.
+folder. A setting the machine cannot honour (``TRANSLUCENT_VARIANT`` naming a variant
+that cannot run here, a ``TRANSLUCENT_CACHE`` that cannot be written) is reported on its
+line and makes the exit code 1.
 """
 
 from __future__ import annotations
@@ -12,16 +14,41 @@ def add_arguments(parser):
     """No options."""
 
 
-def run(args) -> int:
-    """Print one ``key: value`` line per fact."""
-    from ...backend import backend_facts
+def _cache_state() -> tuple[str, bool]:
+    """Return the cache folder and whether an entry can be written there."""
+    import tempfile
+
     from ...cache import cache_dir
+
+    folder = cache_dir()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".doctor-"):
+            pass
+    except OSError as error:
+        return (f"{folder} (NOT WRITABLE: {error.strerror or error}; set TRANSLUCENT_CACHE "
+                "to a writable folder)"), False
+    return str(folder), True
+
+
+def run(args) -> int:
+    """Print one ``key: value`` line per fact; 1 when a setting cannot be honoured."""
+    import sys
+
+    from ...backend import backend_facts
+    from ...errors import InputError
     from ...fast.splatting_cuda import available
 
-    facts = backend_facts()
+    status = 0
+    try:
+        facts = backend_facts()
+    except InputError as error:
+        facts = {"python": sys.version.split()[0], "variant": f"UNUSABLE: {error}"}
+        status = 1
     facts["numba.cuda"] = "usable" if available() else "not usable"
-    facts["cache"] = str(cache_dir())
+    facts["cache"], writable = _cache_state()
+    status = max(status, 0 if writable else 1)
     width = max(len(key) for key in facts)
     for key, value in facts.items():
         print(f"{key:<{width}}  {value}")
-    return 0
+    return status

@@ -60,12 +60,8 @@ def add_arguments(parser):
 
 def run(args) -> int:
     """Load the scene, render the reference (or take it from the cache), write the EXR."""
-    import sys
-
-    from ...reference import render
-    from ...reference.render import check_noise_target, render_to_target
+    from ...reference.render import check_noise_target
     from ...scenes import load_scene
-    from .compare import noise_warning
 
     progressive = args.target_rse is not None
     if not progressive:
@@ -84,7 +80,36 @@ def run(args) -> int:
     out = check_output_file(args.out or f"{scene.name}_reference.exr", "--out",
                             what="a file name ending in .exr")
     # before rendering: a folder that cannot be made would lose the whole render
+    created = _missing_folders(out.parent)
     make_output_folder(out.parent, field="--out", value=str(out), what="the output folder")
+    try:
+        return _render_and_write(args, scene, out, progressive)
+    except BaseException:
+        for folder in created:  # a refused or interrupted render leaves no empty folder
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
+
+
+def _missing_folders(folder: Path) -> list[Path]:
+    """Return the folders ``folder`` needs created, deepest first."""
+    missing = []
+    folder = folder.absolute()
+    while not folder.exists():
+        missing.append(folder)
+        folder = folder.parent
+    return missing
+
+
+def _render_and_write(args, scene, out: Path, progressive: bool) -> int:
+    import sys
+
+    from ...reference import render
+    from ...reference.render import render_to_target
+    from .compare import noise_warning
+
     common = dict(spp=args.spp, seed=args.seed, integrator=args.integrator,
                   per_channel=args.per_channel, cache=not args.no_cache,
                   progress=not args.no_progress)

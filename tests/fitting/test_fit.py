@@ -304,3 +304,15 @@ def test_a_capture_refused_by_the_profile_leaves_no_output_folder(tmp_path):
     with pytest.raises(InputError, match="no channel has 4 usable annuli"):
         fit_capture(sidecar, out_dir=tmp_path / "fit", r_min_mm=1000.0)
     assert not (tmp_path / "fit").exists()
+
+
+@pytest.mark.parametrize("option", [["--segments", "0"], ["--smoothness", "-1"]])
+def test_bad_subedit_options_stop_both_fits_before_any_output(tmp_path, capsys, option):
+    sidecar = tmp_path / "skin.json"
+    assert main(["capture", "skin1", "--generator", "dipole", "--size", "32", "--seed", "1",
+                 "--out", str(sidecar), "--pixel-size", "0.3"]) == 0
+    out = tmp_path / "fit"
+    assert main(["fit", str(sidecar), "--model", "both", "--no-progress", "--out", str(out),
+                 *option]) == 2
+    assert not out.exists()
+    assert option[0].lstrip("-") in capsys.readouterr().err

@@ -1,5 +1,6 @@
 """The ``translucent`` entry point: exit codes and ``TRANSLUCENT_OPTIONS``."""
 
+import pytest
 from translucent.reports.bench import prt as bench_prt
 from translucent.reports.cli import main
 
@@ -37,3 +38,58 @@ def test_unbalanced_quotes_in_the_environment_are_bad_usage(monkeypatch, capsys)
     monkeypatch.setenv("TRANSLUCENT_OPTIONS", '--show "sphere')
     assert main(["scenes"]) == 2
     assert "TRANSLUCENT_OPTIONS" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- signals, variants
+
+
+def _translucent(*arguments, env=None, **options):
+    import os
+    import subprocess
+    import sys
+
+    environment = {**os.environ, **(env or {})}
+    return subprocess.Popen([sys.executable, "-m", "translucent.reports.cli", *arguments],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=environment, **options)
+
+
+@pytest.mark.parametrize("signal_name, code, word", [("SIGINT", 130, "interrupted"),
+                                                      ("SIGTERM", 143, "terminated")])
+def test_a_signal_ends_a_render_with_one_line_and_nothing_left(tmp_path, signal_name, code,
+                                                               word):
+    import signal
+    import time
+
+    out = tmp_path / "new" / "glossy.exr"
+    process = _translucent("render", "glossy", "--spp", "256", "--passes", "400",
+                           "--no-cache", "--no-progress", "-o", str(out))
+    time.sleep(6.0)  # into the render
+    process.send_signal(getattr(signal, signal_name))
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == code, err
+    assert err.strip().endswith(f"translucent render: {word}"), err
+    assert "Traceback" not in err
+    assert not (tmp_path / "new").exists()
+
+
+def test_an_unusable_variant_is_an_input_error_and_doctor_reports_it(tmp_path):
+    env = {"TRANSLUCENT_VARIANT": "cuda_ad_rgb"}
+    process = _translucent("render", "glossy", "--spp", "1", "--passes", "2",
+                           "-o", str(tmp_path / "v" / "x.exr"), env=env)
+    _, err = process.communicate(timeout=120)
+    if "usable" not in err:
+        pytest.skip("this machine has a usable CUDA GPU")
+    assert process.returncode == 2 and "TRANSLUCENT_VARIANT = 'cuda_ad_rgb'" in err
+    assert not (tmp_path / "v").exists()
+    doctor = _translucent("doctor", env=env)
+    out, err = doctor.communicate(timeout=120)
+    assert doctor.returncode == 1 and "UNUSABLE" in out and "Traceback" not in err
+
+
+def test_doctor_reports_an_unwritable_cache(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    doctor = _translucent("doctor", env={"TRANSLUCENT_CACHE": str(blocker / "cache")})
+    out, _ = doctor.communicate(timeout=120)
+    assert doctor.returncode == 1 and "NOT WRITABLE" in out
