@@ -238,7 +238,8 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
                          f"error maps in {folder}")
 
 
-def assert_render_consistent(test, reference_mean, reference_variance, spp: int | None = None,
+def assert_render_consistent(test, reference_mean, reference_variance=None,
+                             spp: int | None = None,
                              *, significance: float | None = None,
                              required_fraction: float | None = None, artifacts=None,
                              name: str | None = None):
@@ -253,9 +254,11 @@ def assert_render_consistent(test, reference_mean, reference_variance, spp: int 
         The render judged: a mean of ``spp`` samples per pixel.
     reference_mean : Image, array_like or path
         The converged reference.
-    reference_variance : Image, array_like or path
+    reference_variance : Image, array_like or path, optional
         The reference's per-sample variance (radiance squared), not the variance of its
-        mean.
+        mean. Default: from ``reference_mean`` itself, a reference written by the suite
+        (``translucent render``, a committed reference): its stored variance of the mean
+        times its samples per pixel (``spp x passes`` of its metadata).
     spp : int, optional
         Samples per pixel of ``test``; default ``test.metadata["spp"]``.
     significance, required_fraction : float, optional
@@ -286,11 +289,11 @@ def assert_render_consistent(test, reference_mean, reference_variance, spp: int 
             raise TypeError("assert_render_consistent needs spp= (the test image's "
                             "metadata has no 'spp')")
     reference_image = _as_image(reference_mean, "reference_mean")
-    variance_image = _as_image(reference_variance, "reference_variance")
+    per_sample = _per_sample_variance(reference_image, reference_variance)
     options = {key: value for key, value in (("significance", significance),
                                              ("required_fraction", required_fraction))
                if value is not None}
-    result = z_test(test_image.rgb, reference_image.rgb, variance_image.rgb, spp, **options)
+    result = z_test(test_image.rgb, reference_image.rgb, per_sample, spp, **options)
     if result.passed:
         return result
     from .error_maps import write_z_test_maps
@@ -299,6 +302,38 @@ def assert_render_consistent(test, reference_mean, reference_variance, spp: int 
     folder = _new_folder(parent, name or "z-test")
     write_z_test_maps(result, folder, test=test_image, reference=reference_image)
     raise AssertionError(f"{result.summary()}; p-value image and maps in {folder}")
+
+
+def _per_sample_variance(reference, reference_variance) -> np.ndarray:
+    """Return the reference's per-sample variance: given, or from its stored variance."""
+    from ..errors import InputError
+
+    if reference_variance is None:
+        samples = (reference.metadata.get("spp"), reference.metadata.get("passes"))
+        if reference.variance is None or not all(isinstance(n, int) and n > 0
+                                                 for n in samples):
+            raise InputError("give reference_variance (the per-sample variance), or a "
+                             "reference whose file holds its variance of the mean and its "
+                             "spp and passes (as translucent render writes it)",
+                             field="reference_variance", value=None)
+        return reference.variance.astype(np.float64) * samples[0] * samples[1]
+    if reference_variance is reference or (
+            isinstance(reference_variance, np.ndarray)
+            and np.shares_memory(reference_variance, reference.rgb)):
+        raise InputError("is the reference image itself, not a variance",
+                         field="reference_variance", value="the reference")
+    variance = _as_image(reference_variance, "reference_variance")
+    if variance.variance is not None or variance.metadata.get("producer") == "reference":
+        # a reference EXR holds radiance in R, G, B: taken as a variance, every test passes
+        raise InputError("is a reference image (radiance, with variance channels of its "
+                         "own), not a per-sample variance; pass the reference as "
+                         "reference_mean and leave reference_variance out to use its "
+                         "stored variance", field="reference_variance",
+                         value=variance.metadata.get("scene", "an image"))
+    if np.array_equal(variance.rgb, reference.rgb):
+        raise InputError("equals the reference's radiance, not a variance",
+                         field="reference_variance", value="the reference's pixels")
+    return variance.rgb
 
 
 class ImageChecks:
@@ -321,7 +356,7 @@ class ImageChecks:
         return assert_image_close(test, reference, metric, max, min, artifacts=self.artifacts,
                                   name=name)
 
-    def assert_render_consistent(self, test, reference_mean, reference_variance,
+    def assert_render_consistent(self, test, reference_mean, reference_variance=None,
                                  spp: int | None = None, *, name: str | None = None, **options):
         """Run :func:`assert_render_consistent` with this test's artifacts folder."""
         __tracebackhide__ = True

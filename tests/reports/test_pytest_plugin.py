@@ -223,3 +223,34 @@ def test_a_relative_artifacts_folder_is_taken_from_where_pytest_was_started(
     monkeypatch.chdir(tmp_path)  # a test that moves into another folder
     started = Path(pytestconfig.invocation_params.dir)
     assert artifacts_root(pytestconfig) == (started / "arts").resolve()
+
+
+def _reference_with_variance(rng, spp=64, passes=16):
+    mean = gradient(32, 32).astype(np.float64)
+    per_sample = 0.5 * mean  # the per-sample variance of the estimator
+    variance_of_mean = per_sample / (spp * passes)
+    noisy = mean + np.sqrt(variance_of_mean) * rng.standard_normal(mean.shape)
+    return mean, per_sample, Image(noisy, variance_of_mean,
+                                   {"producer": "reference", "spp": spp, "passes": passes})
+
+
+def test_render_consistency_reads_the_variance_a_reference_file_stores(rng, tmp_path):
+    mean, per_sample, reference = _reference_with_variance(rng)
+    reference.write(tmp_path / "ref.exr")
+    honest = Image(mean + np.sqrt(per_sample / 1024) * rng.standard_normal(mean.shape),
+                   metadata={"spp": 1024})
+    assert assert_render_consistent(honest, tmp_path / "ref.exr").passed
+    biased = Image(honest.rgb * 1.2, metadata={"spp": 1024})
+    with pytest.raises(AssertionError, match="z-test FAILED"):
+        assert_render_consistent(biased, tmp_path / "ref.exr", artifacts=tmp_path / "a")
+
+
+def test_a_reference_passed_as_its_own_variance_is_refused(rng, tmp_path):
+    _, _, reference = _reference_with_variance(rng)
+    reference.write(tmp_path / "ref.exr")
+    test = Image(reference.rgb, metadata={"spp": 16})
+    for variance in (tmp_path / "ref.exr", reference, reference.rgb):
+        with pytest.raises(InputError, match="reference_variance"):
+            assert_render_consistent(test, reference, variance)
+    with pytest.raises(InputError, match="give reference_variance"):
+        assert_render_consistent(test, Image(reference.rgb))  # no stored variance
