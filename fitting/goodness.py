@@ -305,18 +305,9 @@ class DiscrepancyModel(ProfileModel):
         f = np.exp(ln_f[:, self.channels.index(channel)])[:, None]
         return np.sqrt(stderr**2 + (f * predicted) ** 2)
 
-    def log_likelihood(self, theta):
-        """Student-t log-likelihood with the inflated scales, normalisation included."""
-        theta = np.atleast_2d(np.asarray(theta, dtype=np.float64))
-        total = np.zeros(theta.shape[0])
-        for c, predicted in enumerate(self.predictions(theta)):
-            if predicted is None:
-                continue
-            mean, stderr, dof = self._observations[c]
-            scale = self.residual_scale(c, stderr, predicted, theta)
-            t2 = ((mean - predicted) / scale) ** 2
-            total += np.sum(-0.5 * (dof + 1.0) * np.log1p(t2 / dof) - np.log(scale), axis=-1)
-        return np.where(np.isfinite(total), total, -np.inf)
+    def scale_normalisation(self, scale):
+        """Return ``sum(ln scale)`` per row: the inflated scale varies with ``ln f``."""
+        return np.sum(np.log(scale), axis=-1)
 
     def _ln_f_start(self, base_theta):
         predicted = self.base.predictions(base_theta[None, :])

@@ -182,15 +182,28 @@ class ProfileModel:
         return self.profile.operator.predict(self.profile_nodes(theta), channels=self.channels)
 
     def log_likelihood(self, theta) -> np.ndarray:
-        """Student-t log-likelihood of the measured annulus means, shape (n,)."""
+        """Student-t log-likelihood of the measured annulus means, shape (n,).
+
+        The scale of each annulus is :meth:`residual_scale`; where it depends on the
+        parameters, its normalisation (:meth:`scale_normalisation`) enters too.
+        """
         theta = np.atleast_2d(np.asarray(theta, dtype=np.float64))
         total = np.zeros(theta.shape[0])
         for c, predicted in enumerate(self.predictions(theta)):
             if predicted is None:
                 continue
             mean, stderr, dof = self._observations[c]
-            total += student_t_log_likelihood(mean - predicted, stderr, dof)
+            scale = self.residual_scale(c, stderr, predicted, theta)
+            total += student_t_log_likelihood(mean - predicted, scale, dof) \
+                - self.scale_normalisation(scale)
         return np.where(np.isfinite(total), total, -np.inf)
+
+    def scale_normalisation(self, scale) -> np.ndarray | float:
+        """Return ``sum(ln scale)`` per row where the scale varies with the parameters.
+
+        The standard errors alone are fixed, so their normalisation is a constant: 0.
+        """
+        return 0.0
 
     def in_bounds(self, theta) -> np.ndarray:
         """Tell, per row, whether every coordinate lies within the prior box, shape (n,)."""
