@@ -1367,16 +1367,19 @@ def _html(reports: list[SceneReport], chosen: list[str], context: dict) -> str:
         checks = [check for report in reports for check in report.checks.values()]
         compared = sum(check.status in ("ok", "improved") for check in checks)
         unmatched = sum(check.status == "no baseline" for check in checks)
+        other = sum(check.status == "not compared" for check in checks)
+        reasons = ", ".join(filter(None, [
+            f"{unmatched} result(s) had no baseline entry" if unmatched else "",
+            f"{other} were made against another reference" if other else ""]))
         baseline = f"<code>{_e(context['baseline'])}</code>"
         if compared:
-            extra = (f"; {unmatched} result(s) had no baseline entry to compare with"
-                     if unmatched else "")
+            extra = f"; {reasons}" if reasons else ""
             parts.append(f'<p class="verdict ok">No regression in the {compared} result(s) '
                          f"compared with the baseline {baseline}{extra}{rewritten}.</p>")
         else:
             parts.append(f'<p class="verdict fail">Nothing was compared with the baseline '
-                         f"{baseline}: it has no entry for these scenes and methods"
-                         f"{rewritten}; no regression can be told.</p>")
+                         f"{baseline} ({reasons or 'no result to compare'}){rewritten}; no "
+                         "regression can be told.</p>")
     parts.append(_summary_table(reports, chosen))
     parts.append(_legend(MAP_STYLES))
     if context["excluded"]:
