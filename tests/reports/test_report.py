@@ -216,6 +216,7 @@ def test_every_metric_comes_with_its_noise_floor_and_verdict(tiny):
 def test_a_scene_without_committed_reference_is_rendered_to_a_noise_target(tmp_path,
                                                                              monkeypatch):
     monkeypatch.setattr(report_module, "DEFAULT_TARGET_RSE", 0.5)
+    monkeypatch.setattr(report_module, "DEFAULT_REFERENCE_BUDGET", 3.0)
     monkeypatch.setattr(report_module, "PROGRESSIVE_SPP", 4)
     scene_path = _tiny_scene(tmp_path)
     result = make_report([str(scene_path)], tmp_path / "r", methods=["brdf_pca"],
