@@ -36,7 +36,7 @@ import numpy as np
 from ..errors import InputError
 from ..image import Image
 
-__all__ = ["ZTestResult", "z_test", "z_test_known_variance", "sidak_alpha"]
+__all__ = ["ZTestResult", "block_means", "z_test", "z_test_known_variance", "sidak_alpha"]
 
 #: Family-wise significance of the whole image (Mitsuba 3's render tests).
 SIGNIFICANCE = 0.01
@@ -309,3 +309,47 @@ def z_test_known_variance(first: Image, second: Image, *, passes=None,
     with np.errstate(divide="ignore", invalid="ignore"):
         nu = np.where(spread > 0, (first_variance + second_variance) ** 2 / spread, np.inf)
     return _result(z, significance, required_fraction, nu)
+
+
+def block_means(image: Image, size: int = 8) -> Image:
+    r"""Average an image with its variance over ``size x size`` blocks, for a coarser z-test.
+
+    A per-pixel test needs each pixel's variance, estimated from a few passes, to be
+    right. Where paths are heavy-tailed (long random walks in a high-albedo medium) a
+    render of a few samples per pixel mostly misses the rare bright paths: its per-pixel
+    variance estimate is then too small more often than not, and an honest render fails
+    the per-pixel test (measured: the built-in sphere at 4 spp x 8 passes against its
+    committed reference, 95.6 % of pixel channels accepted where 99.75 % are needed, with
+    the two means 0.3 % apart). Block means average ``size**2`` independent pixels: their
+    distribution is nearly normal and the summed variance estimate nearly exact, while a
+    drift of the image as a whole still shows (the block's standard error is ``size``
+    times smaller than a pixel's).
+
+    Parameters
+    ----------
+    image : Image
+        With ``variance`` (of the mean, per pixel).
+    size : int
+        Block edge, pixels; a partial block at the right or bottom edge is dropped.
+
+    Returns
+    -------
+    Image
+        ``(H // size) x (W // size)``: block means, their variance
+        (:math:`\sum v / n^2`) and the image's metadata.
+    """
+    if not isinstance(image, Image) or image.variance is None:
+        raise InputError("needs an Image with its variance of the mean", field="image",
+                         value=type(image).__name__)
+    size = int(size)
+    height, width = image.shape[0] // size, image.shape[1] // size
+    if size < 1 or height < 1 or width < 1:
+        raise InputError(f"must be >= 1 and at most the image's size {image.shape}",
+                         field="size", value=size)
+
+    def reduce(array):
+        blocks = np.asarray(array, dtype=np.float64)[: height * size, : width * size]
+        return blocks.reshape(height, size, width, size, 3).sum(axis=(1, 3))
+
+    return Image(reduce(image.rgb) / size**2, reduce(image.variance) / size**4,
+                 dict(image.metadata))

@@ -2,9 +2,17 @@
 
 The consistency check renders each scene afresh at a few samples per pixel (other seeds)
 and asks the suite's own two-sample z-test (Welch's t for estimated variances, Sidak
-correction, 99.75 % of pixel channels accepted) whether both estimate the same image: a
-changed scene converter, integrator or Mitsuba cannot drift from the committed truth
-unnoticed.
+correction, 99.75 % of channels accepted) whether both estimate the same image, on 8 x 8
+pixel blocks (:func:`~translucent.reports.statistics.block_means`): per pixel, the heavy
+tails of a few-spp render of a high-albedo medium fail honest renders. Blocks are judged
+where at least half their pixels are lit (:func:`~translucent.noise.lit_mask`): in a dark
+block a few-spp render often sees no light path at all, so its variance estimate is 0 and
+any light in the reference looks like a 10-sigma difference (measured on the sphere). A
+second check sums the differences over every lit pixel, per channel (independent pixels:
+their variances add) and asks for |z| < :data:`GLOBAL_Z`: it sees a drift of the image as
+a whole that no single block resolves (measured at these spp: honest renders |z| <= 1.2;
+a reference 2 % too bright z = 3.7-41, 5 % too bright 9.6-105). A changed scene
+converter, integrator or Mitsuba cannot drift from the committed truth unnoticed.
 """
 
 import dataclasses
@@ -15,7 +23,7 @@ import pytest
 from translucent.cache import content_hash
 from translucent.errors import InputError
 from translucent.image import Image, read_exr
-from translucent.noise import noise_summary
+from translucent.noise import lit_mask, noise_summary
 from translucent.reference import committed as committed_module
 from translucent.reference.committed import (
     PLANS,
@@ -25,7 +33,7 @@ from translucent.reference.committed import (
 )
 from translucent.reference.render import render
 from translucent.reports.cli import main
-from translucent.reports.statistics import z_test_known_variance
+from translucent.reports.statistics import block_means, z_test_known_variance
 from translucent.scenes import load_scene
 
 NAMES = list(PLANS)
@@ -55,13 +63,44 @@ def test_committed_reference_meets_its_noise_target(name):
     assert summary.p99 <= plan.target_p99_rse, summary.text()
 
 
+BLOCK = 8
+
+#: Largest accepted |z| of the summed differences of a channel: a two-sided p of 6e-5.
+GLOBAL_Z = 4.0
+
+
+def _global_z(fresh, committed) -> np.ndarray:
+    """z of the summed differences over the reference's lit pixels, per channel."""
+    lit = lit_mask(committed.rgb)
+    difference = (fresh.rgb[lit].astype(float) - committed.rgb[lit]).sum(axis=0)
+    variance = (fresh.variance[lit].astype(float) + committed.variance[lit]).sum(axis=0)
+    return difference / np.sqrt(variance)
+
+
+def _consistent(fresh, committed):
+    """The block z-test of a fresh render against a reference, on the lit blocks."""
+    fresh_blocks, committed_blocks = block_means(fresh, BLOCK), block_means(committed, BLOCK)
+    lit = lit_mask(committed.rgb).astype(float)[..., None].repeat(3, axis=2)
+    judged = block_means(Image(lit, np.zeros_like(lit)), BLOCK).rgb >= 0.5
+    assert judged.any()
+    # an unjudged block is made equal in both: it is accepted and tells nothing
+    fresh_blocks = Image(np.where(judged, fresh_blocks.rgb, committed_blocks.rgb),
+                         np.where(judged, fresh_blocks.variance, 0.0), fresh.metadata)
+    return z_test_known_variance(fresh_blocks, committed_blocks)
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_a_fresh_render_is_consistent_with_the_committed_reference(name):
     committed = committed_reference(name).require()
     fresh = render(load_scene(name), spp=FRESH_SPP[name], passes=8, seed=1, cache=False,
                    progress=False, integrator=PLANS[name].integrator)
-    result = z_test_known_variance(fresh, committed)
+    result = _consistent(fresh, committed)
     assert result.passed, f"{name}: {result.summary()}"
+    z = _global_z(fresh, committed)
+    assert np.abs(z).max() < GLOBAL_Z, f"{name}: summed differences at z = {z}"
+    # the check can fail: the same render against a reference 5 % too bright
+    drifted = Image(1.05 * committed.rgb, 1.05**2 * committed.variance, committed.metadata)
+    assert np.abs(_global_z(fresh, drifted)).min() > GLOBAL_Z
 
 
 def _stale(scene):
@@ -166,11 +205,3 @@ def test_report_refuses_a_stale_committed_reference(reference_folder, tmp_path):
                     progress=False)
     assert "stale" in str(caught.value) and rerender_command("glossy") in str(caught.value)
     assert not (tmp_path / "report").exists()
-
-
-def test_the_consistency_check_sees_a_five_percent_drift():
-    committed = committed_reference("glossy").require()
-    fresh = render(load_scene("glossy"), spp=FRESH_SPP["glossy"], passes=8, seed=1,
-                   cache=False, progress=False)
-    drifted = Image(1.05 * committed.rgb, 1.05**2 * committed.variance, committed.metadata)
-    assert not z_test_known_variance(fresh, drifted).passed
