@@ -241,3 +241,19 @@ def test_pass_counts_must_be_at_least_two():
     image = Image(np.ones((4, 4, 3)), np.ones((4, 4, 3)), metadata={"passes": 1})
     with pytest.raises(InputError, match="first passes = 1: an estimated variance needs"):
         z_test_known_variance(image, image)
+
+
+def test_block_means_average_pixels_and_their_variances():
+    from translucent.reports.statistics import block_means
+
+    rgb = np.arange(8 * 6 * 3, dtype=float).reshape(8, 6, 3)
+    variance = np.full((8, 6, 3), 4.0)
+    blocks = block_means(Image(rgb, variance, {"passes": 5}), 2)
+    assert blocks.shape == (4, 3) and blocks.metadata["passes"] == 5
+    np.testing.assert_allclose(blocks.rgb[0, 0], rgb[:2, :2].mean(axis=(0, 1)))
+    np.testing.assert_allclose(blocks.variance, 1.0)  # 4 pixels of variance 4: 4 * 4 / 16
+    assert block_means(Image(rgb, variance), 5).shape == (1, 1)  # partial blocks dropped
+    with pytest.raises(InputError, match="variance"):
+        block_means(Image(rgb), 2)
+    with pytest.raises(InputError, match="size"):
+        block_means(Image(rgb, variance), 9)
