@@ -1364,7 +1364,9 @@ def _html(reports: list[SceneReport], chosen: list[str], context: dict) -> str:
                      + "</ul>")
     else:
         rewritten = " (baseline rewritten from this run)" if context["baseline_updated"] else ""
-        checks = [check for report in reports for check in report.checks.values()]
+        # the results with metrics: a method that did not apply has nothing to compare
+        checks = [check for report in reports for name, check in report.checks.items()
+                  if name in report.metrics]
         compared = sum(check.status in ("ok", "improved") for check in checks)
         unmatched = sum(check.status == "no baseline" for check in checks)
         other = sum(check.status == "not compared" for check in checks)
@@ -1449,7 +1451,7 @@ def _scene_section(report: SceneReport, chosen: list[str]) -> str:
         meta = report.reference.metadata
         caption = (f"reference: {meta.get('integrator', '?')}, {meta.get('spp')} spp x "
                    f"{meta.get('passes')} passes, rendered in {_seconds(meta.get('seconds'))}"
-                   f"{' (from the cache)' if report.reference_cached else ''}")
+                   f"{_reference_origin(report)}")
         parts.append('<div class=row>' + _figure(report.files["reference"]["png"], caption,
                                                  css="reference") + "</div>")
         for sentence in meta.get("substitutions") or []:
@@ -1489,6 +1491,12 @@ def _scene_section(report: SceneReport, chosen: list[str]) -> str:
         parts.append("<h3>Methods not run on this scene</h3><ul>" + "".join(not_run) + "</ul>")
     parts.append("</section>")
     return "\n".join(parts)
+
+
+def _reference_origin(report: SceneReport) -> str:
+    if report.reference_source == "committed":
+        return " (committed with the suite)"
+    return " (from the cache)" if report.reference_cached else ""
 
 
 def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
