@@ -48,7 +48,7 @@ def add_arguments(parser):
                              "committed references (`translucent references`; a stale one "
                              "is an error), and other scenes rendered progressively, "
                              f"{PROGRESSIVE_SPP} spp a pass, to a median relative standard "
-                             f"error of {100 * DEFAULT_TARGET_RSE:g} % or for at most "
+                             f"error of {100 * DEFAULT_TARGET_RSE:g} %% or for at most "
                              f"{DEFAULT_REFERENCE_BUDGET:g} s, whichever comes first")
     parser.add_argument("--passes", type=int, default=DEFAULT_PASSES,
                         help=f"independent reference passes with --spp (default "

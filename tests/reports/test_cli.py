@@ -93,3 +93,24 @@ def test_doctor_reports_an_unwritable_cache(tmp_path):
     doctor = _translucent("doctor", env={"TRANSLUCENT_CACHE": str(blocker / "cache")})
     out, _ = doctor.communicate(timeout=120)
     assert doctor.returncode == 1 and "NOT WRITABLE" in out
+
+
+def _command_paths(parser, prefix=()):
+    import argparse
+
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield (*prefix, name)
+                yield from _command_paths(sub, (*prefix, name))
+
+
+def test_every_command_prints_its_help(capsys):
+    """A '%' in a help text is a format directive to argparse: --help must never crash."""
+    from translucent.reports.cli import _build_parser
+
+    paths = list(_command_paths(_build_parser()))
+    assert ("report",) in paths and ("bench", "prt") in paths and ("approx", "prt") in paths
+    for path in paths:
+        assert main([*path, "--help"]) == 0, path
+        assert "usage: translucent" in capsys.readouterr().out, path
