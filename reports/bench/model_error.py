@@ -299,7 +299,7 @@ def measure_medium(scene, medium: Dipole, methods=METHODS, *, spp: int = DEFAULT
         :func:`reference_noise`), ``methods`` (per method: status, reason, seconds and
         :func:`object_metrics`, ``dominated_by`` "model" or "noise"), ``image``.
     """
-    from ..report import run_method
+    from ..runs import run_method
 
     method_medium = medium if method_medium is None else method_medium
     mask = object_mask(scene) if mask is None else mask
@@ -355,7 +355,7 @@ def _check(size: int, spp: int, passes: int, methods, eta: float) -> tuple:
 
 
 def _context(scene, mask, size, spp, passes, methods, eta, media) -> dict:
-    from ..report import backend_versions
+    from ..runs import backend_versions
 
     boundary = ("index-matched (eta = 1): the boundary neither refracts nor reflects, in the "
                 "reference and in the dipole" if eta == 1.0 else
@@ -422,7 +422,7 @@ def markdown(result: dict) -> str:
 
 
 def _write(result: dict, json_path: Path, markdown_path: Path) -> None:
-    from ..report import json_safe
+    from ..runs import json_safe
 
     atomic_write_text(json_path, json.dumps(json_safe(result), indent=2) + "\n")
     atomic_write_text(markdown_path, markdown(result))

@@ -206,7 +206,7 @@ def path_tracing_point(scene, spp: int, seed: int = 1, repeats: int = PATH_TRACI
 
 def _task(kind: str, scene, *arguments):
     """Run one sweep point: the converged reference, a path-traced render or a method run."""
-    from ..report import render_reference, run_method
+    from ..runs import render_reference, run_method
 
     if kind == "reference":
         return render_reference(scene, *arguments)
@@ -348,7 +348,7 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
     from ...fast.base import METHODS, method
     from ...scenes import Scene, load_scene
     from ..distributed import run_tasks
-    from ..report import backend_versions
+    from ..runs import backend_versions
 
     for value, name in ((max_spp, "--max-spp"), (reference_spp, "--reference-spp"),
                         (reference_passes, "--reference-passes")):

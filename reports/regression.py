@@ -1,0 +1,318 @@
+"""Regression against a stored baseline: the gated metrics' tolerances and the checks.
+
+A result is a regression when a gated metric (:data:`TOLERANCES`) is worse than its
+baseline entry beyond the metric's tolerance, or when a baseline entry now has no result.
+:func:`load_baseline` reads and validates a baseline file, :func:`check_against_baseline`
+judges one result, :func:`updated_baseline` writes a run's results into it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import InputError
+from .runs import _now, json_safe
+
+__all__ = ["BASELINE_FORMAT", "DEFAULT_BASELINE", "METRIC_LABELS", "REPORTED_METRICS",
+           "TOLERANCES", "BaselineCheck", "Tolerance", "check_against_baseline",
+           "load_baseline", "updated_baseline"]
+
+#: The committed baseline of the default scenes.
+DEFAULT_BASELINE = Path(__file__).resolve().parent / "baseline" / "default.json"
+
+#: Bumped when the baseline layout changes.
+BASELINE_FORMAT = 1
+
+
+# ====================================================================== tolerances
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """How much worse than its baseline a metric may get before it is a regression.
+
+    A value is a regression when it is worse than the baseline by more than
+    ``absolute + relative * |baseline|`` (worse: higher for errors, lower for SSIM).
+
+    Parameters
+    ----------
+    field : str
+        The :class:`~translucent.reports.metrics.Metrics` attribute.
+    absolute : float
+        Allowed worsening in the metric's units.
+    relative : float
+        Allowed worsening as a fraction of the baseline value.
+    lower_is_better : bool
+        True for errors, False for similarities.
+    """
+
+    field: str
+    absolute: float
+    relative: float
+    lower_is_better: bool = True
+
+    def limit(self, baseline: float) -> float:
+        """Return the worst value still accepted for ``baseline``."""
+        allowed = self.absolute + self.relative * abs(baseline)
+        return baseline + allowed if self.lower_is_better else baseline - allowed
+
+    def is_worse(self, value: float, baseline: float) -> bool:
+        """Return True when ``value`` is worse than ``baseline`` beyond the tolerance (NaN is)."""
+        if not math.isfinite(value):
+            return True
+        limit = self.limit(baseline)
+        return value > limit if self.lower_is_better else value < limit
+
+    def is_better(self, value: float, baseline: float) -> bool:
+        """Return True when ``value`` improved on ``baseline`` by more than the tolerance."""
+        allowed = self.absolute + self.relative * abs(baseline)
+        if not math.isfinite(value):
+            return False
+        return value < baseline - allowed if self.lower_is_better else value > baseline + allowed
+
+
+# The tolerances are about twice the largest change that re-rendering the references alone
+# caused: the default scenes' references were rendered again with another seed (same spp
+# and passes) and every method's image compared with both (measured here, Mitsuba 3.9.1).
+# A regression must exceed what a new reference (another Mitsuba version, another seed)
+# could cause; the noisy references of the bowl and the Cornell box set the scale.
+
+#: HDR-FLIP (0 to 1): 0.005 absolute plus 3 % of the baseline. The largest change measured
+#: was 0.0046 (bowl, radiosity: 1.6 %); the largest relative one 2.5 % (sphere, PRT).
+HDR_FLIP_TOLERANCE = Tolerance("hdr_flip", absolute=0.005, relative=0.03)
+
+#: Relative MSE (dimensionless): 0.001 absolute plus 30 %. The reference's noise is
+#: discounted from it, yet the largest change measured was 0.0033 (bowl, radiosity: 15 %);
+#: on the sphere 0.0004 (6 %).
+RELATIVE_MSE_TOLERANCE = Tolerance("relative_mse", absolute=0.001, relative=0.30)
+
+#: Mean CIEDE2000 (delta E; about 1 is just noticeable): 0.1 absolute plus 15 %. The largest
+#: change measured was 2.0 (Cornell box, PRT, whose walls are black: 7 %); radiosity on the
+#: Cornell box moved 0.28 (7 %).
+CIEDE2000_TOLERANCE = Tolerance("ciede2000", absolute=0.1, relative=0.15)
+
+#: Mean SSIM (1 is identical): 0.03 absolute, no relative part (it is bounded by 1). The
+#: largest change measured was 0.015 (Cornell box, radiosity): reference noise lowers SSIM.
+SSIM_TOLERANCE = Tolerance("ssim", absolute=0.03, relative=0.0, lower_is_better=False)
+
+#: The gated metrics, by :class:`Metrics` field.
+TOLERANCES: dict[str, Tolerance] = {t.field: t for t in (
+    HDR_FLIP_TOLERANCE, RELATIVE_MSE_TOLERANCE, CIEDE2000_TOLERANCE, SSIM_TOLERANCE)}
+
+#: Metrics stored and shown besides the gated ones.
+REPORTED_METRICS = ("hdr_flip", "ldr_flip", "relative_mse", "relative_mse_raw", "rmse",
+                    "psnr", "ssim", "ciede2000")
+
+#: Names shown in the page for each metric field.
+METRIC_LABELS = {"hdr_flip": "HDR-FLIP", "ldr_flip": "LDR-FLIP", "relative_mse": "relMSE",
+                 "relative_mse_raw": "relMSE (raw)", "rmse": "RMSE", "psnr": "PSNR (dB)",
+                 "ssim": "SSIM", "ciede2000": "CIEDE2000"}
+
+
+
+# ====================================================================== baseline
+
+
+def load_baseline(path, *, required: bool = False) -> dict:
+    """Read a baseline file.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The JSON file.
+    required : bool
+        Raise when the file is missing (else an empty baseline is returned).
+
+    Returns
+    -------
+    dict
+        ``{"format": 1, "entries": {scene: {"scene_hash", "reference", "methods":
+        {method: {metric: value}}}}}``.
+
+    Raises
+    ------
+    InputError
+        A folder, a missing file (when required), invalid JSON, an unknown layout or a
+        gated metric that is not a finite number.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError("is a folder; give the baseline's JSON file", file=path,
+                         field="--baseline", value=str(path))
+    if not path.is_file():
+        if required:
+            raise InputError("no such baseline file (run with --update-baseline to create it)",
+                             file=path, field="--baseline", value=str(path))
+        return {"format": BASELINE_FORMAT, "entries": {}}
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise InputError(f"not a readable JSON baseline ({error})", file=path,
+                         field="--baseline") from error
+    if not isinstance(data, dict) or data.get("format") != BASELINE_FORMAT \
+            or not isinstance(data.get("entries"), dict):
+        raise InputError(f"not a baseline of format {BASELINE_FORMAT} (a JSON object with "
+                         f"'format' and 'entries')", file=path, field="format",
+                         value=data.get("format") if isinstance(data, dict) else type(data))
+    for scene_name, entry in data["entries"].items():
+        _check_baseline_entry(path, f"entries.{scene_name}", entry)
+    return data
+
+
+def _check_baseline_entry(path: Path, where: str, entry) -> None:
+    """Refuse an entry the comparison could not read (a hand edit, a foreign file)."""
+    if not isinstance(entry, dict):
+        raise InputError("must be an object with scene_hash, reference and methods",
+                         file=path, field=where, value=entry)
+    for key in ("reference", "methods"):
+        if not isinstance(entry.get(key, {}), dict):
+            raise InputError("must be an object", file=path, field=f"{where}.{key}",
+                             value=entry[key])
+    for method_name, values in entry.get("methods", {}).items():
+        if not isinstance(values, dict):
+            raise InputError("must be an object of metric -> value", file=path,
+                             field=f"{where}.methods.{method_name}", value=values)
+        for metric_name in TOLERANCES:
+            value = values.get(metric_name, 0.0)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value):
+                raise InputError("must be a finite number (a gated metric)", file=path,
+                                 field=f"{where}.methods.{method_name}.{metric_name}",
+                                 value=value)
+
+
+@dataclass(frozen=True)
+class BaselineCheck:
+    """The verdict on one method's metrics against the baseline.
+
+    Parameters
+    ----------
+    status : {"ok", "regression", "improved", "no baseline", "not compared"}
+        "regression" makes the report exit 1.
+    message : str
+        One sentence for the page.
+    metrics : dict of str to dict
+        Per gated metric: ``value``, ``baseline``, ``limit`` and ``verdict`` ("ok",
+        "worse", "better").
+    """
+
+    status: str
+    message: str
+    metrics: dict[str, dict] = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        """Return a JSON-safe dict."""
+        return {"status": self.status, "message": self.message, "metrics": json_safe(self.metrics)}
+
+
+def check_against_baseline(scene_name: str, scene_hash: str, reference: dict, method_name: str,
+                           metrics: dict | None, baseline: dict, *,
+                           failure: str = "") -> BaselineCheck:
+    """Compare one method's metrics on one scene with the baseline.
+
+    Parameters
+    ----------
+    scene_name, method_name : str
+        The pair.
+    scene_hash : str
+        The content hash of the scene: an entry made for another scene of the same name is
+        not compared.
+    reference : dict
+        ``{"spp": ..., "passes": ...}`` of this run's reference: an entry made against
+        another reference is not compared.
+    metrics : dict or None
+        ``Metrics.as_dict()`` of this run; None when the method produced no metrics.
+    baseline : dict
+        From :func:`load_baseline`.
+    failure : str
+        Why there are no metrics (shown when the baseline expected some).
+
+    Returns
+    -------
+    BaselineCheck
+    """
+    entry = baseline.get("entries", {}).get(scene_name)
+    stored = None if entry is None else entry.get("methods", {}).get(method_name)
+    if stored is None:
+        if metrics is None:
+            return BaselineCheck("no baseline", "no result and no baseline entry")
+        return BaselineCheck("no baseline", "no baseline entry for this scene and method "
+                             "(run with --update-baseline to add it)")
+    if entry.get("scene_hash") != scene_hash:
+        return BaselineCheck("not compared", "the baseline was made for another scene of "
+                             "this name (its content hash differs)")
+    made_with = entry.get("reference", {})
+    if any(made_with.get(key) != reference.get(key) for key in ("spp", "passes")):
+        return BaselineCheck("not compared", f"the baseline was made against a reference of "
+                             f"{made_with.get('spp')} spp x {made_with.get('passes')} passes; "
+                             f"this run's has {reference.get('spp')} x "
+                             f"{reference.get('passes')}")
+    if metrics is None:
+        return BaselineCheck("regression", f"the baseline has metrics but this run has none: "
+                             f"{failure or 'no result'}")
+    verdicts: dict[str, dict] = {}
+    for name, tolerance in TOLERANCES.items():
+        if name not in stored:
+            continue
+        value, base = float(metrics[name]), float(stored[name])
+        verdict = ("worse" if tolerance.is_worse(value, base) else
+                   "better" if tolerance.is_better(value, base) else "ok")
+        verdicts[name] = {"value": value, "baseline": base, "limit": tolerance.limit(base),
+                          "verdict": verdict}
+    worse = [METRIC_LABELS[n] for n, v in verdicts.items() if v["verdict"] == "worse"]
+    better = [METRIC_LABELS[n] for n, v in verdicts.items() if v["verdict"] == "better"]
+    if worse:
+        return BaselineCheck("regression", f"worse than the baseline beyond tolerance: "
+                             f"{', '.join(worse)}", verdicts)
+    if better:
+        return BaselineCheck("improved", f"better than the baseline beyond tolerance: "
+                             f"{', '.join(better)} (--update-baseline records it)", verdicts)
+    return BaselineCheck("ok", "within tolerance of the baseline", verdicts)
+
+
+def updated_baseline(baseline: dict, results: list[dict], versions: dict) -> dict:
+    """Return ``baseline`` with this run's scenes replaced by their results.
+
+    Entries of scenes this run did not cover are kept; for a covered scene the entry is
+    rebuilt from the methods that produced metrics (a method that failed or no longer
+    applies loses its entry).
+
+    Parameters
+    ----------
+    baseline : dict
+        From :func:`load_baseline`.
+    results : list of dict
+        Per scene: ``name``, ``scene_hash``, ``reference`` (spp, passes) and ``metrics``
+        ({method: Metrics dict}) of the methods that ran, plus ``methods_run`` (the
+        methods this run asked for).
+    versions : dict
+        Mitsuba, Dr.Jit, variant: recorded for information.
+
+    Returns
+    -------
+    dict
+    """
+    entries = {name: dict(entry) for name, entry in baseline.get("entries", {}).items()}
+    for result in results:
+        previous = entries.get(result["name"], {})
+        methods = {} if previous.get("scene_hash") != result["scene_hash"] else \
+            {name: values for name, values in previous.get("methods", {}).items()
+             if name not in result["methods_run"]}
+        for name, values in result["metrics"].items():
+            methods[name] = {key: json_safe(values[key]) for key in REPORTED_METRICS}
+        entries[result["name"]] = {"scene_hash": result["scene_hash"],
+                                   "reference": dict(result["reference"]),
+                                   "methods": dict(sorted(methods.items()))}
+    return {"format": BASELINE_FORMAT,
+            "note": "image metrics of the fast methods against their references; written by "
+                    "`translucent report --update-baseline`",
+            "updated": _now(), "versions": versions,
+            "tolerances": {name: {"absolute": t.absolute, "relative": t.relative,
+                                  "lower_is_better": t.lower_is_better}
+                           for name, t in TOLERANCES.items()},
+            "entries": dict(sorted(entries.items()))}
+
+

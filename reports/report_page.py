@@ -1,0 +1,320 @@
+"""The report's page: one self-contained HTML file from the scenes' results."""
+
+from __future__ import annotations
+
+import html
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .regression import METRIC_LABELS, REPORTED_METRICS, TOLERANCES, BaselineCheck
+
+if TYPE_CHECKING:  # annotations only: the report imports this module
+    from .report import SceneReport
+    from .runs import MethodRun
+
+__all__ = ["format_seconds", "format_value", "html_page"]
+
+
+def format_value(value, digits: int = 4) -> str:
+    """Return a metric for a table: ``digits`` significant figures, a dash for None."""
+    if value is None:
+        return "–"
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            return str(value)
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+def format_seconds(value) -> str:
+    """Return a duration for a table: ms below a second, else s; a dash for None."""
+    if value is None:
+        return "–"
+    return f"{value * 1000:.0f} ms" if value < 1 else f"{value:.1f} s"
+
+
+
+
+
+def _reference_text(settings: dict) -> str:
+    if settings.get("committed"):
+        return (f"the committed ones of the built-in scenes, other scenes rendered to a median "
+                f"relative standard error of {100 * settings['target_rse']:g} % (at most "
+                f"{settings['budget_seconds']:g} s each)")
+    return f"{settings['spp']} spp x {settings['passes']} passes, rendered for this run"
+
+
+def _stylesheet() -> str:
+    path = Path(__file__).resolve().parent / "templates" / "report.css"
+    return path.read_text(encoding="utf-8") if path.is_file() else ""
+
+
+def _e(text) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _figure(src: str, caption: str, *, css: str = "") -> str:
+    return (f'<figure class="{css}"><img src="{_e(src)}" alt="{_e(caption)}">'
+            f"<figcaption>{_e(caption)}</figcaption></figure>")
+
+
+def _verdict_class(status: str) -> str:
+    return {"regression": "bad", "improved": "good", "ok": "ok"}.get(status, "note")
+
+
+def html_page(reports: list[SceneReport], chosen: list[str], context: dict) -> str:
+    """Return the report's ``index.html``: summary, legend, one section per scene."""
+    from .error_maps import MAP_STYLES
+
+    versions = context["versions"]
+    parts = [
+        "<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+        "<title>translucent report</title>",
+        f"<style>{_stylesheet()}</style></head><body>",
+        "<h1>Fast methods against their references</h1>",
+        f"<p class=meta>Generated {_e(context['generated'])}; Mitsuba {_e(versions['mitsuba'])} "
+        f"({_e(versions['variant'])}), Dr.Jit {_e(versions['drjit'])}; references: "
+        f"{_e(_reference_text(context['reference']))}; tasks "
+        f"on {_e(context['scheduler'])}; whole run {context['seconds']:.1f} s.</p>",
+    ]
+    regressions = context["regressions"]
+    if regressions:
+        parts.append(f'<p class="verdict bad">{len(regressions)} regression(s) against the '
+                     f"baseline <code>{_e(context['baseline'])}</code>"
+                     f"{' (baseline now rewritten)' if context['baseline_updated'] else ''}:"
+                     "</p><ul class=bad>" + "".join(f"<li>{_e(r)}</li>" for r in regressions)
+                     + "</ul>")
+    else:
+        rewritten = " (baseline rewritten from this run)" if context["baseline_updated"] else ""
+        # the results with metrics: a method that did not apply has nothing to compare
+        checks = [check for report in reports for name, check in report.checks.items()
+                  if name in report.metrics]
+        compared = sum(check.status in ("ok", "improved") for check in checks)
+        unmatched = sum(check.status == "no baseline" for check in checks)
+        other = sum(check.status == "not compared" for check in checks)
+        reasons = ", ".join(filter(None, [
+            f"{unmatched} result(s) had no baseline entry" if unmatched else "",
+            f"{other} were made against another reference" if other else ""]))
+        baseline = f"<code>{_e(context['baseline'])}</code>"
+        if compared:
+            extra = f"; {reasons}" if reasons else ""
+            parts.append(f'<p class="verdict ok">No regression in the {compared} result(s) '
+                         f"compared with the baseline {baseline}{extra}{rewritten}.</p>")
+        else:
+            parts.append(f'<p class="verdict fail">Nothing was compared with the baseline '
+                         f"{baseline} ({reasons or 'no result to compare'}){rewritten}; no "
+                         "regression can be told.</p>")
+    parts.append(_summary_table(reports, chosen))
+    parts.append(_legend(MAP_STYLES))
+    if context["excluded"]:
+        parts.append("<h2>Built-in scenes left out</h2><ul>" + "".join(
+            f"<li><b>{_e(n)}</b>: {_e(r)}</li>" for n, r in context["excluded"].items())
+            + "</ul>")
+    for report in reports:
+        parts.append(_scene_section(report, chosen))
+    parts.append(_tolerance_note())
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
+
+
+def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
+    head = "".join(f"<th>{_e(n)}</th>" for n in chosen)
+    rows = []
+    for report in reports:
+        cells = []
+        for name in chosen:
+            run = report.runs.get(name)
+            metrics = report.metrics.get(name)
+            check = report.checks.get(name)
+            css = _verdict_class(check.status) if check else "note"
+            if metrics is not None:
+                noisy = report.verdicts.get(name, {}).get("hdr_flip") == \
+                    "within reference noise"
+                floor = (report.noise_floor or {}).get("hdr_flip")
+                floor_text = f" (noise {floor:.3f})" if floor is not None else ""
+                text = (f'<a href="#{_e(report.slug)}-{_e(name)}">FLIP '
+                        f"{metrics['hdr_flip']:.3f}</a>{_e(floor_text)}<br><small>"
+                        f"{'within reference noise; ' if noisy else ''}{_e(check.status)}"
+                        "</small>")
+            elif run is not None and run.status in ("not applicable", "not built", "not run"):
+                text, css = f"<small>{_e(run.status)}</small>", "muted"
+                if check is not None and check.status == "regression":
+                    text, css = f"<small>{_e(run.status)}; regression</small>", "bad"
+            else:
+                status = run.status if run else "not run"
+                if status == "ok":
+                    status = "no metrics"  # an image but no reference, or metrics failed
+                text = (f"<small>{_e(status)}"
+                        f"{'; regression' if check and check.status == 'regression' else ''}"
+                        "</small>")
+                css = "bad" if check is not None and check.status == "regression" else "fail"
+            cells.append(f'<td class="{css}">{text}</td>')
+        rows.append(f'<tr><th><a href="#{_e(report.slug)}">{_e(report.name)}</a></th>'
+                    + "".join(cells) + "</tr>")
+    return (f'<table class=summary><tr><th>scene</th>{head}</tr>{"".join(rows)}</table>'
+            "<p class=meta>HDR-FLIP of each method against the reference (0 is identical), "
+            "beside its noise floor (what the reference's own noise alone gives), and its "
+            "verdict against the baseline.</p>")
+
+
+def _legend(styles) -> str:
+    items = "".join(f"<li><b>{_e(name)}</b>: {_e(style.unit)}, colour map {_e(style.colormap)} "
+                    f"from {style.vmin:g} to {style.vmax:g}</li>"
+                    for name, style in styles.items() if name != "p_value")
+    return (f"<details><summary>How to read the error maps</summary><ul>{items}</ul><p>"
+            "Method images are shown with the reference's exposure (its 99th-percentile "
+            "luminance is white), so a brightness error stays visible.</p></details>")
+
+
+def _scene_section(report: SceneReport, chosen: list[str]) -> str:
+    parts = [f'<section id="{_e(report.slug)}"><h2>{_e(report.name)}</h2>',
+             f"<p>{_e(report.scene.description)}</p>"]
+    if report.reference is not None:
+        meta = report.reference.metadata
+        caption = (f"reference: {meta.get('integrator', '?')}, {meta.get('spp')} spp x "
+                   f"{meta.get('passes')} passes, rendered in {format_seconds(meta.get('seconds'))}"
+                   f"{_reference_origin(report)}")
+        parts.append('<div class=row>' + _figure(report.files["reference"]["png"], caption,
+                                                 css="reference") + "</div>")
+        for sentence in meta.get("substitutions") or []:
+            parts.append(f"<p class=note>Reference: {_e(sentence)}</p>")
+        source = {"committed": "committed with the suite (translucent references)",
+                  "progressive": f"rendered to a noise target ({meta.get('stopped', '?')})",
+                  "fixed passes": "rendered in fixed passes for this run"}.get(
+                      report.reference_source, report.reference_source)
+        noise = (f"; relative standard error {report.reference_noise.text()}"
+                 if report.reference_noise is not None else "")
+        parts.append(f"<p class=meta>Reference {_e(source)}{_e(noise)}.</p>")
+        if report.scored_mask is not None:
+            parts.append(f"<p class=meta>Every metric below is computed over the "
+                         f"{int(report.scored_mask.sum())} pixels that see an object of the "
+                         "scene (the background, the same in every image, is left out); "
+                         "whole-image values are in metrics.json (<code>image_metrics</code>)."
+                         "</p>")
+        if report.noise_warning:
+            parts.append(f"<p class=fail>Warning: {_e(report.noise_warning)}.</p>")
+    else:
+        parts.append(f"<p class=fail>The reference could not be rendered: "
+                     f"{_e(report.reference_error)}</p>")
+    not_run = []
+    for name in chosen:
+        run = report.runs.get(name)
+        if run is None or run.status in ("not applicable", "not built", "not run"):
+            reason = run.reason if run else "not run"
+            status = run.status if run else "not run"
+            extra = ""
+            check = report.checks.get(name)
+            if check is not None and check.status == "regression":
+                extra = f' <span class=bad>regression: {_e(check.message)}</span>'
+            not_run.append(f"<li><b>{_e(name)}</b> ({_e(status)}): {_e(reason)}{extra}</li>")
+            continue
+        parts.append(_method_block(report, name, run))
+    if not_run:
+        parts.append("<h3>Methods not run on this scene</h3><ul>" + "".join(not_run) + "</ul>")
+    parts.append("</section>")
+    return "\n".join(parts)
+
+
+def _reference_origin(report: SceneReport) -> str:
+    if report.reference_source == "committed":
+        return " (committed with the suite)"
+    return " (from the cache)" if report.reference_cached else ""
+
+
+def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
+    check = report.checks.get(name)
+    anchor = f"{report.slug}-{name}"
+    parts = [f'<div class=method id="{_e(anchor)}"><h3>{_e(name)}']
+    if check is not None:
+        parts.append(f' <span class="tag {_verdict_class(check.status)}">{_e(check.status)}'
+                     "</span>")
+    parts.append("</h3>")
+    if run.status == "failed":
+        parts.append(f"<p class=fail>The method failed: {_e(run.reason)}</p>")
+        if run.details:
+            parts.append(f"<details><summary>traceback</summary><pre>{_e(run.details)}</pre>"
+                         "</details>")
+    files = report.files.get(name, {})
+    if files:
+        figures = [_figure(files["png"], f"{name}")]
+        for map_name in ("flip", "relative_error", "ciede2000", "ssim"):
+            if f"map_{map_name}" in files:
+                figures.append(_figure(files[f"map_{map_name}"], map_name.replace("_", " ")))
+        if report.reference is not None:
+            figures.insert(0, _figure(report.files["reference"]["png"], "reference"))
+        parts.append('<div class=row>' + "".join(figures) + "</div>")
+    if name in report.metric_errors:
+        parts.append(f"<p class=fail>No metrics: {_e(report.metric_errors[name])}</p>")
+    if check is not None:
+        parts.append(f'<p class="{_verdict_class(check.status)}">Baseline: {_e(check.message)}'
+                     "</p>")
+    metrics = report.metrics.get(name)
+    if metrics is not None:
+        parts.append(_metrics_table(metrics, check, report.noise_floor,
+                                    report.verdicts.get(name, {})))
+    if run.status == "ok":
+        cached = (f" Image and times from the run of {_e(run.measured_at)} (cached: nothing "
+                  "it depends on has changed since)." if run.cached else "")
+        cache_note = run.notes.get("cache") if isinstance(run.notes, dict) else None
+        from_cache = (" The method loaded its precomputation from its own cache; the stage "
+                      "times below are those of the run that computed it." if cache_note == "hit"
+                      else "")
+        parts.append(f"<p>Precomputation {format_seconds(run.precompute_seconds)}, first frame "
+                     f"(the first <code>state.render()</code>, first-call costs included) "
+                     f"{format_seconds(run.frame_seconds)}.{cached}{from_cache}</p>")
+        if run.stage_seconds:
+            parts.append("<details><summary>stage times</summary><table class=small>" + "".join(
+                f"<tr><td>{_e(stage)}</td><td>{format_seconds(seconds)}</td></tr>"
+                for stage, seconds in run.stage_seconds.items()) + "</table></details>")
+    if run.skipped:
+        parts.append("<p>Skipped for this scene:</p><ul class=skipped>" + "".join(
+            f"<li>{_e(sentence)}</li>" for sentence in run.skipped) + "</ul>")
+    elif run.status == "ok":
+        parts.append("<p class=meta>The method skipped nothing for this scene.</p>")
+    parts.append("</div>")
+    return "\n".join(parts)
+
+
+def _metrics_table(metrics: dict, check: BaselineCheck | None, floors: dict | None = None,
+                   verdicts: dict | None = None) -> str:
+    from .metrics import NOISE_MARGIN
+
+    gated = check.metrics if check is not None else {}
+    floors, verdicts = floors or {}, verdicts or {}
+    rows = []
+    for key in REPORTED_METRICS:
+        value = metrics.get(key)
+        entry = gated.get(key)
+        noise = verdicts.get(key, "")
+        noise_css = " muted" if noise == "within reference noise" else ""
+        noise_cells = (f"<td>{format_value(floors.get(key))}</td>"
+                       f'<td class="{noise_css.strip()}">{_e(noise)}</td>')
+        if entry is not None:
+            css = {"worse": "bad", "better": "good"}.get(entry["verdict"], "")
+            rows.append(f'<tr class="{css}"><td>{_e(METRIC_LABELS[key])}</td>'
+                        f"<td>{format_value(value)}</td>{noise_cells}"
+                        f"<td>{format_value(entry['baseline'])}</td>"
+                        f"<td>{format_value(entry['limit'])}</td><td>{_e(entry['verdict'])}</td></tr>")
+        else:
+            tolerance = "gated" if key in TOLERANCES else ""
+            rows.append(f"<tr><td>{_e(METRIC_LABELS[key])}</td><td>{format_value(value)}</td>"
+                        f"{noise_cells}<td>–</td><td>–</td><td>{tolerance}</td></tr>")
+    return ("<table class=metrics><tr><th>metric</th><th>value</th><th>noise floor</th>"
+            "<th>against the noise</th><th>baseline</th><th>worst accepted</th>"
+            "<th>against the baseline</th></tr>" + "".join(rows) + "</table>"
+            "<p class=meta>Noise floor: what the metric gives when the only difference is the "
+            "reference's own noise (the reference against itself perturbed by noise of its "
+            f"variance). 'within reference noise': the value does not clear the floor by a "
+            f"factor of {NOISE_MARGIN:g} (errors; 1 - SSIM; the MSE behind PSNR), so the "
+            "reference cannot "
+            "tell this method from a perfect one by this metric.</p>")
+
+
+def _tolerance_note() -> str:
+    items = "".join(
+        f"<li>{_e(METRIC_LABELS[name])}: worse by more than {t.absolute:g}"
+        f"{f' + {t.relative:.0%} of the baseline' if t.relative else ''}</li>"
+        for name, t in TOLERANCES.items())
+    return (f"<h2>Regression tolerances</h2><p>A result is a regression when a gated metric "
+            f"is worse than its baseline by more than:</p><ul>{items}</ul>")
