@@ -19,12 +19,17 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["LIT_FRACTION", "NoiseSummary", "lit_mask", "noise_summary",
-           "relative_standard_error", "resolvable_error"]
+__all__ = ["LIT_FRACTION", "NOISE_WARNING_RSE", "NoiseSummary", "lit_mask", "noise_summary",
+           "noise_warning", "reference_noise_warning", "relative_standard_error",
+           "resolvable_error"]
 
 #: A pixel is lit when its mean luminance exceeds this fraction of the image's
 #: 99th-percentile luminance.
 LIT_FRACTION = 0.02
+
+#: ``render``, ``compare`` and the report warn about a reference whose median relative
+#: standard error is above this.
+NOISE_WARNING_RSE = 0.05
 
 
 def lit_mask(rgb) -> np.ndarray:
@@ -134,3 +139,32 @@ def resolvable_error(summary: NoiseSummary) -> float:
     cannot be told apart from one that matches the truth.
     """
     return 2.0 * summary.median
+
+
+def noise_warning(summary: NoiseSummary) -> str | None:
+    """Return the warning for a reference too noisy to judge small errors by, else None.
+
+    Parameters
+    ----------
+    summary : NoiseSummary
+        The reference's noise (:func:`noise_summary`).
+
+    Returns
+    -------
+    str or None
+        ``"the reference is noisy: ..."`` when the median exceeds
+        :data:`NOISE_WARNING_RSE`, naming the figure and the smallest relative error it
+        resolves (:func:`resolvable_error`).
+    """
+    if not summary.pixels or summary.median <= NOISE_WARNING_RSE:
+        return None
+    return (f"the reference is noisy: {summary.text()} (relative standard error); relative "
+            f"errors below about {100 * resolvable_error(summary):.2g} % cannot be resolved "
+            "against it; render more passes (translucent render --target-rse)")
+
+
+def reference_noise_warning(rgb, variance) -> str | None:
+    """Return :func:`noise_warning` of a reference over its lit pixels (None without variance)."""
+    if variance is None:
+        return None
+    return noise_warning(noise_summary(rgb, variance))

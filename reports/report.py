@@ -119,9 +119,6 @@ DEFAULT_REFERENCE_BUDGET = 300.0
 #: Samples per pixel of each pass of such a progressive reference.
 PROGRESSIVE_SPP = 32
 
-#: A reference whose median relative standard error is above this is warned about.
-NOISE_WARNING_RSE = 0.05
-
 #: Bumped when what a cached method run holds changes, so older entries miss.
 RUN_FORMAT = 1
 
@@ -655,7 +652,7 @@ def _scored_pixels(scene):
 
 def _reference_noise(report: SceneReport) -> None:
     """Summarise the reference's own noise; warn when it is too noisy to judge by."""
-    from ..noise import noise_summary, resolvable_error
+    from ..noise import noise_summary, noise_warning
 
     reference = report.reference
     if reference.variance is None:
@@ -665,10 +662,7 @@ def _reference_noise(report: SceneReport) -> None:
     summary = noise_summary(reference.rgb, reference.variance, report.scored_mask,
                             mask_name="scored")
     report.reference_noise = summary
-    if summary.pixels and summary.median > NOISE_WARNING_RSE:
-        report.noise_warning = (
-            f"the reference is noisy ({summary.text()}, relative standard error): relative "
-            f"errors below about {100 * resolvable_error(summary):.2g} % cannot be resolved")
+    report.noise_warning = noise_warning(summary) or ""
 
 
 def _summary(reports: list[SceneReport], chosen: list[str]) -> list[dict]:

@@ -12,7 +12,7 @@ Where the reference carries its variance, each metric is printed beside its nois
 noise_floor`) and a verdict: "resolved" when the value clears the floor by
 :data:`~translucent.reports.metrics.NOISE_MARGIN` in error form, else "within reference
 noise". A reference whose median relative standard error exceeds
-:data:`NOISE_WARNING_RSE` is warned about.
+:data:`~translucent.noise.NOISE_WARNING_RSE` is warned about.
 """
 
 from __future__ import annotations
@@ -25,24 +25,6 @@ from ...errors import InputError
 
 #: The metric a bare ``--max`` applies to.
 DEFAULT_METRIC = "hdr-flip"
-
-#: Warn about a reference whose median relative standard error over its lit pixels is
-#: above this.
-NOISE_WARNING_RSE = 0.05
-
-
-def noise_warning(image, what: str = "the reference") -> str | None:
-    """Return a warning when ``image`` is too noisy to judge small errors, else None."""
-    from ...noise import noise_summary, resolvable_error
-
-    if image.variance is None:
-        return None
-    summary = noise_summary(image.rgb, image.variance)
-    if not summary.pixels or summary.median <= NOISE_WARNING_RSE:
-        return None
-    return (f"warning: {what} is noisy: {summary.text()} (relative standard error); "
-            f"relative errors below about {100 * resolvable_error(summary):.2g} % cannot be "
-            f"resolved against it; render more passes (translucent render --target-rse)")
 
 
 def add_arguments(parser):
@@ -109,6 +91,7 @@ def _table(metrics, definition, threshold, floor=None) -> list[str]:
 def run(args) -> int:
     """Read both images, compute the metrics, write the maps, print the table."""
     from ...image import read_exr
+    from ...noise import reference_noise_warning
     from ..error_maps import write_error_maps
     from ..metrics import NOISE_MARGIN, evaluate, noise_floor
 
@@ -134,9 +117,9 @@ def run(args) -> int:
         print("noise floor: each metric of the reference against itself perturbed by its own "
               "noise; 'within reference noise': the value does not clear the floor by a "
               f"factor of {NOISE_MARGIN:g} (in error form)")
-    warning = noise_warning(reference)
+    warning = reference_noise_warning(reference.rgb, reference.variance)
     if warning:
-        print(warning, file=sys.stderr)
+        print(f"warning: {warning}", file=sys.stderr)
     if files:
         print(f"error maps: {', '.join(str(f.png) for f in files.values())} (and .exr)")
     if threshold is None:

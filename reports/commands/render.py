@@ -106,9 +106,9 @@ def _missing_folders(folder: Path) -> list[Path]:
 def _render_and_write(args, scene, out: Path, progressive: bool) -> int:
     import sys
 
+    from ...noise import reference_noise_warning
     from ...reference import render
     from ...reference.render import render_to_target
-    from .compare import noise_warning
 
     common = dict(spp=args.spp, seed=args.seed, integrator=args.integrator,
                   per_channel=args.per_channel, cache=not args.no_cache,
@@ -131,7 +131,7 @@ def _render_and_write(args, scene, out: Path, progressive: bool) -> int:
               f"{NoiseSummary(**meta['noise']).text()}")
     for note in meta.get("substitutions", []):
         print(f"  substituted: {note}")
-    warning = noise_warning(image)
+    warning = reference_noise_warning(image.rgb, image.variance)
     if warning:
-        print(warning, file=sys.stderr)
+        print(f"warning: {warning}", file=sys.stderr)
     return 0
