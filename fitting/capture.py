@@ -25,6 +25,7 @@ import numpy as np
 
 from ..atomic import atomic_path, atomic_write_text
 from ..errors import InputError
+from .beam import BEAM_PROFILES
 
 __all__ = [
     "Capture",
@@ -292,8 +293,6 @@ def sidecar_from_dict(data, *, path=None) -> CaptureSpec:
                   allow_null=True)
     beam = _number(data, "beam_radius_mm", path, minimum=0.0) if "beam_radius_mm" in data \
         else 0.0
-    from .beam import BEAM_PROFILES
-
     beam_profile = _choice(data, "beam_profile", path, BEAM_PROFILES, "gaussian")
     black = _number(data, "black_level", path, minimum=0.0)
     saturation = _number(data, "saturation_level", path, minimum=0.0, strict=True)

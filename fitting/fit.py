@@ -22,7 +22,7 @@ from ..atomic import atomic_path, atomic_write_text, make_output_folder
 from ..errors import InputError, check_count
 from ..materials.subedit import save_subedit
 from .capture import Capture, read_capture
-from .goodness import DiscrepancyModel, GoodnessOfFit, goodness_of_fit
+from .goodness import DiscrepancyModel, GoodnessOfFit, best_sample, goodness_of_fit
 from .models import DipoleModel, SubEditModel
 from .profile import RadialProfile, measure_profile
 from .results import ParameterSummary, summaries_to_json, summarise_posterior, write_material
@@ -213,9 +213,7 @@ def _misfit_notes(goodness: GoodnessOfFit) -> list[str]:
 
 def _discrepancy_chain(model, samples, *, walkers, max_steps, seed, progress, description):
     """Sample ``model`` with a model-discrepancy term, started at its best sample."""
-    from .goodness import _best_sample
-
-    extended = DiscrepancyModel(model, start=_best_sample(model, samples))
+    extended = DiscrepancyModel(model, start=best_sample(model, samples))
     if walkers is not None:  # the added coordinates need walkers of their own
         walkers = max(int(walkers), 2 * extended.ndim)
     chain = run_chain(extended, walkers=walkers, max_steps=max_steps, seed=seed,

@@ -43,7 +43,7 @@ from scipy import stats
 from .models import ParameterInfo, ProfileModel
 
 __all__ = ["SIGNIFICANCE", "PREDICTIVE_DRAWS", "ChannelFit", "GoodnessOfFit",
-           "DiscrepancyModel", "goodness_of_fit", "runs_test"]
+           "DiscrepancyModel", "best_sample", "goodness_of_fit", "runs_test"]
 
 #: Family-wise significance of the misfit verdict (all tests, all channels).
 SIGNIFICANCE = 0.01
@@ -189,7 +189,7 @@ def _channel_parameters(model: ProfileModel) -> dict[int, float]:
     return {c: own[c] + shared / max(len(own), 1) for c in own}
 
 
-def _best_sample(model: ProfileModel, samples: np.ndarray) -> np.ndarray:
+def best_sample(model: ProfileModel, samples: np.ndarray) -> np.ndarray:
     """Return the posterior sample of highest likelihood (a stand-in for the MAP point)."""
     subset = samples[:: max(1, samples.shape[0] // 2000)]
     values = model.log_likelihood(subset)
@@ -219,7 +219,7 @@ def goodness_of_fit(model: ProfileModel, samples, *, draws: int = PREDICTIVE_DRA
     samples = np.atleast_2d(np.asarray(samples, dtype=np.float64))
     rng = np.random.default_rng(seed)
     picks = samples[rng.integers(0, samples.shape[0], size=draws)]
-    best = _best_sample(model, samples)
+    best = best_sample(model, samples)
     parameters = _channel_parameters(model)
     tests = 2 * max(len(model.channels), 1)
     threshold = SIGNIFICANCE / tests

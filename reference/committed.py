@@ -79,6 +79,14 @@ def committed_scene_names() -> list[str]:
     return list(PLANS)
 
 
+def _plan(name: str) -> ReferencePlan:
+    """Return the plan of ``name``, or :class:`InputError` naming the planned scenes."""
+    if name not in PLANS:
+        raise InputError(f"no committed reference is planned for this scene (planned: "
+                         f"{', '.join(PLANS)})", field="scene", value=name)
+    return PLANS[name]
+
+
 def committed_path(name: str) -> Path:
     """Return where the committed reference of built-in scene ``name`` lives."""
     return REFERENCE_FOLDER / f"{name}.exr"
@@ -142,9 +150,7 @@ def committed_reference(name: str, scene=None) -> CommittedReference:
 
     from ..cache import content_hash
 
-    if name not in PLANS:
-        raise InputError(f"no committed reference is planned for this scene (planned: "
-                         f"{', '.join(PLANS)})", field="scene", value=name)
+    _plan(name)
     path = committed_path(name)
     if scene is None:
         from ..scenes import load_scene
@@ -197,10 +203,7 @@ def render_committed(name: str, *, budget_seconds: float | None = None,
     from ..scenes import load_scene
     from .render import render_to_target
 
-    if name not in PLANS:
-        raise InputError(f"no committed reference is planned for this scene (planned: "
-                         f"{', '.join(PLANS)})", field="scene", value=name)
-    plan = PLANS[name]
+    plan = _plan(name)
     budget = plan.budget_seconds if budget_seconds is None else budget_seconds
     if not (isinstance(budget, int | float) and math.isfinite(budget) and budget > 0):
         raise InputError("must be > 0 seconds", field="--budget", value=budget_seconds)

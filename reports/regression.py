@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
-from .runs import _now, json_safe
+from .runs import json_safe, timestamp
 
 __all__ = ["BASELINE_FORMAT", "DEFAULT_BASELINE", "METRIC_LABELS", "REPORTED_METRICS",
            "TOLERANCES", "BaselineCheck", "Tolerance", "check_against_baseline",
@@ -309,7 +309,7 @@ def updated_baseline(baseline: dict, results: list[dict], versions: dict) -> dic
     return {"format": BASELINE_FORMAT,
             "note": "image metrics of the fast methods against their references; written by "
                     "`translucent report --update-baseline`",
-            "updated": _now(), "versions": versions,
+            "updated": timestamp(), "versions": versions,
             "tolerances": {name: {"absolute": t.absolute, "relative": t.relative,
                                   "lower_is_better": t.lower_is_better}
                            for name, t in TOLERANCES.items()},

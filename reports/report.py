@@ -67,14 +67,14 @@ from .regression import (
 from .report_page import format_seconds, format_value, html_page
 from .runs import (
     MethodRun,
-    _now,
-    _portable,
-    _task,
     backend_versions,
     committed_reference_for,
     json_safe,
+    portable_scene,
     render_reference,
+    report_task,
     run_method,
+    timestamp,
 )
 
 __all__ = [
@@ -439,7 +439,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     def portable(report: SceneReport):
         # worked out only for a scene with a task: it may load the scene file again
         if report.slug not in portables:
-            portables[report.slug] = _portable(report.scene, report.scene_hash,
+            portables[report.slug] = portable_scene(report.scene, report.scene_hash,
                                                scheduler is None)
         return portables[report.slug]
 
@@ -491,7 +491,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
               f"{sum(1 for t in tasks if t[0] == 'reference')} reference render(s), "
               f"{sum(1 for t in tasks if t[0] == 'method')} method run(s)", file=stream,
               flush=True)
-        results = run_tasks(_task, tasks, scheduler=scheduler, local=serial,
+        results = run_tasks(report_task, tasks, scheduler=scheduler, local=serial,
                             progress=progress)
     else:
         results = []
@@ -527,7 +527,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                     regressions.append(f"{report.name}/{name}: {check.message}")
         exit_code = 1 if regressions and not update_baseline else 0
         context = {
-            "generated": _now(), "versions": versions, "reference": reference_settings,
+            "generated": timestamp(), "versions": versions, "reference": reference_settings,
             "baseline": str(baseline_path), "baseline_updated": update_baseline,
             "baseline_versions": stored_baseline.get("versions", {}),
             "excluded": excluded, "methods": chosen, "regressions": regressions,

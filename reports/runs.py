@@ -24,7 +24,7 @@ from ..errors import InputError
 from ..image import Image
 
 __all__ = ["MethodRun", "backend_versions", "committed_reference_for", "json_safe",
-           "render_reference", "run_method"]
+           "portable_scene", "render_reference", "report_task", "run_method", "timestamp"]
 
 
 
@@ -91,7 +91,8 @@ class MethodRun:
                 "cached": self.cached}
 
 
-def _now() -> str:
+def timestamp() -> str:
+    """Return the local time, to the second, as ISO 8601 (when a run was measured)."""
     return datetime.datetime.now(datetime.timezone.utc).astimezone().isoformat(
         timespec="seconds")
 
@@ -159,7 +160,7 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
 
     knobs = dict(knobs or {})
     base = {"method": method_name, "scene": scene.name, "knobs": knobs,
-            "measured_at": _now()}
+            "measured_at": timestamp()}
     try:
         module = method(method_name)
     except InputError as error:
@@ -241,7 +242,7 @@ def committed_reference_for(scene):
     return committed_reference(scene.name, scene).require()
 
 
-def _task(kind: str, scene, *arguments):
+def report_task(kind: str, scene, *arguments):
     """Run one task of the report on a worker: a reference render or a method run.
 
     ``scene`` is a Scene, or the path of the scene file it was loaded from (a local worker
@@ -256,7 +257,7 @@ def _task(kind: str, scene, *arguments):
     return run_method(arguments[0], scene, *arguments[1:])
 
 
-def _portable(scene, scene_hash: str, local_workers: bool):
+def portable_scene(scene, scene_hash: str, local_workers: bool):
     """Return the scene file's path when a local worker loads the same scene from it."""
     from ..cache import content_hash
     from ..scenes import load_scene
