@@ -87,6 +87,21 @@ def _on_sigterm(signum, frame):
     raise Terminated()
 
 
+def _signal_behind(error: BaseException) -> BaseException | None:
+    """Return the KeyboardInterrupt or Terminated that caused ``error``, if any.
+
+    A signal that arrives while Mitsuba runs a Python plugin (a BSDF of ``brdf_plugins``)
+    is raised in the plugin and reaches us wrapped in Dr.Jit's RuntimeError.
+    """
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, (KeyboardInterrupt, Terminated)):
+            return error
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code.
 
@@ -124,12 +139,15 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as error:
         print(f"translucent {args.command}: error: {error}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"translucent {args.command}: interrupted", file=sys.stderr)
-        return 130
-    except Terminated:
-        print(f"translucent {args.command}: terminated", file=sys.stderr)
-        return 143
+    except BaseException as error:
+        signal_error = _signal_behind(error)
+        if isinstance(signal_error, KeyboardInterrupt):
+            print(f"translucent {args.command}: interrupted", file=sys.stderr)
+            return 130
+        if isinstance(signal_error, Terminated):
+            print(f"translucent {args.command}: terminated", file=sys.stderr)
+            return 143
+        raise
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

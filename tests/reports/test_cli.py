@@ -73,6 +73,42 @@ def test_a_signal_ends_a_render_with_one_line_and_nothing_left(tmp_path, signal_
     assert not (tmp_path / "new").exists()
 
 
+@pytest.mark.parametrize("signal_error, code, word", [(KeyboardInterrupt, 130, "interrupted"),
+                                                       ("Terminated", 143, "terminated")])
+def test_a_signal_wrapped_by_a_renderer_plugin_still_ends_with_one_line(monkeypatch, capsys,
+                                                                        signal_error, code,
+                                                                        word):
+    # A signal that lands in a Python BSDF reaches the caller as Dr.Jit's RuntimeError
+    # raised from the KeyboardInterrupt (or Terminated).
+    from translucent.reports import cli
+    from translucent.reports.commands import scenes
+
+    cause = cli.Terminated() if signal_error == "Terminated" else signal_error()
+
+    def run(args):
+        try:
+            raise cause
+        except BaseException as error:
+            raise RuntimeError("drjit.custom(...): error while performing a custom "
+                               "differentiable operation. (see above).") from error
+
+    monkeypatch.setattr(scenes, "run", run)
+    assert cli.main(["scenes"]) == code
+    assert capsys.readouterr().err.strip() == f"translucent scenes: {word}"
+
+
+def test_an_error_with_no_signal_behind_it_is_not_taken_for_one(monkeypatch):
+    from translucent.reports import cli
+    from translucent.reports.commands import scenes
+
+    def run(args):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(scenes, "run", run)
+    with pytest.raises(RuntimeError, match="a bug"):
+        cli.main(["scenes"])
+
+
 def test_an_unusable_variant_is_an_input_error_and_doctor_reports_it(tmp_path):
     env = {"TRANSLUCENT_VARIANT": "cuda_ad_rgb"}
     process = _translucent("render", "glossy", "--spp", "1", "--passes", "2",
