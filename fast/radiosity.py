@@ -132,6 +132,7 @@ from ..materials.profiles import (
     profile_for,
     radial_cumulative_integral,
 )
+from ..materials.solid import SolidMedium
 from ..scenes.scene import (
     ConstantEnvironment,
     DirectionalLight,
@@ -157,6 +158,7 @@ from .optical_distance import (
     subdivision_barycentrics,
     voxelize,
 )
+from .solid_inputs import mixed_profiles_from_solid, surface_scene
 
 __all__ = [
     "COMPONENTS",
@@ -440,13 +442,17 @@ def _at_positions(operator: sparse.csr_matrix, positions, size: int) -> sparse.c
 
 
 def _pair_fractions(centroids_mm, face_centroids_mm, face_labels, exit_local, incident_local,
-                    materials: int, points: int) -> np.ndarray:
+                    materials: int, points: int, volume_labels=None,
+                    mm_per_unit: float = 1.0) -> np.ndarray:
     """Fraction of the segment between two patch centroids inside each material.
 
-    The material at a point is that of the nearest surface face (the paper's checkerboard
-    block is labelled on its surface). Returns shape (pairs, materials).
+    The material at a point is ``volume_labels(point)`` where the object has a volume
+    (a solid medium; points in scene units), otherwise that of the nearest surface face
+    (the paper's checkerboard block is labelled on its surface). Returns shape
+    (pairs, materials).
     """
-    tree = cKDTree(face_centroids_mm)
+    if volume_labels is None:
+        tree = cKDTree(face_centroids_mm)
     t = (np.arange(points) + 0.5) / points
     fractions = np.zeros((len(exit_local), materials))
     chunk = max(1, (1 << 20) // points)
@@ -455,8 +461,12 @@ def _pair_fractions(centroids_mm, face_centroids_mm, face_labels, exit_local, in
         a = centroids_mm[exit_local[start:stop]]
         b = centroids_mm[incident_local[start:stop]]
         along = a[:, None] + t[None, :, None] * (b - a)[:, None]
-        _, nearest = tree.query(along.reshape(-1, 3))
-        labels = face_labels[nearest].reshape(stop - start, points)
+        if volume_labels is None:
+            _, nearest = tree.query(along.reshape(-1, 3))
+            labels = face_labels[nearest].reshape(stop - start, points)
+        else:
+            labels = volume_labels(along.reshape(-1, 3) / mm_per_unit).reshape(stop - start,
+                                                                                points)
         for m in range(materials):
             fractions[start:stop, m] = (labels == m).mean(axis=1)
     return fractions
@@ -592,7 +602,8 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
                 "pair": sample_pair, "weight": sample_weight, "distance": sample_distance,
                 "fractions": _pair_fractions(centroids, mesh.face_centroids * mm,
                                              material.face_labels, exit_local, incident_local,
-                                             len(material.profiles), knobs["mix_points"]),
+                                             len(material.profiles), knobs["mix_points"],
+                                             material.volume_labels, mm),
                 "patch_label": material.face_labels[first_face],
             }
         blocks = [("reflection", append(members[exit_local], members[incident_local]), None)]
@@ -1494,10 +1505,15 @@ def _materials_of(scene, material) -> dict:
     if material is None:
         return {}
     if isinstance(material, dict):
+        overrides = dict(material)
         for name in material:
             scene.object(name)
-        return dict(material)
-    return {o.name: material for o in scene.objects if profile_for(o.material) is not None}
+    else:
+        overrides = {o.name: material for o in scene.objects
+                     if profile_for(o.material) is not None}
+    # a solid medium is read at this object's faces (solid_inputs)
+    return {name: mixed_profiles_from_solid(value, scene.object(name).mesh).material
+            if isinstance(value, SolidMedium) else value for name, value in overrides.items()}
 
 
 class RadiosityState:
@@ -1891,6 +1907,7 @@ def applies_to(scene) -> str | None:
     Translucent radiosity assumes diffuse surfaces and isotropic multiple scattering
     (Sheng et al. 2014, Sect. 1, 7); glossy BRDFs and SubEdit textures are not modelled.
     """
+    scene, _ = surface_scene(scene, mixed_profiles_from_solid)
     translucent = False
     for obj in scene.objects:
         try:
@@ -1975,6 +1992,7 @@ def precompute(scene, **knobs) -> RadiosityState:
     """
     from ..cache import Cache, content_hash
 
+    scene, solid_notes = surface_scene(scene, mixed_profiles_from_solid)
     reason = applies_to(scene)
     if reason is not None and not reason.startswith("no translucent"):
         refuse_inapplicable(scene, reason, "radiosity does not apply")
@@ -1994,6 +2012,8 @@ def precompute(scene, **knobs) -> RadiosityState:
     if stored is not None:
         patches, F, geometry, log = stored
         log.notes["cache"] = "hit"
+        if solid_notes:
+            log.notes["solid medium"] = solid_notes
         return RadiosityState(scene, patches, F, geometry, resolved, log)
     log = StageLog()
     started = time.perf_counter()
@@ -2022,6 +2042,8 @@ def precompute(scene, **knobs) -> RadiosityState:
     log.notes["scattering_bytes"] = geometry.bytes
     log.notes["max_distance_mm"] = resolved["max_distance_mm"]
     log.notes["cache"] = "miss"
+    if solid_notes:
+        log.notes["solid medium"] = solid_notes
     cache.store_pickle(key, (patches, F, geometry, log))
     return RadiosityState(scene, patches, F, geometry, resolved, log)
 

@@ -103,9 +103,11 @@ from ..cache import content_hash
 from ..errors import InputError
 from ..image import LUMINANCE_WEIGHTS, Image
 from ..materials.homogeneous import Dipole
+from ..materials.solid import SolidMedium
 from ..materials.subedit import SubEditProfiles, subedit_from_dipole
 from ..scenes.scene import DirectionalLight, PointLight
 from .base import StageLog, refuse_inapplicable, with_defaults
+from .solid_inputs import subedit_from_solid
 
 __all__ = [
     "DEFAULT_KNOBS",
@@ -1350,13 +1352,22 @@ def _exitant_radiance(exitance, buffer: SurfaceBuffer, camera: CameraModel, eta:
                             buffer.valid, np.asarray(camera.origin, np.float64), float(eta))
 
 
-def as_subedit(material) -> SubEditProfiles:
-    """Return the SubEdit profiles of a material: itself, or a converted :class:`Dipole`."""
+def as_subedit(material, mesh=None) -> SubEditProfiles:
+    """Return the SubEdit profiles of a material.
+
+    Itself, a converted :class:`Dipole`, or the texture derived from a solid medium on
+    ``mesh`` (:mod:`.solid_inputs`).
+    """
     if isinstance(material, SubEditProfiles):
         return material
     if isinstance(material, Dipole):
         return _converted(material)
-    raise InputError("the splatting method renders Dipole or SubEdit materials",
+    if isinstance(material, SolidMedium):
+        if mesh is None:
+            raise InputError("a solid medium becomes a SubEdit texture on its object's mesh",
+                             field="material", value=material.name)
+        return subedit_from_solid(material, mesh).material
+    raise InputError("the splatting method renders Dipole, SubEdit or solid materials",
                      field="material", value=type(material).__name__)
 
 
@@ -1385,17 +1396,17 @@ _REFUSAL = "the splatting method cannot render this scene"
 
 def _translucent_objects(scene) -> list[int]:
     return [index for index, item in enumerate(scene.objects)
-            if isinstance(item.material, (Dipole, SubEditProfiles))]
+            if isinstance(item.material, (Dipole, SubEditProfiles, SolidMedium))]
 
 
 def applies_to(scene) -> str | None:
     """None when the method renders ``scene``; otherwise why not.
 
-    It needs a translucent object (Dipole or SubEdit material) and point or directional
+    It needs a translucent object (Dipole, SubEdit or solid material) and point or directional
     lights only (Chen et al. 2012, Sect. 6: other lights are future work there).
     """
     if not _translucent_objects(scene):
-        return "no translucent object (Dipole or SubEdit material) in the scene"
+        return "no translucent object (Dipole, SubEdit or solid material) in the scene"
     others = sorted({type(light).__name__ for light in scene.lights
                      if not isinstance(light, _LIGHTS)})
     if others:
@@ -1629,7 +1640,7 @@ class SplattingState:
 
     def _object_buffers(self, scene, index, camera_view):
         item = scene.objects[index]
-        material = as_subedit(item.material)
+        material = as_subedit(item.material, item.mesh)
         mesh = item.mesh
         if mesh.uv is None and not material.is_homogeneous:
             raise InputError("a textured SubEdit material needs a mesh with uv coordinates",
@@ -1650,6 +1661,10 @@ class SplattingState:
         camera_buffer, views, material, radius = self._object_buffers(scene, index,
                                                                       camera_view)
         log.seconds["buffer generation"] += time.perf_counter() - start
+        item = scene.objects[index]
+        if isinstance(item.material, SolidMedium):
+            log.notes.setdefault("solid medium", {})[item.name] = \
+                subedit_from_solid(item.material, item.mesh).note()
         if not camera_buffer.valid.any():
             log.skip(f"object '{scene.objects[index].name}' is out of view: nothing to splat")
             return np.zeros(camera_buffer.shape + (3,))

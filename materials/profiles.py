@@ -709,6 +709,14 @@ class MixedProfiles:
     face_labels : array_like of int, shape (F,)
         Material of each face, in [0, len(profiles)).
     name : str, optional
+    volume_labels : callable, optional
+        ``volume_labels(points) -> labels``: the material inside the object at points in
+        scene units, where the object has one (a solid medium,
+        :mod:`translucent.fast.solid_inputs`). Eq. 16's fractions are then read along the
+        segment through the volume, the distance light travels in each material; without
+        it, from the nearest labelled face (the paper's surface-labelled block).
+    volume_key : optional
+        What identifies ``volume_labels`` in content hashes.
 
     Raises
     ------
@@ -716,7 +724,8 @@ class MixedProfiles:
         Fewer than one profile, a label out of range, or an opaque material among them.
     """
 
-    def __init__(self, profiles, face_labels, *, name: str = ""):
+    def __init__(self, profiles, face_labels, *, name: str = "", volume_labels=None,
+                 volume_key=None):
         converted = []
         for index, material in enumerate(profiles):
             profile = profile_for(material)
@@ -734,11 +743,16 @@ class MixedProfiles:
         if labels.min() < 0 or labels.max() >= len(converted):
             raise InputError(f"labels must lie in [0, {len(converted) - 1}]",
                              field="face_labels", value=[int(labels.min()), int(labels.max())])
+        if volume_labels is not None and not callable(volume_labels):
+            raise InputError("must be callable (points -> labels)", field="volume_labels",
+                             value=type(volume_labels).__name__)
         self.profiles = tuple(converted)
         self.face_labels = labels.astype(np.int64)
         self.name = name or "mixed"
+        self.volume_labels = volume_labels
+        self.volume_key = volume_key
 
     def cache_key(self) -> dict:
         """Return what identifies this material in content hashes."""
         return {"type": "mixed", "profiles": [p.cache_key() for p in self.profiles],
-                "face_labels": self.face_labels}
+                "face_labels": self.face_labels, "volume": self.volume_key}

@@ -41,6 +41,7 @@ __all__ = [
     "SubEditProfiles",
     "DipoleConversion",
     "subedit_from_dipole",
+    "convert_media",
     "builtin_subedit",
     "BUILTIN_SUBEDIT",
     "save_subedit",
@@ -558,13 +559,22 @@ def _value_noise(u, v, frequency: int, rng) -> np.ndarray:
     return (1 - sy) * top + sy * bottom
 
 
+def convert_media(media, *, segments: int = DEFAULT_SEGMENTS) -> list[DipoleConversion]:
+    """Convert several dipole media to SubEdit profiles that share one ``r_s``.
+
+    ``r_s`` is the largest of their radii keeping :data:`DEFAULT_RADIUS_ENERGY` of the
+    energy, so that the profiles can share a texture (blend, per-texel lookup).
+    """
+    media = list(media)
+    if not media:
+        raise InputError("needs at least one medium", field="media", value=[])
+    r_s = max(_dipole_energy_radius(medium, DEFAULT_RADIUS_ENERGY) for medium in media)
+    return [subedit_from_dipole(medium, segments=segments, r_s=r_s) for medium in media]
+
+
 def _converted_pair(first: str, second: str, segments: int):
-    a = measured_medium(first)
-    b = measured_medium(second)
-    r_s = max(_dipole_energy_radius(a, DEFAULT_RADIUS_ENERGY),
-              _dipole_energy_radius(b, DEFAULT_RADIUS_ENERGY))
-    return (subedit_from_dipole(a, segments=segments, r_s=r_s).profiles,
-            subedit_from_dipole(b, segments=segments, r_s=r_s).profiles)
+    a, b = convert_media([measured_medium(first), measured_medium(second)], segments=segments)
+    return a.profiles, b.profiles
 
 
 def _texel_centres(resolution: int):

@@ -148,6 +148,9 @@ class MaterialParts:
         one); above :data:`RR_ALBEDO_THRESHOLD` Russian roulette is switched off.
     chromatic : bool
         The interior's extinction differs between channels.
+    description : str
+        What the image header should say of the medium ("" for nothing), for example a
+        heterogeneous medium's grid resolution.
     """
 
     bsdf: dict
@@ -155,6 +158,7 @@ class MaterialParts:
     blocks_delta_lights: bool = False
     max_albedo: float = 0.0
     chromatic: bool = False
+    description: str = ""
 
 
 MaterialConverter = Callable[[Any, ConversionContext], MaterialParts]
@@ -278,6 +282,8 @@ class MitsubaConversion:
         (:func:`translucent.reference.render`).
     substitutions : list of str
         One sentence for each light replaced by an emitter of finite size.
+    media : dict of str to str
+        Object name -> what its converter says of its medium (heterogeneous ones).
     """
 
     scene_dict: dict
@@ -287,6 +293,7 @@ class MitsubaConversion:
     has_media: bool
     per_channel_recommended: bool = False
     substitutions: list[str] = field(default_factory=list)
+    media: dict[str, str] = field(default_factory=dict)
 
 
 def _shape_key(name: str, used: set) -> str:
@@ -422,6 +429,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     blocks_delta = False
     max_albedo = 0.0
     long_chromatic_walks = False
+    media: dict[str, str] = {}
     for obj in scene.objects:
         context = ConversionContext(scene, obj.name, channel)
         parts = material_converter(obj.material, object_name=obj.name)(obj.material, context)
@@ -429,6 +437,8 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         blocks_delta |= parts.blocks_delta_lights
         max_albedo = max(max_albedo, parts.max_albedo)
         long_chromatic_walks |= parts.chromatic and parts.max_albedo > RR_ALBEDO_THRESHOLD
+        if parts.description:
+            media[obj.name] = parts.description
         key = _shape_key(obj.name, used)
         props = {"bsdf": parts.bsdf}
         if parts.interior is not None:
@@ -465,7 +475,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         **emitters,
     }
     return MitsubaConversion(scene_dict, integrator, int(max_depth), int(rr_depth), has_media,
-                             long_chromatic_walks, notes)
+                             long_chromatic_walks, notes, media)
 
 
 def to_mitsuba_dict(scene: Scene, *, integrator: str | None = None,

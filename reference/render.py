@@ -189,7 +189,8 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
         The mean radiance, the per-pixel variance of the mean (None when ``passes == 1``)
         and metadata: ``producer``, ``scene``, ``scene_hash``, ``spp``, ``passes``,
         ``seed``, ``seconds``, ``variant``, ``mitsuba``, ``drjit``, ``integrator``,
-        ``max_depth``, ``rr_depth``, ``per_channel``, ``substitutions``.
+        ``max_depth``, ``rr_depth``, ``per_channel``, ``substitutions`` and, for
+        heterogeneous media, ``media`` (object -> field and grid).
 
     Raises
     ------
@@ -336,6 +337,7 @@ def _metadata(scene, key, settings, conversions, channels, **items) -> dict:
         "rr_depth": first.rr_depth,
         "per_channel": channels != (None,),
         "substitutions": list(first.substitutions),
+        **({"media": dict(first.media)} if first.media else {}),
     }
 
 

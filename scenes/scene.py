@@ -531,6 +531,11 @@ class Scene:
             raise InputError("must be > 0", file=self.source, field="mm_per_unit",
                              value=self.mm_per_unit)
         object.__setattr__(self, "mm_per_unit", mm)
+        for index, obj in enumerate(self.objects):
+            covers = getattr(obj.material, "check_covers", None)
+            if covers is not None:  # a medium defined over a box (materials.solid)
+                covers(obj.mesh.vertices, file=self.source,
+                       field=f"objects[{index}].material.bounds")
 
     def object(self, name: str) -> SceneObject:
         """Return the object called ``name``; an unknown name lists the valid ones."""
