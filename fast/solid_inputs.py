@@ -36,9 +36,21 @@ from ..materials.profiles import MixedProfiles
 from ..materials.solid import SolidMedium, quantise_media
 from ..materials.subedit import DEFAULT_SEGMENTS, SubEditProfiles, convert_media
 
-__all__ = ["SurfaceConversion", "SPLATTING_MAX_MEDIA", "RADIOSITY_MAX_MEDIA",
+__all__ = ["SurfaceConversion", "SURFACE_ASSUMPTIONS", "SPLATTING_MAX_MEDIA", "RADIOSITY_MAX_MEDIA",
            "DEFAULT_TEXTURE_RESOLUTION", "subedit_from_solid", "mixed_profiles_from_solid",
            "surface_scene", "texel_positions", "VoxelLabels"]
+
+#: What each method assumes when it renders a solid medium from the surface (the report
+#: prints it beside the method's result on such a scene).
+SURFACE_ASSUMPTIONS = {
+    "splatting": "the medium at each surface point stands for the column below it (each "
+                 "texel's profile is the semi-infinite dipole of its surface value), and "
+                 "light between two points follows Eq. 8 of Chen et al. 2012, "
+                 "R_d = sqrt(P(x_i, r) P(x_o, r))",
+    "radiosity": "each face's profile is the semi-infinite dipole of the medium at its "
+                 "centroid, and light between two patches follows Eq. 16 of Sheng et al. "
+                 "2014, mixing the media by the fraction of the straight segment in each",
+}
 
 #: Distinct media a SubEdit texture is made from (a texture lookup per texel: many are cheap).
 SPLATTING_MAX_MEDIA = 64

@@ -305,7 +305,10 @@ def _farthest_points(values: np.ndarray, clusters: int):
 
 
 # -------------------------------------------------------------------- procedural fields
-def _medium(name: str, field: str) -> Dipole:
+def _medium(name, field: str) -> Dipole:
+    """A measured medium by name, or a :class:`Dipole` given as it is."""
+    if isinstance(name, Dipole):
+        return name
     try:
         return measured_medium(name)
     except InputError as error:
@@ -349,7 +352,10 @@ def uniform_solid(medium: str = "Skin1", *, bounds=DEFAULT_BOUNDS, eta: float | 
 
 def checker_solid(first: str = "Skin1", second: str = "Ketchup", *, cells: int = 4,
                   bounds=DEFAULT_BOUNDS, eta: float | None = None) -> SolidMedium:
-    """Build a 3D checker of two measured media, ``cells`` cubes along each side of the box.
+    """Build a 3D checker of two media, ``cells`` cubes along each side of the box.
+
+    ``first`` and ``second`` are measured-media names (Jensen et al. 2001) or
+    :class:`Dipole` media.
 
     Cell ``(i, j, k)`` holds ``second`` when ``i + j + k`` is odd. One voxel a cell: the
     grid is the field exactly. The solid version of Chen et al. 2012's marble chessboard

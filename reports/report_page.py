@@ -267,6 +267,9 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
             parts.append("<details><summary>stage times</summary><table class=small>" + "".join(
                 f"<tr><td>{_e(stage)}</td><td>{format_seconds(seconds)}</td></tr>"
                 for stage, seconds in run.stage_seconds.items()) + "</table></details>")
+    solid = run.notes.get("solid medium") if isinstance(run.notes, dict) else None
+    if solid:
+        parts.append(_solid_note(name, solid))
     if run.skipped:
         parts.append("<p>Skipped for this scene:</p><ul class=skipped>" + "".join(
             f"<li>{_e(sentence)}</li>" for sentence in run.skipped) + "</ul>")
@@ -274,6 +277,20 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         parts.append("<p class=meta>The method skipped nothing for this scene.</p>")
     parts.append("</div>")
     return "\n".join(parts)
+
+
+def _solid_note(method_name: str, conversions: dict) -> str:
+    """Say what a method assumed of a solid medium and what reading it at the surface cost."""
+    from ..fast.solid_inputs import SURFACE_ASSUMPTIONS
+
+    assumption = SURFACE_ASSUMPTIONS.get(method_name, "the medium is read at the surface")
+    items = "".join(
+        f"<li>{_e(obj)}: {int(note.get('media', 0))} media, quantisation error "
+        f"{format_value(note.get('quantisation_error'))}, SubEdit fit error "
+        f"{format_value(note.get('profile_error'))}</li>" for obj, note in conversions.items())
+    return (f"<p class=note>The reference renders the medium in the volume; {_e(method_name)} "
+            f"reads it at the surface and assumes that {_e(assumption)}.</p><ul class=small>"
+            f"{items}</ul>")
 
 
 def _metrics_table(metrics: dict, check: BaselineCheck | None, floors: dict | None = None,

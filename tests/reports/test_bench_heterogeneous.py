@@ -1,0 +1,79 @@
+"""``translucent bench heterogeneous``: the surface heuristics against the volumetric truth."""
+
+import json
+
+import numpy as np
+import pytest
+from translucent.materials import measured_medium, measured_medium_names
+from translucent.reports.bench.heterogeneous import (
+    AFFORDABLE_ALBEDO,
+    checker_scene,
+    diffusion_lengths,
+    heterogeneous_table,
+    most_different_pair,
+)
+from translucent.reports.cli import main
+
+#: A tiny run: 16 x 16 pixels, 4 spp x 2 passes, a 9-row sphere; seconds, not minutes.
+TINY = {"size": 16, "spp": 4, "passes": 2, "rows": 9}
+
+
+def test_the_default_pair_is_the_most_different_affordable_one():
+    first, second = most_different_pair()
+    pair = (measured_medium(first), measured_medium(second))
+    ratio = np.max(np.abs(np.log(diffusion_lengths(pair[0]) / diffusion_lengths(pair[1]))))
+    for a in measured_medium_names():
+        for b in measured_medium_names():
+            media = measured_medium(a), measured_medium(b)
+            if a == b or any(float(np.max(m.albedo)) > AFFORDABLE_ALBEDO for m in media):
+                continue
+            other = np.max(np.abs(np.log(diffusion_lengths(media[0])
+                                         / diffusion_lengths(media[1]))))
+            assert other <= ratio + 1e-12, (a, b)
+
+
+def test_the_checker_scene_holds_the_two_media():
+    skin, ketchup = measured_medium("Skin1"), measured_medium("Ketchup")
+    scene = checker_scene(skin, ketchup, 2, size=16, rows=9)
+    solid = scene.object("sphere").material
+    assert solid.shape == (2, 2, 2) and solid.eta == 1.0
+    assert np.array_equal(solid.sigma_a[0, 0, 0], skin.sigma_a)
+    assert np.array_equal(solid.sigma_a[0, 0, 1], ketchup.sigma_a)
+
+
+@pytest.fixture(scope="module")
+def tiny_table(tmp_path_factory):
+    out = tmp_path_factory.mktemp("heterogeneous")
+    return out, heterogeneous_table(out, pair=("Skin1", "Ketchup"), contrasts=(0.0, 1.0),
+                                    cells=(8,), progress=False, **TINY)
+
+
+def test_the_table_has_both_sweeps_with_noise_beside_every_error(tiny_table):
+    out, result = tiny_table
+    assert result["complete"] and [r["sweep"] for r in result["rows"]] == \
+        ["contrast", "contrast", "cell size"]
+    homogeneous, full, fine = result["rows"]
+    assert homogeneous["contrast"] == pytest.approx(1.0) and full["contrast"] > 2
+    assert fine["cell_mm"] == pytest.approx(2.5) and full["cell_mm"] == pytest.approx(5.0)
+    for row in result["rows"]:
+        assert row["reference"]["noise_relative_mse"] > 0
+        for entry in row["methods"].values():
+            assert entry["status"] == "ok", entry
+            assert entry["dominated_by"] in ("model", "noise")
+    media = full["methods"]["radiosity"]["solid_medium"]["media"]
+    assert media == 2 and homogeneous["methods"]["splatting"]["solid_medium"]["media"] == 1
+    saved = json.loads((out / "heterogeneous.json").read_text())
+    assert len(saved["rows"]) == 3
+    assert "| contrast |" in (out / "heterogeneous.md").read_text()
+
+
+@pytest.mark.parametrize("arguments, field", [
+    (["--contrasts", "0,2"], "--contrasts"), (["--contrasts", "x"], "--contrasts"),
+    (["--rows", "8"], "--rows"), (["--pair", "Skin1,Jelly"], "--pair"),
+    (["--methods", "prt"], "--methods"), (["--passes", "1"], "--passes"),
+])
+def test_bad_options_are_usage_errors_naming_the_option(capsys, tmp_path, arguments, field):
+    code = main(["bench", "heterogeneous", "--out", str(tmp_path / "h"), "--no-progress",
+                 *arguments])
+    assert code == 2 and field in capsys.readouterr().err
+    assert not (tmp_path / "h").exists()
