@@ -71,7 +71,7 @@ PLANS: dict[str, ReferencePlan] = {
     "bowl": ReferencePlan(spp=1024, budget_seconds=1800.0, integrator="volpathmis"),
     "sphere": ReferencePlan(spp=128, budget_seconds=2400.0),
     "cornell_block": ReferencePlan(spp=32, budget_seconds=3600.0),
-    "solid_checker": ReferencePlan(spp=512, budget_seconds=1500.0),
+    "solid_checker": ReferencePlan(spp=256, budget_seconds=1500.0),
     "solid_veins": ReferencePlan(spp=256, budget_seconds=2400.0),
 }
 

@@ -151,6 +151,9 @@ class MaterialParts:
     description : str
         What the image header should say of the medium ("" for nothing), for example a
         heterogeneous medium's grid resolution.
+    prefers_per_channel : bool
+        The medium renders far more efficiently one channel at a time whatever its
+        albedo (a chromatic heterogeneous medium, :mod:`.solid_medium`).
     """
 
     bsdf: dict
@@ -159,6 +162,7 @@ class MaterialParts:
     max_albedo: float = 0.0
     chromatic: bool = False
     description: str = ""
+    prefers_per_channel: bool = False
 
 
 MaterialConverter = Callable[[Any, ConversionContext], MaterialParts]
@@ -277,9 +281,9 @@ class MitsubaConversion:
     has_media : bool
         Whether any object has an interior medium.
     per_channel_recommended : bool
-        A chromatic medium of albedo above :data:`RR_ALBEDO_THRESHOLD`: its long walks
-        converge much faster rendered one channel at a time
-        (:func:`translucent.reference.render`).
+        A chromatic medium of albedo above :data:`RR_ALBEDO_THRESHOLD` (its long walks) or
+        one that prefers it (a chromatic heterogeneous medium): it converges much faster
+        rendered one channel at a time (:func:`translucent.reference.render`).
     substitutions : list of str
         One sentence for each light replaced by an emitter of finite size.
     media : dict of str to str
@@ -436,7 +440,8 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         has_media |= parts.interior is not None
         blocks_delta |= parts.blocks_delta_lights
         max_albedo = max(max_albedo, parts.max_albedo)
-        long_chromatic_walks |= parts.chromatic and parts.max_albedo > RR_ALBEDO_THRESHOLD
+        long_chromatic_walks |= parts.chromatic and (parts.max_albedo > RR_ALBEDO_THRESHOLD
+                                                     or parts.prefers_per_channel)
         if parts.description:
             media[obj.name] = parts.description
         key = _shape_key(obj.name, used)

@@ -11,7 +11,9 @@ Coefficients are per mm in the material and per scene unit here: times
 ``scene.mm_per_unit`` (as :func:`~translucent.reference.mitsuba_scene.dipole_medium`).
 The boundary is ``null`` at eta 1 (index-matched: delta lights reach the medium) and a
 ``dielectric`` otherwise, whose delta lights are replaced by emitters of finite size as
-for a homogeneous medium.
+for a homogeneous medium. A chromatic field is rendered one channel at a time (each
+channel's grid grey): Mitsuba's delta tracking of an RGB medium weights two channels by
+ratios of extinctions, whose rare large values dominate the variance.
 """
 
 from __future__ import annotations
@@ -63,11 +65,13 @@ def _convert_solid(solid: SolidMedium, context: ConversionContext) -> MaterialPa
     chromatic = bool(np.any(sigma_t.max(axis=-1) > sigma_t.min(axis=-1)))
     max_albedo = float(albedo.max())
     description = f"heterogeneous medium, nearest gridvolume: {solid.describe()}"
-    if solid.eta == 1.0:
-        return MaterialParts({"type": "null"}, medium, False, max_albedo, chromatic,
-                             description)
-    boundary = {"type": "dielectric", "int_ior": solid.eta, "ext_ior": 1.0}
-    return MaterialParts(boundary, medium, True, max_albedo, chromatic, description)
+    # delta tracking samples one channel's free paths against the RGB majorant and weights
+    # the others by ratios of extinctions: rare huge weights (docs/references.md); a grey
+    # render per channel has none
+    boundary, blocks = (({"type": "null"}, False) if solid.eta == 1.0 else
+                        ({"type": "dielectric", "int_ior": solid.eta, "ext_ior": 1.0}, True))
+    return MaterialParts(boundary, medium, blocks, max_albedo, chromatic, description,
+                         prefers_per_channel=chromatic)
 
 
 register_material_converter(SolidMedium, _convert_solid)
