@@ -64,19 +64,54 @@ def _build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _command_end(parser: argparse.ArgumentParser, argv: list[str]) -> int:
-    """Return the index in ``argv`` just after the command's name(s) (``bench prt``: 2)."""
+def _command_end(parser: argparse.ArgumentParser, argv: list[str]):
+    """Return the index in ``argv`` just after the command's name(s) (``bench prt``: 2).
+
+    And the parser of that (sub-)command, whose options :func:`_accepted_options` knows.
+    """
     index = 0
     while True:
         choices = next((action.choices for action in parser._actions
                         if isinstance(action, argparse._SubParsersAction)), None)
         if not choices:
-            return index
+            return index, parser
         names = [i for i in range(index, len(argv)) if not argv[i].startswith("-")]
         if not names or argv[names[0]] not in choices:
-            return index
+            return index, parser
         index = names[0] + 1
         parser = choices[argv[names[0]]]
+
+
+def _accepted_options(parser: argparse.ArgumentParser, options: list[str]):
+    """Split ``TRANSLUCENT_OPTIONS`` into what the command accepts and what it does not.
+
+    An option is a token starting with ``-`` (``--name`` or ``--name=value``) with the
+    tokens that follow it up to the next option (its values). One the command has no
+    such option for is left out, values and all, so that one variable can carry the
+    options of several commands (``--no-progress`` for those that have it).
+    """
+    known = parser._option_string_actions
+    groups: list[list[str]] = []
+    for token in options:
+        starts = token.startswith("-") and len(token) > 1 and not _is_number(token)
+        if starts or not groups:
+            groups.append([token])
+        else:
+            groups[-1].append(token)
+    kept, ignored = [], []
+    for group in groups:
+        flag = group[0].split("=", 1)[0]
+        accepted = not flag.startswith("-") or flag == "-" or flag in known
+        (kept if accepted else ignored).extend(group)
+    return kept, ignored
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
 
 
 class Terminated(Exception):
@@ -116,7 +151,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"translucent: error: TRANSLUCENT_OPTIONS = {text!r}: {error}", file=sys.stderr)
         return 2
     parser = _build_parser()
-    end = _command_end(parser, argv)
+    end, command_parser = _command_end(parser, argv)
+    if end and options:
+        options, ignored = _accepted_options(command_parser, options)
+        if ignored:
+            print(f"translucent: note: TRANSLUCENT_OPTIONS {' '.join(ignored)!r} left out: "
+                  f"'{command_parser.prog}' has no such option", file=sys.stderr)
     argv = argv[:end] + options + argv[end:]
     try:
         args = parser.parse_args(argv)

@@ -27,11 +27,31 @@ def test_the_command_line_overrides_the_environment(monkeypatch, capsys):
     assert "object sphere:" in capsys.readouterr().out
 
 
-def test_options_a_command_does_not_take_are_named_as_from_the_environment(monkeypatch,
-                                                                          capsys):
-    monkeypatch.setenv("TRANSLUCENT_OPTIONS", "--no-such-option")
-    assert main(["scenes"]) == 2
-    assert "TRANSLUCENT_OPTIONS" in capsys.readouterr().err
+def test_options_a_command_does_not_take_are_left_out_with_a_note(monkeypatch, capsys):
+    # one variable serves every command: an option this one lacks never breaks it
+    monkeypatch.setenv("TRANSLUCENT_OPTIONS", "--no-such-option 3 --show sphere")
+    assert main(["scenes"]) == 0
+    captured = capsys.readouterr()
+    assert "object sphere:" in captured.out
+    assert "TRANSLUCENT_OPTIONS '--no-such-option 3' left out" in captured.err
+
+
+def test_an_accepted_option_keeps_its_values_even_a_dash(monkeypatch):
+    from translucent.reports.cli import _accepted_options, _build_parser, _command_end
+
+    parser = _build_parser()
+    _, references = _command_end(parser, ["references", "list"])
+    kept, ignored = _accepted_options(references, ["--json", "-", "--bogus=1", "--budget",
+                                                   "-1", "--no-progress"])
+    assert ignored == ["--bogus=1"]
+    assert kept == ["--json", "-", "--budget", "-1", "--no-progress"]
+
+
+def test_an_invalid_value_of_an_accepted_option_is_still_bad_usage(monkeypatch, capsys):
+    monkeypatch.setenv("TRANSLUCENT_OPTIONS", "--spp many")
+    assert main(["render", "glossy"]) == 2
+    err = capsys.readouterr().err
+    assert "invalid int value: 'many'" in err and "TRANSLUCENT_OPTIONS" in err
 
 
 def test_unbalanced_quotes_in_the_environment_are_bad_usage(monkeypatch, capsys):
