@@ -15,6 +15,7 @@ on the command line wins over the same option from the environment.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import shlex
@@ -61,7 +62,45 @@ def _build_parser() -> argparse.ArgumentParser:
         command = sub.add_parser(name, help=help_text, description=module.__doc__)
         module.add_arguments(command)
         command.set_defaults(run=module.run)
+    _add_common_options(parser)
     return parser
+
+
+def _add_common_options(parser: argparse.ArgumentParser) -> None:
+    """Give every command (and sub-command) ``--no-progress``, the one convention of all."""
+    choices = next((action.choices for action in parser._actions
+                    if isinstance(action, argparse._SubParsersAction)), None)
+    if choices:
+        for command in choices.values():
+            _add_common_options(command)
+    elif "--no-progress" not in parser._option_string_actions:
+        parser.add_argument("--no-progress", action="store_true",
+                            help="no progress bars (of the steps that show one)")
+
+
+@contextlib.contextmanager
+def _progress_bars(shown: bool):
+    """Hide every tqdm progress bar of the command while ``shown`` is False.
+
+    The command's own ``--no-progress`` already hides its bars; this reaches those of the
+    steps it calls (precomputations, renders) that take no such argument.
+    """
+    if shown:
+        yield
+        return
+    from tqdm import std
+
+    original = std.tqdm.__dict__["__init__"]
+
+    def hidden(self, *args, **kwargs):
+        kwargs["disable"] = True
+        original.__get__(self, type(self))(*args, **kwargs)
+
+    std.tqdm.__init__ = hidden
+    try:
+        yield
+    finally:
+        std.tqdm.__init__ = original
 
 
 def _command_end(parser: argparse.ArgumentParser, argv: list[str]):
@@ -175,7 +214,8 @@ def main(argv: list[str] | None = None) -> int:
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        return int(args.run(args) or 0)
+        with _progress_bars(not getattr(args, "no_progress", False)):
+            return int(args.run(args) or 0)
     except InputError as error:
         print(f"translucent {args.command}: error: {error}", file=sys.stderr)
         return 2

@@ -170,3 +170,40 @@ def test_every_command_prints_its_help(capsys):
     for path in paths:
         assert main([*path, "--help"]) == 0, path
         assert "usage: translucent" in capsys.readouterr().out, path
+
+
+def test_every_command_takes_no_progress_and_it_hides_every_bar(monkeypatch, capsys):
+    import argparse
+
+    from translucent.reports.cli import _build_parser
+
+    def leaves(parser, prefix=()):
+        subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if not subs:
+            yield prefix, parser
+        for action in subs:
+            for name, sub in action.choices.items():
+                yield from leaves(sub, (*prefix, name))
+
+    found = list(leaves(_build_parser()))
+    assert len(found) > 10
+    for path, parser in found:
+        assert "--no-progress" in parser._option_string_actions, path
+
+    # a bar inside a step the command calls (not one of its own) is hidden too
+    from translucent.reports.commands import scenes
+
+    def run(args):
+        import sys
+
+        from tqdm.auto import tqdm
+
+        for _ in tqdm(range(3), file=sys.stderr, mininterval=0):
+            pass
+        return 0
+
+    monkeypatch.setattr(scenes, "run", run)
+    assert main(["scenes", "--no-progress"]) == 0
+    assert capsys.readouterr().err == ""
+    assert main(["scenes"]) == 0
+    assert "3/3" in capsys.readouterr().err
