@@ -39,6 +39,7 @@ __all__ = [
     "material_from_dict",
     "material_to_dict",
     "register_material_type",
+    "register_spec_type",
 ]
 
 
@@ -125,6 +126,30 @@ def register_material_type(name: str, constructor: Callable[..., Any], *,
                          tuple(path_keys))
     MATERIAL_TYPES[name] = entry
     return entry
+
+
+def register_spec_type(name: str, from_spec: Callable[[dict], Any], material_class: type, *,
+                       keys, path_keys=(), save_hint: str) -> MaterialType:
+    """Register a type whose material is built from its whole table (a "spec").
+
+    ``from_spec(table)`` builds the material; the table is kept on it, so that
+    :func:`material_to_dict` writes back exactly what built it. A material of that class
+    made in code has no table: writing it raises :class:`InputError` with ``save_hint``
+    (how to save it to a file a table can name).
+    """
+    def constructor(**table):
+        material = from_spec(table)
+        material.__dict__["_spec"] = dict(table)  # what rebuilds it, for material_to_dict
+        return material
+
+    def to_dict(material) -> dict:
+        spec = material.__dict__.get("_spec")
+        if spec is None:
+            raise InputError(save_hint, field="material", value=getattr(material, "name", ""))
+        return dict(spec)
+
+    return register_material_type(name, constructor, material_class=material_class,
+                                  to_dict=to_dict, keys=keys, path_keys=path_keys)
 
 
 def _load_plugins() -> None:

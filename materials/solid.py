@@ -306,7 +306,7 @@ def _farthest_points(values: np.ndarray, clusters: int):
 
 # -------------------------------------------------------------------- procedural fields
 def _medium(name, field: str) -> Dipole:
-    """A measured medium by name, or a :class:`Dipole` given as it is."""
+    """Return a measured medium by name, or a :class:`Dipole` given as it is."""
     if isinstance(name, Dipole):
         return name
     try:
@@ -558,26 +558,13 @@ SPEC_KEYS = ("field", "file", "bounds", "eta", "medium", "first", "second", "bas
              "cells", "seed", "resolution", "stripes", "axis")
 
 
-def _from_table(**table) -> SolidMedium:
-    solid = solid_from_spec(table)
-    solid.__dict__["_spec"] = dict(table)  # what rebuilds it, for material_to_dict
-    return solid
-
-
-def _to_table(solid: SolidMedium) -> dict:
-    spec = solid.__dict__.get("_spec")
-    if spec is None:
-        raise InputError("this solid medium was made in code: save it with save_solid and "
-                         "refer to it as {type = \"solid\", file = \"...\"}",
-                         field="material", value=solid.name)
-    return dict(spec)
-
-
 def _register() -> None:
-    from .factory import register_material_type
+    from .factory import register_spec_type
 
-    register_material_type("solid", _from_table, material_class=SolidMedium,
-                           to_dict=_to_table, keys=SPEC_KEYS, path_keys=("file",))
+    register_spec_type("solid", solid_from_spec, SolidMedium, keys=SPEC_KEYS,
+                       path_keys=("file",),
+                       save_hint="this solid medium was made in code: save it with "
+                       "save_solid and refer to it as {type = \"solid\", file = \"...\"}")
 
 
 _register()

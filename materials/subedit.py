@@ -764,26 +764,13 @@ SPEC_KEYS = ("builtin", "file", "measured", "segments", "r_s", "resolution", "sq
              "first", "second", "seed", "base", "vein")
 
 
-def _from_table(**table) -> SubEditProfiles:
-    profiles = subedit_from_spec(table)
-    profiles.__dict__["_spec"] = dict(table)  # what rebuilds it, for material_to_dict
-    return profiles
-
-
-def _to_table(profiles: SubEditProfiles) -> dict:
-    spec = profiles.__dict__.get("_spec")
-    if spec is None:
-        raise InputError("this SubEdit texture was made in code: save it with save_subedit "
-                         "and refer to it as {type = \"subedit\", file = \"...\"}",
-                         field="material", value=profiles.name)
-    return dict(spec)
-
-
 def _register() -> None:
-    from .factory import register_material_type
+    from .factory import register_spec_type
 
-    register_material_type("subedit", _from_table, material_class=SubEditProfiles,
-                           to_dict=_to_table, keys=SPEC_KEYS, path_keys=("file",))
+    register_spec_type("subedit", subedit_from_spec, SubEditProfiles, keys=SPEC_KEYS,
+                       path_keys=("file",),
+                       save_hint="this SubEdit texture was made in code: save it with "
+                       "save_subedit and refer to it as {type = \"subedit\", file = \"...\"}")
 
 
 _register()

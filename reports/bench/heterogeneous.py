@@ -29,18 +29,24 @@ row.
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import time
 from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_write_text, check_output_folder
+from ...atomic import check_output_folder
 from ...errors import InputError, check_count
 from ...materials import Dipole, measured_medium, measured_medium_names
 from . import count_list, with_size
-from .model_error import object_mask, object_metrics, reference_noise
+from .model_error import (
+    method_cells,
+    object_mask,
+    object_metrics,
+    reference_noise,
+    table_cell,
+    write_table,
+)
 
 __all__ = ["AFFORDABLE_ALBEDO", "METHODS", "most_different_pair", "diffusion_lengths",
            "checker_scene", "measure_checker", "heterogeneous_table", "markdown"]
@@ -228,16 +234,10 @@ def heterogeneous_table(out, *, pair=None, contrasts=DEFAULT_CONTRASTS, cells=DE
                **measure_checker(scene, spp=spp, passes=passes, methods=methods, mask=mask)}
         result["rows"].append(row)
         result["seconds"] = time.perf_counter() - started
-        _write(result, json_path, out / MARKDOWN_NAME)
+        write_table(result, json_path, out / MARKDOWN_NAME, markdown)
     result["complete"] = True
-    _write(result, json_path, out / MARKDOWN_NAME)
+    write_table(result, json_path, out / MARKDOWN_NAME, markdown)
     return result
-
-
-def _cell(value, digits: int = 3) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "–"
-    return f"{value:.{digits}g}"
 
 
 def markdown(result: dict) -> str:
@@ -261,26 +261,14 @@ def markdown(result: dict) -> str:
     lines += ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
     for row in result["rows"]:
         noise = row["reference"]
-        cells = [row["sweep"], _cell(row["t"]), str(row["cells"]), _cell(row["cell_mm"]),
-                 _cell(row["cell_over_diffusion_length"]), _cell(row["contrast"]),
-                 _cell(noise["relative_standard_error"]), _cell(noise["noise_relative_mse"])]
+        cells = [row["sweep"], table_cell(row["t"]), str(row["cells"]),
+                 table_cell(row["cell_mm"]), table_cell(row["cell_over_diffusion_length"]),
+                 table_cell(row["contrast"]), table_cell(noise["relative_standard_error"]),
+                 table_cell(noise["noise_relative_mse"])]
         for name in methods:
-            entry = row["methods"].get(name, {})
-            if entry.get("status") != "ok":
-                cells += [entry.get("status", "not run"), "–", "–"]
-                continue
-            star = "*" if entry["dominated_by"] == "noise" else ""
-            cells += [_cell(entry["hdr_flip"]), _cell(entry["relative_mse"]) + star,
-                      _cell(entry["luminance_ratio"])]
+            cells += method_cells(row["methods"].get(name, {}))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-def _write(result: dict, json_path: Path, markdown_path: Path) -> None:
-    from ..runs import json_safe
-
-    atomic_write_text(json_path, json.dumps(json_safe(result), indent=2) + "\n")
-    atomic_write_text(markdown_path, markdown(result))
 
 
 def add_arguments(parser):

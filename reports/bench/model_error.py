@@ -58,6 +58,9 @@ __all__ = [
     "bench_scene",
     "index_matched",
     "markdown",
+    "method_cells",
+    "table_cell",
+    "write_table",
     "measure_medium",
     "model_error_table",
     "object_mask",
@@ -374,10 +377,20 @@ def _context(scene, mask, size, spp, passes, methods, eta, media) -> dict:
                        "object's pixels"}
 
 
-def _cell(value, digits: int = 3) -> str:
+def table_cell(value, digits: int = 3) -> str:
+    """Return a number for a Markdown table: ``digits`` significant figures, "–" for none."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "–"
     return f"{value:.{digits}g}"
+
+
+def method_cells(entry: dict) -> list[str]:
+    """Return a method's three cells (FLIP, relMSE with * when noise-dominated, Y ratio)."""
+    if entry.get("status") != "ok":
+        return [entry.get("status", "not run"), "–", "–"]
+    star = "*" if entry["dominated_by"] == "noise" else ""
+    return [table_cell(entry["hdr_flip"]), table_cell(entry["relative_mse"]) + star,
+            table_cell(entry["luminance_ratio"])]
 
 
 def markdown(result: dict) -> str:
@@ -402,16 +415,10 @@ def markdown(result: dict) -> str:
     lines += ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
     for row in result["rows"]:
         noise = row["reference"]
-        cells = [row["medium"], _cell(noise["relative_standard_error"]),
-                 _cell(noise["noise_relative_mse"]), _cell(noise["noise_hdr_flip"])]
+        cells = [row["medium"], table_cell(noise["relative_standard_error"]),
+                 table_cell(noise["noise_relative_mse"]), table_cell(noise["noise_hdr_flip"])]
         for name in methods:
-            entry = row["methods"].get(name, {})
-            if entry.get("status") != "ok":
-                cells += [entry.get("status", "not run"), "–", "–"]
-                continue
-            star = "*" if entry["dominated_by"] == "noise" else ""
-            cells += [_cell(entry["hdr_flip"]), _cell(entry["relative_mse"]) + star,
-                      _cell(entry["luminance_ratio"])]
+            cells += method_cells(row["methods"].get(name, {}))
         lines.append("| " + " | ".join(cells) + " |")
     failures = [(row["medium"], name, entry["reason"]) for row in result["rows"]
                 for name, entry in row["methods"].items() if entry.get("status") != "ok"]
@@ -421,11 +428,12 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _write(result: dict, json_path: Path, markdown_path: Path) -> None:
+def write_table(result: dict, json_path: Path, markdown_path: Path, to_markdown=None) -> None:
+    """Write a benchmark's result as JSON and its Markdown table (default :func:`markdown`)."""
     from ..runs import json_safe
 
     atomic_write_text(json_path, json.dumps(json_safe(result), indent=2) + "\n")
-    atomic_write_text(markdown_path, markdown(result))
+    atomic_write_text(markdown_path, (to_markdown or markdown)(result))
 
 
 def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_SIZE,
@@ -493,9 +501,9 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
         result["rows"].append(measure_medium(scene, medium, methods, spp=spp, passes=passes,
                                              mask=mask, images=images, knobs=knobs))
         result["seconds"] = time.perf_counter() - started
-        _write(result, json_path, out / MARKDOWN_NAME)
+        write_table(result, json_path, out / MARKDOWN_NAME)
     result["complete"] = True
-    _write(result, json_path, out / MARKDOWN_NAME)
+    write_table(result, json_path, out / MARKDOWN_NAME)
     return result
 
 

@@ -1,4 +1,4 @@
-"""The fast methods' inputs derived from a solid medium (splatting's texture, radiosity's labels)."""
+"""The fast methods' inputs derived from a solid medium (splatting texture, radiosity labels)."""
 
 import numpy as np
 import pytest

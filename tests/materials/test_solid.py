@@ -98,7 +98,7 @@ height = 8
 [[objects]]
 name = "ball"
 mesh = { type = "icosphere", subdivisions = 1, radius = 1.0 }
-material = { type = "solid", field = "uniform", medium = "Skin1", bounds = [[-0.5, -1, -1], [1, 1, 1]] }
+material = { type = "solid", field = "uniform", bounds = [[-0.5, -1, -1], [1, 1, 1]] }
 [[lights]]
 type = "point"
 position = [3, 3, 3]
