@@ -233,5 +233,17 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGTERM, previous)
 
 
+def entry_point() -> None:
+    """Run :func:`main` as the ``translucent`` program and exit with its code."""
+    code = main()
+    if code in (130, 143):
+        # a render cut short inside a Dr.Jit kernel can leave its thread pool waiting at
+        # interpreter shutdown; the command has already unwound and removed its files
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry_point()

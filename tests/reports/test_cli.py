@@ -86,7 +86,7 @@ def test_a_signal_ends_a_render_with_one_line_and_nothing_left(tmp_path, signal_
                            "--no-cache", "--no-progress", "-o", str(out))
     time.sleep(6.0)  # into the render
     process.send_signal(getattr(signal, signal_name))
-    _, err = process.communicate(timeout=120)
+    _, err = process.communicate(timeout=60)
     assert process.returncode == code, err
     assert err.strip().endswith(f"translucent render: {word}"), err
     assert "Traceback" not in err
