@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from .. import signals
 from ..backend import mitsuba
 from ..cache import Cache, content_hash
 from ..errors import InputError, check_count
@@ -119,6 +120,7 @@ def render_sample(channels, mitsuba_scenes, spp: int, seed: int, on_render=None)
     Per channel, each channel of the image comes from its own scene's render.
     ``on_render`` (optional) is called after each Mitsuba render.
     """
+    signals.check()  # a signal a plugin's caller swallowed still ends the render here
     if channels == (None,):
         sample = _render_pass(mitsuba_scenes[0], spp, seed)
         if on_render is not None:

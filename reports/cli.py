@@ -21,7 +21,9 @@ import os
 import shlex
 import sys
 
+from .. import signals
 from ..errors import InputError
+from ..signals import Terminated
 
 __all__ = ["main", "COMMANDS"]
 
@@ -153,12 +155,14 @@ def _is_number(token: str) -> bool:
     return True
 
 
-class Terminated(Exception):
-    """SIGTERM, raised where the program is so that temporary files are cleaned up."""
-
-
 def _on_sigterm(signum, frame):
+    signals.record("terminate")
     raise Terminated()
+
+
+def _on_sigint(signum, frame):
+    signals.record("interrupt")
+    raise KeyboardInterrupt()
 
 
 def _signal_behind(error: BaseException) -> BaseException | None:
@@ -212,7 +216,9 @@ def main(argv: list[str] | None = None) -> int:
 
     previous = None
     if threading.current_thread() is threading.main_thread():
+        signals.reset()
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
+        previous_interrupt = signal.signal(signal.SIGINT, _on_sigint)
     try:
         with _progress_bars(not getattr(args, "no_progress", False)):
             return int(args.run(args) or 0)
@@ -231,6 +237,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+            signal.signal(signal.SIGINT, previous_interrupt)
 
 
 def entry_point() -> None:
