@@ -152,6 +152,20 @@ def register_spec_type(name: str, from_spec: Callable[[dict], Any], material_cla
                                   to_dict=to_dict, keys=keys, path_keys=path_keys)
 
 
+def spec_file_path(value, file, what: str) -> Path:
+    """Return the path a table's ``file`` key names, relative to the table's own file.
+
+    ``what`` says what the file holds ("a .npz grid"), for the error on a non-string.
+    """
+    if not isinstance(value, (str, Path)):
+        raise InputError(f"must be a string (the path of {what})", file=file, field="file",
+                         value=value)
+    path = Path(value)
+    if file is not None and not path.is_absolute():
+        path = Path(file).parent / path
+    return path
+
+
 def _load_plugins() -> None:
     """Import every module of this package, so that the types they register are known.
 

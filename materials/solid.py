@@ -526,12 +526,9 @@ def solid_from_spec(spec: dict, *, file=None) -> SolidMedium:
         if spec:
             raise InputError("a solid file takes no option but eta", file=file,
                              field="material", value=sorted(spec))
-        if not isinstance(value, (str, Path)):
-            raise InputError("must be a string (the path of a .npz grid)", file=file,
-                             field="file", value=value)
-        path = Path(value)
-        if file is not None and not path.is_absolute():
-            path = Path(file).parent / path
+        from .factory import spec_file_path
+
+        path = spec_file_path(value, file, "a .npz grid")
         solid = load_solid(path)
         if eta is not None:
             solid = SolidMedium(solid.sigma_a, solid.sigma_s_prime, solid.bounds, eta,

@@ -740,12 +740,9 @@ def subedit_from_spec(spec: dict, *, file=None) -> SubEditProfiles:
         raise InputError("a subedit file takes no other options", file=file, field="material",
                          value=sorted(spec))
     if source == "file":
-        if not isinstance(value, (str, Path)):
-            raise InputError("must be a string (the path of a .npz texture)", file=file,
-                             field="file", value=value)
-        path = Path(value)
-        if file is not None and not path.is_absolute():
-            path = Path(file).parent / path
+        from .factory import spec_file_path
+
+        path = spec_file_path(value, file, "a .npz texture")
         try:
             return load_subedit(path)
         except InputError as error:  # named by the key that holds the path
