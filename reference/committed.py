@@ -73,6 +73,7 @@ PLANS: dict[str, ReferencePlan] = {
     "cornell_block": ReferencePlan(spp=32, budget_seconds=3600.0),
     "solid_checker": ReferencePlan(spp=256, budget_seconds=1500.0),
     "solid_veins": ReferencePlan(spp=256, budget_seconds=2400.0),
+    "sphere_dielectric": ReferencePlan(spp=64, budget_seconds=3600.0),
 }
 
 

@@ -35,9 +35,12 @@ know them.
 A delta light (point, spot, directional) cannot reach a medium behind a ``dielectric``
 boundary in ``volpath``: the shadow ray from a scattering point stops at the boundary and a
 BSDF-sampled path never hits a light of zero size, so the medium renders black. When a
-scene holds such a boundary those lights are replaced by emitters of finite size and the
-same power (:mod:`translucent.reference.delta_lights`); the replacement is listed in
-:attr:`MitsubaConversion.substitutions` and in the image metadata.
+scene holds such a boundary and such a light, the default integrator is ``volpath_mnee``,
+which connects the medium to the light through the boundary by manifold next-event
+estimation (:mod:`translucent.reference.manifold_nee`); the choice is stated in
+:attr:`MitsubaConversion.substitutions`. With ``integrator="volpath"`` forced, those lights
+are replaced by emitters of finite size and the same power instead
+(:mod:`translucent.reference.delta_lights`), listed there and in the image metadata.
 """
 
 from __future__ import annotations
@@ -79,8 +82,12 @@ __all__ = [
 ]
 
 #: The integrators a reference may use; ``path`` ignores media, so it is refused for a
-#: scene that has one.
-INTEGRATORS = ("volpath", "volpathmis", "path")
+#: scene that has one. ``volpath_mnee`` is ``volpath`` with manifold next-event
+#: estimation through a dielectric boundary (:mod:`translucent.reference.manifold_nee`).
+INTEGRATORS = ("volpath", "volpathmis", "volpath_mnee", "path")
+
+#: The lights of zero size that a path cannot hit.
+DELTA_LIGHTS = (PointLight, SpotLight, DirectionalLight)
 
 #: -1 is unbounded: paths end by leaving the scene or by Russian roulette, without bias. A
 #: finite depth darkens media of high albedo, whose paths scatter hundreds of times.
@@ -381,8 +388,9 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     Parameters
     ----------
     scene : Scene
-    integrator : {"volpath", "volpathmis", "path"}, optional
-        Default: ``volpath`` when any object has a medium, ``path`` otherwise.
+    integrator : {"volpath", "volpathmis", "volpath_mnee", "path"}, optional
+        Default: ``volpath_mnee`` when a delta light meets a dielectric boundary around a
+        medium, else ``volpath`` when any object has a medium, ``path`` otherwise.
     max_depth : int, optional
         Longest path (-1 unbounded, the default: :data:`DEFAULT_MAX_DEPTH`).
     spp : int
@@ -392,7 +400,8 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         monochrome render of one channel; see :func:`translucent.reference.render`).
     substitute_delta_lights : bool, optional
         Replace point, spot and directional lights by emitters of finite size. Default:
-        when some material blocks delta lights (a dielectric boundary around a medium).
+        when some material blocks delta lights (a dielectric boundary around a medium) and
+        the integrator is not ``volpath_mnee``, which reaches them.
     delta_light_size : float
         Size of those emitters: their radius as a fraction of the distance from the light
         to the nearest surface, the sine of a sun disk's angular radius
@@ -450,17 +459,29 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
             props["interior"] = parts.interior
         shapes[key] = to_mitsuba_mesh(obj.mesh, key, props=props)
 
+    notes: list[str] = []
+    has_delta_lights = any(isinstance(light, DELTA_LIGHTS) for light in scene.lights)
     if integrator is None:
-        integrator = "volpath" if has_media else "path"
+        if blocks_delta and has_delta_lights:
+            integrator = "volpath_mnee"
+            notes.append("delta lights reached through the dielectric boundary by manifold "
+                         "next-event estimation (volpath_mnee), not replaced")
+        else:
+            integrator = "volpath" if has_media else "path"
     if integrator == "path" and has_media:
         raise InputError("the path integrator ignores media; use volpath or volpathmis",
                          file=scene.source, field="integrator", value=integrator)
     if rr_depth is None:
         rr_depth = NO_RUSSIAN_ROULETTE if max_albedo > RR_ALBEDO_THRESHOLD else DEFAULT_RR_DEPTH
     check_count(rr_depth, "rr_depth", 1)
-    substitute = blocks_delta if substitute_delta_lights is None else bool(substitute_delta_lights)
+    if substitute_delta_lights is None:
+        substitute = blocks_delta and integrator != "volpath_mnee"
+    else:
+        substitute = bool(substitute_delta_lights)
+    if integrator == "volpath_mnee":
+        from .manifold_nee import register
 
-    notes: list[str] = []
+        register()
     environment = delta_lights.EnvironmentParts()
     emitters: dict[str, Any] = {}
     for index, light in enumerate(scene.lights):

@@ -30,7 +30,7 @@ __all__ = ["render", "render_to_target", "reference_settings", "reference_key", 
 
 #: Bumped whenever the scene conversion or the estimator changes what a reference holds,
 #: so that older cache entries miss.
-REFERENCE_FORMAT = 1
+REFERENCE_FORMAT = 2
 
 #: Show a progress bar only for renders that last longer than this (seconds).
 PROGRESS_DELAY_SECONDS = 1.0
@@ -159,8 +159,9 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
         Show a progress bar over passes (only once a render has lasted a second).
     cache : bool
         Look the reference up in, and store it into, the ``"reference"`` cache.
-    integrator : {"volpath", "volpathmis", "path"}, optional
-        Default ``volpath`` with media, ``path`` without
+    integrator : {"volpath", "volpathmis", "volpath_mnee", "path"}, optional
+        Default ``volpath_mnee`` where a delta light meets a dielectric boundary around a
+        medium, ``volpath`` with other media, ``path`` without
         (:func:`~translucent.reference.mitsuba_scene.convert_scene`).
     max_depth, rr_depth : int, optional
         Path depth limit (-1 unbounded, the default) and the depth where Russian roulette
@@ -191,8 +192,9 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
         The mean radiance, the per-pixel variance of the mean (None when ``passes == 1``)
         and metadata: ``producer``, ``scene``, ``scene_hash``, ``spp``, ``passes``,
         ``seed``, ``seconds``, ``variant``, ``mitsuba``, ``drjit``, ``integrator``,
-        ``max_depth``, ``rr_depth``, ``per_channel``, ``substitutions`` and, for
-        heterogeneous media, ``media`` (object -> field and grid).
+        ``max_depth``, ``rr_depth``, ``per_channel``, ``substitutions``, for
+        heterogeneous media ``media`` (object -> field and grid), and for ``volpath_mnee``
+        ``manifold_nee`` (its counts: :data:`~translucent.reference.manifold_nee.COUNTERS`).
 
     Raises
     ------
@@ -236,8 +238,8 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
         bar.close()
     _check_finite_render(scene, passes_done.mean)
     image = Image(passes_done.mean, passes_done.variance(),
-                  _metadata(scene, key, settings, conversions, channels, spp=spp,
-                            passes=passes, seed=seed,
+                  _metadata(scene, key, settings, conversions, channels, mitsuba_scenes,
+                            spp=spp, passes=passes, seed=seed,
                             seconds=time.perf_counter() - start))
     if store is not None:
         image.write(store.path(key, ".exr"))
@@ -319,10 +321,23 @@ class PassAccumulator:
         return accumulator
 
 
-def _metadata(scene, key, settings, conversions, channels, **items) -> dict:
+def _manifold_counts(mitsuba_scenes) -> dict | None:
+    """The ``volpath_mnee`` counts summed over the loaded scenes (None: another integrator)."""
+    from .manifold_nee import counts
+
+    total = None
+    for mitsuba_scene in mitsuba_scenes:
+        found = counts(mitsuba_scene)
+        if found is not None:
+            total = found if total is None else {k: total[k] + v for k, v in found.items()}
+    return total
+
+
+def _metadata(scene, key, settings, conversions, channels, mitsuba_scenes=(), **items) -> dict:
     from ..cache import content_hash
 
     first = conversions[0]
+    manifold = _manifold_counts(mitsuba_scenes)
     return {
         "producer": "reference",
         "scene": scene.name,
@@ -340,6 +355,7 @@ def _metadata(scene, key, settings, conversions, channels, **items) -> dict:
         "per_channel": channels != (None,),
         "substitutions": list(first.substitutions),
         **({"media": dict(first.media)} if first.media else {}),
+        **({"manifold_nee": manifold} if manifold is not None else {}),
     }
 
 
@@ -539,8 +555,8 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
     reached = summary()
     _check_finite_render(scene, accumulator.mean)
     image = Image(accumulator.mean, accumulator.variance(),
-                  _metadata(scene, key, settings, conversions, channels, spp=spp,
-                            passes=accumulator.count, seed=seed, seconds=elapsed(),
+                  _metadata(scene, key, settings, conversions, channels, mitsuba_scenes,
+                            spp=spp, passes=accumulator.count, seed=seed, seconds=elapsed(),
                             seed_offset=PROGRESSIVE_SEED_OFFSET,
                             noise=reached.as_dict(), target_rse=target_rse,
                             target_p99_rse=target_p99_rse, budget_seconds=budget_seconds,
