@@ -20,6 +20,7 @@ from .manifold_nee import (  # noqa: E402
     INTEGRATOR_NAME,
     MAX_ITERATIONS,
     MIN_STEP,
+    POSITION_PRECISION,
     ROULETTE_TRANSMITTANCE,
     TOLERANCE,
 )
@@ -66,6 +67,7 @@ class ManifoldVolpath(ADIntegrator):
 
     # ------------------------------------------------------------------ set-up
     def prepare_scene(self, scene):
+        """Find the lights a medium vertex connects to and the scene's media, once."""
         if self.prepared_for is scene:
             return
         connectable = []
@@ -86,15 +88,18 @@ class ManifoldVolpath(ADIntegrator):
         self.prepared_for = scene
 
     def reset_counts(self):
+        """Start the counts (:data:`COUNTERS`) again from zero."""
         self.counters = [0] * len(COUNTERS)
 
     # ------------------------------------------------------------- transmittance
     @dr.syntax
     def transmittance(self, scene, sampler, origin, target, directional, medium,
                       channel, active):
-        """Transmittance from ``origin`` (an Interaction3f) to ``target`` (a point, or a
-        direction when ``directional``): ratio tracking through media, null surfaces
-        passed, any other surface blocks (as ``volpath``'s shadow rays).
+        """Return the transmittance from ``origin`` to ``target``.
+
+        ``origin`` is an Interaction3f, ``target`` a point or, when ``directional``, a
+        direction: ratio tracking through media, null surfaces passed, any other surface
+        blocks (as ``volpath``'s shadow rays).
         """
         active = mi.Bool(active)
         ray = origin.spawn_ray(dr.select(directional, target,
@@ -149,72 +154,91 @@ class ManifoldVolpath(ADIntegrator):
         return tr
 
     # -------------------------------------------------------------- the solve
-    def constraint(self, y, n, s, t, v, light, directional, eta):
-        """Snell mismatch :math:`C` at ``y`` with normal ``n``, in the basis (s, t)."""
-        wi = dr.normalize(v - y)
-        wo = dr.select(directional, light, dr.normalize(light - y))
+    def constraint(self, to_v, to_light, n, s, t, directional, eta):
+        """Return the Snell mismatch :math:`C` in the basis (s, t).
+
+        ``to_v`` and ``to_light`` run from the boundary point to the vertex and to the
+        light (the light's direction when ``directional``); ``n`` is the normal there.
+        Differences, not positions: a vertex near the boundary keeps its precision.
+        """
+        wi = dr.normalize(to_v)
+        wo = dr.normalize(to_light)
         w = wo + eta * wi
         tangential = w - n * dr.dot(n, w)
         return mi.Vector2f(dr.dot(tangential, s), dr.dot(tangential, t))
 
-    def local_constraint(self, si, frame, a, b, v, light, directional, eta):
+    def constraint_at(self, si, frame, v, light, directional, eta):
+        """Return :math:`C` at the surface point ``si``."""
+        to_light = dr.select(directional, light, light - si.p)
+        return self.constraint(v - si.p, to_light, si.sh_frame.n, frame[0], frame[1],
+                               directional, eta)
+
+    def local_constraint(self, si, frame, a, b, to_v, to_light, directional, eta):
+        """Return :math:`C` at tangent offset (a, b) of the first-order model about ``si``."""
         s, t, dn_ds, dn_dt = frame
-        y = si.p + a * s + b * t
+        offset = a * s + b * t
         n = dr.normalize(si.sh_frame.n + a * dn_ds + b * dn_dt)
-        return self.constraint(y, n, s, t, v, light, directional, eta)
+        moved_light = dr.select(directional, to_light, to_light - offset)
+        return self.constraint(to_v - offset, moved_light, n, s, t, directional, eta)
+
+    def tolerance(self, si, v):
+        """Return :data:`TOLERANCE` plus what float32 positions allow at ``si``."""
+        return TOLERANCE + POSITION_PRECISION * (1.0 + dr.max(dr.abs(si.p))) \
+            / dr.maximum(dr.norm(v - si.p), 1e-30)
 
     @dr.syntax
     def solve(self, scene, v, si, light, directional, eta, active):
         """Newton's method on the boundary from ``si`` (module docstring).
 
         Returns the surface interaction reached and whether :math:`|C|` fell below
-        :data:`TOLERANCE` there.
+        :data:`TOLERANCE` there (plus what float32 positions allow: a vertex close to the
+        boundary knows its direction to it only to :data:`POSITION_PRECISION` times the
+        coordinates' size over the distance).
         """
         active = mi.Bool(active)
         si = mi.SurfaceInteraction3f(si)
-        frame = tangent_frame(si)
-        c = self.constraint(si.p, si.sh_frame.n, frame[0], frame[1], v, light,
-                            directional, eta)
-        error = dr.norm(c)
-        converged = active & (error < TOLERANCE)
+        error = dr.norm(self.constraint_at(si, tangent_frame(si), v, light, directional,
+                                           eta))
+        converged = active & (error < self.tolerance(si, v))
         active &= ~converged
         beta = mi.Float(1.0)
         iteration = mi.UInt32(0)
         while active:
             frame = tangent_frame(si)
-            h = DIFFERENCE_STEP * (dr.norm(v - si.p) + self.scene_size)
-            ca = (self.local_constraint(si, frame, h, 0.0, v, light, directional, eta)
-                  - self.local_constraint(si, frame, -h, 0.0, v, light, directional,
+            to_v = v - si.p
+            to_light = dr.select(directional, light, light - si.p)
+            # the step of the differences follows the shorter lever: the vertex's distance
+            h = DIFFERENCE_STEP * dr.minimum(dr.norm(to_v), dr.norm(to_light))
+            ca = (self.local_constraint(si, frame, h, 0.0, to_v, to_light, directional, eta)
+                  - self.local_constraint(si, frame, -h, 0.0, to_v, to_light, directional,
                                           eta)) / (2.0 * h)
-            cb = (self.local_constraint(si, frame, 0.0, h, v, light, directional, eta)
-                  - self.local_constraint(si, frame, 0.0, -h, v, light, directional,
+            cb = (self.local_constraint(si, frame, 0.0, h, to_v, to_light, directional, eta)
+                  - self.local_constraint(si, frame, 0.0, -h, to_v, to_light, directional,
                                           eta)) / (2.0 * h)
-            c = self.constraint(si.p, si.sh_frame.n, frame[0], frame[1], v, light,
+            c = self.constraint(to_v, to_light, si.sh_frame.n, frame[0], frame[1],
                                 directional, eta)
             det = ca.x * cb.y - cb.x * ca.y
             step_a = -(cb.y * c.x - cb.x * c.y) / det
             step_b = -(ca.x * c.y - ca.y * c.x) / det
-            proposal = si.p + beta * (step_a * frame[0] + step_b * frame[1])
-            ray = mi.Ray3f(v, dr.normalize(proposal - v))
+            step = beta * (step_a * frame[0] + step_b * frame[1])
+            ray = mi.Ray3f(v, dr.normalize(step - to_v))
             candidate = scene.ray_intersect(ray, mi.RayFlags.All | mi.RayFlags.dNSdUV,
                                             False, active)
             leaves = (candidate.is_valid() & (dr.dot(ray.d, candidate.n) > 0.0)
-                      & dr.all(dr.isfinite(proposal)))
-            candidate_frame = tangent_frame(candidate)
-            candidate_error = dr.norm(self.constraint(
-                candidate.p, candidate.sh_frame.n, candidate_frame[0], candidate_frame[1],
-                v, light, directional, eta))
+                      & dr.all(dr.isfinite(step)))
+            candidate_error = dr.norm(self.constraint_at(candidate, tangent_frame(candidate),
+                                                         v, light, directional, eta))
             better = active & leaves & (candidate_error < error)
             si[better] = candidate
             error[better] = candidate_error
             beta = dr.select(better, dr.minimum(1.0, 2.0 * beta), 0.5 * beta)
-            converged |= better & (error < TOLERANCE)
+            converged |= better & (error < self.tolerance(si, v))
             iteration += 1
             active &= ~converged & (iteration < MAX_ITERATIONS) & (beta >= MIN_STEP)
         return si, converged
 
     def geometry(self, si, v, light, directional, eta):
-        """:math:`|d\\omega_\\ell| / |dA_\\perp(v)|` (or cross-section ratio) at the solution."""
+        r"""Return :math:`|d\omega_\ell| / |dA_\perp(v)|` (or the cross-section ratio) at ``si``."""
         frame = tangent_frame(si)
         s_axis, t_axis, dn_ds, dn_dt = frame
         distance = dr.norm(v - si.p)
@@ -252,9 +276,9 @@ class ManifoldVolpath(ADIntegrator):
 
     @dr.syntax
     def connect(self, scene, sampler, mei, medium, channel, active):
-        """Manifold next-event estimation at the medium vertices ``mei``.
+        r"""Make the manifold next-event estimate at the medium vertices ``mei``.
 
-        Returns the irradiance :math:`E_\\perp` (times the emitter-selection weight)
+        Returns the irradiance :math:`E_\perp` (times the emitter-selection weight)
         and the unit direction from the vertex to its refraction point.
         """
         active = mi.Bool(active)
@@ -344,6 +368,7 @@ class ManifoldVolpath(ADIntegrator):
     # ------------------------------------------------------------- the path
     @dr.syntax
     def sample(self, mode, scene, sampler, ray, δL, state_in, active, **kwargs):
+        """Trace one path per lane (Mitsuba's ``ADIntegrator`` interface, primal only)."""
         if mode != dr.ADMode.Primal:
             raise RuntimeError(f"{INTEGRATOR_NAME} renders primal images only")
         self.prepare_scene(scene)
@@ -537,4 +562,5 @@ class ManifoldVolpath(ADIntegrator):
         return L, valid_ray, [], L
 
     def to_string(self):
+        """Describe the integrator as Mitsuba prints it."""
         return f"ManifoldVolpath[max_depth = {self.max_depth}, rr_depth = {self.rr_depth}]"

@@ -87,6 +87,11 @@ MAX_ITERATIONS = 32
 #: this (float32 positions give about 1e-6).
 TOLERANCE = 2e-5
 
+#: Relative precision of a float32 position (a few units in the last place): a vertex at
+#: distance d from its refraction point y knows the direction to it only to about this
+#: times (1 + |y|) / d, which is added to :data:`TOLERANCE`.
+POSITION_PRECISION = 8.0 * 2.0**-24
+
 #: Step of the central differences, as a fraction of the distance from the medium vertex to
 #: the boundary plus the scene's size.
 DIFFERENCE_STEP = 1e-3

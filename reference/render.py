@@ -322,7 +322,7 @@ class PassAccumulator:
 
 
 def _manifold_counts(mitsuba_scenes) -> dict | None:
-    """The ``volpath_mnee`` counts summed over the loaded scenes (None: another integrator)."""
+    """Return the ``volpath_mnee`` counts summed over the loaded scenes (None: other)."""
     from .manifold_nee import counts
 
     total = None
