@@ -64,6 +64,8 @@ the solver reaches from its start is found (the header says which scenes are con
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..backend import mitsuba
 
 __all__ = ["INTEGRATOR_NAME", "COUNTERS", "register", "counts"]
@@ -126,3 +128,50 @@ def counts(mitsuba_scene) -> dict[str, int] | None:
     if counters is None:
         return None
     return dict(zip(COUNTERS, (int(c) for c in counters), strict=True))
+
+
+def boundary_edge_count(vertices, faces) -> int:
+    """Return how many edges of a mesh fail to be shared by exactly two opposed faces.
+
+    Vertices are welded by position first (a box has separate vertices along its edges
+    for its flat normals). 0 for a closed, consistently oriented 2-manifold: the inside
+    the solve refracts into is well defined.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    scale = float(np.abs(vertices).max()) if vertices.size else 1.0
+    keys = np.round(vertices / (1e-7 * max(scale, 1e-30))).astype(np.int64)
+    _, welded = np.unique(keys, axis=0, return_inverse=True)
+    welded = welded.ravel()[faces]
+    directed = np.concatenate([welded[:, [0, 1]], welded[:, [1, 2]], welded[:, [2, 0]]])
+    directed = directed[directed[:, 0] != directed[:, 1]]  # degenerate triangles' edges
+    forward, counts = np.unique(directed, axis=0, return_counts=True)
+    table = {tuple(edge): count for edge, count in zip(forward.tolist(), counts.tolist(),
+                                                        strict=True)}
+    bad = 0
+    for (a, b), count in table.items():
+        if count != 1 or table.get((b, a), 0) != 1:
+            bad += 1
+    return bad
+
+
+def check_closed_boundaries(scene, indices) -> None:
+    """Refuse a dielectric boundary (objects ``indices`` of ``scene``) that is not closed.
+
+    Raises
+    ------
+    InputError
+        Naming the scene file, the object's mesh and how many edges are open or
+        inconsistently oriented.
+    """
+    from ..errors import InputError
+
+    for index in indices:
+        obj = scene.objects[index]
+        bad = boundary_edge_count(obj.mesh.vertices, obj.mesh.faces)
+        if bad:
+            raise InputError(
+                f"{INTEGRATOR_NAME} refracts through the boundary of a medium, which must "
+                f"be a closed, consistently oriented mesh; {bad} edges are open or "
+                f"inconsistently oriented", file=scene.source,
+                field=f"objects[{index}].mesh", value=obj.name)

@@ -443,11 +443,14 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     max_albedo = 0.0
     long_chromatic_walks = False
     media: dict[str, str] = {}
-    for obj in scene.objects:
+    blocking: list[int] = []
+    for index, obj in enumerate(scene.objects):
         context = ConversionContext(scene, obj.name, channel)
         parts = material_converter(obj.material, object_name=obj.name)(obj.material, context)
         has_media |= parts.interior is not None
         blocks_delta |= parts.blocks_delta_lights
+        if parts.blocks_delta_lights:
+            blocking.append(index)
         max_albedo = max(max_albedo, parts.max_albedo)
         long_chromatic_walks |= parts.chromatic and (parts.max_albedo > RR_ALBEDO_THRESHOLD
                                                      or parts.prefers_per_channel)
@@ -479,8 +482,9 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     else:
         substitute = bool(substitute_delta_lights)
     if integrator == "volpath_mnee":
-        from .manifold_nee import register
+        from .manifold_nee import check_closed_boundaries, register
 
+        check_closed_boundaries(scene, blocking)
         register()
     environment = delta_lights.EnvironmentParts()
     emitters: dict[str, Any] = {}

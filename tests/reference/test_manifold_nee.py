@@ -1,0 +1,359 @@
+"""volpath_mnee shown correct three independent ways, and its place in the reference.
+
+1. At eta = 1 (a ``dielectric`` of index 1 around the medium) the manifold connection is
+   ordinary next-event estimation: it must match ``volpath`` with a ``null`` boundary.
+2. With a small sphere light at eta 1.3, the connection (sampled on the light, then
+   solved) and the paths it leaves to unidirectional sampling must add up to plain
+   ``volpath`` with the same light.
+3. A flat slab at eta 1.3 under a point light, seen from straight above: annulus by
+   annulus, the radiance must match a photon tracer written here in numpy, from the
+   light (no Mitsuba, no code shared with the integrator).
+
+The fast tier runs each at a few thousand pixel samples; the ``slow`` tier at enough to
+resolve a 2 % difference.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from translucent.errors import InputError
+from translucent.image import Image
+from translucent.reports.statistics import z_test_known_variance
+
+mi_module = pytest.importorskip("mitsuba")
+
+from translucent.backend import mitsuba  # noqa: E402
+from translucent.reference import manifold_nee  # noqa: E402
+
+#: Largest accepted |z| of a summed difference (two-sided p of 6e-5 per channel).
+GLOBAL_Z = 4.0
+
+
+@pytest.fixture(scope="module")
+def mi():
+    module = mitsuba()
+    if not module.variant().startswith(("llvm_", "cuda_")):
+        pytest.skip("volpath_mnee needs a JIT variant")
+    manifold_nee.register()
+    return module
+
+
+def _medium():
+    return {"type": "homogeneous", "sigma_t": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
+            "albedo": {"type": "rgb", "value": [0.9, 0.8, 0.7]}, "scale": 3.0}
+
+
+def _sphere_scene(mi, integrator, boundary, light, size):
+    from translucent.scenes.meshes import icosphere
+    from translucent.scenes.raycast import to_mitsuba_mesh
+
+    shape = to_mitsuba_mesh(icosphere(4, 1.0), "sphere",
+                            props={"bsdf": boundary, "interior": _medium()})
+    camera = mi.ScalarTransform4f().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0])
+    return mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": integrator, "max_depth": -1, "rr_depth": 5},
+        "sensor": {"type": "perspective", "fov": 30, "to_world": camera,
+                   "film": {"type": "hdrfilm", "width": size, "height": size,
+                            "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": 16}},
+        "sphere": shape, "light": light})
+
+
+def _passes(mi, scene, spp, passes, seed=0):
+    """Mean and variance of the mean over independent passes, float64 (H, W, 3)."""
+    images = np.array([np.array(mi.render(scene, spp=spp, seed=seed + k))[..., :3]
+                       for k in range(passes)], dtype=np.float64)
+    return images.mean(axis=0), images.var(axis=0, ddof=1) / passes
+
+
+def _summed_z(first, second, lit):
+    difference = (first[0][lit] - second[0][lit]).sum(axis=0)
+    return difference / np.sqrt((first[1][lit] + second[1][lit]).sum(axis=0))
+
+
+def _agree(first, second, passes, resolution=0.05):
+    """Per-pixel z-test and the summed difference per channel; and that it can fail.
+
+    ``resolution``: a relative difference the summed test must tell apart.
+    """
+    lit = first[0][..., 1] > 1e-4 * first[0][..., 1].max()
+    assert lit.sum() > 20
+    result = z_test_known_variance(Image(*first), Image(*second), passes=(passes, passes))
+    assert result.passed, result.summary()
+    z = _summed_z(first, second, lit)
+    assert np.abs(z).max() < GLOBAL_Z, f"summed differences at z = {z}"
+    scale = 1.0 + resolution
+    drifted = (scale * second[0], scale**2 * second[1])
+    assert np.abs(_summed_z(first, drifted, lit)).min() > GLOBAL_Z, \
+        f"too noisy to tell {resolution:.0%}"
+
+
+POINT = {"type": "point", "position": [3.0, 4.0, 4.0],
+         "intensity": {"type": "rgb", "value": [100.0, 100.0, 100.0]}}
+
+
+def _eta_one(mi, size, spp, passes):
+    manifold = _sphere_scene(mi, "volpath_mnee", {"type": "dielectric", "int_ior": 1.0},
+                             POINT, size)
+    plain = _sphere_scene(mi, "volpath", {"type": "null"}, POINT, size)
+    first = _passes(mi, manifold, spp, passes)
+    counted = manifold_nee.counts(manifold)
+    assert counted["connections"] > 0
+    assert counted["not_converged"] <= 1e-3 * counted["connections"], counted
+    # at eta 1 every point sees the light; only grazing rays where the shading normal and
+    # the triangle's disagree on the side are not refractions
+    assert counted["not_refraction"] <= 1e-5 * counted["connections"], counted
+    _agree(first, _passes(mi, plain, spp, passes, seed=100), passes)
+
+
+def test_at_eta_one_the_connection_is_next_event_estimation(mi):
+    _eta_one(mi, 16, 64, 8)
+
+
+@pytest.mark.slow
+def test_at_eta_one_the_connection_is_next_event_estimation_converged(mi):
+    _eta_one(mi, 32, 256, 16)
+
+
+def _sphere_light(radius):
+    return {"type": "sphere", "center": [3.0, 4.0, 4.0], "radius": radius,
+            "emitter": {"type": "area", "radiance": {
+                "type": "rgb", "value": [100.0 / (math.pi * radius**2)] * 3}}}
+
+
+def _area_limit(mi, size, spp_plain, spp_manifold, passes, reflective=True, resolution=0.05):
+    # Without reflection the light's highlight on the surface, a rare-hit estimate common
+    # to both integrators and heavy-tailed at a few hundred spp, is gone; what is
+    # compared is the refracted light, the manifold connection's part.
+    boundary = {"type": "dielectric", "int_ior": 1.3}
+    if not reflective:
+        boundary["specular_reflectance"] = 0.0
+    light = _sphere_light(0.8)
+    manifold = _sphere_scene(mi, "volpath_mnee", boundary, light, size)
+    plain = _sphere_scene(mi, "volpath", boundary, light, size)
+    _agree(_passes(mi, manifold, spp_manifold, passes),
+           _passes(mi, plain, spp_plain, passes, seed=100), passes, resolution)
+
+
+def test_a_small_sphere_light_gives_what_volpath_gives(mi):
+    _area_limit(mi, 8, 4096, 128, 16, reflective=False, resolution=0.1)
+
+
+@pytest.mark.slow
+def test_a_small_sphere_light_gives_what_volpath_gives_converged(mi):
+    _area_limit(mi, 24, 16384, 1024, 32, resolution=0.03)
+
+
+# --------------------------------------------------------------------------- the slab
+def _fresnel(cos_i, eta_i, eta_t):
+    """Unpolarised Fresnel reflectance and the transmitted cosine (numpy)."""
+    cos_i = np.abs(cos_i)
+    sin2_t = (eta_i / eta_t) ** 2 * (1.0 - cos_i**2)
+    cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, None))
+    r_s = (eta_i * cos_i - eta_t * cos_t) / (eta_i * cos_i + eta_t * cos_t)
+    r_p = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t)
+    return np.where(sin2_t >= 1.0, 1.0, 0.5 * (r_s**2 + r_p**2)), cos_t
+
+
+def photon_tracer(sigma_a, sigma_s, eta, thickness, height, edges, cone_degrees, photons,
+                  rng, batches=8):
+    """Radiance leaving a slab's top straight up, per annulus about the light's foot.
+
+    A point light of unit intensity at ``height`` (mm) above the top of a laterally
+    infinite slab (z in [-thickness, 0], isotropic scattering, index ``eta`` inside).
+    Photons leave the light uniformly over the downward hemisphere (flux 2 pi / n each),
+    are refracted in with weight 1 - F, walk with implicit absorption, and at each
+    boundary leave with 1 - F and walk on with F; exits through the top within
+    ``cone_degrees`` of the vertical are scored: radiance = flux / (annulus area x
+    pi sin^2 cone). Returns (mean, standard error over batches) per annulus.
+    """
+    sigma_t = sigma_a + sigma_s
+    albedo = sigma_s / sigma_t
+    cos_cone = math.cos(math.radians(cone_degrees))
+    projected_solid_angle = math.pi * (1.0 - cos_cone**2)
+    areas = math.pi * (edges[1:] ** 2 - edges[:-1] ** 2)
+    sums = np.zeros((batches, edges.size - 1))
+    per_batch = photons // batches
+    for batch in range(batches):
+        uz = -rng.random(per_batch)
+        phi = 2.0 * math.pi * rng.random(per_batch)
+        sin_t = np.sqrt(1.0 - uz**2)
+        ux, uy = sin_t * np.cos(phi), sin_t * np.sin(phi)
+        x, y = ux * height / -uz, uy * height / -uz
+        z = np.zeros(per_batch)
+        reflected, cos_in = _fresnel(uz, 1.0, eta)
+        weight = (1.0 - reflected) * (2.0 * math.pi / per_batch)
+        ux, uy, uz = ux / eta, uy / eta, -cos_in
+        floor = 1e-4 * 2.0 * math.pi / per_batch
+        while weight.size:
+            step = -np.log1p(-rng.random(weight.size)) / sigma_t
+            up, down = uz > 0, uz < 0
+            to_boundary = np.full(weight.size, np.inf)
+            to_boundary[up] = -z[up] / uz[up]
+            to_boundary[down] = (-thickness - z[down]) / uz[down]
+            hit = step >= to_boundary
+            travel = np.minimum(step, to_boundary)
+            x, y, z = x + travel * ux, y + travel * uy, z + travel * uz
+            reflected, cos_out = _fresnel(uz[hit], eta, 1.0)
+            top = uz[hit] > 0
+            leaving = weight[hit] * (1.0 - reflected)
+            scored = top & (cos_out >= cos_cone)
+            radius = np.hypot(x[hit][scored], y[hit][scored])
+            annulus = np.searchsorted(edges, radius) - 1
+            inside = (annulus >= 0) & (annulus < edges.size - 1)
+            np.add.at(sums[batch], annulus[inside], leaving[scored][inside])
+            weight[hit] *= reflected
+            uz[hit] = -uz[hit]
+            z[hit] = np.where(top, 0.0, -thickness)
+            scatter = ~hit
+            weight[scatter] *= albedo
+            cos_new = 2.0 * rng.random(int(scatter.sum())) - 1.0
+            phi = 2.0 * math.pi * rng.random(cos_new.size)
+            sin_new = np.sqrt(1.0 - cos_new**2)
+            ux[scatter], uy[scatter] = sin_new * np.cos(phi), sin_new * np.sin(phi)
+            uz[scatter] = cos_new
+            small = weight < floor
+            survives = rng.random(weight.size) < 0.1  # Russian roulette: unbiased
+            weight = np.where(small, np.where(survives, 10.0 * weight, 0.0), weight)
+            alive = weight > 0
+            x, y, z, ux, uy, uz, weight = (a[alive] for a in (x, y, z, ux, uy, uz, weight))
+    radiance = sums / (areas * projected_solid_angle)
+    return radiance.mean(axis=0), radiance.std(axis=0, ddof=1) / math.sqrt(batches)
+
+
+SLAB = {"sigma_a": 0.1, "sigma_s": 0.9, "eta": 1.3, "thickness": 10.0, "height": 5.0}
+
+
+def _slab_render(mi, size, spp, passes, half_width):
+    from translucent.scenes.meshes import slab
+    from translucent.scenes.raycast import to_mitsuba_mesh
+
+    sigma_t = SLAB["sigma_a"] + SLAB["sigma_s"]
+    medium = {"type": "homogeneous", "sigma_t": {"type": "rgb", "value": [1.0] * 3},
+              "albedo": {"type": "rgb", "value": [SLAB["sigma_s"] / sigma_t] * 3},
+              "scale": sigma_t}
+    thickness = SLAB["thickness"]
+    shape = to_mitsuba_mesh(slab(60.0, 60.0, thickness, (0.0, -thickness / 2, 0.0), 8),
+                            "slab", props={"bsdf": {"type": "dielectric",
+                                                    "int_ior": SLAB["eta"]},
+                                           "interior": medium})
+    view = (mi.ScalarTransform4f().look_at(origin=[0, 50, 0], target=[0, 0, 0],
+                                           up=[0, 0, -1])
+            @ mi.ScalarTransform4f().scale([half_width, half_width, 1.0]))
+    scene = mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": "volpath_mnee", "max_depth": -1, "rr_depth": 5},
+        "sensor": {"type": "orthographic", "to_world": view,
+                   "film": {"type": "hdrfilm", "width": size, "height": size,
+                            "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": 16}},
+        "slab": shape,
+        "light": {"type": "point", "position": [0.0, SLAB["height"], 0.0],
+                  "intensity": {"type": "rgb", "value": [1.0] * 3}}})
+    images = np.array([np.array(mi.render(scene, spp=spp, seed=k))[..., 1]
+                       for k in range(passes)], dtype=np.float64)
+    return images, manifold_nee.counts(scene)
+
+
+def _slab_check(mi, size, spp, passes, photons, annuli):
+    half_width = 4.0
+    edges = half_width * np.sqrt(np.arange(annuli + 1) / annuli)  # equal areas
+    traced, traced_se = photon_tracer(SLAB["sigma_a"], SLAB["sigma_s"], SLAB["eta"],
+                                      SLAB["thickness"], SLAB["height"], edges, 15.0,
+                                      photons, np.random.default_rng(2))
+    images, counted = _slab_render(mi, size, spp, passes, half_width)
+    centres = (np.arange(size) + 0.5) / size * 2.0 * half_width - half_width
+    radius = np.hypot(*np.meshgrid(centres, centres))
+    annulus = np.searchsorted(edges, radius) - 1
+    per_pass = np.array([[image[annulus == k].mean() for k in range(annuli)]
+                         for image in images])
+    rendered = per_pass.mean(axis=0)
+    rendered_se = per_pass.std(axis=0, ddof=1) / math.sqrt(passes)
+    z = (rendered - traced) / np.hypot(rendered_se, traced_se)
+    assert counted["not_converged"] <= 1e-4 * counted["connections"], counted
+    assert np.abs(z).max() < 3.5, f"rendered {rendered}, traced {traced}, z {z}"
+    combined = (rendered - traced).sum() / np.sqrt((rendered_se**2 + traced_se**2).sum())
+    assert abs(combined) < 3.0, f"all annuli together at z = {combined:.2f}"
+    # the check can fail: a render 10 % too dark is told apart
+    darker = (0.9 * rendered - traced).sum() / np.sqrt((rendered_se**2
+                                                        + traced_se**2).sum())
+    assert darker < -3.0, f"too noisy to tell 10 % (z = {darker:.2f})"
+
+
+def test_a_slab_under_a_point_light_matches_an_independent_photon_tracer(mi):
+    _slab_check(mi, 24, 32, 8, 600_000, 3)
+
+
+@pytest.mark.slow
+def test_a_slab_under_a_point_light_matches_an_independent_photon_tracer_converged(mi):
+    _slab_check(mi, 48, 128, 16, 8_000_000, 6)
+
+
+# ----------------------------------------------------------------- in the reference
+def test_the_reference_picks_it_where_a_delta_light_meets_a_dielectric(mi):
+    from translucent.reference.mitsuba_scene import convert_scene
+    from translucent.scenes import load_scene
+
+    scene = load_scene("sphere_dielectric")
+    conversion = convert_scene(scene, spp=4)
+    assert conversion.integrator == "volpath_mnee"
+    assert conversion.scene_dict["integrator"]["type"] == "volpath_mnee"
+    assert any("manifold next-event estimation" in note for note in conversion.substitutions)
+    assert not any(key.startswith("light_0_") for key in conversion.scene_dict)  # no stand-in
+    forced = convert_scene(scene, spp=4, integrator="volpath")
+    assert forced.integrator == "volpath"
+    assert any("sphere emitter" in note for note in forced.substitutions)
+    index_matched = convert_scene(load_scene("sphere"), spp=4)
+    assert index_matched.integrator == "volpath"
+
+
+def test_its_counts_are_in_the_image_header(mi):
+    import dataclasses
+
+    from translucent.reference import render
+    from translucent.scenes import load_scene
+
+    scene = load_scene("sphere_dielectric")
+    small = dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, width=8,
+                                                                  height=8))
+    image = render(small, spp=4, passes=2, cache=False, progress=False)
+    assert image.metadata["integrator"] == "volpath_mnee"
+    counted = image.metadata["manifold_nee"]
+    assert set(counted) == set(manifold_nee.COUNTERS)
+    assert counted["connections"] >= counted["solved"] > 0
+    assert image.rgb[..., 1].max() > 0
+
+
+def test_an_open_boundary_is_refused_naming_the_object(mi):
+    import dataclasses
+
+    from translucent.reference.mitsuba_scene import convert_scene
+    from translucent.scenes import load_scene
+    from translucent.scenes.meshes import plane
+
+    scene = load_scene("sphere_dielectric")
+    obj = dataclasses.replace(scene.objects[0], mesh=plane(2.0, 2.0))
+    broken = dataclasses.replace(scene, objects=[obj])
+    with pytest.raises(InputError) as caught:
+        convert_scene(broken, spp=4)
+    message = str(caught.value)
+    assert "objects[0].mesh" in message and "closed" in message
+
+
+def test_the_closed_mesh_check_counts_open_and_flipped_edges():
+    from translucent.scenes.meshes import icosphere, plane, slab
+
+    sphere = icosphere(2, 1.0)
+    assert manifold_nee.boundary_edge_count(sphere.vertices, sphere.faces) == 0
+    box = slab(4.0, 4.0, 1.0, (0.0, 0.0, 0.0), 4)  # separate vertices along its edges
+    assert manifold_nee.boundary_edge_count(box.vertices, box.faces) == 0
+    square = plane(1.0, 1.0)
+    assert manifold_nee.boundary_edge_count(square.vertices, square.faces) == 4
+    flipped = sphere.faces.copy()
+    flipped[0] = flipped[0][::-1]
+    assert manifold_nee.boundary_edge_count(sphere.vertices, flipped) == 3  # its 3 edges
