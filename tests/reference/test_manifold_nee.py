@@ -19,7 +19,6 @@ import math
 
 import numpy as np
 import pytest
-
 from translucent.errors import InputError
 from translucent.image import Image
 from translucent.reports.statistics import z_test_known_variance
