@@ -17,6 +17,14 @@ so the noise is the medium's), and the scene is rendered with ``volpath``,
 ``volpathmis`` and per-channel ``volpath`` at the same spp. Each gets the mean over
 object pixels and channels of the relative variance of the mean, and the efficiency
 ``1 / (relative variance x seconds)``, printed as a ratio to ``volpath``'s.
+
+``--delta-lights`` compares the two ways of lighting a medium behind a dielectric boundary
+with a point, spot or directional light (default scene ``sphere_dielectric``): manifold
+next-event estimation (``volpath_mnee``) and ``volpath`` with the lights replaced by small
+emitters of the same power. Each is rendered at the same spp; printed are the median
+relative standard error over the object's lit pixels, the process CPU time, that error
+scaled to one CPU minute (error falls as the square root of time) and the efficiency
+ratio.
 """
 
 from __future__ import annotations
@@ -57,12 +65,18 @@ def add_arguments(parser):
     parser.add_argument("--integrators", metavar="MATERIAL", default=None,
                         help="compare volpath, volpathmis and per-channel volpath on this "
                         "measured medium instead of timing the overhead")
+    parser.add_argument("--delta-lights", action="store_true",
+                        help="compare volpath_mnee with volpath and stand-in emitters on a "
+                        "scene with a dielectric boundary and a delta light (default scene "
+                        "sphere_dielectric)")
 
 
 def _scene(args):
     from ...errors import InputError
     from ...scenes import load_scene
 
+    if getattr(args, "delta_lights", False) and args.scene == "sphere":
+        args.scene = "sphere_dielectric"
     scene = load_scene(args.scene)
     for name in ("spp", "passes", "repeats"):
         if getattr(args, name) < 1:
@@ -70,7 +84,7 @@ def _scene(args):
     if args.size < 0:
         raise InputError("must be >= 0 (0: the scene's own size)", field="--size",
                          value=args.size)
-    if args.integrators and args.passes < 2:
+    if (args.integrators or getattr(args, "delta_lights", False)) and args.passes < 2:
         raise InputError("must be >= 2 with --integrators (the spread of the passes gives "
                          "the variance compared)", field="--passes", value=args.passes)
     return at_width(scene, args.size)
@@ -192,10 +206,82 @@ def _print_integrators(result) -> None:
               f"{row['efficiency_ratio']:>20.2f}")
 
 
+#: The lighting estimators ``--delta-lights`` compares: name -> keyword arguments of render.
+DELTA_LIGHT_ESTIMATORS = {
+    "volpath_mnee": {"integrator": "volpath_mnee"},
+    "volpath + stand-in emitters": {"integrator": "volpath"},
+}
+
+
+def _delta_lights(scene, args) -> dict:
+    from ...backend import mitsuba
+    from ...errors import InputError
+    from ...noise import noise_summary
+    from ...reference import convert_scene, render
+
+    if convert_scene(scene, spp=1).integrator != "volpath_mnee":
+        raise InputError("needs a delta light and a dielectric boundary around a medium",
+                         field="--scene", value=args.scene)
+    mask = _object_mask(scene)
+    rows = {}
+    for name, options in DELTA_LIGHT_ESTIMATORS.items():
+        render(scene, spp=1, passes=2, cache=False, progress=False, **options)  # warm-up
+        cpu = time.process_time()
+        image = render(scene, spp=args.spp, passes=args.passes, cache=False, progress=False,
+                       **options)
+        cpu_seconds = time.process_time() - cpu
+        summary = noise_summary(image.rgb, image.variance, mask, mask_name="object")
+        # no object pixel lit (a stand-in found by no path): an unbounded error
+        median = summary.median if summary.pixels and np.isfinite(summary.median) else np.inf
+        p99 = summary.p99 if summary.pixels and np.isfinite(summary.p99) else np.inf
+        per_minute = median * (cpu_seconds / 60.0) ** 0.5
+        rows[name] = {"seconds": image.metadata["seconds"], "cpu_seconds": cpu_seconds,
+                      "median_rse": median, "p99_rse": p99,
+                      "pixels": summary.pixels, "median_rse_per_cpu_minute": per_minute,
+                      "substitutions": image.metadata.get("substitutions", [])}
+    baseline = rows["volpath + stand-in emitters"]
+    for row in rows.values():
+        with np.errstate(invalid="ignore", divide="ignore"):
+            row["efficiency_ratio"] = float((baseline["median_rse_per_cpu_minute"]
+                                             / row["median_rse_per_cpu_minute"]) ** 2)
+    for row in rows.values():  # JSON has no infinity: null for "no lit pixel"
+        for key, value in row.items():
+            if isinstance(value, float) and not np.isfinite(value):
+                row[key] = None
+    mi = mitsuba()
+    return {"benchmark": "reference delta lights", "scene": scene.name,
+            "size": [scene.camera.width, scene.camera.height], "spp": args.spp,
+            "passes": args.passes, "variant": mi.variant(), "mitsuba": mi.__version__,
+            "object_pixels": int(mask.sum()), "estimators": rows}
+
+
+def _print_delta_lights(result) -> None:
+    width, height = result["size"]
+    print(f"delta lights behind a dielectric: {result['scene']} {width} x {height}, "
+          f"{result['spp']} spp x {result['passes']} passes ({result['variant']})")
+    print(f"{'estimator':>28}  {'cpu s':>8}  {'median RSE':>10}  {'p99 RSE':>8}  "
+          f"{'RSE at 1 CPU min':>16}  {'efficiency':>10}")
+    def percent(value, width):
+        return f"{'none lit':>{width + 1}}" if value is None else f"{100 * value:>{width}.2f}%"
+
+    for name, row in result["estimators"].items():
+        ratio = row["efficiency_ratio"]
+        ratio_text = "n/a" if ratio is None else f"{ratio:.1f}"
+        print(f"{name:>28}  {row['cpu_seconds']:>8.1f}  {percent(row['median_rse'], 9)}  "
+              f"{percent(row['p99_rse'], 7)}  {percent(row['median_rse_per_cpu_minute'], 15)}"
+              f"  {ratio_text:>10}")
+    print("efficiency: 1 / (RSE^2 x CPU time) as a ratio to the stand-in emitters' (n/a: "
+          "no object pixel received the stand-ins' light)")
+
+
 def run(args) -> int:
     """Run the overhead timing (or the integrator comparison), print it, write the JSON."""
     scene = _scene(args)
-    if args.integrators:
+    if getattr(args, "delta_lights", False):
+        result = _delta_lights(scene, args)
+        _print_delta_lights(result)
+        default = "bench_reference_delta_lights.json"
+    elif args.integrators:
         result = _integrators(scene, args)
         _print_integrators(result)
         default = "bench_reference_integrators.json"

@@ -38,7 +38,10 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=int, default=0, help="picks the passes' seeds "
                         "(default 0)")
     parser.add_argument("--integrator", choices=INTEGRATORS, default=None,
-                        help="default: volpath with media, path without")
+                        help="default: volpath_mnee where a point, spot or directional "
+                        "light meets a dielectric boundary around a medium (manifold "
+                        "next-event estimation), volpath with other media, path without; "
+                        "volpath there replaces such lights by small emitters")
     parser.add_argument("--per-channel", action=argparse.BooleanOptionalAction, default=None,
                         help="render R, G and B separately (media of one channel each); "
                         "default: where a medium is chromatic and of albedo near 1, as the "

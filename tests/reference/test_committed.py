@@ -40,7 +40,7 @@ NAMES = list(PLANS)
 
 #: Samples per pixel of each of the 8 passes of the fresh render, per scene: a few seconds.
 FRESH_SPP = {"glossy": 16, "bowl": 16, "sphere": 4, "cornell_block": 2, "solid_checker": 16,
-             "solid_veins": 8}
+             "solid_veins": 8, "sphere_dielectric": 4}
 
 
 @pytest.mark.parametrize("name", NAMES)

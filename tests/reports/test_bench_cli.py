@@ -93,3 +93,29 @@ def test_bench_prt_refuses_a_sweep_figure_path_that_is_a_folder(tmp_path, capsys
     monkeypatch.setattr(bench_prt, "memory_bandwidth", _never)
     assert main(["bench", "prt", "--sweep", "--png", str(tmp_path)]) == 2
     assert "--png = " in capsys.readouterr().err
+
+
+def test_bench_reference_delta_lights_refuses_a_scene_without_a_dielectric(capsys, monkeypatch):
+    import translucent.reference
+
+    monkeypatch.setattr(translucent.reference, "render", _never)
+    code = main(["bench", "reference", "--delta-lights", "--scene", "cornell_block",
+                 "--size", "8", "--passes", "2"])
+    assert code == 2
+    assert "needs a delta light and a dielectric boundary" in capsys.readouterr().err
+
+
+def test_bench_reference_delta_lights_measures_both_estimators(tmp_path, capsys):
+    import json
+
+    out = tmp_path / "delta.json"
+    assert main(["bench", "reference", "--delta-lights", "--size", "12", "--spp", "4",
+                 "--passes", "2", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["scene"] == "sphere_dielectric"
+    rows = result["estimators"]
+    assert set(rows) == {"volpath_mnee", "volpath + stand-in emitters"}
+    assert rows["volpath_mnee"]["median_rse"] is not None  # the connection lights the sphere
+    assert any("sphere emitter" in note
+               for note in rows["volpath + stand-in emitters"]["substitutions"])
+    assert "RSE at 1 CPU min" in capsys.readouterr().out
