@@ -73,10 +73,12 @@ PLANS: dict[str, ReferencePlan] = {
     "cornell_block": ReferencePlan(spp=32, budget_seconds=3600.0),
     "solid_checker": ReferencePlan(spp=256, budget_seconds=1500.0),
     "solid_veins": ReferencePlan(spp=256, budget_seconds=2400.0),
-    # manifold next-event estimation costs 15-20x volpath's time per sample: 1 % / 5 % would
-    # take about three hours on this 2-core CPU (docs/references.md), so the target is looser
-    "sphere_dielectric": ReferencePlan(spp=64, budget_seconds=3600.0, target_rse=0.015,
-                                       target_p99_rse=0.10),
+    # manifold next-event estimation costs 15-20x volpath's time per sample, and Skin1's
+    # shadowed half is lit only by light diffused round the sphere (the darkest quarter of
+    # the lit pixels has 4x the median's error): 1 % / 5 % would take many hours on this
+    # 2-core CPU (docs/references.md), so the target is looser until a GPU renders it
+    "sphere_dielectric": ReferencePlan(spp=64, budget_seconds=5400.0, target_rse=0.015,
+                                       target_p99_rse=0.30),
 }
 
 

@@ -96,10 +96,26 @@ POINT = {"type": "point", "position": [3.0, 4.0, 4.0],
          "intensity": {"type": "rgb", "value": [100.0, 100.0, 100.0]}}
 
 
-def _eta_one(mi, size, spp, passes):
+SPOT = {"type": "spot", "intensity": {"type": "rgb", "value": [100.0, 100.0, 100.0]},
+        "cutoff_angle": 12.0, "beam_width": 8.0}
+DIRECTIONAL = {"type": "directional", "direction": [-0.6, -0.8, -0.2],
+               "irradiance": {"type": "rgb", "value": [3.0, 3.0, 3.0]}}
+
+
+def _light(mi, kind):
+    if kind == "point":
+        return POINT
+    if kind == "spot":  # aimed a little off the centre: its fall-off crosses the sphere
+        return {**SPOT, "to_world": mi.ScalarTransform4f().look_at(
+            origin=[3.0, 4.0, 4.0], target=[0.3, 0.2, 0.0], up=[0.0, 0.0, 1.0])}
+    return DIRECTIONAL
+
+
+def _eta_one(mi, size, spp, passes, kind="point"):
+    light = _light(mi, kind)
     manifold = _sphere_scene(mi, "volpath_mnee", {"type": "dielectric", "int_ior": 1.0},
-                             POINT, size)
-    plain = _sphere_scene(mi, "volpath", {"type": "null"}, POINT, size)
+                             light, size)
+    plain = _sphere_scene(mi, "volpath", {"type": "null"}, light, size)
     first = _passes(mi, manifold, spp, passes)
     counted = manifold_nee.counts(manifold)
     assert counted["connections"] > 0
@@ -110,8 +126,9 @@ def _eta_one(mi, size, spp, passes):
     _agree(first, _passes(mi, plain, spp, passes, seed=100), passes)
 
 
-def test_at_eta_one_the_connection_is_next_event_estimation(mi):
-    _eta_one(mi, 16, 64, 8)
+@pytest.mark.parametrize("kind", ["point", "spot", "directional"])
+def test_at_eta_one_the_connection_is_next_event_estimation(mi, kind):
+    _eta_one(mi, 16 if kind == "point" else 10, 64, 8, kind)
 
 
 @pytest.mark.slow
