@@ -160,8 +160,18 @@ def _object_mask(scene) -> np.ndarray:
     return gbuffer(scene).hit
 
 
-def _integrators(scene, args) -> dict:
+def _comparison_header(benchmark: str, scene, args, mask) -> dict:
+    """Return what an estimator comparison's JSON says of its set-up."""
     from ...backend import mitsuba
+
+    mi = mitsuba()
+    return {"benchmark": benchmark, "scene": scene.name,
+            "size": [scene.camera.width, scene.camera.height], "spp": args.spp,
+            "passes": args.passes, "variant": mi.variant(), "mitsuba": mi.__version__,
+            "object_pixels": int(mask.sum())}
+
+
+def _integrators(scene, args) -> dict:
     from ...materials import Dipole, measured_medium
     from ...reference import render
     from ...scenes import ConstantEnvironment
@@ -185,12 +195,8 @@ def _integrators(scene, args) -> dict:
     baseline = rows["volpath"]["efficiency"]
     for row in rows.values():
         row["efficiency_ratio"] = row["efficiency"] / baseline
-    mi = mitsuba()
-    return {"benchmark": "reference integrators", "scene": scene.name,
-            "material": medium.name or args.integrators,
-            "size": [scene.camera.width, scene.camera.height], "spp": args.spp,
-            "passes": args.passes, "variant": mi.variant(), "mitsuba": mi.__version__,
-            "object_pixels": int(mask.sum()), "estimators": rows}
+    return {**_comparison_header("reference integrators", scene, args, mask),
+            "material": medium.name or args.integrators, "estimators": rows}
 
 
 def _print_integrators(result) -> None:
@@ -214,7 +220,6 @@ DELTA_LIGHT_ESTIMATORS = {
 
 
 def _delta_lights(scene, args) -> dict:
-    from ...backend import mitsuba
     from ...errors import InputError
     from ...noise import noise_summary
     from ...reference import convert_scene, render
@@ -248,11 +253,8 @@ def _delta_lights(scene, args) -> dict:
         for key, value in row.items():
             if isinstance(value, float) and not np.isfinite(value):
                 row[key] = None
-    mi = mitsuba()
-    return {"benchmark": "reference delta lights", "scene": scene.name,
-            "size": [scene.camera.width, scene.camera.height], "spp": args.spp,
-            "passes": args.passes, "variant": mi.variant(), "mitsuba": mi.__version__,
-            "object_pixels": int(mask.sum()), "estimators": rows}
+    return {**_comparison_header("reference delta lights", scene, args, mask),
+            "estimators": rows}
 
 
 def _print_delta_lights(result) -> None:
