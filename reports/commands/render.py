@@ -133,7 +133,15 @@ def _render_and_write(args, scene, out: Path, progressive: bool) -> int:
         print(f"  {meta['stopped']}: relative standard error "
               f"{NoiseSummary(**meta['noise']).text()}")
     for note in meta.get("substitutions", []):
-        print(f"  substituted: {note}")
+        label = "lights" if "manifold next-event" in note else "substituted"
+        print(f"  {label}: {note}")
+    counted = meta.get("manifold_nee")
+    if counted and counted.get("connections"):
+        lost = counted["not_converged"] / counted["connections"]
+        print(f"  manifold connections: {counted['connections']}, solved "
+              f"{counted['solved']}, not converged {counted['not_converged']} "
+              f"({100 * lost:.2g} %: no refraction path, or the solve failed), not a "
+              f"refraction {counted['not_refraction']}")
     warning = reference_noise_warning(image.rgb, image.variance)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
