@@ -11,6 +11,7 @@ the EXR is written atomically, so an interrupted render leaves nothing behind.
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 
@@ -321,11 +322,14 @@ class PassAccumulator:
         return accumulator
 
 
-def _manifold_counts(mitsuba_scenes) -> dict | None:
-    """Return the ``volpath_mnee`` counts summed over the loaded scenes (None: other)."""
+def _manifold_counts(mitsuba_scenes, before=None) -> dict | None:
+    """Return the ``volpath_mnee`` counts summed over the loaded scenes (None: other).
+
+    ``before``: counts of passes rendered earlier (a resumed render), added to them.
+    """
     from .manifold_nee import counts
 
-    total = None
+    total = dict(before) if before else None
     for mitsuba_scene in mitsuba_scenes:
         found = counts(mitsuba_scene)
         if found is not None:
@@ -333,11 +337,12 @@ def _manifold_counts(mitsuba_scenes) -> dict | None:
     return total
 
 
-def _metadata(scene, key, settings, conversions, channels, mitsuba_scenes=(), **items) -> dict:
+def _metadata(scene, key, settings, conversions, channels, mitsuba_scenes=(),
+              manifold_before=None, **items) -> dict:
     from ..cache import content_hash
 
     first = conversions[0]
-    manifold = _manifold_counts(mitsuba_scenes)
+    manifold = _manifold_counts(mitsuba_scenes, manifold_before)
     return {
         "producer": "reference",
         "scene": scene.name,
@@ -493,6 +498,7 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
 
     accumulator = PassAccumulator((*shape, 3))
     seconds_before = 0.0
+    manifold_before = None
     partial = store.path(partial_key, ".partial.npz") if store is not None else None
     if partial is not None and partial.is_file():
         try:
@@ -500,8 +506,11 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
                 if saved["mean"].shape == (*shape, 3):
                     accumulator = PassAccumulator.from_state(saved)
                     seconds_before = float(saved["seconds"])
+                    if "manifold_nee" in saved:
+                        manifold_before = json.loads(str(saved["manifold_nee"]))
         except Exception:  # an unreadable partial state is started again
             accumulator, seconds_before = PassAccumulator((*shape, 3)), 0.0
+            manifold_before = None
 
     start = time.perf_counter()
     channels, conversions, mitsuba_scenes = load_scenes(
@@ -539,7 +548,8 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
                 channels, mitsuba_scenes, spp,
                 PROGRESSIVE_SEED_OFFSET + seed * PROGRESSIVE_SEED_STRIDE + accumulator.count))
             if partial is not None:
-                _save_partial(partial, accumulator, elapsed())
+                _save_partial(partial, accumulator, elapsed(),
+                              _manifold_counts(mitsuba_scenes, manifold_before))
             reached = summary()
             bar.update()
             if reached is not None:
@@ -556,7 +566,8 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
     _check_finite_render(scene, accumulator.mean)
     image = Image(accumulator.mean, accumulator.variance(),
                   _metadata(scene, key, settings, conversions, channels, mitsuba_scenes,
-                            spp=spp, passes=accumulator.count, seed=seed, seconds=elapsed(),
+                            manifold_before, spp=spp, passes=accumulator.count, seed=seed,
+                            seconds=elapsed(),
                             seed_offset=PROGRESSIVE_SEED_OFFSET,
                             noise=reached.as_dict(), target_rse=target_rse,
                             target_p99_rse=target_p99_rse, budget_seconds=budget_seconds,
@@ -566,11 +577,13 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
     return image
 
 
-def _save_partial(path, accumulator: PassAccumulator, seconds: float) -> None:
+def _save_partial(path, accumulator: PassAccumulator, seconds: float,
+                  manifold: dict | None = None) -> None:
     from ..atomic import atomic_path
 
+    extra = {} if manifold is None else {"manifold_nee": np.array(json.dumps(manifold))}
     try:
         with atomic_path(path) as tmp, open(tmp, "wb") as handle:
-            np.savez(handle, seconds=np.array(seconds), **accumulator.state())
+            np.savez(handle, seconds=np.array(seconds), **accumulator.state(), **extra)
     except (InputError, OSError):
         pass  # resuming is a convenience: a cache that cannot be written costs only that

@@ -373,3 +373,21 @@ def test_the_closed_mesh_check_counts_open_and_flipped_edges():
     flipped = sphere.faces.copy()
     flipped[0] = flipped[0][::-1]
     assert manifold_nee.boundary_edge_count(sphere.vertices, flipped) == 3  # its 3 edges
+
+
+def test_a_resumed_render_counts_every_pass(mi, tmp_path, monkeypatch):
+    import dataclasses
+
+    from translucent.reference.render import render_to_target
+    from translucent.scenes import load_scene
+
+    monkeypatch.setenv("TRANSLUCENT_CACHE", str(tmp_path))
+    scene = load_scene("sphere_dielectric")
+    small = dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, width=6,
+                                                                  height=6))
+    options = {"target_rse": 1e-6, "spp": 2, "min_passes": 2, "progress": False}
+    first = render_to_target(small, max_passes=2, **options)
+    resumed = render_to_target(small, max_passes=4, **options)  # resumes from pass 2
+    assert resumed.metadata["passes"] == 4
+    once, twice = first.metadata["manifold_nee"], resumed.metadata["manifold_nee"]
+    assert twice["connections"] > 1.5 * once["connections"]
