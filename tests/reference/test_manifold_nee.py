@@ -126,9 +126,14 @@ def _eta_one(mi, size, spp, passes, kind="point"):
     _agree(first, _passes(mi, plain, spp, passes, seed=100), passes)
 
 
-@pytest.mark.parametrize("kind", ["point", "spot", "directional"])
-def test_at_eta_one_the_connection_is_next_event_estimation(mi, kind):
-    _eta_one(mi, 16 if kind == "point" else 10, 64, 8, kind)
+def test_at_eta_one_the_connection_is_next_event_estimation(mi):
+    _eta_one(mi, 16, 64, 8)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["spot", "directional"])
+def test_at_eta_one_spot_and_directional_lights_are_connected_too(mi, kind):
+    _eta_one(mi, 10, 64, 8, kind)
 
 
 @pytest.mark.slow
@@ -302,7 +307,7 @@ def _slab_check(mi, size, spp, passes, photons, annuli):
 
 
 def test_a_slab_under_a_point_light_matches_an_independent_photon_tracer(mi):
-    _slab_check(mi, 24, 32, 8, 600_000, 3)
+    _slab_check(mi, 16, 32, 8, 300_000, 2)
 
 
 @pytest.mark.slow
@@ -326,23 +331,6 @@ def test_the_reference_picks_it_where_a_delta_light_meets_a_dielectric(mi):
     assert any("sphere emitter" in note for note in forced.substitutions)
     index_matched = convert_scene(load_scene("sphere"), spp=4)
     assert index_matched.integrator == "volpath"
-
-
-def test_its_counts_are_in_the_image_header(mi):
-    import dataclasses
-
-    from translucent.reference import render
-    from translucent.scenes import load_scene
-
-    scene = load_scene("sphere_dielectric")
-    small = dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, width=8,
-                                                                  height=8))
-    image = render(small, spp=4, passes=2, cache=False, progress=False)
-    assert image.metadata["integrator"] == "volpath_mnee"
-    counted = image.metadata["manifold_nee"]
-    assert set(counted) == set(manifold_nee.COUNTERS)
-    assert counted["connections"] >= counted["solved"] > 0
-    assert image.rgb[..., 1].max() > 0
 
 
 def test_an_open_boundary_is_refused_naming_the_object(mi):
@@ -375,7 +363,8 @@ def test_the_closed_mesh_check_counts_open_and_flipped_edges():
     assert manifold_nee.boundary_edge_count(sphere.vertices, flipped) == 3  # its 3 edges
 
 
-def test_a_resumed_render_counts_every_pass(mi, tmp_path, monkeypatch):
+def test_its_counts_are_in_the_header_and_a_resumed_render_counts_every_pass(
+        mi, tmp_path, monkeypatch):
     import dataclasses
 
     from translucent.reference.render import render_to_target
@@ -389,5 +378,9 @@ def test_a_resumed_render_counts_every_pass(mi, tmp_path, monkeypatch):
     first = render_to_target(small, max_passes=2, **options)
     resumed = render_to_target(small, max_passes=4, **options)  # resumes from pass 2
     assert resumed.metadata["passes"] == 4
+    assert first.metadata["integrator"] == "volpath_mnee"
     once, twice = first.metadata["manifold_nee"], resumed.metadata["manifold_nee"]
+    assert set(once) == set(manifold_nee.COUNTERS)
+    assert once["connections"] >= once["solved"] > 0
+    assert first.rgb[..., 1].max() > 0
     assert twice["connections"] > 1.5 * once["connections"]

@@ -164,12 +164,16 @@ def test_point_light_behind_a_dielectric_needs_the_stand_in():
                   CAMERA.__class__(CAMERA.origin, CAMERA.target, fov=40, width=16, height=16),
                   mm_per_unit=2.0)
     black = render(scene, spp=8, passes=2, cache=False, progress=False,
-                   substitute_delta_lights=False)
+                   integrator="volpath", substitute_delta_lights=False)
     assert black.rgb.max() == 0.0
-    lit = render(scene, spp=8, passes=2, cache=False, progress=False)
+    lit = render(scene, spp=8, passes=2, cache=False, progress=False, integrator="volpath")
     assert lit.rgb.mean() > 0.0
     (note,) = lit.metadata["substitutions"]
     assert "point light -> sphere emitter" in note
+    # by default the reference reaches the light through the boundary instead
+    connected = render(scene, spp=8, passes=2, cache=False, progress=False)
+    assert connected.metadata["integrator"] == "volpath_mnee"
+    assert connected.rgb.mean() > 0.0
 
 
 # ------------------------------------------------------------ passes and variance

@@ -81,7 +81,8 @@ def test_a_dielectric_solid_boundary_blocks_delta_lights_as_a_dipole_does():
 
     scene = _small(load_scene("solid_checker"))
     dielectric = scene.with_material("sphere", checker_solid(eta=1.3))
-    conversion = convert_scene(dielectric)
+    assert convert_scene(dielectric).integrator == "volpath_mnee"  # reaches the light
+    conversion = convert_scene(dielectric, integrator="volpath")
     assert conversion.substitutions  # the point light became an emitter of finite size
     assert not any(k.startswith("light_0") and v.get("type") == "point"
                    for k, v in conversion.scene_dict.items() if isinstance(v, dict))
