@@ -167,7 +167,7 @@ def test_a_small_sphere_light_gives_what_volpath_gives(mi):
 
 @pytest.mark.slow
 def test_a_small_sphere_light_gives_what_volpath_gives_converged(mi):
-    _area_limit(mi, 24, 16384, 1024, 32, resolution=0.03)
+    _area_limit(mi, 16, 16384, 512, 16, resolution=0.03)
 
 
 # --------------------------------------------------------------------------- the slab
@@ -312,7 +312,7 @@ def test_a_slab_under_a_point_light_matches_an_independent_photon_tracer(mi):
 
 @pytest.mark.slow
 def test_a_slab_under_a_point_light_matches_an_independent_photon_tracer_converged(mi):
-    _slab_check(mi, 48, 128, 16, 8_000_000, 6)
+    _slab_check(mi, 32, 64, 16, 4_000_000, 4)
 
 
 # ----------------------------------------------------------------- in the reference
