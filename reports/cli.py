@@ -40,6 +40,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "stress": ("stress", "numerical stability sweeps of every kernel"),
     "fit": ("fit", "fit dipole / SubEdit profiles to a captured slab image"),
     "capture": ("capture", "make a synthetic slab capture"),
+    "capture-import": ("capture_import", "turn a photo of a lit slab into a capture (also "
+                                         "spelt `capture import`)"),
 }
 
 
@@ -187,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
     and nothing half-written is left, and end it with one line and exit code 130 / 143.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:2] == ["capture", "import"]:  # a verb of capture, a command of its own here
+        argv = ["capture-import"] + argv[2:]
     text = os.environ.get("TRANSLUCENT_OPTIONS", "")
     try:
         options = shlex.split(text)
