@@ -35,6 +35,7 @@ __all__ = [
     "read_capture",
     "read_sidecar",
     "write_capture",
+    "write_exr_pixels",
 ]
 
 #: Sidecar keys: name -> one-line meaning (the documentation table is built from the same text).
@@ -48,8 +49,12 @@ SIDECAR_FIELDS: dict[str, str] = {
     "eta": "relative index of refraction in [1, 3], or null to fit it",
     "beam_radius_mm": "1/e^2 radius of the Gaussian beam, or the radius of a top-hat beam, "
                       "mm, >= 0 (0: a pencil beam), at most the image diagonal",
-    "beam_profile": '"gaussian" (default) or "top_hat" (a uniform disk: a fibre or an '
-                    'aperture)',
+    "beam_profile": '"gaussian" (default), "top_hat" (a uniform disk: a fibre or an '
+                    'aperture) or "measured" (the beam\'s own image, beam_image)',
+    "beam_image": 'with beam_profile "measured": an image of the beam on a white diffuse '
+                  'target, relative to the sidecar',
+    "beam_pixel_size_mm": "pixel size of beam_image on the target, mm (default: "
+                          "pixel_size_mm; finer is better: the image is blurred by its pixels)",
     "black_level": "stored value of zero light, >= 0",
     "saturation_level": "stored value at and above which a pixel is clipped, > black_level",
     "exposure": "stored units per unit of E (mm^2), > 0, or null when unknown",
@@ -87,7 +92,12 @@ class CaptureSpec:
         1/e^2 radius of the Gaussian beam irradiance, or the radius of a top-hat beam, mm
         (0: pencil beam).
     beam_profile : str
-        ``"gaussian"`` or ``"top_hat"``.
+        ``"gaussian"``, ``"top_hat"`` or ``"measured"``.
+    beam_image : str or None
+        With ``"measured"``: the beam's image file, relative to the sidecar's folder (its
+        radius, holding 99 % of the power, becomes ``beam_radius_mm`` when read).
+    beam_pixel_size_mm : float or None
+        The beam image's pixel size on the target, mm (None: ``pixel_size_mm``).
     black_level, saturation_level : float
         In stored units (code values for PNG/TIFF).
     exposure : float or None
@@ -106,6 +116,8 @@ class CaptureSpec:
     eta: float | None = 1.3
     beam_radius_mm: float = 0.0
     beam_profile: str = "gaussian"
+    beam_image: str | None = None
+    beam_pixel_size_mm: float | None = None
     black_level: float = 0.0
     saturation_level: float = math.inf
     exposure: float | None = None
@@ -120,6 +132,9 @@ class CaptureSpec:
             data["saturation_level"] = 3.4e38
         if not data["synthetic"]:
             del data["synthetic"]
+        for key in ("beam_image", "beam_pixel_size_mm"):
+            if data[key] is None:
+                del data[key]
         return data
 
 
@@ -134,11 +149,14 @@ class Capture:
         Stored values as read (code values for PNG/TIFF), NaN kept where the file has them.
     path : Path or None
         The sidecar's path.
+    beam : MeasuredBeam or None
+        The measured beam (``beam_profile = "measured"``), read from ``beam_image``.
     """
 
     spec: CaptureSpec
     pixels: np.ndarray
     path: Path | None = None
+    beam: Any = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -293,7 +311,20 @@ def sidecar_from_dict(data, *, path=None) -> CaptureSpec:
                   allow_null=True)
     beam = _number(data, "beam_radius_mm", path, minimum=0.0) if "beam_radius_mm" in data \
         else 0.0
-    beam_profile = _choice(data, "beam_profile", path, BEAM_PROFILES, "gaussian")
+    beam_profile = _choice(data, "beam_profile", path, BEAM_PROFILES + ("measured",),
+                           "gaussian")
+    beam_image = data.get("beam_image")
+    if beam_profile == "measured":
+        if not isinstance(beam_image, str) or \
+                Path(beam_image).suffix.lower() not in _IMAGE_SUFFIXES:
+            raise InputError('beam_profile "measured" needs beam_image, a file name ending in '
+                             f"{', '.join(_IMAGE_SUFFIXES)}", file=path, field="beam_image",
+                             value=beam_image)
+    elif beam_image is not None:
+        raise InputError('beam_image is read only with beam_profile "measured"', file=path,
+                         field="beam_image", value=beam_image)
+    beam_pixel = _number(data, "beam_pixel_size_mm", path, minimum=0.0, strict=True,
+                         allow_null=True) if "beam_pixel_size_mm" in data else None
     black = _number(data, "black_level", path, minimum=0.0)
     saturation = _number(data, "saturation_level", path, minimum=0.0, strict=True)
     if saturation <= black:
@@ -306,7 +337,8 @@ def sidecar_from_dict(data, *, path=None) -> CaptureSpec:
     return CaptureSpec(image=image, pixel_size_mm=pixel_size,
                        incident_px=(float(incident[0]), float(incident[1])), side=side,
                        thickness_mm=thickness, eta=eta, beam_radius_mm=beam,
-                       beam_profile=beam_profile, black_level=black,
+                       beam_profile=beam_profile, beam_image=beam_image,
+                       beam_pixel_size_mm=beam_pixel, black_level=black,
                        saturation_level=saturation, exposure=exposure, encoding=encoding,
                        synthetic=dict(synthetic))
 
@@ -437,10 +469,23 @@ def read_capture(path) -> Capture:
     if not (0.0 <= x <= width and 0.0 <= y <= height):
         raise InputError(f"must lie inside the image (x in [0, {width}], y in [0, {height}])",
                          file=path, field="incident_px", value=list(spec.incident_px))
+    beam = None
+    if spec.beam_profile == "measured":
+        from .measured_beam import measure_beam
+
+        beam_path = path.parent / spec.beam_image
+        try:
+            beam_pixels = _read_image(beam_path)
+        except InputError as error:
+            raise InputError(error.reason, file=beam_path, field="beam_image",
+                             value=spec.beam_image) from None
+        beam = measure_beam(beam_pixels, spec.beam_pixel_size_mm or spec.pixel_size_mm,
+                            path=beam_path)
+        spec = replace(spec, beam_radius_mm=beam.radius_mm)
     _check_beam(spec, (height, width), path)
     if not np.isfinite(pixels).any():
         raise InputError("no finite pixel in the image", file=image_path, field="pixels")
-    return Capture(spec=spec, pixels=pixels, path=path)
+    return Capture(spec=spec, pixels=pixels, path=path, beam=beam)
 
 
 def write_capture(path, pixels, spec: CaptureSpec) -> Path:
@@ -473,12 +518,7 @@ def write_capture(path, pixels, spec: CaptureSpec) -> Path:
                          "name (.json)", file=path, field="image", value=spec.image)
     suffix = image_path.suffix.lower()
     if suffix == ".exr":
-        import OpenEXR
-
-        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        channels = {"RGB": np.ascontiguousarray(pixels, dtype=np.float32)}
-        with atomic_path(image_path) as tmp, OpenEXR.File(header, channels) as exr:
-            exr.write(str(tmp))
+        write_exr_pixels(image_path, pixels)
     else:
         codes = np.clip(np.rint(np.nan_to_num(np.asarray(pixels, np.float64))), 0, 65535)
         codes = codes.astype(np.uint16)
@@ -498,6 +538,16 @@ def write_capture(path, pixels, spec: CaptureSpec) -> Path:
     return path
 
 
+def write_exr_pixels(path, pixels) -> None:
+    """Write stored values (H, W, 3) as a float32 RGB OpenEXR, atomically."""
+    import OpenEXR
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    channels = {"RGB": np.ascontiguousarray(pixels, dtype=np.float32)}
+    with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
+        exr.write(str(tmp))
+
+
 def encode_srgb(linear, spec: CaptureSpec) -> np.ndarray:
     """Inverse of :func:`decode_pixels` for sRGB: linear signal above black -> stored codes."""
     top = 65535.0
@@ -508,4 +558,4 @@ def encode_srgb(linear, spec: CaptureSpec) -> np.ndarray:
 def with_spec(capture: Capture, **changes) -> Capture:
     """Return a copy of ``capture`` whose sidecar has ``changes`` (not re-validated)."""
     return Capture(spec=replace(capture.spec, **changes), pixels=capture.pixels,
-                   path=capture.path)
+                   path=capture.path, beam=capture.beam)

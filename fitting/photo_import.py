@@ -34,7 +34,7 @@ import numpy as np
 
 from ..atomic import atomic_path, check_output_file
 from ..errors import InputError
-from .capture import CaptureSpec, read_capture, write_capture
+from .capture import CaptureSpec, read_capture, write_capture, write_exr_pixels
 from .profile import annulus_edges, refine_incident_point
 
 __all__ = ["ImportedCapture", "MIN_SPOT_CONTRAST", "RAW_SUFFIXES", "import_photo",
@@ -142,7 +142,8 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
                  black_level: float | None = None, white_level: float | None = None,
                  incident_px=None, eta: float | None = 1.3, side: str = "reflection",
                  thickness_mm: float | None = None, beam_radius_mm: float = 0.0,
-                 beam_profile: str = "gaussian") -> ImportedCapture:
+                 beam_profile: str = "gaussian", beam_image=None,
+                 beam_pixel_size_mm: float | None = None) -> ImportedCapture:
     """Turn a linear photo into a capture (see the module docstring); nothing is left on error.
 
     Parameters
@@ -165,6 +166,12 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
         Where to look for the spot (default: the brightest spot of the photo).
     eta, side, thickness_mm, beam_radius_mm, beam_profile
         Written to the sidecar (docs/capture-format.md); ``eta`` None: fitted.
+    beam_image : path, optional
+        A linear photo of the beam on a white diffuse target (TIFF or OpenEXR), written
+        beside the capture as ``<stem>_beam.exr``; the sidecar's beam is then
+        ``"measured"`` (:mod:`translucent.fitting.measured_beam`).
+    beam_pixel_size_mm : float, optional
+        The beam photo's pixel size on the target (default: ``pixel_size_mm``).
 
     Returns
     -------
@@ -179,7 +186,8 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
         raise InputError("the sidecar must be a .json file", file=sidecar, field="--out")
     image_path = sidecar.with_suffix(".exr")
     preview_path = sidecar.with_name(f"{sidecar.stem}_preview.png")
-    for path in (sidecar, image_path, preview_path):
+    beam_path = sidecar.with_name(f"{sidecar.stem}_beam.exr")
+    for path in (sidecar, image_path, preview_path, beam_path):
         check_output_file(path, "--out")
     if not sidecar.parent.is_dir():
         raise InputError("no such folder", file=sidecar.parent, field="--out")
@@ -220,16 +228,25 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
     else:
         start, contrast = (float(incident_px[0]), float(incident_px[1])), math.nan
     centre = refine_incident_point(luminance, start, saturated=clipped)
+    beam_pixels = None
+    if beam_image is not None:
+        beam_pixels, _ = _read_photo(Path(beam_image), "beam_image (--beam-image)")
+        beam_profile, beam_radius_mm = "measured", 0.0
     spec = CaptureSpec(image=image_path.name, pixel_size_mm=float(pixel_size_mm),
                        incident_px=(round(centre[0], 3), round(centre[1], 3)), side=side,
                        thickness_mm=thickness_mm, eta=eta, beam_radius_mm=beam_radius_mm,
-                       beam_profile=beam_profile, black_level=black,
-                       saturation_level=saturation, exposure=None,
-                       synthetic={})
+                       beam_profile=beam_profile,
+                       beam_image=None if beam_pixels is None else beam_path.name,
+                       beam_pixel_size_mm=beam_pixel_size_mm if beam_pixels is not None
+                       else None, black_level=black, saturation_level=saturation,
+                       exposure=None, synthetic={})
     written = []
     try:
         _write_preview(preview_path, luminance, centre, clipped)
         written.append(preview_path)
+        if beam_pixels is not None:
+            write_exr_pixels(beam_path, beam_pixels)
+            written.append(beam_path)
         write_capture(sidecar, stored, spec)
         written += [image_path, sidecar]
         read_capture(sidecar)  # what the fitter will read: refused now, not later

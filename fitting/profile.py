@@ -589,7 +589,14 @@ def measure_profile(capture: Capture, *, r_max_mm: float | None = None,
                        _grid_spacing(mean, radius_mean, used, pixel))
     grid_px = grid.nodes / pixel
     pairs = _pixel_ring_pairs(r_out_mm / pixel + 2.0, centre, grid_px, (height, width))
-    kernel = beam_convolution_matrix(grid, spec.beam_radius_mm, spec.beam_profile)
+    if capture.beam is not None:  # the beam's own image
+        kernel = capture.beam.convolution_matrix(grid)
+    elif spec.beam_profile == "measured":
+        raise InputError('beam_profile "measured" needs the capture read with its beam_image '
+                         "(read_capture)", file=capture.path, field="beam_image",
+                         value=spec.beam_image)
+    else:
+        kernel = beam_convolution_matrix(grid, spec.beam_radius_mm, spec.beam_profile)
     matrices = []
     for c in range(3):
         # a censored annulus estimates the mean over its censored pixels' footprints too

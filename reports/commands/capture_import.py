@@ -47,6 +47,12 @@ def add_arguments(parser):
                         help="1/e^2 radius (Gaussian) or radius (top hat) of the beam, mm "
                              "(default 0: a pencil)")
     parser.add_argument("--beam-profile", choices=("gaussian", "top_hat"), default="gaussian")
+    parser.add_argument("--beam-image", default=None,
+                        help="linear photo of the beam on a white diffuse target: the fitter "
+                             "then convolves with the measured beam")
+    parser.add_argument("--beam-pixel-size-mm", type=float, default=None,
+                        help="pixel size of --beam-image on the target, mm (default: the "
+                             "capture's; a finer one is better)")
 
 
 def run(args) -> int:
@@ -61,7 +67,8 @@ def run(args) -> int:
                           incident_px=args.incident,
                           eta=None if args.unknown_eta else args.eta, side=args.side,
                           thickness_mm=args.thickness, beam_radius_mm=args.beam_radius,
-                          beam_profile=args.beam_profile)
+                          beam_profile=args.beam_profile, beam_image=args.beam_image,
+                          beam_pixel_size_mm=args.beam_pixel_size_mm)
     contrast = "" if result.spot_contrast != result.spot_contrast else \
         f" (spot {result.spot_contrast:.0f} noise standard deviations above the median)"
     print(f"incident point {result.incident_px[0]:.2f}, {result.incident_px[1]:.2f} px"

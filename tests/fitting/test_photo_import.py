@@ -119,3 +119,16 @@ def test_bad_input_is_refused_with_nothing_written(tmp_path, capsys, case, messa
     error = capsys.readouterr().err
     assert code == 2 and message in error and "Traceback" not in error
     assert list((tmp_path / "out").iterdir()) == []
+
+
+def test_a_beam_photo_makes_the_beam_measured(tmp_path):
+    photo, dark, _, _ = _photo(tmp_path)
+    yy, xx = np.mgrid[0:64, 0:64] + 0.5
+    beam = 20000.0 * np.exp(-2.0 * ((xx - 32.0) ** 2 + (yy - 32.0) ** 2) / 8.0 ** 2) + 50.0
+    tifffile.imwrite(tmp_path / "beam.tif", np.rint(beam).astype(np.uint16))
+    result = import_photo(photo, tmp_path / "slab.json", pixel_size_mm=0.2, dark=dark,
+                          beam_image=tmp_path / "beam.tif", beam_pixel_size_mm=0.05)
+    capture = read_capture(result.sidecar)
+    assert capture.spec.beam_profile == "measured" and capture.beam is not None
+    # a Gaussian of 1/e^2 radius 8 px x 0.05 mm holds 99 % of its power within 1.52 w
+    assert capture.spec.beam_radius_mm == pytest.approx(1.52 * 0.4, abs=0.05)
