@@ -23,7 +23,7 @@ from ..errors import InputError, check_count
 from ..materials.subedit import save_subedit
 from .capture import Capture, read_capture
 from .goodness import DiscrepancyModel, GoodnessOfFit, best_sample, goodness_of_fit
-from .models import DipoleModel, SubEditModel
+from .models import DipoleModel, SubEditModel, WalkModel
 from .profile import RadialProfile, measure_profile
 from .results import ParameterSummary, summaries_to_json, summarise_posterior, write_material
 from .sampler import ChainResult, run_chain
@@ -32,7 +32,9 @@ __all__ = ["FitResult", "default_moves", "fit_capture", "fit_dipole", "fit_subed
            "output_folder", "write_outputs", "MODELS"]
 
 #: Fits ``translucent fit --model`` offers.
-MODELS = ("dipole", "subedit")
+MODELS = ("dipole", "walk", "subedit")
+#: The coefficient models (sigma_a, sigma_s' per channel) and their forward profiles.
+COEFFICIENT_MODELS = {"dipole": DipoleModel, "walk": WalkModel}
 #: Step budgets: a three-channel dipole converges in ~2000 steps, a SubEdit channel with
 #: 9 knots in ~4000; the budgets leave room for hard captures.
 DIPOLE_MAX_STEPS = 20000
@@ -60,7 +62,7 @@ class FitResult:
     Attributes
     ----------
     kind : str
-        ``"dipole"`` or ``"subedit"``.
+        ``"dipole"``, ``"walk"`` or ``"subedit"``.
     capture : Capture
     profile : RadialProfile
     model : ProfileModel
@@ -129,7 +131,7 @@ class FitResult:
     def truths(self) -> np.ndarray | None:
         """Return the true values in the sampling space (synthetic dipole captures), or None."""
         truth = self.capture.spec.synthetic
-        if self.kind != "dipole":
+        if self.kind not in COEFFICIENT_MODELS:
             return None
         # the sidecar's "synthetic" object may hold anything: use it only when it is whole
         try:
@@ -223,8 +225,9 @@ def _discrepancy_chain(model, samples, *, walkers, max_steps, seed, progress, de
 
 def fit_dipole(capture, *, fit_eta: bool | None = None, walkers: int | None = None,
                max_steps: int = DIPOLE_MAX_STEPS, seed: int | None = None,
-               progress: bool = False, profile: RadialProfile | None = None) -> FitResult:
-    """Posterior over the dipole (or slab multipole) parameters of a capture.
+               progress: bool = False, profile: RadialProfile | None = None,
+               forward: str = "dipole") -> FitResult:
+    """Posterior over the coefficients (sigma_a, sigma_s' per channel) of a capture.
 
     Parameters
     ----------
@@ -240,17 +243,23 @@ def fit_dipole(capture, *, fit_eta: bool | None = None, walkers: int | None = No
         Progress bar on stderr.
     profile : RadialProfile, optional
         A profile already measured from this capture.
+    forward : {"dipole", "walk"}
+        The forward profile: the dipole (or slab multipole), :class:`DipoleModel`; or the
+        tabulated photon random walk, :class:`WalkModel`.
 
     Returns
     -------
     FitResult
     """
+    if forward not in COEFFICIENT_MODELS:
+        raise InputError(f"must be one of {', '.join(COEFFICIENT_MODELS)}", field="model",
+                         value=forward)
     seed = _checked_seed(seed)
     capture = _as_capture(capture)
     profile = measure_profile(capture) if profile is None else profile
-    model = DipoleModel(profile, capture.spec, fit_eta=fit_eta)
+    model = COEFFICIENT_MODELS[forward](profile, capture.spec, fit_eta=fit_eta)
     chain = run_chain(model, walkers=walkers, max_steps=max_steps, seed=seed, progress=progress,
-                      moves=default_moves(), description="dipole posterior")
+                      moves=default_moves(), description=f"{forward} posterior")
     summaries = summarise_posterior(model, chain.samples, chain.sample_modes)
     notes = [] if chain.converged else [chain.message]
     notes += _mode_notes(model, chain, summaries)
@@ -266,12 +275,12 @@ def fit_dipole(capture, *, fit_eta: bool | None = None, walkers: int | None = No
                      f"({chain.mode_fractions()[heaviest]:.0%} of the samples), not of the "
                      "whole posterior")
     goodness = goodness_of_fit(model, chain.samples, seed=0 if seed is None else seed)
-    result = FitResult("dipole", capture, profile, model, [chain], chain.samples, summaries,
+    result = FitResult(forward, capture, profile, model, [chain], chain.samples, summaries,
                        model.material(values), notes, goodness)
     if goodness.misfit:
         extended, wide = _discrepancy_chain(
             model, chain.samples, walkers=walkers, max_steps=max_steps, seed=seed,
-            progress=progress, description="dipole posterior with model discrepancy")
+            progress=progress, description=f"{forward} posterior with model discrepancy")
         result.discrepancy = summarise_posterior(extended, wide.samples)
         result.discrepancy_goodness = goodness_of_fit(extended, wide.samples)
         result.discrepancy_chains = [wide]
@@ -482,13 +491,16 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
         SubEditModel(profile, capture.spec,
                      **{k: options[k] for k in ("segments", "r_s_mm", "smoothness")
                         if options.get(k) is not None})
+    if "walk" in models:  # a capture the table does not cover is refused before writing
+        WalkModel(profile, capture.spec, fit_eta=options.get("fit_eta"))
     if out_dir is not None:  # before the chains run, not after; not for a refused capture
         out_dir = output_folder(out_dir)
     results = {}
     for kind in models:
-        if kind == "dipole":
+        if kind in COEFFICIENT_MODELS:
             keys = ("fit_eta", "walkers", "max_steps")
             results[kind] = fit_dipole(capture, seed=seed, progress=progress, profile=profile,
+                                       forward=kind,
                                        **{k: options[k] for k in keys if k in options})
         else:
             keys = ("segments", "r_s_mm", "smoothness", "walkers", "max_steps")

@@ -29,7 +29,7 @@ SubEdit ln P knots        uniform box + smoothness         :data:`KNOT_BOX_NATS`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -48,6 +48,7 @@ __all__ = [
     "SIGMA_A_RANGE",
     "SIGMA_S_PRIME_RANGE",
     "SubEditModel",
+    "WalkModel",
     "student_t_log_likelihood",
 ]
 
@@ -522,6 +523,65 @@ class DipoleModel(ProfileModel):
             np.zeros((1, self.ndim)))[2][0])
         return {"type": "dipole", "sigma_a": sigma_a, "sigma_s_prime": sigma_s_prime,
                 "eta": eta, "g": 0.0}
+
+
+class WalkModel(DipoleModel):
+    r"""The photon random walk's own profile, tabulated, with per-channel coefficients.
+
+    The parameters, priors, starting points and material file are the dipole's
+    (:class:`DipoleModel`); the profile is the semi-infinite slab's reflectance of the walk
+    of :mod:`translucent.fitting.random_walk` (exact Fresnel boundary, isotropic
+    scattering), read from the table of :mod:`translucent.fitting.walk_table` in reduced
+    units: :math:`R(r) = \sigma'^2_t \hat R(\sigma'_t r; \alpha', \eta)`. The node at
+    r = 0, where single scattering makes the profile diverge like 1/r, gets the value that
+    gives the first grid interval its exact share of the exitance.
+
+    Parameters
+    ----------
+    profile, spec, fit_eta
+        As :class:`DipoleModel`.
+
+    Raises
+    ------
+    InputError
+        For a slab of finite thickness or a transmission capture (the table is the
+        semi-infinite reflectance), or an eta outside the table.
+    """
+
+    def __init__(self, profile: RadialProfile, spec: CaptureSpec, *, fit_eta: bool | None = None):
+        from .walk_table import load_table
+
+        if spec.side != "reflection":
+            raise InputError("the walk model tabulates reflection only; fit a transmission "
+                             "capture with --model dipole (the slab multipole)", field="side",
+                             value=spec.side)
+        if spec.thickness_mm is not None:
+            raise InputError("the walk model tabulates a semi-infinite slab; fit a slab of "
+                             "finite thickness with --model dipole (the slab multipole)",
+                             field="thickness_mm", value=spec.thickness_mm)
+        self.table = load_table()
+        if spec.eta is not None:
+            self.table.check_eta(spec.eta)
+        super().__init__(profile, spec, fit_eta=fit_eta)
+        if self.fit_eta:  # the prior is the table's range
+            index = self.names.index("eta")
+            low = max(ETA_FIT_RANGE[0], float(self.table.etas[0]))
+            high = min(ETA_FIT_RANGE[1], float(self.table.etas[-1]))
+            self.parameters[index] = replace(self.parameters[index], lower=low, upper=high)
+
+    def unit_profiles(self, sigma_a, sigma_s_prime, eta) -> np.ndarray:
+        """Return the walk's exitance per unit entering power at the nodes, mm^-2, (n, nodes, 3)."""
+        nodes = self.profile.operator.grid.nodes
+        sigma_t = sigma_a + sigma_s_prime  # (n, 3)
+        albedo = sigma_s_prime / sigma_t
+        eta = np.broadcast_to(np.asarray(eta, dtype=np.float64)[:, None], albedo.shape)
+        reduced = sigma_t[..., None] * nodes[1:]  # (n, 3, nodes - 1)
+        values = self.table.reduced_profile(reduced, albedo, eta) * sigma_t[..., None] ** 2
+        # node 0: the linear interpolant's integral over [0, r1] equals the exitance there
+        r1 = nodes[1]
+        inside = self.table.reduced_cumulative(sigma_t * r1, albedo, eta) / (2.0 * np.pi)
+        first = 6.0 * (inside / r1 ** 2 - values[..., 0] / 3.0)
+        return np.moveaxis(np.concatenate([first[..., None], values], axis=-1), 1, -1)
 
 
 class SubEditModel(ProfileModel):

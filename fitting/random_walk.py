@@ -394,14 +394,17 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
 def walk_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
                  pixel_size_mm: float = 0.1, incident_px=None, side: str = "reflection",
                  thickness_mm: float | None = None, beam_radius_mm: float = 0.0,
-                 photons: int = 200_000, rotations: int = 16, camera: Camera | None = None,
+                 photons: int = 200_000, rotations: int = 1, camera: Camera | None = None,
                  seed: int | None = None, image_name: str = "capture.exr",
                  eta_known: bool = True, progress: bool = False):
     """Make a synthetic capture traced by :func:`photon_random_walk`, with camera defects.
 
     Parameters are those of :func:`~translucent.fitting.synthetic.dipole_capture`, plus
     ``photons`` (per channel), ``rotations`` (film scoring) and ``progress`` (a progress
-    bar).
+    bar). ``rotations`` > 1 gives a smoother film, but its copies of an exit land in the
+    same annulus: the walk's own error is then shared along each annulus, where the
+    fitter's standard errors (from the scatter of an annulus's pixels) cannot see it. With
+    the default 1 every exit lands on one pixel and the scatter holds the walk's error.
 
     Returns
     -------

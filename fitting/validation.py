@@ -21,6 +21,7 @@ from ..errors import InputError
 from ..materials import Dipole, measured_medium, measured_medium_names
 from .capture import Capture
 from .fit import fit_dipole
+from .models import SIGMA_A_RANGE, SIGMA_S_PRIME_RANGE
 from .profile import measure_profile
 from .synthetic import Camera, default_pixel_size, dipole_capture
 
@@ -52,6 +53,8 @@ class CoverageResult:
     misfit : ndarray of bool, shape (captures,)
         Fits the goodness-of-fit tests flagged as a model misfit: false alarms, since the
         captures are made by the fitted model itself.
+    fit_seconds : ndarray, shape (captures,)
+        Wall time of each fit (profile, MAP, chain, goodness of fit).
     """
 
     inside: np.ndarray
@@ -59,6 +62,7 @@ class CoverageResult:
     z: np.ndarray
     seconds: float
     misfit: np.ndarray | None = None
+    fit_seconds: np.ndarray | None = None
 
     @property
     def fraction(self) -> float:
@@ -68,8 +72,9 @@ class CoverageResult:
 
 def coverage_study(captures: int = 20, *, seed: int = 0, size: int = 48,
                    camera: Camera | None = None, walkers: int | None = 16,
-                   progress: bool = False) -> CoverageResult:
-    """Fit ``captures`` dipole-forward captures with random truth; count 95 % coverage.
+                   progress: bool = False, placement: str = "centre",
+                   generator: str = "dipole", photons: int = 1_000_000) -> CoverageResult:
+    """Fit ``captures`` synthetic captures with random truth; count 95 % coverage.
 
     Parameters
     ----------
@@ -82,11 +87,24 @@ def coverage_study(captures: int = 20, *, seed: int = 0, size: int = 48,
         Default: ``Camera(peak_signal=40000)``, exposure unknown.
     walkers : int, optional
     progress : bool
+    placement : {"centre", "off_centre", "border"}
+        Where the beam enters: the image centre; a random point a quarter of the image
+        from it; or a random point on the image's edge (half the profile cut off).
+    generator : {"dipole", "walk"}
+        The captures' maker and the fitted model together: the independent dipole
+        convolution (:func:`~translucent.fitting.synthetic.dipole_capture`) fitted with
+        the dipole, or the photon random walk (``photons`` per channel) fitted with the
+        tabulated walk.
 
     Returns
     -------
     CoverageResult
     """
+    if placement not in PLACEMENTS:
+        raise InputError(f"must be one of {', '.join(PLACEMENTS)}", field="placement",
+                         value=placement)
+    if generator not in ("dipole", "walk"):
+        raise InputError("must be 'dipole' or 'walk'", field="generator", value=generator)
     began = time.perf_counter()
     camera = Camera(peak_signal=40000) if camera is None else camera
     rng = np.random.default_rng(seed)
@@ -94,15 +112,25 @@ def coverage_study(captures: int = 20, *, seed: int = 0, size: int = 48,
     z = np.zeros((captures, 6))
     converged = np.zeros(captures, dtype=bool)
     misfit = np.zeros(captures, dtype=bool)
+    fit_seconds = np.zeros(captures)
     for index in range(captures):
         sigma_a = np.exp(rng.uniform(*np.log(TRUTH_SIGMA_A), size=3))
         sigma_s_prime = np.exp(rng.uniform(*np.log(TRUTH_SIGMA_S_PRIME), size=3))
         material = Dipole(sigma_a=sigma_a, sigma_s_prime=sigma_s_prime, eta=1.3)
-        pixels, spec = dipole_capture(material, size=size,
-                                      pixel_size_mm=default_pixel_size(material, size),
-                                      camera=camera, seed=int(rng.integers(2**31)))
+        incident = _placement(placement, size, rng)
+        common = {"size": size, "pixel_size_mm": default_pixel_size(material, size),
+                  "camera": camera, "seed": int(rng.integers(2**31)),
+                  "incident_px": incident}
+        if generator == "walk":
+            from .random_walk import walk_capture
+
+            pixels, spec, _ = walk_capture(material, photons=photons, **common)
+        else:
+            pixels, spec = dipole_capture(material, **common)
         result = fit_dipole(Capture(spec, pixels), walkers=walkers,
-                            seed=int(rng.integers(2**31)), progress=progress)
+                            seed=int(rng.integers(2**31)), progress=progress,
+                            forward=generator)
+        fit_seconds[index] = result.seconds
         converged[index] = result.converged
         misfit[index] = result.misfit
         truth = np.concatenate([sigma_a, sigma_s_prime])
@@ -110,7 +138,25 @@ def coverage_study(captures: int = 20, *, seed: int = 0, size: int = 48,
             inside[index, i] = summary.low95 <= truth[i] <= summary.high95
             half = 0.5 * (np.log(summary.high68) - np.log(summary.low68))
             z[index, i] = (np.log(summary.median) - np.log(truth[i])) / half
-    return CoverageResult(inside, converged, z, time.perf_counter() - began, misfit)
+    return CoverageResult(inside, converged, z, time.perf_counter() - began, misfit,
+                          fit_seconds)
+
+
+#: Where :func:`coverage_study` puts the beam.
+PLACEMENTS = ("centre", "off_centre", "border")
+
+
+def _placement(placement, size, rng) -> tuple[float, float]:
+    """Incident point (x, y), pixels, for :func:`coverage_study`."""
+    if placement == "centre":
+        return (size / 2.0, size / 2.0)
+    if placement == "off_centre":
+        angle = rng.uniform(0.0, 2.0 * np.pi)
+        return (size / 2.0 + 0.25 * size * np.cos(angle),
+                size / 2.0 + 0.25 * size * np.sin(angle))
+    along = rng.uniform(0.25 * size, 0.75 * size)
+    return [(along, 0.5), (0.5, along), (along, size - 0.5), (size - 0.5, along)][
+        int(rng.integers(4))]
 
 
 @dataclass
@@ -135,6 +181,9 @@ class BiasRow:
     spp: int = 0
     beam_radius_mm: float = 0.0
     relative_standard_error: list | None = None
+    forward: str = "dipole"
+    covered: list | None = None
+    misfit: bool = False
 
     def to_json(self) -> dict:
         """JSON-able dict."""
@@ -142,12 +191,13 @@ class BiasRow:
 
 
 def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
-                     rotations: int = 16, seed: int = 0, walkers: int | None = None,
+                     rotations: int = 1, seed: int = 0, walkers: int | None = None,
                      r_min_transport_lengths=(0.0,), progress: bool = False,
                      on_row=None, generator: str = "walk", spp: int = 4096,
                      pass_spp: int | None = None,
-                     beam_radius_fraction: float | None = None) -> list[BiasRow]:
-    """Fit transport-solver captures of measured media with the dipole; recovered against true.
+                     beam_radius_fraction: float | None = None,
+                     forward: str = "dipole") -> list[BiasRow]:
+    """Fit transport-solver captures of measured media; recovered against true coefficients.
 
     Each capture: ``size`` x ``size`` pixels spanning ~12 diffusion lengths
     (:func:`~translucent.fitting.synthetic.default_pixel_size`), eta known, exposure
@@ -181,6 +231,8 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
     beam_radius_fraction : float, optional
         Beam 1/e^2 radius as a fraction of the field width (volpath; default
         :data:`~translucent.fitting.volpath_capture.DEFAULT_BEAM_FRACTION`).
+    forward : {"dipole", "walk"}
+        The fitted profile (see :func:`~translucent.fitting.fit.fit_dipole`).
 
     Returns
     -------
@@ -211,7 +263,7 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
                 row = _empty_row(material, r_min, pixel, photons, began, extra)
             else:
                 result = fit_dipole(capture, walkers=walkers, seed=fit_seed, progress=progress,
-                                    profile=profile)
+                                    profile=profile, forward=forward)
                 row = _bias_row(material, result, r_min, pixel, photons, began, extra)
             rows.append(row)
             if on_row is not None:
@@ -244,6 +296,11 @@ def _solver_capture(generator, material, *, size, pixel, photons, rotations, spp
 def _bias_row(material, result, r_min, pixel, photons, began, extra=None) -> BiasRow:
     """One row of the bias table from a fit."""
     get = result.parameter
+    # a truth outside the prior's support (Spectralon's sigma_a = 0) counts at its bound
+    truth = np.concatenate([np.clip(material.sigma_a, *SIGMA_A_RANGE),
+                            np.clip(material.sigma_s_prime, *SIGMA_S_PRIME_RANGE)])
+    covered = [bool(s.low95 <= t <= s.high95) for s, t in
+               zip(result.parameters[:6], truth, strict=True)]
     return BiasRow(
         material=material.name, true_sigma_a=material.sigma_a.tolist(),
         fit_sigma_a=[get(f"sigma_a[{c}]").median for c in "RGB"],
@@ -255,7 +312,8 @@ def _bias_row(material, result, r_min, pixel, photons, began, extra=None) -> Bia
                                get(f"sigma_s_prime[{c}]").high68] for c in "RGB"],
         status=[s.status for s in result.parameters[:6]], converged=result.converged,
         tau_max=float(result.chains[0].tau.max()), r_min_mm=r_min, pixel_size_mm=pixel,
-        **{"photons": int(photons), **(extra or {})}, seconds=time.perf_counter() - began)
+        **{"photons": int(photons), **(extra or {})}, seconds=time.perf_counter() - began,
+        forward=result.kind, covered=covered, misfit=bool(result.misfit))
 
 
 def _empty_row(material, r_min, pixel, photons, began, extra=None) -> BiasRow:
@@ -282,10 +340,13 @@ def _ratios(fit, true, status) -> str:
 def bias_table_text(rows) -> str:
     """Format the bias table as Markdown: recovered / true per coefficient and channel."""
     lines = ["| material | r_min (mm) | sigma_a fit/true R G B | sigma_s' fit/true R G B | "
-             "converged |", "| --- | --- | --- | --- | --- |"]
+             "truth in 95 % | verdict | converged |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
     for row in rows:
         sigma_a = _ratios(row.fit_sigma_a, row.true_sigma_a, row.status[:3])
         sigma_s = _ratios(row.fit_sigma_s_prime, row.true_sigma_s_prime, row.status[3:])
+        covered = "-" if row.covered is None else f"{sum(row.covered)} / 6"
         lines.append(f"| {row.material} | {row.r_min_mm:.2g} | {sigma_a} | {sigma_s} | "
+                     f"{covered} | {'misfit' if row.misfit else 'fits'} | "
                      f"{'yes' if row.converged else 'no'} |")
     return "\n".join(lines)

@@ -88,8 +88,12 @@ EXITS_PER_PHOTON = 12
 
 
 def _run_kernel(seed, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius, r_kill,
-                capacity):
-    """Run the compiled walk; returns the exit buffer (numpy), the exit count, lost weight."""
+                capacity, *, interactions: bool = False):
+    """Run the compiled walk; returns the exit buffer (numpy), the exit count, lost weight.
+
+    With ``interactions``, the buffer gains an eighth array: the number of scattering
+    events each exit's path had (what reweights a walk to another albedo).
+    """
     import drjit as dr
     from drjit.llvm import PCG32, Float64, UInt32, UInt64
 
@@ -104,14 +108,15 @@ def _run_kernel(seed, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius,
     buffers = [dr.zeros(Float64, capacity) for _ in range(5)]  # x, y, x0, y0, weight
     side_buffer = dr.zeros(UInt32, capacity)
     photon_buffer = dr.zeros(UInt32, capacity)
+    scatter_buffer = dr.zeros(UInt32, capacity if interactions else 1)
     counter = dr.zeros(UInt32, 1)
     lost = dr.zeros(Float64, 1)
     eta2 = eta * eta
 
-    def cond(rng, x, y, z, ux, uy, uz, w):
+    def cond(rng, x, y, z, ux, uy, uz, w, n):
         return w > 0
 
-    def body(rng, x, y, z, ux, uy, uz, w):
+    def body(rng, x, y, z, ux, uy, uz, w, n):
         step = -dr.log(1.0 - rng.next_float64()) / sigma_t
         to_boundary = dr.select(uz > 0, (depth - z) / uz,
                                 dr.select(uz < 0, -z / uz, math.inf))
@@ -136,6 +141,8 @@ def _run_kernel(seed, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius,
             dr.scatter(buffer, value, slot, active=store)
         dr.scatter(side_buffer, dr.select(uz > 0, UInt32(1), UInt32(0)), slot, active=store)
         dr.scatter(photon_buffer, index, slot, active=store)
+        if interactions:
+            dr.scatter(scatter_buffer, n, slot, active=store)
         # Henyey-Greenstein scattering (MCML's rotation formulas)
         xi = rng.next_float64()
         if g == 0.0:
@@ -155,20 +162,24 @@ def _run_kernel(seed, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius,
         uy = dr.select(hit, uy, new_y)
         uz = dr.select(hit, -uz, new_z)
         w = dr.select(hit, w * reflect, w * albedo)
+        n = dr.select(hit, n, n + 1)
         # Russian roulette on light photons (unbiased)
         survive = rng.next_float64() < 0.1
         w = dr.select(w < 1e-4, dr.select(survive, w * 10.0, 0.0), w)
         far = (w > 0) & ((dr.abs(x) > r_kill) | (dr.abs(y) > r_kill) | (z > r_kill))
         dr.scatter_reduce(dr.ReduceOp.Add, lost, w, UInt32(0), active=far)
         w = dr.select(far, 0.0, w)
-        return rng, x, y, z, ux, uy, uz, w
+        return rng, x, y, z, ux, uy, uz, w, n
 
     state = (rng, Float64(x0), Float64(y0), dr.zeros(Float64, photons),
              dr.zeros(Float64, photons), dr.zeros(Float64, photons),
-             dr.full(Float64, 1.0, photons), dr.full(Float64, 1.0, photons))
+             dr.full(Float64, 1.0, photons), dr.full(Float64, 1.0, photons),
+             dr.zeros(UInt32, photons))
     dr.while_loop(state=state, cond=cond, body=body)
-    dr.eval(buffers, side_buffer, photon_buffer, counter, lost)
+    dr.eval(buffers, side_buffer, photon_buffer, scatter_buffer, counter, lost)
     count = int(np.asarray(counter)[0])
     arrays = [np.asarray(b, dtype=np.float64) for b in buffers]
     arrays += [np.asarray(side_buffer, dtype=np.int64), np.asarray(photon_buffer, dtype=np.int64)]
+    if interactions:
+        arrays.append(np.asarray(scatter_buffer, dtype=np.int64))
     return arrays, count, float(np.asarray(lost)[0])

@@ -5,6 +5,8 @@ seed; 96 x 96 pixels, exposure unknown, the default camera), then times
 
 * the three-channel dipole posterior (6 coefficients + exposure): MAP, Laplace start,
   emcee until 50 tau (target: at most 60 s on the suite's 2-core machine);
+* the same posterior with the tabulated random-walk profile (:class:`WalkModel`; target:
+  at most twice the dipole's time);
 * the SubEdit posterior (``--segments`` segments, three independent channel chains):
   (target: at most 3 minutes);
 
@@ -13,12 +15,13 @@ same dipole model (``scipy.optimize.least_squares``): the posterior's cost is re
 a multiple of the point fit's. Also printed: tau, steps, walkers, acceptance and the
 number of log-probability calls (vectorised calls and parameter vectors).
 
-``translucent bench fitting --bias-table --generator {walk,volpath} --out DIR`` runs the
-dipole's model-bias study instead (:func:`translucent.fitting.validation.model_bias_table`):
-transport-solver captures of the measured media, fitted with the dipole, recovered against
-true coefficients. Each finished medium is printed and ``DIR/bias_<generator>.json`` and
-``DIR/bias_<generator>.md`` are rewritten (atomically), so an interrupted run keeps what
-it finished.
+``translucent bench fitting --bias-table --generator {walk,volpath} [--forward walk]
+--out DIR`` runs the model-bias study instead
+(:func:`translucent.fitting.validation.model_bias_table`): transport-solver captures of
+the measured media, fitted with the dipole (or the tabulated walk), recovered against true
+coefficients, with the fraction of truths inside their 95 % intervals and the fits flagged
+as misfits. Each finished medium is printed and ``DIR/bias_<generator>[_walk].json`` and
+``.md`` are rewritten (atomically), so an interrupted run keeps what it finished.
 """
 
 from __future__ import annotations
@@ -31,9 +34,10 @@ import numpy as np
 from ...atomic import atomic_write_text, check_output_folder
 from ...errors import check_count
 
-#: Targets of the task, seconds.
+#: Targets, seconds; the walk model's posterior at most this multiple of the dipole's.
 TARGET_DIPOLE_SECONDS = 60.0
 TARGET_SUBEDIT_SECONDS = 180.0
+TARGET_WALK_RATIO = 2.0
 
 
 def add_arguments(parser):
@@ -57,7 +61,10 @@ def add_arguments(parser):
     bias.add_argument("--photons", type=float, default=1e5, help="photons per channel (walk)")
     bias.add_argument("--r-min", type=float, nargs="+", default=[0.0],
                       help="fit outside these many transport lengths (one row each)")
-    bias.add_argument("--out", default=".", help="folder for bias_<generator>.json / .md")
+    bias.add_argument("--forward", choices=("dipole", "walk"), default="dipole",
+                      help="the fitted profile: the dipole (default) or the tabulated walk")
+    bias.add_argument("--out", default=".",
+                      help="folder for bias_<generator>[_walk].json / .md")
 
 
 def _point_fit_seconds(model) -> tuple[float, np.ndarray]:
@@ -90,19 +97,22 @@ def _bias_table(args) -> int:
     from ...fitting.validation import bias_table_text, model_bias_table
 
     out = check_output_folder(args.out, "--out")
-    json_path, text_path = out / f"bias_{args.generator}.json", out / f"bias_{args.generator}.md"
+    stem = f"bias_{args.generator}" + ("" if args.forward == "dipole" else f"_{args.forward}")
+    json_path, text_path = out / f"{stem}.json", out / f"{stem}.md"
     rows = []
     began = time.perf_counter()
     solver = (f"volpath {args.spp} spp" if args.generator == "volpath"
               else f"random walk {int(args.photons)} photons/channel")
-    print(f"model bias: {solver}, {args.size} x {args.size}, seed {args.seed}, "
+    print(f"model bias of the {args.forward} fit: {solver}, {args.size} x {args.size}, "
+          f"seed {args.seed}, "
           f"materials {', '.join(args.materials) if args.materials else 'all twelve'}",
           flush=True)
 
     def finished(row):
         rows.append(row)
         out.mkdir(parents=True, exist_ok=True)  # at the first row: bad input leaves nothing
-        figures = {"generator": args.generator, "size": args.size, "seed": args.seed,
+        figures = {"generator": args.generator, "forward": args.forward, "size": args.size,
+                   "seed": args.seed,
                    "spp": args.spp if args.generator == "volpath" else None,
                    "photons": int(args.photons) if args.generator == "walk" else None,
                    "seconds": time.perf_counter() - began,
@@ -113,15 +123,19 @@ def _bias_table(args) -> int:
               f"{row.seconds:.0f} s, {'converged' if row.converged else 'NOT converged'}; "
               f"sigma_a fit/true {np.round(np.divide(row.fit_sigma_a, row.true_sigma_a), 2)}"
               f", sigma_s' fit/true "
-              f"{np.round(np.divide(row.fit_sigma_s_prime, row.true_sigma_s_prime), 2)}",
-              flush=True)
+              f"{np.round(np.divide(row.fit_sigma_s_prime, row.true_sigma_s_prime), 2)}; "
+              f"truth inside 95 %: {sum(row.covered)} of 6; "
+              f"{'MODEL MISFIT' if row.misfit else 'fits'}", flush=True)
 
     with np.errstate(divide="ignore", invalid="ignore"):
         model_bias_table(args.materials, photons=int(args.photons), size=args.size,
                          seed=args.seed, r_min_transport_lengths=tuple(args.r_min),
                          generator=args.generator, spp=args.spp, pass_spp=args.pass_spp,
-                         progress=True, on_row=finished)
+                         progress=True, on_row=finished, forward=args.forward)
     print(bias_table_text(rows))
+    covered = sum(sum(row.covered) for row in rows)
+    print(f"truth inside its 95 % interval: {covered} of {6 * len(rows)} coefficients; "
+          f"misfits flagged: {sum(row.misfit for row in rows)} of {len(rows)}")
     print(f"wrote {json_path} and {text_path} ({time.perf_counter() - began:.0f} s)")
     return 0 if all(row.converged for row in rows) else 1
 
@@ -159,6 +173,15 @@ def run(args) -> int:
     print("  " + _chain_line(chain))
     figures["dipole"] = {"seconds": dipole.seconds, "ratio_to_baseline": dipole.seconds / baseline,
                          "target_met": ok, **chain.summary()}
+    status = max(status, 0 if ok else 1)
+    walk = fit_dipole(capture, seed=args.seed, profile=profile, forward="walk")
+    ratio = walk.seconds / dipole.seconds
+    ok = walk.converged and ratio <= TARGET_WALK_RATIO
+    print(f"walk-table posterior: {walk.seconds:.1f} s = {ratio:.2f} x the dipole's (target "
+          f"<= {TARGET_WALK_RATIO:g} x: {'met' if ok else 'NOT met'})")
+    print("  " + _chain_line(walk.chains[0]))
+    figures["walk"] = {"seconds": walk.seconds, "ratio_to_dipole": ratio, "target_met": ok,
+                       **walk.chains[0].summary()}
     status = max(status, 0 if ok else 1)
     if not args.skip_subedit:
         subedit = fit_subedit(capture, segments=args.segments, seed=args.seed, profile=profile)

@@ -50,8 +50,10 @@ def add_arguments(parser):
     parser.add_argument("--photons", type=float, default=2e5,
                         help="photons per channel (walk generator; about a minute per 1e5 "
                              "for a high-albedo medium on two cores)")
-    parser.add_argument("--rotations", type=int, default=16,
-                        help="random rotations per exit on the film (walk generator)")
+    parser.add_argument("--rotations", type=int, default=1,
+                        help="random rotations per exit on the film (walk generator; more "
+                             "give a smoother film whose error the fitter cannot see: it is "
+                             "shared along each annulus; default 1)")
     parser.add_argument("--spp", type=int, default=256,
                         help="samples per pixel in all (volpath generator; per channel: "
                              "128 x 128 x 256 takes ~20 min for Skin1 on two busy cores, "

@@ -1,4 +1,4 @@
-"""Fit dipole and/or SubEdit profiles to a captured slab image: ``translucent fit CAPTURE.json``.
+"""Fit dipole, walk or SubEdit profiles to a captured slab image: ``translucent fit CAPTURE``.
 
 Measures the radial profile of every channel, samples the posterior with emcee until it
 has converged (or the step budget runs out, which is said), and writes into the output
@@ -25,8 +25,12 @@ from pathlib import Path
 def add_arguments(parser):
     """Options of ``translucent fit``."""
     parser.add_argument("capture", help="the capture's JSON sidecar (docs/capture-format.md)")
-    parser.add_argument("--model", choices=("dipole", "subedit", "both"), default="dipole",
-                        help="profile model to fit (default: dipole)")
+    parser.add_argument("--model", choices=("dipole", "walk", "subedit", "both"),
+                        default="dipole",
+                        help="profile model to fit: dipole (or slab multipole), walk (the "
+                             "photon random walk's own profile, tabulated: semi-infinite "
+                             "reflection), subedit, or both dipole and subedit "
+                             "(default: dipole)")
     parser.add_argument("--out", "-o", default=None,
                         help="output folder (default: <capture>_fit beside the sidecar)")
     parser.add_argument("--r-min", type=float, default=0.0,
