@@ -387,22 +387,30 @@ class WalkProfileTable:
         rows, last = self._rows(albedo, eta)
         centres = np.log(self.centres)
         ln_r = np.log(np.maximum(radius, 1e-300))
-        k = np.clip(np.searchsorted(centres, ln_r, side="right"), 1, centres.size - 1)
-        k = np.minimum(k, last[..., None])
-        left = np.take_along_axis(rows, k - 1, axis=-1)
-        right = np.take_along_axis(rows, k, axis=-1)
-        t = np.clip((ln_r - centres[k - 1]) / (centres[k] - centres[k - 1]), None, 1.0)
-        value = left + t * (right - left)
+        # the centres from the second on are equally spaced in ln r: the interval by
+        # arithmetic (what searchsorted would give, without its cost)
+        step = centres[2] - centres[1]
+        k = np.where(ln_r < centres[1], 1,
+                     2 + np.floor((ln_r - centres[1]) / step).astype(np.int64))
+        k = np.minimum(np.clip(k, 1, centres.size - 1), last[..., None])
+        count = rows.shape[-1]
+        flat = rows.reshape(-1)
+        base = (np.arange(flat.size // count) * count).reshape(rows.shape[:-1] + (1,))
+        left = flat[base + k - 1]
+        slope = (flat[base + k] - left) / (centres[k] - centres[k - 1])
+        value = left + np.minimum(ln_r - centres[k - 1], centres[k] - centres[k - 1]) * slope
         # below the first centre: R ~ 1/r (single scattering)
         value = np.where(ln_r < centres[0], rows[..., :1] - (ln_r - centres[0]), value)
         # beyond the last resolved ring: the far-field shape from there on
         end = centres[last][..., None]
         beyond = ln_r > end
-        if np.any(beyond):
-            end_value = np.take_along_axis(rows, last[..., None], axis=-1)
-            tail = _ln_tail_ratio(np.exp(np.maximum(ln_r, end)), np.exp(end),
-                                  albedo[..., None])
-            value = np.where(beyond, end_value + tail, value)
+        if np.any(beyond):  # only there: the far-field shape costs logs and exps
+            where = np.nonzero(beyond)
+            profile = where[:-1]
+            end_value = np.take_along_axis(rows, last[..., None], axis=-1)[..., 0]
+            kappa = asymptotic_attenuation(albedo)
+            value[where] = end_value[profile] + _ln_tail_ratio(
+                np.exp(ln_r[where]), np.exp(end[..., 0][profile]), kappa[profile])
         return np.exp(value) * albedo[..., None]
 
     def _rows(self, albedo, eta):
@@ -494,14 +502,13 @@ def asymptotic_attenuation(albedo) -> np.ndarray:
     return np.where(albedo >= 1.0, 0.0, 0.5 * (low + high))
 
 
-def _ln_tail_ratio(radius, start, albedo):
+def _ln_tail_ratio(radius, start, kappa):
     r"""Return ln of the far-field shape at ``radius`` over its value at ``start``.
 
     The shape is :math:`(1 + \kappa r) e^{-\kappa r} / r^3` (one diffusion source's far
     field, with transport's :math:`\kappa`; at :math:`\kappa = 0` the non-absorbing
     :math:`1/r^3`).
     """
-    kappa = asymptotic_attenuation(albedo)
     return (np.log1p(kappa * radius) - np.log1p(kappa * start) - kappa * (radius - start)
             - 3.0 * (np.log(radius) - np.log(start)))
 

@@ -174,13 +174,20 @@ def run(args) -> int:
     figures["dipole"] = {"seconds": dipole.seconds, "ratio_to_baseline": dipole.seconds / baseline,
                          "target_met": ok, **chain.summary()}
     status = max(status, 0 if ok else 1)
+    # the same capture: the model-conditional posteriors compared (a model that misfits
+    # it also samples a discrepancy posterior, counted apart)
     walk = fit_dipole(capture, seed=args.seed, profile=profile, forward="walk")
-    ratio = walk.seconds / dipole.seconds
+    conditional = walk.chains[0].seconds
+    ratio = conditional / dipole.chains[0].seconds
     ok = walk.converged and ratio <= TARGET_WALK_RATIO
-    print(f"walk-table posterior: {walk.seconds:.1f} s = {ratio:.2f} x the dipole's (target "
-          f"<= {TARGET_WALK_RATIO:g} x: {'met' if ok else 'NOT met'})")
+    print(f"walk-table posterior: {conditional:.1f} s = {ratio:.2f} x the dipole's "
+          f"{dipole.chains[0].seconds:.1f} s (target <= {TARGET_WALK_RATIO:g} x: "
+          f"{'met' if ok else 'NOT met'})" + (
+              f"; it misfits this dipole-made capture, and its discrepancy posterior took "
+              f"{walk.seconds - conditional:.1f} s more" if walk.misfit else ""))
     print("  " + _chain_line(walk.chains[0]))
-    figures["walk"] = {"seconds": walk.seconds, "ratio_to_dipole": ratio, "target_met": ok,
+    figures["walk"] = {"seconds": conditional, "ratio_to_dipole": ratio, "target_met": ok,
+                       "misfit": bool(walk.misfit), "seconds_with_discrepancy": walk.seconds,
                        **walk.chains[0].summary()}
     status = max(status, 0 if ok else 1)
     if not args.skip_subedit:
