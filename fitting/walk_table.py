@@ -36,10 +36,10 @@ cumulative exitance at the ring edges.
 How it is evaluated (:class:`WalkProfileTable`): bilinear in :math:`(s, \ln \hat r)` and
 linear in eta. Where a ring is not resolved (relative standard error above
 :data:`MAX_RELATIVE_SE`: far from the beam in an absorbing medium, where the reweighted
-paths are rare) and beyond the last ring, the profile continues as one diffusion source's
-far field, :math:`(1 + \kappa r) e^{-\kappa r} / r^3`, with transport's own asymptotic
-attenuation :math:`\kappa` (:func:`asymptotic_attenuation`), scaled to meet the table at
-its last resolved ring; below the first ring it follows the single-scattering limit
+paths are rare) and beyond the last ring, the single scattering stays exact and the rest
+continues as one diffusion source's far field, :math:`(1 + \kappa r) e^{-\kappa r} / r^3`,
+with transport's own asymptotic attenuation :math:`\kappa`
+(:func:`asymptotic_attenuation`), scaled to meet the table at its last resolved ring; below the first ring it follows the single-scattering limit
 :math:`R \propto 1/r`. The table's own error against independent walks is measured in
 tests/fitting/test_walk_table.py and stated in docs/capture-format.md.
 """
@@ -172,6 +172,10 @@ def single_scattering(radius, eta) -> np.ndarray:
     return value.reshape(radius.shape)
 
 
+#: Floor of the walked part, as a fraction of the whole (where single scattering is all).
+MIN_MULTIPLE_FRACTION = 1e-6
+#: Reduced radius beyond which single scattering (~e^-r) is taken as 0.
+SINGLE_SCATTERING_REACH = 700.0
 #: Quadrature nodes of :func:`single_scattering` per radius.
 SINGLE_SCATTERING_NODES = 4001
 
@@ -409,9 +413,37 @@ class WalkProfileTable:
             profile = where[:-1]
             end_value = np.take_along_axis(rows, last[..., None], axis=-1)[..., 0]
             kappa = asymptotic_attenuation(albedo)
-            value[where] = end_value[profile] + _ln_tail_ratio(
-                np.exp(ln_r[where]), np.exp(end[..., 0][profile]), kappa[profile])
+            ln_end = end[..., 0][profile]
+            # the single scattering stays exact; the rest of the profile continues in the
+            # far-field shape from what it was at the last resolved ring
+            single = self._single_scattering(ln_r[where], eta[profile])
+            rest = np.maximum(np.exp(end_value[profile])
+                              - self._single_scattering(ln_end, eta[profile]), 0.0)
+            with np.errstate(divide="ignore"):
+                value[where] = np.log(single + rest * np.exp(_ln_tail_ratio(
+                    np.exp(ln_r[where]), np.exp(ln_end), kappa[profile])))
         return np.exp(value) * albedo[..., None]
+
+    @cached_property
+    def _single_scattering_table(self) -> tuple[np.ndarray, np.ndarray]:
+        """ln r and ln of :func:`single_scattering` on a fine grid, per tabulated eta."""
+        radius = np.geomspace(RADIUS_RANGE[0], SINGLE_SCATTERING_REACH, 241)
+        with np.errstate(divide="ignore"):
+            values = np.log(np.stack([single_scattering(radius, eta) for eta in self.etas]))
+        return np.log(radius), np.maximum(values, -745.0)
+
+    def _single_scattering(self, ln_r, eta) -> np.ndarray:
+        """Single scattering per unit albedo at ln r (linear in ln-ln and in eta)."""
+        grid, table = self._single_scattering_table
+        lower, weight = self._eta_weights(eta)
+        upper = np.minimum(lower + 1, self.etas.size - 1)
+        position = np.clip((ln_r - grid[0]) / (grid[1] - grid[0]), 0.0, grid.size - 1.0)
+        k = np.minimum(np.floor(position).astype(np.int64), grid.size - 2)
+        t = position - k
+        value = np.zeros(np.shape(ln_r))
+        for e, w in ((lower, 1.0 - weight), (upper, weight)):
+            value += w * (table[e, k] + t * (table[e, k + 1] - table[e, k]))
+        return np.where(ln_r > grid[-1], 0.0, np.exp(value))
 
     def _rows(self, albedo, eta):
         """ln(R_hat / alpha') over the rings, interpolated to each (albedo, eta).
@@ -419,12 +451,36 @@ class WalkProfileTable:
         Returns the rows, shape (..., K), and the index of the last ring resolved in all
         four table rows they blend.
         """
-        rows = np.zeros(albedo.shape + (self.edges.size - 1,))
+        single_rows, multiple_rows = self._split_rows
+        multiple = np.zeros(albedo.shape + (self.edges.size - 1,))
+        single = np.zeros_like(multiple)
         last = np.full(albedo.shape, self.edges.size - 2)
         for e, a, weight in self._corners(albedo, eta):
-            rows += weight[..., None] * self.ln_profile[e, a]
+            multiple += weight[..., None] * multiple_rows[e, a]
             last = np.minimum(last, self._last_resolved[e, a])
+        lower, we = self._eta_weights(eta)
+        upper = np.minimum(lower + 1, self.etas.size - 1)
+        single = (1.0 - we)[..., None] * single_rows[lower] + we[..., None] * single_rows[upper]
+        rows = np.log(single + albedo[..., None] * np.exp(multiple))
         return rows, last
+
+    @cached_property
+    def _split_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """The table split into its exact and its walked part, for interpolation in s.
+
+        R / alpha' = R_1 + alpha' M: the single scattering R_1 (per unit albedo, exact, at
+        the ring centres) and the rest, M = (R / alpha' - R_1) / alpha', which varies
+        slowly with the albedo (double scattering and beyond per alpha'^2). Interpolating
+        ln(R / alpha') itself across the coarse steps of low albedo (where the two parts
+        trade places) would be geometric, biased low between the grid points.
+
+        Returns R_1, shape (E, K), and ln M, shape (E, S, K).
+        """
+        single = np.stack([single_scattering(self.centres, eta) for eta in self.etas])
+        albedo = 1.0 - self.attenuation ** 2 / 3.0
+        total = np.exp(self.ln_profile)
+        rest = np.maximum(total - single[:, None, :], MIN_MULTIPLE_FRACTION * total)
+        return single, np.log(rest / albedo[None, :, None])
 
     def _corners(self, albedo, eta):
         """Return the four (eta index, attenuation index, weight) of the bilinear blend."""
@@ -463,12 +519,15 @@ class WalkProfileTable:
         k = np.clip(np.searchsorted(edges, ln_r, side="right"), 1, edges.size - 1)
         t = np.clip((ln_r - edges[k - 1]) / (edges[k] - edges[k - 1]), None, 1.0)
         value = np.zeros(radius.shape)
+        grid_albedo = 1.0 - self.attenuation ** 2 / 3.0
+        # ln(E / alpha'), as the profile: E itself falls with the albedo too fast for a
+        # linear blend across the coarse low-albedo steps
         for e, a, weight in self._corners(albedo, eta):
-            left = ln_cumulative[e, a, k - 1]
-            right = ln_cumulative[e, a, k]
+            left = ln_cumulative[e, a, k - 1] - np.log(grid_albedo[a])
+            right = ln_cumulative[e, a, k] - np.log(grid_albedo[a])
             value += weight * np.where(ln_r < edges[0], left + (ln_r - edges[0]),
                                        left + t * (right - left))
-        return np.exp(value)
+        return np.exp(value) * albedo
 
     @cached_property
     def _last_resolved(self) -> np.ndarray:
