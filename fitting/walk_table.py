@@ -35,13 +35,14 @@ cumulative exitance at the ring edges.
 
 How it is evaluated (:class:`WalkProfileTable`): the exact single scattering plus the
 walked rest per :math:`\alpha'^2` (which varies slowly with the albedo), the latter
-bilinear in :math:`(s, \ln \hat r)`; linear in eta. Where a ring is not resolved (relative standard error above
-:data:`MAX_RELATIVE_SE`: far from the beam in an absorbing medium, where the reweighted
-paths are rare) and beyond the last ring, the single scattering stays exact and the rest
-continues as one diffusion source's far field, :math:`(1 + \kappa r) e^{-\kappa r} / r^3`,
-with transport's own asymptotic attenuation :math:`\kappa`
-(:func:`asymptotic_attenuation`), scaled to meet the table at its last resolved ring;
-below the first ring it follows the single-scattering limit :math:`R \propto 1/r`. The table's own error against independent walks is measured in
+bilinear in :math:`(s, \ln \hat r)`; linear in eta. Where a ring is not resolved
+(relative standard error above :data:`MAX_RELATIVE_SE`: far from the beam in an
+absorbing medium, where the reweighted paths are rare) and beyond the last ring, the
+single scattering stays exact and the rest continues as one diffusion source's far field,
+:math:`(1 + \kappa r) e^{-\kappa r} / r^3`, with transport's own asymptotic attenuation
+:math:`\kappa` (:func:`asymptotic_attenuation`), scaled to meet the table at its last
+resolved ring; below the first ring it follows the single-scattering limit
+:math:`R \propto 1/r`. The table's own error against independent walks is measured in
 tests/fitting/test_walk_table.py and stated in docs/capture-format.md.
 """
 
