@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-__all__ = ["drjit_available", "walk_channel_drjit"]
+__all__ = ["drjit_available", "walk_channel_drjit", "walk_exits"]
 
 
 def drjit_available() -> bool:
@@ -63,15 +63,9 @@ def walk_channel_drjit(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_r
     film_sum = None if film is None else np.zeros(film.shape[0] * film.shape[1])
     if sigma_a + sigma_s <= 0:
         return radial, totals, 0.0, film_sum
-    seed = int(rng.integers(2**63))
-    capacity = EXITS_PER_PHOTON * photons
-    while True:
-        exits, count, lost = _run_kernel(seed, photons, sigma_a, sigma_s, g, eta, thickness,
-                                         beam_radius, r_kill, capacity)
-        if count <= capacity:
-            break
-        capacity = int(count * 1.25) + 1
-    x, y, x0, y0, weight, side, photon = (array[:count] for array in exits)
+    exits, lost = walk_exits(int(rng.integers(2**63)), photons, sigma_a, sigma_s, g, eta,
+                             thickness, beam_radius, r_kill)
+    x, y, x0, y0, weight, side, photon = exits
     batch = photon % batches
     for which in (0, 1):
         chosen = side == which
@@ -80,6 +74,36 @@ def walk_channel_drjit(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_r
                         x0[chosen], y0[chosen], weight[chosen], batch[chosen], edges, film,
                         rotations, radial, totals, film_sum)
     return radial, totals, lost, film_sum
+
+
+def walk_exits(seed, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius, r_kill, *,
+               interactions: bool = False):
+    """Run the compiled walk and return every exit, the buffer enlarged until they fit.
+
+    Parameters
+    ----------
+    seed : int
+        Seeds the PCG32 streams (one per photon): the walk is deterministic, so a buffer
+        that overflowed is enlarged and the same walk run again.
+    photons, sigma_a, sigma_s, g, eta, thickness, beam_radius, r_kill
+        As the numpy walk.
+    interactions : bool
+        Also return each exit's number of scattering events.
+
+    Returns
+    -------
+    (list of ndarray, float)
+        ``x, y, x0, y0, weight, side, photon`` (and ``scatterings``) of the exits, and the
+        weight lost at the kill radius.
+    """
+    capacity = EXITS_PER_PHOTON * photons
+    while True:
+        arrays, count, lost = _run_kernel(seed, photons, sigma_a, sigma_s, g, eta, thickness,
+                                          beam_radius, r_kill, capacity,
+                                          interactions=interactions)
+        if count <= capacity:
+            return [array[:count] for array in arrays], lost
+        capacity = int(count * 1.25) + 1
 
 
 #: Initial exit-buffer size per photon (an exit is each partial transmission through a

@@ -201,21 +201,15 @@ def _walk_rings(eta, base, photons, edges, seed, progress_bar=None):
     after two or more scatterings (one is :func:`single_scattering`), within the last ring
     edge, one chunk of photons at a time.
     """
-    from .walk_kernel import _run_kernel
+    from .walk_kernel import walk_exits
 
     done = 0
     rng = np.random.default_rng(seed)
     while done < photons:
         count = min(CHUNK, photons - done)
-        capacity = 12 * count
-        while True:
-            arrays, exits, _lost = _run_kernel(int(rng.integers(2**63)), count, 1.0 - base, base,
-                                               0.0, float(eta), None, 0.0, KILL_RADIUS,
-                                               capacity, interactions=True)
-            if exits <= capacity:
-                break
-            capacity = int(exits * 1.25) + 1
-        x, y, x0, y0, weight, side, photon, scatterings = (a[:exits] for a in arrays)
+        arrays, _lost = walk_exits(int(rng.integers(2**63)), count, 1.0 - base, base, 0.0,
+                                   float(eta), None, 0.0, KILL_RADIUS, interactions=True)
+        x, y, x0, y0, weight, side, photon, scatterings = arrays
         radius = np.hypot(x - x0, y - y0)
         ring = np.searchsorted(edges, radius, side="right") - 1
         keep = (side == 0) & (ring < edges.size - 1) & (scatterings >= 2)
@@ -344,12 +338,27 @@ class WalkProfileTable:
     relative_se: np.ndarray
     cumulative: np.ndarray
 
-    @property
+    @cached_property
     def centres(self) -> np.ndarray:
         """Geometric centres of the rings (the first, from 0, at half its edge)."""
         inner = self.edges[:-1].copy()
         inner[0] = 0.25 * self.edges[1]
         return np.sqrt(inner * self.edges[1:])
+
+    @cached_property
+    def _ln_centres(self) -> np.ndarray:
+        return np.log(self.centres)
+
+    @cached_property
+    def albedos(self) -> np.ndarray:
+        """The albedo alpha' = 1 - s^2 / 3 of each attenuation grid point."""
+        return 1.0 - self.attenuation ** 2 / 3.0
+
+    @cached_property
+    def _ln_cumulative_per_albedo(self) -> np.ndarray:
+        """ln(E / alpha') at the ring edges from the first on, shape (E, S, K)."""
+        with np.errstate(divide="ignore"):
+            return np.log(self.cumulative[..., 1:]) - np.log(self.albedos)[None, :, None]
 
     def check_eta(self, eta) -> None:
         """Refuse relative indices outside the tabulated range."""
@@ -360,15 +369,16 @@ class WalkProfileTable:
             raise InputError(f"the walk table covers eta {low:g} .. {high:g}", field="eta",
                              value=float(eta.ravel()[np.flatnonzero(bad.ravel())[0]]))
 
-    def _eta_weights(self, eta):
-        """Lower table index and weight of the upper one, per eta value."""
+    def _eta_pairs(self, eta):
+        """Return the two tables about each eta and their weights, [(lower, 1 - w), (upper, w)]."""
         eta = np.clip(np.asarray(eta, dtype=np.float64), self.etas[0], self.etas[-1])
         if self.etas.size == 1:
-            return np.zeros(eta.shape, dtype=np.int64), np.zeros(eta.shape)
+            lower, weight = np.zeros(eta.shape, dtype=np.int64), np.zeros(eta.shape)
+            return [(lower, 1.0 - weight), (lower, weight)]
         upper = np.clip(np.searchsorted(self.etas, eta, side="right"), 1, self.etas.size - 1)
         lower = upper - 1
         weight = (eta - self.etas[lower]) / (self.etas[upper] - self.etas[lower])
-        return lower, weight
+        return [(lower, 1.0 - weight), (upper, weight)]
 
     def reduced_profile(self, radius, albedo, eta) -> np.ndarray:
         r"""Reduced exitance :math:`\hat R(\hat r; \alpha', \eta)` per entering photon.
@@ -391,7 +401,7 @@ class WalkProfileTable:
         albedo, eta = np.broadcast_arrays(np.asarray(albedo, dtype=np.float64),
                                           np.asarray(eta, dtype=np.float64))
         rows, last = self._rows(albedo, eta)
-        centres = np.log(self.centres)
+        centres = self._ln_centres
         ln_r = np.log(np.maximum(radius, 1e-300))
         # the centres from the second on are equally spaced in ln r: the interval by
         # arithmetic (what searchsorted would give, without its cost)
@@ -437,13 +447,11 @@ class WalkProfileTable:
     def _single_scattering(self, ln_r, eta) -> np.ndarray:
         """Single scattering per unit albedo at ln r (linear in ln-ln and in eta)."""
         grid, table = self._single_scattering_table
-        lower, weight = self._eta_weights(eta)
-        upper = np.minimum(lower + 1, self.etas.size - 1)
         position = np.clip((ln_r - grid[0]) / (grid[1] - grid[0]), 0.0, grid.size - 1.0)
         k = np.minimum(np.floor(position).astype(np.int64), grid.size - 2)
         t = position - k
         value = np.zeros(np.shape(ln_r))
-        for e, w in ((lower, 1.0 - weight), (upper, weight)):
+        for e, w in self._eta_pairs(eta):
             value += w * (table[e, k] + t * (table[e, k + 1] - table[e, k]))
         return np.where(ln_r > grid[-1], 0.0, np.exp(value))
 
@@ -455,14 +463,11 @@ class WalkProfileTable:
         """
         single_rows, multiple_rows = self._split_rows
         multiple = np.zeros(albedo.shape + (self.edges.size - 1,))
-        single = np.zeros_like(multiple)
         last = np.full(albedo.shape, self.edges.size - 2)
         for e, a, weight in self._corners(albedo, eta):
             multiple += weight[..., None] * multiple_rows[e, a]
             last = np.minimum(last, self._last_resolved[e, a])
-        lower, we = self._eta_weights(eta)
-        upper = np.minimum(lower + 1, self.etas.size - 1)
-        single = (1.0 - we)[..., None] * single_rows[lower] + we[..., None] * single_rows[upper]
+        single = sum(w[..., None] * single_rows[e] for e, w in self._eta_pairs(eta))
         rows = np.log(single + albedo[..., None] * np.exp(multiple))
         return rows, last
 
@@ -479,10 +484,9 @@ class WalkProfileTable:
         Returns R_1, shape (E, K), and ln M, shape (E, S, K).
         """
         single = np.stack([single_scattering(self.centres, eta) for eta in self.etas])
-        albedo = 1.0 - self.attenuation ** 2 / 3.0
         total = np.exp(self.ln_profile)
         rest = np.maximum(total - single[:, None, :], MIN_MULTIPLE_FRACTION * total)
-        return single, np.log(rest / albedo[None, :, None])
+        return single, np.log(rest / self.albedos[None, :, None])
 
     def _corners(self, albedo, eta):
         """Return the four (eta index, attenuation index, weight) of the bilinear blend."""
@@ -491,9 +495,7 @@ class WalkProfileTable:
         top = np.clip(np.searchsorted(grid, s, side="right"), 1, grid.size - 1)
         bottom = top - 1
         ws = np.clip((s - grid[bottom]) / (grid[top] - grid[bottom]), 0.0, 1.0)
-        lower, we = self._eta_weights(eta)
-        upper = np.minimum(lower + 1, self.etas.size - 1)
-        return [(e, a, w_e * w_a) for e, w_e in ((lower, 1.0 - we), (upper, we))
+        return [(e, a, w_e * w_a) for e, w_e in self._eta_pairs(eta)
                 for a, w_a in ((bottom, 1.0 - ws), (top, ws))]
 
     def reduced_cumulative(self, radius, albedo, eta) -> np.ndarray:
@@ -515,18 +517,16 @@ class WalkProfileTable:
         radius, albedo, eta = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
                                                     for a in (radius, albedo, eta)))
         edges = np.log(self.edges[1:])
-        with np.errstate(divide="ignore"):
-            ln_cumulative = np.log(self.cumulative[..., 1:])
+        ln_cumulative = self._ln_cumulative_per_albedo
         ln_r = np.log(np.maximum(radius, 1e-300))
         k = np.clip(np.searchsorted(edges, ln_r, side="right"), 1, edges.size - 1)
         t = np.clip((ln_r - edges[k - 1]) / (edges[k] - edges[k - 1]), None, 1.0)
         value = np.zeros(radius.shape)
-        grid_albedo = 1.0 - self.attenuation ** 2 / 3.0
         # ln(E / alpha'), as the profile: E itself falls with the albedo too fast for a
         # linear blend across the coarse low-albedo steps
         for e, a, weight in self._corners(albedo, eta):
-            left = ln_cumulative[e, a, k - 1] - np.log(grid_albedo[a])
-            right = ln_cumulative[e, a, k] - np.log(grid_albedo[a])
+            left = ln_cumulative[e, a, k - 1]
+            right = ln_cumulative[e, a, k]
             value += weight * np.where(ln_r < edges[0], left + (ln_r - edges[0]),
                                        left + t * (right - left))
         return np.exp(value) * albedo

@@ -35,3 +35,18 @@ def write_sidecar(tmp_path):
         return path
 
     return write
+
+
+@pytest.fixture(scope="module")
+def small_capture():
+    """A small dipole capture (40 x 40 px), its measured profile and its material."""
+    from translucent.fitting.capture import Capture
+    from translucent.fitting.profile import measure_profile
+    from translucent.fitting.synthetic import Camera, dipole_capture
+    from translucent.materials import Dipole
+
+    material = Dipole(sigma_a=[0.05, 0.1, 0.2], sigma_s_prime=[1.0, 1.5, 2.0], eta=1.3)
+    pixels, spec = dipole_capture(material, size=40, pixel_size_mm=0.2, seed=3,
+                                  camera=Camera(peak_signal=30000))
+    capture = Capture(spec, pixels)
+    return capture, measure_profile(capture), material

@@ -3,26 +3,13 @@
 import numpy as np
 import pytest
 from translucent.errors import InputError
-from translucent.fitting.capture import Capture
 from translucent.fitting.models import (
     SIGMA_A_RANGE,
     DipoleModel,
     SubEditModel,
     student_t_log_likelihood,
 )
-from translucent.fitting.profile import measure_profile
-from translucent.fitting.synthetic import Camera, dipole_capture
-from translucent.materials import Dipole
 from translucent.materials.subedit import SubEditProfiles
-
-
-@pytest.fixture(scope="module")
-def small_capture():
-    material = Dipole(sigma_a=[0.05, 0.1, 0.2], sigma_s_prime=[1.0, 1.5, 2.0], eta=1.3)
-    pixels, spec = dipole_capture(material, size=40, pixel_size_mm=0.2, seed=3,
-                                  camera=Camera(peak_signal=30000))
-    capture = Capture(spec, pixels)
-    return capture, measure_profile(capture), material
 
 
 def truth_theta(model, material, exposure):

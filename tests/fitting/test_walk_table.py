@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 from translucent.errors import InputError
 from translucent.fitting import walk_table
 from translucent.fitting.random_walk import photon_random_walk
-from translucent.fitting.walk_kernel import _run_kernel, drjit_available
+from translucent.fitting.walk_kernel import drjit_available, walk_exits
 from translucent.materials import Dipole
 
 needs_drjit = pytest.mark.skipif(not drjit_available(),
@@ -34,9 +34,9 @@ def _bin_means(table, edges, albedo, eta):
 @pytest.mark.parametrize("eta", [1.0, 1.4])
 def test_single_scattering_matches_the_walks_first_exits(eta):
     photons = 100_000
-    arrays, count, _ = _run_kernel(11, photons, 0.0, 1.0, 0.0, eta, None, 0.0, 160.0,
-                                   12 * photons, interactions=True)
-    x, y, x0, y0, weight, side, _, scatterings = (a[:count] for a in arrays)
+    arrays, _ = walk_exits(11, photons, 0.0, 1.0, 0.0, eta, None, 0.0, 160.0,
+                           interactions=True)
+    x, y, x0, y0, weight, side, _, scatterings = arrays
     first = (side == 0) & (scatterings == 1)
     radius = np.hypot(x - x0, y - y0)[first]
     edges = np.array([0.0, 0.01, 0.03, 0.1, 0.3, 1.0, 2.0])
@@ -53,17 +53,18 @@ def test_single_scattering_matches_the_walks_first_exits(eta):
 def test_the_interaction_count_leaves_the_walk_unchanged():
     if not drjit_available():
         pytest.skip("Dr.Jit's LLVM backend is not available")
-    plain, count, lost = _run_kernel(3, 2000, 0.1, 0.9, 0.0, 1.3, None, 0.0, 50.0, 40000)
-    counted, count2, lost2 = _run_kernel(3, 2000, 0.1, 0.9, 0.0, 1.3, None, 0.0, 50.0, 40000,
-                                         interactions=True)
-    assert count == count2 and lost == pytest.approx(lost2, rel=1e-12)
+    plain, lost = walk_exits(3, 2000, 0.1, 0.9, 0.0, 1.3, None, 0.0, 50.0)
+    counted, lost2 = walk_exits(3, 2000, 0.1, 0.9, 0.0, 1.3, None, 0.0, 50.0,
+                                interactions=True)
+    count = plain[0].size
+    assert counted[0].size == count and lost == pytest.approx(lost2, rel=1e-12)
     # the buffer's order depends on the threads: compare photon by photon (a photon's own
     # exits are stored in the order they happen)
-    order = np.argsort(plain[6][:count], kind="stable")
-    order2 = np.argsort(counted[6][:count], kind="stable")
+    order = np.argsort(plain[6], kind="stable")
+    order2 = np.argsort(counted[6], kind="stable")
     for a, b in zip(plain, counted[:7], strict=True):
-        np.testing.assert_array_equal(a[:count][order], b[:count][order2])
-    assert counted[7][:count].min() >= 1  # no photon leaves before it scatters
+        np.testing.assert_array_equal(a[order], b[order2])
+    assert counted[7].min() >= 1  # no photon leaves before it scatters
 
 
 @settings(max_examples=60, deadline=None)
@@ -140,17 +141,11 @@ def test_an_unreadable_table_is_an_input_error(tmp_path):
 # --- the fitter's model -------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def walk_model():
-    from translucent.fitting.capture import Capture
+def walk_model(small_capture):
     from translucent.fitting.models import WalkModel
-    from translucent.fitting.profile import measure_profile
-    from translucent.fitting.synthetic import Camera, dipole_capture
 
-    material = Dipole(sigma_a=[0.05, 0.1, 0.2], sigma_s_prime=[1.0, 1.5, 2.0], eta=1.3)
-    pixels, spec = dipole_capture(material, size=40, pixel_size_mm=0.2, seed=3,
-                                  camera=Camera(peak_signal=30000))
-    capture = Capture(spec, pixels)
-    return WalkModel(measure_profile(capture), capture.spec)
+    capture, profile, _ = small_capture
+    return WalkModel(profile, capture.spec)
 
 
 @settings(max_examples=25, deadline=None)
