@@ -29,7 +29,7 @@ SubEdit ln P knots        uniform box + smoothness         :data:`KNOT_BOX_NATS`
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -562,12 +562,8 @@ class WalkModel(DipoleModel):
         self.table = load_table()
         if spec.eta is not None:
             self.table.check_eta(spec.eta)
+        # the table spans ETA_FIT_RANGE (a test checks it), so the dipole's eta prior holds
         super().__init__(profile, spec, fit_eta=fit_eta)
-        if self.fit_eta:  # the prior is the table's range
-            index = self.names.index("eta")
-            low = max(ETA_FIT_RANGE[0], float(self.table.etas[0]))
-            high = min(ETA_FIT_RANGE[1], float(self.table.etas[-1]))
-            self.parameters[index] = replace(self.parameters[index], lower=low, upper=high)
 
     def unit_profiles(self, sigma_a, sigma_s_prime, eta) -> np.ndarray:
         """Return the walk's exitance per unit entering power at the nodes, mm^-2, (n, nodes, 3)."""
