@@ -73,6 +73,7 @@ PLANS: dict[str, ReferencePlan] = {
     "cornell_block": ReferencePlan(spp=32, budget_seconds=3600.0),
     "solid_checker": ReferencePlan(spp=256, budget_seconds=1500.0),
     "solid_veins": ReferencePlan(spp=256, budget_seconds=2400.0),
+    "solid_gradient": ReferencePlan(spp=256, budget_seconds=1500.0),
     # manifold next-event estimation costs 15-20x volpath's time per sample, and Skin1's
     # shadowed half is lit only by light diffused round the sphere (the darkest quarter of
     # the lit pixels has 4x the median's error, and the median fell only as passes^-0.32

@@ -40,7 +40,7 @@ NAMES = list(PLANS)
 
 #: Samples per pixel of each of the 8 passes of the fresh render, per scene: a few seconds.
 FRESH_SPP = {"glossy": 16, "bowl": 16, "sphere": 4, "cornell_block": 2, "solid_checker": 16,
-             "solid_veins": 8, "sphere_dielectric": 4}
+             "solid_veins": 8, "solid_gradient": 16, "sphere_dielectric": 4}
 
 #: The drift the consistency check must detect, per scene (default 5 %): sphere_dielectric's
 #: own red channel, Skin1's long walks, has a summed standard error of 1.7 % (measured), so
