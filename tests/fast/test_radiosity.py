@@ -15,6 +15,9 @@ from translucent.fast.radiosity import (
     scattering_matrix,
     solve_radiosity,
 )
+from translucent.fast.radiosity import method as radiosity_method
+from translucent.fast.radiosity.geometry import pair_fractions
+from translucent.fast.radiosity.scattering import mixed_values
 from translucent.materials import Lambertian, measured_medium
 from translucent.materials.profiles import (
     DipoleProfile,
@@ -953,7 +956,7 @@ def test_approx_refuses_a_material_no_object_would_take(tmp_path, capsys, monkey
     def never(*args, **kwargs):
         raise AssertionError("precomputed with --material ignored")
 
-    monkeypatch.setattr(radiosity, "precompute", never)
+    monkeypatch.setattr(radiosity_method, "precompute", never)
     assert main(["approx", "radiosity", "furnace_sphere", "--material", "Marble", "--out",
                  str(tmp_path / "f.exr")]) == 2
     assert "material = 'Marble': no translucent object" in capsys.readouterr().err
@@ -990,7 +993,7 @@ def test_compiled_eq16_equals_mixed_profile_sample_by_sample(rng):
     expected = mixed_profile(np.stack([t[0] for t in tables]), at, fractions) * weight[:, None]
     summed = np.stack([np.bincount(pair, expected[:, c], minlength=pairs) for c in range(3)],
                       axis=1)
-    assert radiosity._mixed_values(item, material, grid) == pytest.approx(summed, rel=1e-12,
+    assert mixed_values(item, material, grid) == pytest.approx(summed, rel=1e-12,
                                                                            abs=1e-300)
 
 
@@ -1000,7 +1003,26 @@ def test_pair_fractions_count_the_points_in_each_material():
     def labels(points):
         return np.digitize(points[:, 0], [2.5, 7.5])
 
-    counts = radiosity._pair_fractions(centroids, None, None, np.array([0, 0, 1]),
+    counts = pair_fractions(centroids, None, None, np.array([0, 0, 1]),
                                        np.array([1, 2, 2]), 3, 8, labels)
     # 8 points at t = (i + 0.5) / 8 along each segment
     assert counts.tolist() == [[2, 4, 2], [8, 0, 0], [2, 4, 2]]
+
+
+def test_csr_order_is_a_stable_lexsort(rng):
+    from translucent.fast.radiosity.kernels import csr_order
+
+    rows, cols = rng.integers(0, 7, 500), rng.integers(0, 5, 500)  # many ties
+    assert np.array_equal(csr_order(rows, cols, 7), np.lexsort((cols, rows)))
+    assert len(csr_order(np.zeros(0, int), np.zeros(0, int), 3)) == 0
+
+
+def test_moving_operator_rows_keeps_every_entry(rng):
+    from translucent.fast.radiosity.geometry import _at_positions
+
+    operator = sparse.random(6, 9, density=0.4, random_state=1, format="csr")
+    positions = np.array([10, 2, 7, 0, 13, 5])
+    moved = _at_positions(operator, positions, 15)
+    assert moved.shape == (15, 9)
+    assert np.array_equal(moved.toarray()[positions], operator.toarray())
+    assert moved.toarray()[np.setdiff1d(np.arange(15), positions)].sum() == 0

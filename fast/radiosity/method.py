@@ -1,0 +1,226 @@
+"""The fast-method contract of translucent radiosity: applicability, knobs, precompute, approx."""
+
+from __future__ import annotations
+
+import math
+import time
+
+from ...errors import InputError, check_count
+from ...image import Image
+from ...materials.profiles import (
+    MixedProfiles,
+    profile_for,
+)
+from ..base import StageLog, refuse_inapplicable, with_defaults
+from ..form_factors import build_patches, form_factors, needs_form_factors
+from ..optical_distance import (
+    closed_surface,
+)
+from ..solid_inputs import mixed_profiles_from_solid, surface_scene
+from .geometry import scattering_geometry
+from .knobs import COMPONENTS, DEFAULT_KNOBS, FORMAT_VERSION, RUNTIME_KNOBS, SOLVERS
+from .state import RadiosityState, materials_of
+
+
+def applies_to(scene) -> str | None:
+    """None when every material is Lambertian, a Dipole, a RadialProfile or MixedProfiles.
+
+    Translucent radiosity assumes diffuse surfaces and isotropic multiple scattering
+    (Sheng et al. 2014, Sect. 1, 7); glossy BRDFs and SubEdit textures are not modelled.
+    """
+    scene, _ = surface_scene(scene, mixed_profiles_from_solid)
+    translucent = False
+    for obj in scene.objects:
+        try:
+            profile = profile_for(obj.material)
+        except InputError:
+            return (f"object '{obj.name}' has a {type(obj.material).__name__} material; "
+                    "translucent radiosity takes diffuse (Lambertian) surfaces and dipole or "
+                    "tabulated radial profiles only")
+        translucent |= profile is not None
+    if not translucent:
+        return "no translucent object: this is classical radiosity (every S entry is an albedo)"
+    return None
+
+
+def _resolve_knobs(scene, knobs: dict) -> dict:
+    resolved = with_defaults(knobs, DEFAULT_KNOBS)
+    if resolved["self_term"] not in ("polar", "samples"):
+        raise InputError("must be 'polar' or 'samples'", field="self_term",
+                         value=resolved["self_term"])
+    if resolved["transfer"] not in ("auto", "never"):
+        raise InputError("must be 'auto' or 'never'", field="transfer", value=resolved["transfer"])
+    if resolved["solver"] not in SOLVERS:
+        raise InputError(f"unknown solver; valid: {', '.join(SOLVERS)}", field="solver",
+                         value=resolved["solver"])
+    for name in ("tolerance", "sample_falloff", "centroid_beyond", "transfer_budget_mb"):
+        if not float(resolved[name]) > 0:
+            raise InputError("must be > 0", field=name, value=resolved[name])
+    for name in ("rays_per_patch", "self_samples", "voxels_per_axis", "profile_samples",
+                 "max_iterations", "light_samples", "mix_points"):
+        check_count(resolved[name], name)
+    if resolved["mix_points"] > 255:
+        raise InputError("must be <= 255 (points per segment are counted in a byte)",
+                         field="mix_points", value=resolved["mix_points"])
+    check_count(resolved["diffusion_voxels_per_axis"], "diffusion_voxels_per_axis", minimum=4)
+    if not isinstance(resolved["finite_object_energy"], bool):
+        raise InputError("must be true or false", field="finite_object_energy",
+                         value=resolved["finite_object_energy"])
+    if resolved["max_distance_mm"] is None:
+        radii = []
+        for obj in scene.objects:
+            profile = profile_for(obj.material)
+            profiles = profile.profiles if isinstance(profile, MixedProfiles) else \
+                ((profile,) if profile is not None else ())
+            radii += [p.support_radius(resolved["profile_energy_cutoff"]) for p in profiles]
+        resolved["max_distance_mm"] = float(max(radii, default=1.0))
+    elif not float(resolved["max_distance_mm"]) > 0:
+        raise InputError("must be > 0 mm", field="max_distance_mm",
+                         value=resolved["max_distance_mm"])
+    elif not math.isfinite(float(resolved["max_distance_mm"])):
+        raise InputError("must be a finite distance > 0 mm (or None: from the profiles)",
+                         field="max_distance_mm", value=resolved["max_distance_mm"])
+    diffuse_samples = resolved["diffuse_light_samples"]
+    if diffuse_samples is not None and (int(diffuse_samples) != diffuse_samples
+                                        or diffuse_samples < 1):
+        raise InputError("must be None (as light_samples) or an integer >= 1",
+                         field="diffuse_light_samples", value=diffuse_samples)
+    from ...scenes.raycast import RAY_ENGINES
+
+    if resolved["shadow_ray_engine"] not in RAY_ENGINES:
+        raise InputError(f"unknown ray engine; valid: {', '.join(RAY_ENGINES)}",
+                         field="shadow_ray_engine", value=resolved["shadow_ray_engine"])
+    thickness = resolved["sheet_thickness_mm"]
+    if thickness is not None and not float(thickness) > 0:
+        raise InputError("must be > 0 mm", field="sheet_thickness_mm", value=thickness)
+    return resolved
+
+
+def precompute(scene, **knobs) -> RadiosityState:
+    """Patches, form factors, optical distances and scattering samples; cached on disk.
+
+    Sheng et al. 2014, Sect. 5.1-5.2. The cache key holds the geometry, which objects are
+    translucent (and the labels of heterogeneous ones) and the knobs -- never the lights or
+    the homogeneous materials, so relighting and translucency changes reuse it. With
+    ``max_distance_mm=None`` the cut-off comes from the scene's profiles (part of the key).
+
+    Parameters
+    ----------
+    scene : Scene
+    **knobs
+        See :data:`DEFAULT_KNOBS`.
+
+    Returns
+    -------
+    RadiosityState
+    """
+    from ...cache import Cache, content_hash
+
+    scene, solid_notes = surface_scene(scene, mixed_profiles_from_solid)
+    reason = applies_to(scene)
+    if reason is not None and not reason.startswith("no translucent"):
+        refuse_inapplicable(scene, reason, "radiosity does not apply")
+    resolved = _resolve_knobs(scene, knobs)
+    translucent = [i for i, o in enumerate(scene.objects) if profile_for(o.material) is not None]
+    # an open translucent surface is a thin sheet of constant thickness, lit from both
+    # sides (the rose petals of Sheng et al. 2014, Sect. 6.1)
+    sheets = [i for i in translucent
+              if not closed_surface(scene.objects[i].mesh.faces, scene.objects[i].mesh.vertices)]
+    labels = {scene.objects[i].name: scene.objects[i].material.face_labels
+              for i in translucent if isinstance(scene.objects[i].material, MixedProfiles)}
+    geometry_knobs = {k: v for k, v in resolved.items() if k not in RUNTIME_KNOBS}
+    key = content_hash("radiosity", FORMAT_VERSION, scene.geometry_key(), geometry_knobs,
+                       [scene.objects[i].name for i in translucent], labels)
+    cache = Cache("radiosity")
+    stored = cache.load_pickle(key)
+    if stored is not None:
+        patches, F, geometry, log = stored
+        log.notes["cache"] = "hit"
+        if solid_notes:
+            log.notes["solid medium"] = solid_notes
+        return RadiosityState(scene, patches, F, geometry, resolved, log)
+    log = StageLog()
+    started = time.perf_counter()
+    patches = build_patches(scene, triangles_per_patch=resolved["triangles_per_patch"],
+                            two_sided=sheets)
+    for index in sheets:
+        log.notes.setdefault("thin sheets", []).append(scene.objects[index].name)
+    log.seconds["patches"] = time.perf_counter() - started
+    log.notes["patches"] = len(patches)
+    reason = needs_form_factors(scene)
+    if reason is not None:
+        log.skip(reason)
+        F = None
+    else:
+        started = time.perf_counter()
+        F, facts = form_factors(scene, patches, rays_per_patch=resolved["rays_per_patch"],
+                                threshold=resolved["form_factor_threshold"],
+                                seed=resolved["seed"])
+        log.seconds["form_factors"] = time.perf_counter() - started
+        log.notes["form_factors"] = facts
+    started = time.perf_counter()
+    geometry = scattering_geometry(scene, patches, translucent,
+                                   max_distance_mm=resolved["max_distance_mm"], knobs=resolved,
+                                   log=log, sheet_thickness_mm=resolved["sheet_thickness_mm"])
+    log.seconds["scattering"] = time.perf_counter() - started
+    log.notes["scattering_bytes"] = geometry.bytes
+    log.notes["max_distance_mm"] = resolved["max_distance_mm"]
+    log.notes["cache"] = "miss"
+    if solid_notes:
+        log.notes["solid medium"] = solid_notes
+    cache.store_pickle(key, (patches, F, geometry, log))
+    return RadiosityState(scene, patches, F, geometry, resolved, log)
+
+
+def add_approx_arguments(parser) -> None:
+    """Options of ``translucent approx radiosity SCENE``."""
+    parser.add_argument("--material", default=None,
+                        help="for every translucent object: a measured material name "
+                             "(Jensen et al. 2001 table, e.g. Marble) or a CSV profile table "
+                             "(r in mm, then 1 or 3 reflection columns, optionally as many "
+                             "transmission columns)")
+    parser.add_argument("--component", default="both", choices=COMPONENTS,
+                        help="bounce component of Sheng et al. 2014, Fig. 6 (default: both)")
+    parser.add_argument("--solver", default=DEFAULT_KNOBS["solver"], choices=SOLVERS)
+    parser.add_argument("--rays", type=int, default=DEFAULT_KNOBS["rays_per_patch"],
+                        help="form-factor rays per patch")
+    parser.add_argument("--max-distance", type=float, default=None,
+                        help="scattering cut-off max_d in mm (default: from the profiles)")
+    parser.add_argument("--triangles-per-patch", type=int,
+                        default=DEFAULT_KNOBS["triangles_per_patch"])
+    parser.add_argument("--semi-infinite", action="store_true",
+                        help="the dipole as the paper uses it, without the finite-object "
+                             "energy (knob finite_object_energy)")
+
+
+def approx(scene, args) -> Image:
+    """Precompute (or load) and render ``scene`` for ``translucent approx radiosity``."""
+    from pathlib import Path
+
+    from ...materials import measured_medium
+    from ...materials.profiles import TabulatedProfile
+
+    started = time.perf_counter()
+    material = None
+    if args.material and Path(args.material).is_file():
+        material = TabulatedProfile.from_file(args.material)
+    elif args.material:
+        material = measured_medium(args.material)
+    if material is not None:
+        targets = materials_of(scene, material)
+        if not targets:
+            raise InputError(f"no translucent object in scene {scene.name!r} to give it to",
+                             field="material", value=args.material)
+        for name in targets:
+            scene = scene.with_material(name, material)
+    state = precompute(scene, solver=args.solver, rays_per_patch=args.rays,
+                       max_distance_mm=args.max_distance,
+                       triangles_per_patch=args.triangles_per_patch,
+                       finite_object_energy=not args.semi_infinite)
+    image = state.render(component=args.component)
+    for sentence in state.log.skipped:
+        print(f"skipped: {sentence}")
+    print(f"patches {len(state.patches)}, iterations {image.metadata['iterations']}, "
+          f"max column sum of S {state.convergence['max_scattering_column_sum']:.4f}")
+    return image.with_metadata(seconds=time.perf_counter() - started,
+                               precompute_seconds=dict(state.log.seconds))
