@@ -1,0 +1,364 @@
+"""Scenes: applicability, rasterised views and the precomputed state."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...errors import InputError
+from ...image import Image
+from ...materials.homogeneous import Dipole
+from ...materials.solid import SolidMedium
+from ...materials.subedit import SubEditProfiles
+from ...scenes.scene import DirectionalLight, PointLight
+from ..base import StageLog, refuse_inapplicable, with_defaults
+from ..solid_inputs import subedit_from_solid
+from .buffers import CameraModel, SurfaceBuffer
+from .frame import LightView, as_subedit, gather_frame, light_view, splat_frame
+from .knobs import BACKENDS, DEFAULT_KNOBS
+from .selection import SAMPLING_RANGES
+
+_LIGHTS = (PointLight, DirectionalLight)
+#: Widest irradiance-buffer cone for a point light (degrees): a light inside the object's
+#: bounding sphere sees only this cone of it.
+MAX_LIGHT_FOV = 160.0
+#: Margin of the irradiance buffer around the bounding sphere (no hit falls on its edge).
+VIEW_MARGIN = 1.02
+
+
+#: How an InputError for a scene the method cannot render begins (the reason follows).
+_REFUSAL = "the splatting method cannot render this scene"
+
+
+def _translucent_objects(scene) -> list[int]:
+    return [index for index, item in enumerate(scene.objects)
+            if isinstance(item.material, (Dipole, SubEditProfiles, SolidMedium))]
+
+
+def applies_to(scene) -> str | None:
+    """None when the method renders ``scene``; otherwise why not.
+
+    It needs a translucent object (Dipole, SubEdit or solid material) and point or directional
+    lights only (Chen et al. 2012, Sect. 6: other lights are future work there).
+    """
+    if not _translucent_objects(scene):
+        return "no translucent object (Dipole, SubEdit or solid material) in the scene"
+    others = sorted({type(light).__name__ for light in scene.lights
+                     if not isinstance(light, _LIGHTS)})
+    if others:
+        return (f"the method handles point and directional lights only; the scene has "
+                f"{', '.join(others)}")
+    if not scene.lights:
+        return "the scene has no light"
+    return None
+
+
+def _check_knobs(knobs: dict) -> dict:
+    merged = with_defaults(knobs, DEFAULT_KNOBS)
+    for name in ("irradiance_resolution", "levels"):
+        value = merged[name]
+        if isinstance(value, bool) or not isinstance(value, int | float | np.number) \
+                or not np.isfinite(value) or int(value) != value or not 1 <= value <= 8192:
+            raise InputError("must be an integer in [1, 8192]", field=name, value=value)
+        merged[name] = int(value)
+    if merged["levels"] > 12:
+        raise InputError("must be <= 12", field="levels", value=merged["levels"])
+    for name in ("z0", "alpha", "epsilon", "lambda_z", "lambda_m", "level_sampling"):
+        value = merged[name]
+        value = float(value) if isinstance(value, int | float | np.number) \
+            and not isinstance(value, bool) else math.nan
+        if not np.isfinite(value) or value < 0 or (name == "epsilon" and value == 0):
+            raise InputError("must be a finite number >= 0 (epsilon > 0)", field=name,
+                             value=merged[name])
+        merged[name] = value
+    for name, choices in (("backend", BACKENDS), ("sampling_range", SAMPLING_RANGES),
+                          ("buffers", ("raster", "mitsuba"))):
+        if merged[name] not in choices:
+            raise InputError(f"must be one of {', '.join(map(repr, choices))}", field=name,
+                             value=merged[name])
+    merged["multiresolution"] = bool(merged["multiresolution"])
+    merged["profile_upsampling"] = bool(merged["profile_upsampling"])
+    merged["adaptive"] = bool(merged["adaptive"])
+    return merged
+
+
+def precompute(scene, **knobs) -> SplattingState:
+    """Validate the scene and knobs; nothing geometric is precomputed (Chen et al. 2012).
+
+    The method needs no precomputation: every buffer is rebuilt each frame from the current
+    mesh, so a deforming mesh costs nothing extra and nothing can go stale. The only
+    tables (the SubEdit conversion of a dipole, Eq. 14's lookup table and the mean
+    profile's energy of the profile upsampling) depend on the material alone and are built
+    on first use.
+    """
+    refuse_inapplicable(scene, applies_to(scene), _REFUSAL)
+    return SplattingState(scene, _check_knobs(knobs))
+
+
+def _surface_buffer(gbuffer_view, object_index: int, uv_values, footprint) -> SurfaceBuffer:
+    valid = gbuffer_view.hit & (gbuffer_view.object_id == object_index)
+    uv = gbuffer_view.interpolate(object_index, uv_values) if uv_values is not None else \
+        np.zeros(valid.shape + (2,))
+    depth = np.where(valid, gbuffer_view.depth, 0.0)
+    return SurfaceBuffer(gbuffer_view.position, gbuffer_view.normal, uv, depth, valid,
+                         np.where(valid, footprint, 0.0))
+
+
+def _perspective_footprint(gbuffer_view) -> np.ndarray:
+    """Pixel cross-section side at the hit: d (2 tan(fov/2) / W) cos^1.5 of the off-axis angle."""
+    camera = gbuffer_view.camera
+    pixel = 2.0 * math.tan(math.radians(camera.fov) / 2.0) / camera.width
+    cosine = np.clip(-gbuffer_view.view_direction @ camera.forward, 0.0, 1.0)
+    depth = np.where(gbuffer_view.hit, gbuffer_view.depth, 0.0)
+    return depth * pixel * cosine**1.5
+
+
+@dataclass(frozen=True, eq=False)
+class RasterView:
+    r"""What :func:`rasterize_view` saw: per pixel the first triangle of the scene.
+
+    ``triangle`` (H, W) indexes the scene's faces, objects in order (-1: nothing);
+    ``barycentric`` (H, W, 2) weighs its second and third vertices; ``depth`` (H, W) is
+    the distance along the ray from the eye (perspective) or image plane (orthographic);
+    ``footprint`` (H, W) the side of the pixel's cross-section at that depth, scene units.
+    """
+
+    triangle: np.ndarray
+    barycentric: np.ndarray
+    depth: np.ndarray
+    footprint: np.ndarray
+    face_offsets: np.ndarray
+
+    def surface(self, scene, object_index: int) -> SurfaceBuffer:
+        """Return one object's :class:`SurfaceBuffer` (invalid where another is in front)."""
+        from ..splatting_kernels import interpolate_surface
+
+        mesh = scene.objects[object_index].mesh
+        uv = mesh.uv if mesh.uv is not None else np.zeros((0, 2))
+        valid, position, normal, uv, depth, footprint = interpolate_surface(
+            self.triangle, self.barycentric, self.depth, self.footprint,
+            int(self.face_offsets[object_index]), int(self.face_offsets[object_index + 1]),
+            mesh.vertices, mesh.faces, mesh.normals, np.asarray(uv, dtype=np.float64))
+        return SurfaceBuffer(position, normal, uv, depth, valid, footprint)
+
+
+def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None,
+                   extent=None) -> RasterView:
+    """Render the G-buffer of a perspective ``camera`` or an orthographic light view.
+
+    Buffer generation of Chen et al. 2012 (Sect. 4) by rasterisation, as the paper does:
+    :func:`.splatting_kernels.rasterize` tests each pixel's own ray against the triangles
+    of its projected bounding box, so the buffers are those of the ray queries of
+    :func:`translucent.scenes.raycast.gbuffer` (perspective) and
+    :func:`~translucent.scenes.raycast.gbuffer_orthographic` (``direction``, a square of
+    ``size`` pixels and half-width ``extent`` around ``centre``, scene units) up to
+    rounding, in milliseconds instead of seconds. The perspective footprint is
+    :func:`.splatting_kernels.perspective_footprint`, computed at hit pixels only.
+    """
+    # the ray-cast G-buffers' own image frames, so that both kinds of buffer agree
+    from ...scenes.raycast import NEAR_CLIP, camera_frame, default_up
+    from ..splatting_kernels import perspective_footprint, rasterize
+
+    meshes = [item.mesh for item in scene.objects]
+    vertex_offsets = np.cumsum([0] + [len(m.vertices) for m in meshes])
+    face_offsets = np.cumsum([0] + [len(m.faces) for m in meshes])
+    vertices = np.concatenate([m.vertices for m in meshes])
+    faces = np.concatenate([m.faces + offset
+                            for m, offset in zip(meshes, vertex_offsets[:-1], strict=True)])
+    if camera is not None:
+        forward, left, up = camera_frame(camera)
+        tan_x = math.tan(math.radians(camera.fov) / 2.0)
+        tan_y = tan_x * camera.height / camera.width
+        width, height, eye, orthographic = camera.width, camera.height, camera.origin, False
+    else:
+        forward = np.asarray(direction, dtype=np.float64)
+        forward = forward / np.linalg.norm(forward)
+        left = np.cross(default_up(forward), forward)
+        left /= np.linalg.norm(left)
+        up = np.cross(forward, left)
+        tan_x = tan_y = float(extent)
+        width = height = int(size)
+        lower, upper = vertices.min(axis=0), vertices.max(axis=0)
+        behind = float(np.max(np.linalg.norm(vertices - centre, axis=1))) + \
+            float(np.linalg.norm(centre - np.clip(centre, lower, upper))) + 1.0
+        eye, orthographic = centre - forward * behind, True
+    triangle, barycentric, depth = rasterize(
+        vertices, faces, np.asarray(eye, np.float64), forward, left, up, tan_x, tan_y,
+        width, height, NEAR_CLIP, orthographic)
+    if orthographic:
+        footprint = np.full((height, width), 2.0 * tan_x / width)
+    else:
+        footprint = perspective_footprint(triangle, depth, tan_x, tan_y)
+    return RasterView(triangle, barycentric, depth, footprint, face_offsets)
+
+
+@dataclass
+class SplattingState:
+    """What :func:`precompute` returns: the scene and knobs (no geometric state).
+
+    ``render(lights=None, material=None, scene=None)`` renders a frame; ``scene`` replaces
+    the geometry (a deformed mesh) without any precomputation.
+    """
+
+    scene: object
+    knobs: dict
+    log: StageLog = field(default_factory=StageLog)
+
+    def render_ground_truth(self, lights=None, material=None, *, scene=None) -> Image:
+        """Render the brute-force ground truth of :meth:`render` (see :func:`gather_frame`).
+
+        Same buffers and material; cost pixels x irradiance samples, so keep both small.
+        """
+        return self.render(lights, material, scene=scene, _ground_truth=True)
+
+    def render(self, lights=None, material=None, *, scene=None, _ground_truth=False) -> Image:
+        """Render one frame with Chen et al. 2012's four steps; see the module docstring.
+
+        Parameters
+        ----------
+        lights : sequence of PointLight / DirectionalLight, optional
+            Replace the scene's lights.
+        material : SubEditProfiles or Dipole, optional
+            Replace the material of every translucent object.
+        scene : Scene, optional
+            Render this scene (for example with a deformed mesh) instead of the one given
+            to :func:`precompute`.
+        """
+        scene = self.scene if scene is None else scene
+        if lights is not None:
+            scene = scene.with_lights(lights)
+        if material is not None:
+            for index in _translucent_objects(scene):
+                scene = scene.with_material(scene.objects[index].name, material)
+        refuse_inapplicable(scene, applies_to(scene), _REFUSAL)
+        log = StageLog()
+        start = time.perf_counter()
+        camera_view = self._camera_view(scene)
+        camera = CameraModel.from_camera(scene.camera)
+        log.seconds["buffer generation"] = time.perf_counter() - start
+        radiance = np.zeros((scene.camera.height, scene.camera.width, 3))
+        for index in _translucent_objects(scene):
+            radiance += self._render_object(scene, index, camera_view, camera, log,
+                                            _ground_truth)
+        seconds = time.perf_counter() - start
+        self.log = log
+        producer = "splatting ground truth" if _ground_truth else "splatting"
+        return Image(radiance.astype(np.float32), metadata={
+            "producer": producer, "knobs": self.knobs, "seconds": seconds,
+            "stage_seconds": log.seconds, "notes": log.notes, "skipped": log.skipped})
+
+    def buffers(self, lights=None, *, scene=None):
+        """Return the buffers of a frame: the camera's :class:`SurfaceBuffer` and light views.
+
+        For the first translucent object; what :meth:`render` splats, exposed so that a
+        benchmark can evaluate the ground truth on a subset of the same pixels.
+
+        Returns
+        -------
+        tuple
+            ``(camera_buffer, camera_model, light_views, material, sphere_radius)``.
+        """
+        scene = self.scene if scene is None else scene
+        if lights is not None:
+            scene = scene.with_lights(lights)
+        index = _translucent_objects(scene)[0]
+        camera_buffer, views, material, radius = self._object_buffers(
+            scene, index, self._camera_view(scene))
+        return camera_buffer, CameraModel.from_camera(scene.camera), views, material, radius
+
+    def _camera_view(self, scene):
+        """Return the camera's buffers: a :class:`RasterView` or a ray-cast G-buffer."""
+        if self.knobs["buffers"] == "raster":
+            return rasterize_view(scene, camera=scene.camera)
+        from ...scenes.raycast import gbuffer
+
+        return gbuffer(scene)
+
+    def _object_buffers(self, scene, index, camera_view):
+        item = scene.objects[index]
+        material = as_subedit(item.material, item.mesh)
+        mesh = item.mesh
+        if mesh.uv is None and not material.is_homogeneous:
+            raise InputError("a textured SubEdit material needs a mesh with uv coordinates",
+                             field=f"objects[{index}].mesh.uv", value=None)
+        centre = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
+        radius = float(np.max(np.linalg.norm(mesh.vertices - centre, axis=1)))
+        if isinstance(camera_view, RasterView):
+            camera_buffer = camera_view.surface(scene, index)
+        else:
+            camera_buffer = _surface_buffer(camera_view, index, mesh.uv,
+                                            _perspective_footprint(camera_view))
+        views = [self._light_view(scene, index, light, centre, radius, material.eta)
+                 for light in scene.lights]
+        return camera_buffer, views, material, radius
+
+    def _render_object(self, scene, index, camera_view, camera, log, ground_truth):
+        start = time.perf_counter()
+        camera_buffer, views, material, radius = self._object_buffers(scene, index,
+                                                                      camera_view)
+        log.seconds["buffer generation"] += time.perf_counter() - start
+        item = scene.objects[index]
+        if isinstance(item.material, SolidMedium):
+            log.notes.setdefault("solid medium", {})[item.name] = \
+                subedit_from_solid(item.material, item.mesh).note()
+        if not camera_buffer.valid.any():
+            log.skip(f"object '{scene.objects[index].name}' is out of view: nothing to splat")
+            return np.zeros(camera_buffer.shape + (3,))
+        if ground_truth:
+            return gather_frame(camera_buffer, camera, views, material,
+                                mm_per_unit=scene.mm_per_unit)
+        return splat_frame(camera_buffer, camera, views, material,
+                           mm_per_unit=scene.mm_per_unit, sphere_radius=radius,
+                           knobs=self.knobs, log=log)
+
+    def _light_view(self, scene, index, light, centre, radius, eta) -> LightView:
+        from ...scenes.raycast import default_up, gbuffer_from_point, gbuffer_orthographic
+        from ...scenes.scene import Camera
+
+        size = self.knobs["irradiance_resolution"]
+        raster = self.knobs["buffers"] == "raster"
+        uv = scene.objects[index].mesh.uv
+        if isinstance(light, PointLight):
+            towards = centre - light.position
+            distance = float(np.linalg.norm(towards))
+            if distance <= radius * VIEW_MARGIN:
+                fov = MAX_LIGHT_FOV
+            else:
+                fov = min(MAX_LIGHT_FOV,
+                          2.0 * math.degrees(math.asin(radius * VIEW_MARGIN / distance)))
+            if distance == 0:
+                towards = np.array([0.0, 0.0, -1.0])
+            towards = towards / np.linalg.norm(towards)
+            if raster:
+                buffer = rasterize_view(scene, camera=Camera(
+                    light.position, light.position + towards, default_up(towards), fov, size,
+                    size)).surface(scene, index)
+            else:
+                view = gbuffer_from_point(scene, light.position, towards, fov, size)
+                buffer = _surface_buffer(view, index, uv, _perspective_footprint(view))
+            from ..splatting_kernels import light_flux
+
+            flux, cosine = light_flux(
+                buffer.position, buffer.normal, buffer.valid, buffer.footprint,
+                np.reshape(np.asarray(light.position, np.float64), (1, 1, 3)),
+                np.reshape(np.asarray(light.intensity, np.float64), (1, 1, 3)), float(eta),
+                True)
+            return LightView(buffer, flux, cosine)
+        else:
+            if raster:
+                buffer = rasterize_view(scene, direction=light.direction, size=size,
+                                        centre=centre, extent=radius * VIEW_MARGIN
+                                        ).surface(scene, index)
+            else:
+                view = gbuffer_orthographic(scene, light.direction, size, center=centre,
+                                            extent=radius * VIEW_MARGIN)
+                footprint = np.full(view.shape, math.sqrt(view.pixel_area))
+                buffer = _surface_buffer(view, index, uv, footprint)
+            to_light = -light.direction
+            irradiance = light.irradiance
+        return light_view(buffer, to_light, irradiance, eta)
+
+
