@@ -138,6 +138,24 @@ def test_radiosity_renders_a_checker_between_its_two_media():
     assert np.all(mixed >= low * 0.999) and np.all(mixed <= high * 1.001)
 
 
+def test_radiosity_renders_the_gradient_between_its_end_media_and_converges():
+    scene = _small(load_scene("solid_gradient"), rows=13, size=16)
+    state = radiosity.precompute(scene)
+    image = state.render()
+    assert state.log.notes["solid medium"]["sphere"]["media"] > 2
+    assert state.convergence["max_scattering_column_sum"] < 1.0  # Eq. 15 holds
+    lit = image.rgb.sum(axis=-1) > 0
+    totals = []
+    for name in ("Skin1", "Ketchup"):
+        medium = measured_medium(name)
+        homogeneous = scene.with_material("sphere", Dipole(medium.sigma_a,
+                                                           medium.sigma_s_prime, eta=1.0))
+        totals.append(radiosity.precompute(homogeneous).render().rgb[lit].sum(axis=0))
+    mixed = image.rgb[lit].sum(axis=0)
+    low, high = np.minimum(*totals), np.maximum(*totals)
+    assert np.all(mixed >= low * 0.999) and np.all(mixed <= high * 1.001)
+
+
 def test_the_veins_are_quantised_with_their_error_recorded():
     solid = veined_solid(resolution=16, eta=1.0)
     mesh = geometry_image(17, shape="sphere")
