@@ -121,21 +121,26 @@ def test_radiosity_renders_the_homogeneous_limit_as_the_homogeneous_material():
     assert first.rgb.max() > 0 and np.allclose(first.rgb, second.rgb, rtol=1e-9)
 
 
-def test_radiosity_renders_a_checker_between_its_two_media():
-    scene = _small(load_scene("solid_checker"), rows=13, size=16)
-    state = radiosity.precompute(scene)
-    image = state.render()
-    assert state.log.notes["solid medium"]["sphere"]["media"] == 2
+def _assert_between_media(scene, image, names):
+    """The image's total light per channel lies between those of its media alone."""
     lit = image.rgb.sum(axis=-1) > 0
     totals = []
-    for name in ("Skin1", "Ketchup"):
+    for name in names:
         medium = measured_medium(name)
         homogeneous = scene.with_material("sphere", Dipole(medium.sigma_a,
                                                            medium.sigma_s_prime, eta=1.0))
         totals.append(radiosity.precompute(homogeneous).render().rgb[lit].sum(axis=0))
     mixed = image.rgb[lit].sum(axis=0)
-    low, high = np.minimum(*totals), np.maximum(*totals)
+    low, high = np.min(totals, axis=0), np.max(totals, axis=0)
     assert np.all(mixed >= low * 0.999) and np.all(mixed <= high * 1.001)
+
+
+def test_radiosity_renders_a_checker_between_its_two_media():
+    scene = _small(load_scene("solid_checker"), rows=13, size=16)
+    state = radiosity.precompute(scene)
+    image = state.render()
+    assert state.log.notes["solid medium"]["sphere"]["media"] == 2
+    _assert_between_media(scene, image, ("Skin1", "Ketchup"))
 
 
 def test_radiosity_renders_the_gradient_between_its_end_media_and_converges():
@@ -144,16 +149,7 @@ def test_radiosity_renders_the_gradient_between_its_end_media_and_converges():
     image = state.render()
     assert state.log.notes["solid medium"]["sphere"]["media"] > 2
     assert state.convergence["max_scattering_column_sum"] < 1.0  # Eq. 15 holds
-    lit = image.rgb.sum(axis=-1) > 0
-    totals = []
-    for name in ("Skin1", "Ketchup"):
-        medium = measured_medium(name)
-        homogeneous = scene.with_material("sphere", Dipole(medium.sigma_a,
-                                                           medium.sigma_s_prime, eta=1.0))
-        totals.append(radiosity.precompute(homogeneous).render().rgb[lit].sum(axis=0))
-    mixed = image.rgb[lit].sum(axis=0)
-    low, high = np.minimum(*totals), np.maximum(*totals)
-    assert np.all(mixed >= low * 0.999) and np.all(mixed <= high * 1.001)
+    _assert_between_media(scene, image, ("Skin1", "Ketchup"))
 
 
 def test_the_veins_are_quantised_with_their_error_recorded():
