@@ -139,6 +139,14 @@ def write_exr(path, image: Image) -> Path:
 
     if not isinstance(image, Image):
         raise InputError("expected an Image", file=path, field="image", value=type(image))
+    # a NaN image is never written: read_exr refuses it, so it could only mislead
+    for name, plane in (("pixels", image.rgb), ("variance", image.variance)):
+        bad = None if plane is None else ~np.isfinite(plane)
+        if bad is not None and bad.any():
+            y, x, c = np.argwhere(bad)[0]
+            raise InputError(f"{int(bad.sum())} channels are NaN or Inf (first at x={x}, y={y}, "
+                             f"channel {'RGB'[c]}); nothing was written", file=path,
+                             field=name, value=float(plane[y, x, c]))
     channels = {"RGB": image.rgb}
     if image.variance is not None:
         for index, name in enumerate("RGB"):

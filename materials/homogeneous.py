@@ -19,7 +19,14 @@ from .dipole import (
     total_diffuse_reflectance,
 )
 
-__all__ = ["Dipole", "Lambertian", "rgb_field"]
+__all__ = ["MAX_COEFFICIENT", "Dipole", "Lambertian", "rgb_field"]
+
+
+#: Largest absorption or reduced scattering coefficient a Dipole takes, mm^-1: a mean free
+#: path of a nanometre, far beyond any measured medium (the catalogue's densest is ~10^2),
+#: and small enough that the products of coefficients the dipole and the float32 renderers
+#: form (sigma_t^2, sigma_tr z) stay finite; 1e300 rendered an all-NaN image.
+MAX_COEFFICIENT = 1e6
 
 
 def rgb_field(value, field: str, *, minimum: float = 0.0, strict: bool = False, file=None,
@@ -73,8 +80,10 @@ class Dipole:
     name: str = ""
 
     def __post_init__(self):
-        object.__setattr__(self, "sigma_a", rgb_field(self.sigma_a, "sigma_a"))
-        object.__setattr__(self, "sigma_s_prime", rgb_field(self.sigma_s_prime, "sigma_s_prime"))
+        object.__setattr__(self, "sigma_a", rgb_field(self.sigma_a, "sigma_a",
+                                                      maximum=MAX_COEFFICIENT))
+        object.__setattr__(self, "sigma_s_prime", rgb_field(self.sigma_s_prime, "sigma_s_prime",
+                                                            maximum=MAX_COEFFICIENT))
         eta = float(check_finite(self.eta, "eta"))
         if not 1.0 <= eta <= 3.0:
             raise InputError("must be in [1, 3]", field="eta", value=self.eta)

@@ -45,7 +45,12 @@ def test_no_rgb_channels(tmp_path):
 def test_nan_pixels_rejected_on_read(tmp_path):
     rgb = np.ones((4, 4, 3), np.float32)
     rgb[2, 1, 0] = np.nan
-    path = Image(rgb).write(tmp_path / "nan.exr")
+    import OpenEXR
+
+    path = tmp_path / "nan.exr"  # written by another program: write_exr refuses NaN
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                      {"RGB": rgb}) as exr:
+        exr.write(str(path))
     with pytest.raises(InputError, match="1 pixel channels are NaN or Inf .first at x=1, y=2"):
         read_exr(path)
 
@@ -128,3 +133,16 @@ def test_an_exr_without_checksum_is_read(tmp_path):
     with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, {"RGB": rgb}) as exr:
         exr.write(str(path))
     np.testing.assert_array_equal(read_exr(path).rgb, rgb)
+
+
+@pytest.mark.parametrize("plane", ["pixels", "variance"])
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_a_non_finite_image_is_refused_and_nothing_is_written(tmp_path, plane, bad):
+    rgb, variance = np.ones((3, 4, 3), np.float32), np.ones((3, 4, 3), np.float32)
+    (rgb if plane == "pixels" else variance)[2, 1, 0] = bad
+    path = tmp_path / "out.exr"
+    with pytest.raises(InputError, match=r"1 channels are NaN or Inf \(first at x=1, y=2, "
+                                         r"channel R\)") as caught:
+        write_exr(path, Image(rgb, variance))
+    assert caught.value.field == plane and str(path) in str(caught.value)
+    assert not any(tmp_path.iterdir())

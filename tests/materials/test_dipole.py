@@ -120,3 +120,13 @@ def test_dipole_is_immutable():
     medium = Dipole(0.1, 1.0)
     with pytest.raises(ValueError):
         medium.sigma_a[0] = 2.0
+
+
+@pytest.mark.parametrize("field", ["sigma_a", "sigma_s_prime"])
+def test_coefficients_beyond_the_float_range_of_the_renderers_are_refused(field):
+    from translucent.materials.homogeneous import MAX_COEFFICIENT
+
+    values = {"sigma_a": 0.01, "sigma_s_prime": 1.0, field: 1e300}
+    with pytest.raises(InputError, match=rf"{field} = .*must be <= {MAX_COEFFICIENT}"):
+        Dipole(**values)
+    Dipole(**{**values, field: MAX_COEFFICIENT})  # the bound itself is a medium
