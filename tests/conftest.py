@@ -26,3 +26,21 @@ def pytest_configure(config):
 def rng():
     """A seeded generator: every stochastic test is reproducible."""
     return np.random.default_rng(20260101)
+
+
+@pytest.fixture
+def write_foreign_exr():
+    """Write an RGB EXR as another program would: no checksum, NaN and Inf kept.
+
+    :func:`translucent.image.write_exr` refuses non-finite pixels, so files that a reader
+    must refuse are made this way.
+    """
+    def write(path, rgb):
+        import OpenEXR
+
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+        with OpenEXR.File(header, {"RGB": np.ascontiguousarray(rgb, np.float32)}) as exr:
+            exr.write(str(path))
+        return path
+
+    return write

@@ -42,15 +42,10 @@ def test_no_rgb_channels(tmp_path):
         read_exr(path)
 
 
-def test_nan_pixels_rejected_on_read(tmp_path):
+def test_nan_pixels_rejected_on_read(tmp_path, write_foreign_exr):
     rgb = np.ones((4, 4, 3), np.float32)
     rgb[2, 1, 0] = np.nan
-    import OpenEXR
-
-    path = tmp_path / "nan.exr"  # written by another program: write_exr refuses NaN
-    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
-                      {"RGB": rgb}) as exr:
-        exr.write(str(path))
+    path = write_foreign_exr(tmp_path / "nan.exr", rgb)
     with pytest.raises(InputError, match="1 pixel channels are NaN or Inf .first at x=1, y=2"):
         read_exr(path)
 

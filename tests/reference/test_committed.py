@@ -137,7 +137,8 @@ def _good_image(name):
                     / f"{name}.exr")
 
 
-def test_missing_corrupt_wrong_size_and_nan_references_are_refused(reference_folder):
+def test_missing_corrupt_wrong_size_and_nan_references_are_refused(reference_folder,
+                                                                   write_foreign_exr):
     scene = load_scene("glossy")
     path = reference_folder / "glossy.exr"
     assert "missing" in committed_reference("glossy", scene).problem
@@ -151,7 +152,7 @@ def test_missing_corrupt_wrong_size_and_nan_references_are_refused(reference_fol
 
     rgb = good.rgb.copy()
     rgb[3, 4, 1] = np.nan
-    Image(rgb, good.variance, good.metadata).write(path)
+    write_foreign_exr(path, rgb)
     problem = committed_reference("glossy", scene).problem
     assert "cannot be read" in problem and "NaN" in problem
 

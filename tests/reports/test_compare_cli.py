@@ -109,10 +109,14 @@ def write_without_rgb(path):
 
 
 def with_pixel(value):
-    def write(path):
+    def write(path):  # as another program would: write_exr refuses non-finite pixels
+        import OpenEXR
+
         rgb = gradient()
         rgb[3, 5, 1] = value
-        write_exr(path, Image(rgb))
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+        with OpenEXR.File(header, {"RGB": np.ascontiguousarray(rgb, np.float32)}) as exr:
+            exr.write(str(path))
     return write
 
 
