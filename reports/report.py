@@ -127,9 +127,9 @@ EXCLUDED_SCENES: dict[str, str] = {
     "heterogeneous": "a SubEdit texture is a surface model with no physical counterpart, so "
                      "it has no volumetric reference; solid_checker, solid_gradient and "
                      "solid_veins are heterogeneous media defined in the volume, rendered by "
-                     "the reference "
-                     "and read at the surface by splatting and radiosity; this scene stays "
-                     "the splatting benchmark's (`translucent bench splatting`)",
+                     "the reference and read at the surface by splatting and radiosity; "
+                     "this scene stays the splatting benchmark's (`translucent bench "
+                     "splatting`)",
     "furnace_sphere": "a check of the reference renderer (a Lambertian sphere in a constant "
                       "environment renders 0.5); it has no translucent object and no analytic "
                       "BRDF, so no fast method has anything to approximate",

@@ -210,8 +210,8 @@ def _self_operators(grid: RadialGrid, count: int, rows, rho, weight):
 
 def _at_positions(operator: sparse.csr_matrix, positions, size: int) -> sparse.csr_matrix:
     """Move the rows of ``operator`` to ``positions`` of a (size x K) operator."""
-    # a row permutation and empty rows between: no COO round trip (it sorted all 23 M
-    # entries of a 4608-patch sphere again)
+    # a row permutation with empty rows between: a COO round trip would sort every
+    # entry again
     positions = np.asarray(positions, dtype=np.int64)
     order = np.argsort(positions)
     moved = operator[order]
@@ -254,8 +254,8 @@ def pair_fractions(centroids_mm, face_centroids_mm, face_labels, exit_local, inc
         else:
             labels = volume_labels(along.reshape(-1, 3) / mm_per_unit).reshape(stop - start,
                                                                                 points)
-        # one count of every (pair, material): M comparisons of every point took 10 s
-        # on a 32-medium gradient
+        # one count of every (pair, material), not one comparison of every point per
+        # material
         rows = np.repeat(np.arange(stop - start), points) * materials
         fractions[start:stop] = np.bincount(rows + labels.reshape(-1),
                                             minlength=(stop - start) * materials
