@@ -126,6 +126,18 @@ def _header_value(value):
     return json.dumps(value, sort_keys=True, default=_json_default)
 
 
+def _refuse_non_finite(plane, noun: str, tail: str, *, file, field: str) -> None:
+    """Raise InputError naming how many channels of ``plane`` are NaN or Inf, and the first."""
+    if plane is None:
+        return
+    bad = ~np.isfinite(plane)
+    if bad.any():
+        y, x, c = np.argwhere(bad)[0]
+        raise InputError(f"{int(bad.sum())} {noun} are NaN or Inf (first at x={x}, y={y}, "
+                         f"channel {'RGB'[c]}){tail}", file=file, field=field,
+                         value=float(plane[y, x, c]))
+
+
 def write_exr(path, image: Image) -> Path:
     """Write ``image`` to ``path`` as a ZIP-compressed float32 OpenEXR, atomically.
 
@@ -141,12 +153,7 @@ def write_exr(path, image: Image) -> Path:
         raise InputError("expected an Image", file=path, field="image", value=type(image))
     # a NaN image is never written: read_exr refuses it, so it could only mislead
     for name, plane in (("pixels", image.rgb), ("variance", image.variance)):
-        bad = None if plane is None else ~np.isfinite(plane)
-        if bad is not None and bad.any():
-            y, x, c = np.argwhere(bad)[0]
-            raise InputError(f"{int(bad.sum())} channels are NaN or Inf (first at x={x}, y={y}, "
-                             f"channel {'RGB'[c]}); nothing was written", file=path,
-                             field=name, value=float(plane[y, x, c]))
+        _refuse_non_finite(plane, "channels", "; nothing was written", file=path, field=name)
     channels = {"RGB": image.rgb}
     if image.variance is not None:
         for index, name in enumerate("RGB"):
@@ -196,12 +203,7 @@ def read_exr(path) -> Image:
         raise InputError("an RGB image needs channels R, G and B", file=path,
                          field="channels", value=sorted(planes))
     rgb = np.stack([planes[c] for c in "RGB"], axis=-1)
-    bad = ~np.isfinite(rgb)
-    if bad.any():
-        y, x, c = np.argwhere(bad)[0]
-        raise InputError(f"{int(bad.sum())} pixel channels are NaN or Inf (first at "
-                         f"x={x}, y={y}, channel {'RGB'[c]})", file=path, field="pixels",
-                         value=float(rgb[y, x, c]))
+    _refuse_non_finite(rgb, "pixel channels", "", file=path, field="pixels")
     variance = None
     if all(f"variance.{c}" in planes for c in "RGB"):
         variance = np.stack([planes[f"variance.{c}"] for c in "RGB"], axis=-1)
