@@ -30,16 +30,21 @@ def rng():
 
 @pytest.fixture
 def write_foreign_exr():
-    """Write an RGB EXR as another program would: no checksum, NaN and Inf kept.
+    """Write an EXR as another program would: no checksum, NaN and Inf kept.
 
-    :func:`translucent.image.write_exr` refuses non-finite pixels, so files that a reader
-    must refuse are made this way.
+    :func:`translucent.image.write_exr` refuses non-finite pixels and always writes R, G
+    and B, so files that a reader must refuse are made this way. ``channels`` is an
+    (H, W, 3) array (written as RGB) or a dict of channel name to plane.
     """
-    def write(path, rgb):
+    def write(path, channels):
         import OpenEXR
 
+        if not isinstance(channels, dict):
+            channels = {"RGB": channels}
+        planes = {name: np.ascontiguousarray(plane, np.float32)
+                  for name, plane in channels.items()}
         header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        with OpenEXR.File(header, {"RGB": np.ascontiguousarray(rgb, np.float32)}) as exr:
+        with OpenEXR.File(header, planes) as exr:
             exr.write(str(path))
         return path
 
