@@ -26,6 +26,8 @@ dipole) are recorded in :class:`SurfaceConversion`.
 
 from __future__ import annotations
 
+import functools
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -168,6 +170,53 @@ class VoxelLabels:
     def __call__(self, points) -> np.ndarray:
         """Return the label at each point, shape ``points.shape[:-1]``."""
         return self.labels[self.solid.voxel_index(points)]
+
+    def counts_along(self, ends, first, second, points: int, labels: int, *,
+                     scale: float = 1.0) -> np.ndarray:
+        """Count the labels at ``points`` midpoints of each segment (Eq. 16's fractions).
+
+        Segment p runs from ``ends[first[p]]`` to ``ends[second[p]]``; its points sit at
+        ``t = (i + 0.5) / points`` and are looked up as :meth:`__call__` does, at
+        ``point / scale`` (ends in mm, ``scale`` mm per scene unit).
+
+        Returns
+        -------
+        ndarray of uint8, shape (segments, labels)
+        """
+        if not 1 <= points <= 255:
+            raise InputError("must be 1..255 (counts are bytes)", field="points",
+                             value=points)
+        solid = self.solid
+        return _compiled_counts_along()(
+            np.ascontiguousarray(ends, dtype=np.float64),
+            np.ascontiguousarray(first, dtype=np.int64),
+            np.ascontiguousarray(second, dtype=np.int64), int(points), int(labels),
+            float(scale), np.ascontiguousarray(self.labels), solid.bounds[0].astype(np.float64),
+            (solid.bounds[1] - solid.bounds[0]).astype(np.float64),
+            np.array(solid.shape[::-1], dtype=np.int64))
+
+
+@functools.lru_cache(maxsize=1)
+def _compiled_counts_along():
+    import numba
+
+    @numba.njit(cache=True)
+    def counts_along(ends, first, second, points, labels, scale, grid, lower, extent,
+                     sizes):  # pragma: no cover - compiled
+        counts = np.zeros((len(first), labels), np.uint8)
+        index = np.empty(3, np.int64)
+        for segment in range(len(first)):
+            a, b = first[segment], second[segment]
+            for i in range(points):
+                t = (i + 0.5) / points
+                for d in range(3):
+                    x = (ends[a, d] + t * (ends[b, d] - ends[a, d])) / scale
+                    cell = math.floor((x - lower[d]) / extent[d] * sizes[d])
+                    index[d] = min(max(cell, 0), sizes[d] - 1)
+                counts[segment, grid[index[2], index[1], index[0]]] += 1
+        return counts
+
+    return counts_along
 
 
 def _voxel_centres(solid: SolidMedium) -> np.ndarray:

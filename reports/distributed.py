@@ -14,7 +14,7 @@ from typing import Any
 
 from ..errors import InputError
 
-__all__ = ["run_tasks", "dask_client"]
+__all__ = ["run_tasks", "dask_client", "worker_environment"]
 
 
 @contextlib.contextmanager
@@ -29,6 +29,7 @@ def dask_client(scheduler: str | None = None, *, workers: int = 2, threads_per_w
     workers, threads_per_worker : int
         Size of the local cluster (ignored with ``scheduler``).
     """
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if scheduler is not None:
@@ -45,10 +46,36 @@ def dask_client(scheduler: str | None = None, *, workers: int = 2, threads_per_w
         finally:
             client.close()
         return
-    with LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker,
-                      processes=True, host="127.0.0.1", dashboard_address=None) as cluster, \
+    with dask.config.set({"distributed.nanny.pre-spawn-environ":
+                          worker_environment(threads_per_worker)}), \
+            LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker,
+                         processes=True, host="127.0.0.1", dashboard_address=None) as cluster, \
             Client(cluster) as client:
         yield client
+
+
+def worker_environment(threads: int) -> dict[str, str]:
+    """Environment of a local worker process: its thread pools sized to its ``threads``.
+
+    Dask's own default keeps BLAS to one thread but leaves numba's pool at the machine's
+    core count (every worker's ``parallel=True`` kernels then fight for the same cores)
+    and sets ``MALLOC_TRIM_THRESHOLD_``, which turns off glibc's adaptive mmap threshold:
+    every large temporary array is then mapped and faulted in afresh. Both showed as
+    system time in the radiosity precomputation (docs/performance.md).
+
+    Parameters
+    ----------
+    threads : int
+        Threads per worker.
+
+    Returns
+    -------
+    dict of str to str
+        Variables set in each worker process before it starts.
+    """
+    count = str(max(1, int(threads)))
+    return {name: count for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                                     "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")}
 
 
 def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], *,

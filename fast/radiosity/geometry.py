@@ -30,10 +30,15 @@ from ..optical_distance import (
     closed_surface,
     is_convex,
     optical_distances,
-    subdivision_barycentrics,
     voxelize,
 )
-from .kernels import csr_order
+from .kernels import (
+    csr_order,
+    directed_pairs,
+    move_rows,
+    sample_operator,
+    scattering_samples,
+)
 from .knobs import POLAR_NODES
 
 
@@ -212,14 +217,9 @@ def _at_positions(operator: sparse.csr_matrix, positions, size: int) -> sparse.c
     """Move the rows of ``operator`` to ``positions`` of a (size x K) operator."""
     # a row permutation with empty rows between: a COO round trip would sort every
     # entry again
-    positions = np.asarray(positions, dtype=np.int64)
-    order = np.argsort(positions)
-    moved = operator[order]
-    lengths = np.zeros(size, dtype=np.int64)
-    lengths[positions[order]] = np.diff(moved.indptr)
-    indptr = np.concatenate([[0], np.cumsum(lengths)])
-    return sparse.csr_matrix((moved.data, moved.indices, indptr),
-                             shape=(size, operator.shape[1]))
+    indptr, indices, data = move_rows(operator.indptr, operator.indices, operator.data,
+                                      positions, size)
+    return sparse.csr_matrix((data, indices, indptr), shape=(size, operator.shape[1]))
 
 
 def pair_fractions(centroids_mm, face_centroids_mm, face_labels, exit_local, incident_local,
@@ -238,6 +238,9 @@ def pair_fractions(centroids_mm, face_centroids_mm, face_labels, exit_local, inc
         times ``points``, stored as counts (a byte per pair and material, where float64
         fractions of all pairs of a 4608-patch sphere with 16 materials took 2.7 GB).
     """
+    if hasattr(volume_labels, "counts_along"):  # a voxel grid: compiled, no point arrays
+        return volume_labels.counts_along(centroids_mm, exit_local, incident_local, points,
+                                          materials, scale=mm_per_unit)
     if volume_labels is None:
         tree = cKDTree(face_centroids_mm)
     t = (np.arange(points) + 0.5) / points
@@ -333,47 +336,30 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
         tree = cKDTree(centroids)
         reach = max_distance_mm + float(radius.max())
         undirected = tree.query_pairs(reach, output_type="ndarray")
-        exit_local = np.concatenate([undirected[:, 0], undirected[:, 1]])
-        incident_local = np.concatenate([undirected[:, 1], undirected[:, 0]])
-        if knobs["self_term"] == "samples":
-            exit_local = np.concatenate([exit_local, np.arange(len(members))])
-            incident_local = np.concatenate([incident_local, np.arange(len(members))])
-        delta = np.linalg.norm(centroids[exit_local] - centroids[incident_local], axis=1)
-        keep = delta <= max_distance_mm + radius[incident_local]
-        exit_local, incident_local, delta = exit_local[keep], incident_local[keep], delta[keep]
+        exit_local, incident_local, delta = directed_pairs(
+            undirected, centroids, radius, max_distance_mm,
+            with_self=knobs["self_term"] == "samples")
         m = _samples_per_edge(delta, radius[incident_local], knobs)
-        # one inside test per patch pair, shared by its samples (voxel resolution anyway)
-        pair_inside = voxels.segment_inside(centroids[exit_local], centroids[incident_local]) \
-            if voxels is not None else None
-        pair_rows, pair_faces = patches.faces_of(members[incident_local])
-        pair_m = m[pair_rows]
-        sample_points, sample_pair, sample_weight = [], [], []
-        for value in np.unique(pair_m):
-            chosen = np.flatnonzero(pair_m == value)
-            barycentric = subdivision_barycentrics(int(value))
-            corners = patches.triangles[pair_faces[chosen]] * mm
-            sample_points.append(np.einsum("sk,nkd->nsd", barycentric, corners).reshape(-1, 3))
-            sample_pair.append(np.repeat(pair_rows[chosen], len(barycentric)))
-            sample_weight.append(np.repeat(patches.triangle_area[pair_faces[chosen]] * mm * mm
-                                           / value**2, len(barycentric)))
-        sample_pair = np.concatenate(sample_pair) if sample_pair else np.zeros(0, np.int64)
-        sample_weight = np.concatenate(sample_weight) if sample_weight else np.zeros(0)
-        # one call for every sample: each exit voxel's Dijkstra search runs once, not once
-        # per sample count
-        sample_distance = optical_distances(
-            voxels, centroids[exit_local[sample_pair]],
-            np.concatenate(sample_points) if sample_points else np.zeros((0, 3)),
-            max_distance_mm, inside=None if voxels is None else pair_inside[sample_pair])
-        inside = np.isfinite(sample_distance)
-        sample_pair, sample_weight = sample_pair[inside], sample_weight[inside]
-        sample_distance = sample_distance[inside]
-        k, f = grid.locate(sample_distance)
-        f = f.astype(np.float64)
-        operator = sparse.coo_matrix(
-            (np.concatenate([sample_weight * (1.0 - f), sample_weight * f]),
-             (np.concatenate([sample_pair, sample_pair]), np.concatenate([k, k + 1]))),
-            shape=(len(exit_local), grid.samples)).tocsr()
-        operator.sum_duplicates()
+        # compiled, in pair order: the arrays hold a sample per pair of a whole sphere
+        offsets, sample_weight, sample_distance, sample_points = scattering_samples(
+            exit_local, members[incident_local], m, centroids, patches,
+            points=voxels is not None)
+        sample_pair = None
+        if voxels is not None:
+            sample_pair = np.repeat(np.arange(len(exit_local)), np.diff(offsets))
+            # one inside test per patch pair, shared by its samples (voxel resolution
+            # anyway); one call for every sample: each exit voxel's Dijkstra search runs once
+            pair_inside = voxels.segment_inside(centroids[exit_local], centroids[incident_local])
+            sample_distance = optical_distances(voxels, centroids[exit_local[sample_pair]],
+                                                sample_points, max_distance_mm,
+                                                inside=pair_inside[sample_pair])
+            del sample_points
+        indptr, indices, data = sample_operator(offsets, sample_weight, sample_distance,
+                                                grid.radius)
+        operator = sparse.csr_matrix((data, indices, indptr),
+                                     shape=(len(exit_local), grid.samples))
+        inside = sample_distance <= max_distance_mm
+        kept_samples = int(np.count_nonzero(inside))
         self_cumulative = self_segment = None
         if knobs["self_term"] == "polar":
             rows, rho, weight = _polar_self_nodes(patches, members)
@@ -389,8 +375,11 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
                                  value=len(material.face_labels))
             start = patches.face_offset[index]
             first_face = patches.patch_faces[patches.patch_face_start[members]] - start
+            if sample_pair is None:
+                sample_pair = np.repeat(np.arange(len(exit_local)), np.diff(offsets))
             samples = {
-                "pair": sample_pair, "weight": sample_weight, "distance": sample_distance,
+                "pair": sample_pair[inside], "weight": sample_weight[inside],
+                "distance": sample_distance[inside],
                 "fractions": pair_fractions(centroids, mesh.face_centroids * mm,
                                              material.face_labels, exit_local, incident_local,
                                              len(material.profiles), knobs["mix_points"],
@@ -420,7 +409,7 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
                 log.skip(f"no finite-object energy for '{obj.name}': no cell of the "
                          f"diffusion grid ({voxel:.3g} mm) lies inside it; raise "
                          "diffusion_voxels_per_axis")
-        facts.update({"pairs": int(len(exit_local)), "samples": int(len(sample_pair)),
+        facts.update({"pairs": int(len(exit_local)), "samples": kept_samples,
                       "seconds": time.perf_counter() - started})
         per_object.append((index, members, len(exit_local), operator, self_cumulative,
                            self_segment, samples, facts, diffusion))

@@ -242,3 +242,263 @@ def csr_order(rows, cols, size: int) -> np.ndarray:
     indptr, order = buckets(rows, int(size))
     sort_rows(indptr, order, cols)
     return order
+
+
+@functools.lru_cache(maxsize=1)
+def _compiled_scattering_samples():
+    import numba
+
+    @numba.njit(cache=True)
+    def sample_offsets(incident, m, face_start):  # pragma: no cover - compiled
+        offsets = np.empty(len(incident) + 1, np.int64)
+        offsets[0] = 0
+        for pair in range(len(incident)):
+            faces = face_start[incident[pair] + 1] - face_start[incident[pair]]
+            offsets[pair + 1] = offsets[pair] + faces * m[pair] * m[pair]
+        return offsets
+
+    @numba.njit(cache=True)
+    def fill(exit_local, incident, m, centroids, face_start, faces, triangles, area, mm,
+             table, table_start, offsets, points):  # pragma: no cover - compiled
+        weight = np.empty(offsets[-1])
+        distance = np.empty(offsets[-1])
+        with_points = len(points) == offsets[-1]
+        corner = np.empty((3, 3))
+        for pair in range(len(incident)):
+            sample = offsets[pair]
+            count = m[pair] * m[pair]
+            first = table_start[m[pair]]
+            start = exit_local[pair]
+            for entry in range(face_start[incident[pair]], face_start[incident[pair] + 1]):
+                face = faces[entry]
+                for k in range(3):
+                    for d in range(3):
+                        corner[k, d] = triangles[face, k, d] * mm
+                share = area[face] * mm * mm / count
+                for b in range(first, first + count):
+                    squared = 0.0
+                    for d in range(3):
+                        x = (table[b, 0] * corner[0, d] + table[b, 1] * corner[1, d]
+                             + table[b, 2] * corner[2, d])
+                        if with_points:
+                            points[sample, d] = x
+                        squared += (x - centroids[start, d]) ** 2
+                    weight[sample] = share
+                    distance[sample] = math.sqrt(squared)
+                    sample += 1
+        return weight, distance
+
+    @numba.njit(inline="always")
+    def node(r, top, nodes):  # pragma: no cover - compiled
+        return min(int(math.sqrt(max(r, 0.0) / top) * (nodes - 1)), nodes - 2)
+
+    @numba.njit(cache=True)
+    def operator(offsets, weight, distance, radius):  # pragma: no cover - compiled
+        nodes = len(radius)
+        top = radius[nodes - 1]
+        pairs = len(offsets) - 1
+        mark = np.full(nodes, -1, np.int64)
+        indptr = np.zeros(pairs + 1, np.int64)
+        for pair in range(pairs):
+            used = 0
+            for sample in range(offsets[pair], offsets[pair + 1]):
+                if not distance[sample] <= top:
+                    continue
+                k = node(distance[sample], top, nodes)
+                for column in (k, k + 1):
+                    if mark[column] != pair:
+                        mark[column] = pair
+                        used += 1
+            indptr[pair + 1] = indptr[pair] + used
+        indices = np.empty(indptr[-1], np.int32)
+        data = np.empty(indptr[-1])
+        value = np.zeros(nodes)
+        mark[:] = -1
+        for pair in range(pairs):
+            lo = indptr[pair]
+            used = lo
+            for sample in range(offsets[pair], offsets[pair + 1]):
+                r = distance[sample]
+                if not r <= top:
+                    continue
+                k = node(r, top, nodes)
+                # the float32 offset of RadialGrid.locate
+                f = np.float64(np.float32(min(max((r - radius[k]) / (radius[k + 1] - radius[k]),
+                                                  0.0), 1.0)))
+                for column in (k, k + 1):
+                    if mark[column] != pair:
+                        mark[column] = pair
+                        indices[used] = column
+                        used += 1
+                value[k] += weight[sample] * (1.0 - f)
+                value[k + 1] += weight[sample] * f
+            # a few columns a row: an insertion sort allocates nothing
+            for entry in range(lo + 1, used):
+                column = indices[entry]
+                back = entry - 1
+                while back >= lo and indices[back] > column:
+                    indices[back + 1] = indices[back]
+                    back -= 1
+                indices[back + 1] = column
+            for entry in range(lo, used):
+                data[entry] = value[indices[entry]]
+                value[indices[entry]] = 0.0
+        return indptr, indices, data
+
+    @numba.njit(cache=True)
+    def move_rows(indptr, indices, data, positions, size):  # pragma: no cover - compiled
+        moved = np.zeros(size + 1, np.int64)
+        for row in range(len(positions)):
+            moved[positions[row] + 1] = indptr[row + 1] - indptr[row]
+        for row in range(size):
+            moved[row + 1] += moved[row]
+        moved_indices = np.empty_like(indices)
+        moved_data = np.empty_like(data)
+        for row in range(len(positions)):
+            target = moved[positions[row]]
+            for entry in range(indptr[row], indptr[row + 1]):
+                moved_indices[target] = indices[entry]
+                moved_data[target] = data[entry]
+                target += 1
+        return moved, moved_indices, moved_data
+
+    @numba.njit(cache=True)
+    def directed(undirected, centroids, radius, cut_off, with_self):  # pragma: no cover
+        count = len(undirected)
+        total = 2 * count + (len(centroids) if with_self else 0)
+        exit_local = np.empty(total, np.int64)
+        incident = np.empty(total, np.int64)
+        distance = np.empty(total)
+        kept = 0
+        for candidate in range(total):
+            if candidate < 2 * count:
+                pair = candidate % count
+                forward = candidate < count
+                a = undirected[pair, 0] if forward else undirected[pair, 1]
+                b = undirected[pair, 1] if forward else undirected[pair, 0]
+            else:
+                a = b = candidate - 2 * count
+            squared = 0.0
+            for d in range(3):
+                squared += (centroids[a, d] - centroids[b, d]) ** 2
+            length = math.sqrt(squared)
+            if length <= cut_off + radius[b]:
+                exit_local[kept], incident[kept], distance[kept] = a, b, length
+                kept += 1
+        return exit_local[:kept].copy(), incident[:kept].copy(), distance[:kept].copy()
+
+    return sample_offsets, fill, operator, move_rows, directed
+
+
+def directed_pairs(undirected, centroids_mm, radius_mm, cut_off_mm: float, *,
+                   with_self: bool) -> tuple:
+    """Both directions of each candidate pair (and each patch with itself), kept within reach.
+
+    Pair (a, b) is kept when the centroid distance is at most ``cut_off_mm`` plus the
+    radius of the incident patch b: some point of b may lie within the cut-off.
+
+    Parameters
+    ----------
+    undirected : ndarray of int, shape (n, 2)
+        From ``cKDTree.query_pairs``.
+    centroids_mm : ndarray, shape (patches, 3)
+    radius_mm : ndarray, shape (patches,)
+    cut_off_mm : float
+    with_self : bool
+        Append (a, a) for every patch (the ``"samples"`` self term).
+
+    Returns
+    -------
+    exit_local, incident_local : ndarray of int64
+        Every (a, b) then every (b, a) then the self pairs, those kept, in that order.
+    distance : ndarray
+        Centroid distance, mm.
+    """
+    *_, directed = _compiled_scattering_samples()
+    return directed(np.ascontiguousarray(undirected, dtype=np.int64).reshape(-1, 2),
+                    np.ascontiguousarray(centroids_mm, dtype=np.float64),
+                    np.ascontiguousarray(radius_mm, dtype=np.float64), float(cut_off_mm),
+                    bool(with_self))
+
+
+def scattering_samples(exit_local, incident, m, centroids_mm, patches, *, points: bool):
+    """Midpoint-rule samples of every pair's incident patch (Sheng et al. 2014, Sect. 5.2).
+
+    Pair p integrates over the triangles of patch ``incident[p]``, each split ``m[p]``
+    times per edge (:func:`~translucent.fast.optical_distance.subdivision_barycentrics`),
+    from the centroid of exit patch ``exit_local[p]``. Samples come in pair order.
+
+    Parameters
+    ----------
+    exit_local : ndarray of int, shape (pairs,)
+        Rows of ``centroids_mm``.
+    incident : ndarray of int, shape (pairs,)
+        Global patch indices.
+    m : ndarray of int, shape (pairs,)
+        Splits per triangle edge, >= 1.
+    centroids_mm : ndarray, shape (n, 3)
+        mm.
+    patches : Patches
+    points : bool
+        Return the sample points too (the voxel distances and nothing else need them).
+
+    Returns
+    -------
+    offsets : ndarray of int64, shape (pairs + 1,)
+        Pair p owns samples ``offsets[p]:offsets[p+1]``.
+    weight : ndarray, shape (samples,)
+        mm^2, area / m^2.
+    distance : ndarray, shape (samples,)
+        Euclidean distance from the exit centroid, mm.
+    points : ndarray, shape (samples, 3) or (0, 3)
+        mm.
+    """
+    from ..optical_distance import subdivision_barycentrics
+
+    sample_offsets, fill, *_ = _compiled_scattering_samples()
+    m = np.ascontiguousarray(m, dtype=np.int64)
+    incident = np.ascontiguousarray(incident, dtype=np.int64)
+    most = int(m.max(initial=1))
+    tables = [subdivision_barycentrics(value) for value in range(1, most + 1)]
+    table_start = np.zeros(most + 1, np.int64)
+    table_start[1:] = np.cumsum([0] + [len(t) for t in tables[:-1]])
+    face_start = np.ascontiguousarray(patches.patch_face_start, dtype=np.int64)
+    offsets = sample_offsets(incident, m, face_start)
+    out = np.empty((offsets[-1] if points else 0, 3))
+    weight, distance = fill(np.ascontiguousarray(exit_local, dtype=np.int64), incident, m,
+                            np.ascontiguousarray(centroids_mm, dtype=np.float64), face_start,
+                            np.ascontiguousarray(patches.patch_faces, dtype=np.int64),
+                            np.ascontiguousarray(patches.triangles, dtype=np.float64),
+                            np.ascontiguousarray(patches.triangle_area, dtype=np.float64),
+                            float(patches.mm_per_unit), np.concatenate(tables), table_start,
+                            offsets, out)
+    return offsets, weight, distance, out
+
+
+def sample_operator(offsets, weight, distance, radius) -> tuple:
+    """CSR (pairs x K) of the samples' interpolation weights on the profile grid.
+
+    Row p sums ``weight * (1 - f)`` at node k and ``weight * f`` at k + 1 over the samples
+    of pair p, ``(k, f)`` as :meth:`~translucent.materials.profiles.RadialGrid.locate`;
+    samples beyond the last node (or at ``inf``) are left out. Columns are sorted and
+    summed, as ``coo_matrix(...).tocsr()`` with ``sum_duplicates``.
+
+    Returns
+    -------
+    indptr, indices, data : ndarray
+    """
+    _, _, operator, *_ = _compiled_scattering_samples()
+    return operator(np.ascontiguousarray(offsets, dtype=np.int64),
+                    np.ascontiguousarray(weight, dtype=np.float64),
+                    np.ascontiguousarray(distance, dtype=np.float64),
+                    np.ascontiguousarray(radius, dtype=np.float64))
+
+
+def move_rows(indptr, indices, data, positions, size: int) -> tuple:
+    """CSR arrays with row r moved to row ``positions[r]`` of ``size`` rows (others empty).
+
+    ``positions`` must be distinct.
+    """
+    _, _, _, move, _ = _compiled_scattering_samples()
+    return move(np.ascontiguousarray(indptr, dtype=np.int64), indices, data,
+                np.ascontiguousarray(positions, dtype=np.int64), int(size))

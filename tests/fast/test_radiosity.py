@@ -16,8 +16,6 @@ from translucent.fast.radiosity import (
     solve_radiosity,
 )
 from translucent.fast.radiosity import method as radiosity_method
-from translucent.fast.radiosity.geometry import pair_fractions
-from translucent.fast.radiosity.scattering import mixed_values
 from translucent.materials import Lambertian, measured_medium
 from translucent.materials.profiles import (
     DipoleProfile,
@@ -961,68 +959,3 @@ def test_approx_refuses_a_material_no_object_would_take(tmp_path, capsys, monkey
                  str(tmp_path / "f.exr")]) == 2
     assert "material = 'Marble': no translucent object" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
-
-
-def test_compiled_eq16_equals_mixed_profile_sample_by_sample(rng):
-    from types import SimpleNamespace
-
-    from translucent.materials.profiles import RadialGrid, mixed_profile
-
-    profiles = [TwoExponentialProfile(0.005 * (m + 1), 0.3 + 0.1 * m) for m in range(5)]
-    material = MixedProfiles(profiles, np.zeros(4, dtype=np.int64))
-    grid = RadialGrid(30.0, 64)
-    samples, pairs, points = 500, 40, 8
-    counts = np.zeros((pairs, len(profiles)), dtype=np.uint8)
-    for row in range(pairs):  # each path crosses 1-3 materials
-        crossed = rng.choice(len(profiles), size=rng.integers(1, 4), replace=False)
-        counts[row] = np.bincount(rng.choice(crossed, size=points),
-                                  minlength=len(profiles))
-    pair = rng.integers(0, pairs, samples)
-    distance = rng.uniform(0.0, 35.0, samples)  # beyond max_d: the last node, as locate
-    weight = rng.uniform(0.1, 2.0, samples)
-    item = SimpleNamespace(samples={"pair": pair, "distance": distance, "weight": weight,
-                                    "fractions": counts, "mix_points": points},
-                           sample_operator=sparse.csr_matrix((pairs, grid.samples)))
-    tables = [p.tabulate(grid, "reflection") for p in profiles]
-    fractions = counts[pair] / points
-    at = np.empty((samples, len(profiles), 3))
-    radius = grid.radius
-    for m, table in enumerate(tables):
-        r = np.clip(fractions[:, m] * distance, 0.0, grid.max_radius)
-        at[:, m] = np.stack([np.interp(r, radius, table[:, c]) for c in range(3)], axis=1)
-    expected = mixed_profile(np.stack([t[0] for t in tables]), at, fractions) * weight[:, None]
-    summed = np.stack([np.bincount(pair, expected[:, c], minlength=pairs) for c in range(3)],
-                      axis=1)
-    assert mixed_values(item, material, grid) == pytest.approx(summed, rel=1e-12,
-                                                                           abs=1e-300)
-
-
-def test_pair_fractions_count_the_points_in_each_material():
-    centroids = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0]])
-    # three slabs of x: [0, 2.5) label 0, [2.5, 7.5) label 1, beyond label 2
-    def labels(points):
-        return np.digitize(points[:, 0], [2.5, 7.5])
-
-    counts = pair_fractions(centroids, None, None, np.array([0, 0, 1]),
-                                       np.array([1, 2, 2]), 3, 8, labels)
-    # 8 points at t = (i + 0.5) / 8 along each segment
-    assert counts.tolist() == [[2, 4, 2], [8, 0, 0], [2, 4, 2]]
-
-
-def test_csr_order_is_a_stable_lexsort(rng):
-    from translucent.fast.radiosity.kernels import csr_order
-
-    rows, cols = rng.integers(0, 7, 500), rng.integers(0, 5, 500)  # many ties
-    assert np.array_equal(csr_order(rows, cols, 7), np.lexsort((cols, rows)))
-    assert len(csr_order(np.zeros(0, int), np.zeros(0, int), 3)) == 0
-
-
-def test_moving_operator_rows_keeps_every_entry(rng):
-    from translucent.fast.radiosity.geometry import _at_positions
-
-    operator = sparse.random(6, 9, density=0.4, random_state=1, format="csr")
-    positions = np.array([10, 2, 7, 0, 13, 5])
-    moved = _at_positions(operator, positions, 15)
-    assert moved.shape == (15, 9)
-    assert np.array_equal(moved.toarray()[positions], operator.toarray())
-    assert moved.toarray()[np.setdiff1d(np.arange(15), positions)].sum() == 0

@@ -2,8 +2,11 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from translucent.fast import radiosity, splatting
 from translucent.fast.solid_inputs import (
+    VoxelLabels,
     mixed_profiles_from_solid,
     subedit_from_solid,
     texel_positions,
@@ -109,6 +112,29 @@ def test_radiosity_labels_faces_by_the_voxel_and_reads_fractions_through_the_vol
     chord = np.stack([-0.9 + 1.8 * t, np.full_like(t, 0.3), np.full_like(t, 0.3)], axis=1)
     labels = material.volume_labels(chord)
     assert labels.mean() == pytest.approx(0.5, abs=2e-3)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(1, 5), st.integers(1, 40), st.integers(0, 2**32 - 1))
+def test_compiled_counts_along_segments_equal_the_point_lookup(cells, points, seed):
+    from translucent.fast.radiosity.geometry import pair_fractions
+
+    rng = np.random.default_rng(seed)
+    solid = checker_solid("Skin1", "Ketchup", cells=cells, eta=1.0)
+    labels = rng.integers(0, 3, solid.shape)  # three labels, in any pattern
+    volume = VoxelLabels(solid, labels)
+    # ends inside and beyond the box (clamped to the border voxels), in mm at 10 mm a unit
+    ends = rng.uniform(-1.3, 1.3, (12, 3)) * 10.0
+    first, second = rng.integers(0, 12, 30), rng.integers(0, 12, 30)
+    t = (np.arange(points) + 0.5) / points
+    along = ends[first][:, None] + t[None, :, None] * (ends[second] - ends[first])[:, None]
+    looked_up = volume(along.reshape(-1, 3) / 10.0).reshape(30, points)
+    expected = np.stack([(looked_up == label).sum(axis=1) for label in range(3)], axis=1)
+    counts = volume.counts_along(ends, first, second, points, 3, scale=10.0)
+    assert counts.dtype == np.uint8
+    assert np.array_equal(counts, expected)
+    assert np.array_equal(pair_fractions(ends, None, None, first, second, 3, points, volume,
+                                         10.0), expected)
 
 
 def test_radiosity_renders_the_homogeneous_limit_as_the_homogeneous_material():
