@@ -52,6 +52,19 @@ def test_selection_keeps_the_largest_entries_until_the_energy(row, energy, budge
         assert kept_energy - squared[kept].min() < energy * total
 
 
+@settings(max_examples=80, deadline=None)
+@given(values=arrays(np.float64, st.integers(1, 200),
+                     elements=st.sampled_from([0.0, 1.0, 2.0, 2.0, 3.5]) | st.floats(0, 1e6)),
+       data=st.data())
+def test_largest_at_is_the_partition_of_the_negated_values(values, data):
+    from translucent.fast.sparse_transport import largest_at
+
+    k = data.draw(st.integers(0, len(values) - 1))
+    copy = values.copy()
+    assert largest_at(copy, k) == -np.partition(-values, k)[k]
+    assert np.array_equal(np.sort(copy), np.sort(values))  # reordered, nothing lost
+
+
 def test_selection_respects_the_budget_on_a_decaying_row(rng):
     row = (rng.normal(size=4096) * np.geomspace(1, 1e-6, 4096)).astype(np.float32)
     sparse = nonlinear_approximation(row[None, :], 1.0, 100)
