@@ -364,27 +364,55 @@ def _compiled_scattering_samples():
 
     @numba.njit(cache=True)
     def directed(undirected, centroids, radius, cut_off, with_self):  # pragma: no cover
-        count = len(undirected)
-        total = 2 * count + (len(centroids) if with_self else 0)
-        exit_local = np.empty(total, np.int64)
-        incident = np.empty(total, np.int64)
-        distance = np.empty(total)
+        count = len(centroids)
+        start = np.zeros(count + 1, np.int64)
+        for pair in range(len(undirected)):
+            start[undirected[pair, 0] + 1] += 1
+            start[undirected[pair, 1] + 1] += 1
+        if with_self:
+            start[1:] += 1
+        for row in range(count):
+            start[row + 1] += start[row]
+        neighbour = np.empty(start[count], np.int64)
+        fill = start[:-1].copy()
+        for pair in range(len(undirected)):
+            a, b = undirected[pair, 0], undirected[pair, 1]
+            neighbour[fill[a]] = b
+            fill[a] += 1
+            neighbour[fill[b]] = a
+            fill[b] += 1
+        if with_self:
+            for row in range(count):
+                neighbour[fill[row]] = row
+                fill[row] += 1
+        mark = np.full(count, -1, np.int64)
+        for row in range(count):
+            lo, hi = start[row], start[row + 1]
+            length = hi - lo
+            if length * max(1.0, math.log2(max(length, 1))) < count:
+                neighbour[lo:hi] = np.sort(neighbour[lo:hi])
+            else:  # a dense row: a scan of every patch costs less than a sort
+                for entry in range(lo, hi):
+                    mark[neighbour[entry]] = row
+                entry = lo
+                for column in range(count):
+                    if mark[column] == row:
+                        neighbour[entry] = column
+                        entry += 1
+        exit_local = np.empty(len(neighbour), np.int64)
+        incident = np.empty(len(neighbour), np.int64)
+        distance = np.empty(len(neighbour))
         kept = 0
-        for candidate in range(total):
-            if candidate < 2 * count:
-                pair = candidate % count
-                forward = candidate < count
-                a = undirected[pair, 0] if forward else undirected[pair, 1]
-                b = undirected[pair, 1] if forward else undirected[pair, 0]
-            else:
-                a = b = candidate - 2 * count
-            squared = 0.0
-            for d in range(3):
-                squared += (centroids[a, d] - centroids[b, d]) ** 2
-            length = math.sqrt(squared)
-            if length <= cut_off + radius[b]:
-                exit_local[kept], incident[kept], distance[kept] = a, b, length
-                kept += 1
+        for a in range(count):
+            for entry in range(start[a], start[a + 1]):
+                b = neighbour[entry]
+                squared = 0.0
+                for d in range(3):
+                    squared += (centroids[a, d] - centroids[b, d]) ** 2
+                length = math.sqrt(squared)
+                if length <= cut_off + radius[b]:
+                    exit_local[kept], incident[kept], distance[kept] = a, b, length
+                    kept += 1
         return exit_local[:kept].copy(), incident[:kept].copy(), distance[:kept].copy()
 
     return sample_offsets, fill, operator, move_rows, directed
@@ -392,7 +420,7 @@ def _compiled_scattering_samples():
 
 def directed_pairs(undirected, centroids_mm, radius_mm, cut_off_mm: float, *,
                    with_self: bool) -> tuple:
-    """Both directions of each candidate pair (and each patch with itself), kept within reach.
+    """Both directions of each candidate pair (and each patch with itself) within reach, sorted.
 
     Pair (a, b) is kept when the centroid distance is at most ``cut_off_mm`` plus the
     radius of the incident patch b: some point of b may lie within the cut-off.
@@ -410,7 +438,8 @@ def directed_pairs(undirected, centroids_mm, radius_mm, cut_off_mm: float, *,
     Returns
     -------
     exit_local, incident_local : ndarray of int64
-        Every (a, b) then every (b, a) then the self pairs, those kept, in that order.
+        The kept pairs sorted by (exit, incident): every later pass over them (samples,
+        their operator, its rows moved into S's pattern) then walks memory in order.
     distance : ndarray
         Centroid distance, mm.
     """

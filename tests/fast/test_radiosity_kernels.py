@@ -73,10 +73,12 @@ def test_scattering_samples_are_the_midpoint_rule_in_pair_order(rng):
     assert none.shape == (0, 3)
 
 
-def test_directed_pairs_are_both_directions_then_the_self_pairs_within_reach(rng):
+@pytest.mark.parametrize("share", [1.0, 0.1])  # dense rows (a scan), sparse rows (a sort)
+def test_directed_pairs_are_both_directions_and_the_self_pairs_within_reach_sorted(rng, share):
     centroids = rng.uniform(0.0, 10.0, (40, 3))
     radius = rng.uniform(0.1, 1.0, 40)
     undirected = np.array([(a, b) for a in range(40) for b in range(a + 1, 40)])
+    undirected = undirected[rng.permutation(len(undirected))[:int(share * len(undirected))]]
     exit_local, incident, distance = directed_pairs(undirected, centroids, radius, 4.0,
                                                     with_self=True)
     every_exit = np.concatenate([undirected[:, 0], undirected[:, 1], np.arange(40)])
@@ -84,9 +86,10 @@ def test_directed_pairs_are_both_directions_then_the_self_pairs_within_reach(rng
     length = np.linalg.norm(centroids[every_exit] - centroids[every_incident], axis=1)
     keep = length <= 4.0 + radius[every_incident]
     assert 0 < keep.sum() < len(keep)
-    assert np.array_equal(exit_local, every_exit[keep])
-    assert np.array_equal(incident, every_incident[keep])
-    assert np.array_equal(distance, length[keep])
+    order = np.lexsort((every_incident[keep], every_exit[keep]))
+    assert np.array_equal(exit_local, every_exit[keep][order])
+    assert np.array_equal(incident, every_incident[keep][order])
+    assert np.array_equal(distance, length[keep][order])
     without, _, _ = directed_pairs(undirected, centroids, radius, 4.0, with_self=False)
     assert len(without) == len(exit_local) - 40
 
