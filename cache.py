@@ -25,7 +25,12 @@ import numpy as np
 from .atomic import atomic_path
 from .errors import InputError
 
-__all__ = ["cache_dir", "content_hash", "private_cache", "Cache"]
+__all__ = ["cache_dir", "content_hash", "private_cache", "limited_entries", "entry_limit",
+           "ENTRY_LIMIT_VARIABLE", "Cache"]
+
+#: The largest entry, in bytes, that :meth:`Cache.store_pickle` keeps when told its size;
+#: unset or empty: no limit. Set by :func:`limited_entries`, inherited by worker processes.
+ENTRY_LIMIT_VARIABLE = "TRANSLUCENT_CACHE_MAX_ENTRY_BYTES"
 
 
 def cache_dir() -> Path:
@@ -55,6 +60,51 @@ def private_cache(prefix: str = "translucent-cold-"):
         else:
             os.environ["TRANSLUCENT_CACHE"] = previous
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def entry_limit() -> int | None:
+    """Return the entry limit of :data:`ENTRY_LIMIT_VARIABLE` in bytes, or None (no limit).
+
+    Raises
+    ------
+    InputError
+        When the variable holds anything but a whole number >= 0.
+    """
+    given = os.environ.get(ENTRY_LIMIT_VARIABLE, "").strip()
+    if not given:
+        return None
+    try:
+        value = int(given)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise InputError("must be a whole number of bytes >= 0 (or unset: no limit)",
+                         field=ENTRY_LIMIT_VARIABLE, value=given)
+    return value
+
+
+@contextlib.contextmanager
+def limited_entries(max_bytes: int | None):
+    """Keep cache entries of at most ``max_bytes`` for the block (None: no limit).
+
+    Sets :data:`ENTRY_LIMIT_VARIABLE`, so worker processes started inside inherit it; the
+    previous setting is restored afterwards.
+    """
+    previous = os.environ.get(ENTRY_LIMIT_VARIABLE)
+    if max_bytes is None:
+        os.environ.pop(ENTRY_LIMIT_VARIABLE, None)
+    else:
+        if int(max_bytes) != max_bytes or max_bytes < 0:
+            raise InputError("must be a whole number of bytes >= 0", field="max_bytes",
+                             value=max_bytes)
+        os.environ[ENTRY_LIMIT_VARIABLE] = str(int(max_bytes))
+    try:
+        yield
+    finally:
+        if previous is None:
+            os.environ.pop(ENTRY_LIMIT_VARIABLE, None)
+        else:
+            os.environ[ENTRY_LIMIT_VARIABLE] = previous
 
 
 def _canonical(value: Any) -> Any:
@@ -115,8 +165,17 @@ class Cache:
         except Exception:  # a stale or foreign entry is a miss, not a crash
             return None
 
-    def store_pickle(self, key: str, value) -> Path:
+    def store_pickle(self, key: str, value, *, nbytes: int | None = None) -> Path | None:
         """Store ``value`` under ``key`` atomically and return the path.
+
+        Parameters
+        ----------
+        key : str
+        value : object
+            Anything picklable.
+        nbytes : int, optional
+            The size of ``value``'s arrays. Above :func:`entry_limit` nothing is written and
+            None is returned: the caller recomputes next time (and may say so).
 
         Raises
         ------
@@ -124,6 +183,9 @@ class Cache:
             When the cache folder cannot be written; the message names
             ``TRANSLUCENT_CACHE``, the setting that moves it.
         """
+        limit = entry_limit()
+        if nbytes is not None and limit is not None and nbytes > limit:
+            return None
         path = self.path(key, ".pkl")
         try:
             with atomic_path(path) as tmp, open(tmp, "wb") as handle:

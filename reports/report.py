@@ -119,6 +119,11 @@ DEFAULT_REFERENCE_BUDGET = 300.0
 #: Samples per pixel of each pass of such a progressive reference.
 PROGRESSIVE_SPP = 32
 
+#: The largest method precomputation (bytes) a report keeps in the cache by default
+#: (``--keep-precomputations`` keeps all): PRT's and BRDF-PCA's tens of MB are kept,
+#: radiosity's dense operators on the default spheres (1-3 GB each) are not.
+REPORT_CACHE_ENTRY_LIMIT = 256 * 2**20
+
 #: Bumped when what a cached method run holds changes, so older entries miss.
 RUN_FORMAT = 1
 
@@ -351,7 +356,8 @@ def _slug(name: str, taken: set[str]) -> str:
 def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 update_baseline: bool = False, scheduler: str | None = None,
                 serial: bool = False, spp: int | None = None, passes: int = DEFAULT_PASSES,
-                progress: bool = True, stream=None) -> ReportResult:
+                progress: bool = True, stream=None,
+                keep_precomputations: bool = False) -> ReportResult:
     """Run the report: references, fast methods, metrics, error maps, baseline, HTML.
 
     Parameters
@@ -384,6 +390,11 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         Progress bars (on stderr).
     stream : file, optional
         Where the summary lines go (default stdout).
+    keep_precomputations : bool
+        Keep every method's precomputation in the cache. Default: those up to
+        :data:`REPORT_CACHE_ENTRY_LIMIT` bytes (the report keeps its own results; writing
+        radiosity's dense operators, 1-3 GB a scene, cost more than recomputing them saves
+        on a later run, docs/references.md). A method says what it did not keep.
 
     Returns
     -------
@@ -398,7 +409,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     """
     from tqdm.auto import tqdm
 
-    from ..cache import Cache, content_hash
+    from ..cache import Cache, content_hash, limited_entries
     from ..fast.base import method as method_module
     from ..scenes import Scene, load_scene
     from .distributed import run_tasks
@@ -497,8 +508,9 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
               f"{sum(1 for t in tasks if t[0] == 'reference')} reference render(s), "
               f"{sum(1 for t in tasks if t[0] == 'method')} method run(s)", file=stream,
               flush=True)
-        results = run_tasks(report_task, tasks, scheduler=scheduler, local=serial,
-                            progress=progress)
+        with limited_entries(None if keep_precomputations else REPORT_CACHE_ENTRY_LIMIT):
+            results = run_tasks(report_task, tasks, scheduler=scheduler, local=serial,
+                                progress=progress)
     else:
         results = []
     for (report, name, key), result in zip(owners, results, strict=True):

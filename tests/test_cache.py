@@ -54,3 +54,39 @@ def test_a_cache_that_cannot_be_written_names_translucent_cache(tmp_path, monkey
                                          r"be written"):
         Cache("unit").store_pickle(content_hash("x"), 1)
     assert a_file.read_text() == "keep me"
+
+
+def test_entries_over_the_limit_are_not_written_and_the_setting_is_restored(tmp_path,
+                                                                          monkeypatch):
+    from translucent.cache import ENTRY_LIMIT_VARIABLE, entry_limit, limited_entries
+
+    monkeypatch.delenv(ENTRY_LIMIT_VARIABLE, raising=False)
+    cache = Cache("unit", root=tmp_path)
+    small, large = content_hash("small"), content_hash("large")
+    with limited_entries(1000):
+        assert entry_limit() == 1000
+        assert cache.store_pickle(small, np.zeros(10), nbytes=80) is not None
+        assert cache.store_pickle(large, np.zeros(200), nbytes=1600) is None
+        assert cache.store_pickle(content_hash("unsized"), np.zeros(200)) is not None
+        with limited_entries(None):
+            assert entry_limit() is None
+        assert entry_limit() == 1000
+    assert entry_limit() is None
+    assert cache.load_pickle(small) is not None
+    assert cache.load_pickle(large) is None
+    assert not cache.path(large, ".pkl").exists()
+    assert cache.store_pickle(large, np.zeros(200), nbytes=1600) is not None
+
+
+def test_a_bad_entry_limit_names_the_variable(monkeypatch):
+    import pytest
+    from translucent.cache import ENTRY_LIMIT_VARIABLE, entry_limit, limited_entries
+    from translucent.errors import InputError
+
+    for value in ("-1", "1e9", "lots"):
+        monkeypatch.setenv(ENTRY_LIMIT_VARIABLE, value)
+        with pytest.raises(InputError, match=rf"{ENTRY_LIMIT_VARIABLE} = '{value}'"):
+            entry_limit()
+    with pytest.raises(InputError, match="max_bytes = -5"):
+        with limited_entries(-5):
+            pass

@@ -114,7 +114,7 @@ def precompute(scene, **knobs) -> RadiosityState:
     -------
     RadiosityState
     """
-    from ...cache import Cache, content_hash
+    from ...cache import ENTRY_LIMIT_VARIABLE, Cache, content_hash, entry_limit
 
     scene, solid_notes = surface_scene(scene, mixed_profiles_from_solid)
     reason = applies_to(scene)
@@ -168,7 +168,12 @@ def precompute(scene, **knobs) -> RadiosityState:
     log.notes["cache"] = "miss"
     if solid_notes:
         log.notes["solid medium"] = solid_notes
-    cache.store_pickle(key, (patches, F, geometry, log))
+    size = geometry.bytes + (0 if F is None else F.data.nbytes + F.indices.nbytes
+                             + F.indptr.nbytes)
+    if cache.store_pickle(key, (patches, F, geometry, log), nbytes=size) is None:
+        log.skip(f"the precomputation ({size / 1e9:.2g} GB) is not kept in the cache: over "
+                 f"its entry limit of {entry_limit() / 1e6:.4g} MB ({ENTRY_LIMIT_VARIABLE}); "
+                 "the next run computes it again")
     return RadiosityState(scene, patches, F, geometry, resolved, log)
 
 

@@ -1,7 +1,8 @@
 """The main job: every fast method against its reference on the built-in scenes, as HTML.
 
 ``translucent report [SCENE ...] [--out DIR] [--methods m1,m2] [--update-baseline]
-[--baseline FILE] [--scheduler ADDRESS | --serial] [--spp N --passes K]``
+[--baseline FILE] [--scheduler ADDRESS | --serial] [--spp N --passes K]
+[--keep-precomputations]``
 
 Writes ``DIR/index.html`` (images side by side, error maps, metrics, precomputation and
 frame times, what each method skipped and why) and ``DIR/metrics.json``. Exits 0 when no
@@ -20,6 +21,7 @@ def add_arguments(parser):
         DEFAULT_REFERENCE_BUDGET,
         DEFAULT_TARGET_RSE,
         PROGRESSIVE_SPP,
+        REPORT_CACHE_ENTRY_LIMIT,
     )
 
     parser.add_argument("scenes", nargs="*", metavar="SCENE",
@@ -53,6 +55,11 @@ def add_arguments(parser):
     parser.add_argument("--passes", type=int, default=DEFAULT_PASSES,
                         help=f"independent reference passes with --spp (default "
                              f"{DEFAULT_PASSES})")
+    parser.add_argument("--keep-precomputations", action="store_true",
+                        help="keep every method's precomputation in the cache (default: "
+                             f"those up to {REPORT_CACHE_ENTRY_LIMIT // 2**20} MiB; "
+                             "radiosity's of the default spheres, 1-3 GB each, are "
+                             "computed again on the next run)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -72,5 +79,6 @@ def run(args) -> int:
     result = make_report(args.scenes or None, args.out, methods=methods, baseline=args.baseline,
                          update_baseline=args.update_baseline, scheduler=args.scheduler,
                          serial=args.serial, spp=args.spp, passes=args.passes,
-                         progress=not args.no_progress)
+                         progress=not args.no_progress,
+                         keep_precomputations=args.keep_precomputations)
     return result.exit_code

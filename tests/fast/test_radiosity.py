@@ -483,6 +483,22 @@ def test_precompute_is_cached_by_geometry_not_material():
     assert again.S.data[:, 0].sum() != pytest.approx(first.S.data[:, 0].sum())
 
 
+def test_a_precomputation_over_the_cache_entry_limit_is_not_kept_and_says_so():
+    from translucent.cache import limited_entries, private_cache
+
+    with private_cache():
+        with limited_entries(1000):
+            first = precompute(_block_scene(), rays_per_patch=16, max_distance_mm=21.5)
+        assert first.log.notes["cache"] == "miss"
+        assert any("not kept in the cache" in sentence and "TRANSLUCENT_CACHE_MAX_ENTRY_BYTES"
+                   in sentence for sentence in first.log.skipped)
+        again = precompute(_block_scene(), rays_per_patch=16, max_distance_mm=21.5)
+        assert again.log.notes["cache"] == "miss"  # nothing had been written
+        assert not any("not kept" in sentence for sentence in again.log.skipped)
+        assert precompute(_block_scene(), rays_per_patch=16,
+                          max_distance_mm=21.5).log.notes["cache"] == "hit"
+
+
 def test_bad_knobs_are_reported():
     with pytest.raises(InputError, match="unknown knob.*rays_per_patch"):
         precompute(_block_scene(), rays=3)

@@ -91,6 +91,7 @@ STAND_IN_METHODS = textwrap.dedent('''
     """Stand-in fast methods for the report's tests."""
     import numpy as np
 
+    from translucent.cache import entry_limit
     from translucent.fast.base import StageLog
     from translucent.image import Image
 
@@ -105,7 +106,8 @@ STAND_IN_METHODS = textwrap.dedent('''
         def __init__(self, scene, grey):
             self.scene, self.grey = scene, grey
             self.log = StageLog(skipped=["no transfer: a flat image needs none"],
-                                seconds={"nothing": 0.0})
+                                seconds={"nothing": 0.0},
+                                notes={"cache_entry_limit": entry_limit()})
 
         def render(self, lights=None, material=None):
             camera = self.scene.camera
@@ -180,6 +182,9 @@ def test_tiny_report_shows_every_image_it_wrote(tiny):
     assert math.isfinite(flat["metrics"]["hdr_flip"])
     assert flat["precompute_seconds"] >= 0 and flat["frame_seconds"] > 0
     assert flat["skipped"] == ["no transfer: a flat image needs none"]
+    # the tasks ran under the report's cache entry limit, and it was lifted afterwards
+    assert flat["notes"]["cache_entry_limit"] == report_module.REPORT_CACHE_ENTRY_LIMIT
+    assert os.environ.get("TRANSLUCENT_CACHE_MAX_ENTRY_BYTES") is None
     for map_name in ("flip", "relative_error", "ciede2000", "ssim"):
         assert (tiny["out"] / flat["files"][f"map_{map_name}"]).is_file()
     page = (tiny["out"] / "index.html").read_text()
