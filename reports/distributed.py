@@ -61,7 +61,8 @@ def worker_environment(threads: int) -> dict[str, str]:
     core count (every worker's ``parallel=True`` kernels then fight for the same cores)
     and sets ``MALLOC_TRIM_THRESHOLD_``, which turns off glibc's adaptive mmap threshold:
     every large temporary array is then mapped and faulted in afresh. Both showed as
-    system time in the radiosity precomputation (docs/performance.md).
+    system time in the radiosity precomputation (docs/references.md, "The time of a
+    fresh report").
 
     Parameters
     ----------

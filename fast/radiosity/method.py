@@ -171,9 +171,9 @@ def precompute(scene, **knobs) -> RadiosityState:
     size = geometry.bytes + (0 if F is None else F.data.nbytes + F.indices.nbytes
                              + F.indptr.nbytes)
     if cache.store_pickle(key, (patches, F, geometry, log), nbytes=size) is None:
-        log.skip(f"the precomputation ({size / 1e9:.2g} GB) is not kept in the cache: over "
-                 f"its entry limit of {entry_limit() / 1e6:.4g} MB ({ENTRY_LIMIT_VARIABLE}); "
-                 "the next run computes it again")
+        log.skip(f"the precomputation ({size / 2**20:.0f} MiB) is not kept in the cache: "
+                 f"over its entry limit of {entry_limit() / 2**20:.4g} MiB "
+                 f"({ENTRY_LIMIT_VARIABLE}); the next run computes it again")
     return RadiosityState(scene, patches, F, geometry, resolved, log)
 
 
