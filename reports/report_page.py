@@ -54,9 +54,41 @@ def _e(text) -> str:
     return html.escape(str(text), quote=True)
 
 
-def _figure(src: str, caption: str, *, css: str = "") -> str:
-    return (f'<figure class="{css}"><img src="{_e(src)}" alt="{_e(caption)}">'
+def _figure(src: str, caption: str, *, css: str = "", scale: str = "") -> str:
+    return (f'<figure class="{css}"><img src="{_e(src)}" alt="{_e(caption)}">{scale}'
             f"<figcaption>{_e(caption)}</figcaption></figure>")
+
+
+#: Colours sampled along each colour bar (CSS interpolates between them).
+COLOUR_BAR_STOPS = 17
+
+
+def colour_bar(style) -> str:
+    """Draw the scale of an error map under it: its colours, both ends and the unit.
+
+    Parameters
+    ----------
+    style : MapStyle
+        The map's colour map and range (:data:`~translucent.reports.error_maps.MAP_STYLES`).
+
+    Returns
+    -------
+    str
+        HTML: a gradient of the colour map's own colours from ``vmin`` to ``vmax``, values
+        beyond clipped as in the map.
+    """
+    import numpy as np
+
+    from .error_maps import colour_map
+
+    values = np.linspace(style.vmin, style.vmax, COLOUR_BAR_STOPS)[None, :]
+    stops = ", ".join(f"rgb({r},{g},{b}) {100 * i / (COLOUR_BAR_STOPS - 1):.4g}%"
+                      for i, (r, g, b) in enumerate(colour_map(values, style)[0]))
+    low, high = f"{style.vmin:g}", f"{style.vmax:g}"
+    return (f'<div class=scale title="{_e(style.unit)}">'
+            f'<div class=bar style="background: linear-gradient(to right, {stops})"></div>'
+            f"<div class=ends><span>{_e(low)}</span><span>{_e(style.unit)}</span>"
+            f"<span>{_e(high)}</span></div></div>")
 
 
 def _verdict_class(status: str) -> str:
@@ -223,6 +255,8 @@ def _reference_origin(report: SceneReport) -> str:
 
 
 def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
+    from .error_maps import MAP_STYLES
+
     check = report.checks.get(name)
     anchor = f"{report.slug}-{name}"
     parts = [f'<div class=method id="{_e(anchor)}"><h3>{_e(name)}']
@@ -240,7 +274,8 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         figures = [_figure(files["png"], f"{name}")]
         for map_name in ("flip", "relative_error", "ciede2000", "ssim"):
             if f"map_{map_name}" in files:
-                figures.append(_figure(files[f"map_{map_name}"], map_name.replace("_", " ")))
+                figures.append(_figure(files[f"map_{map_name}"], map_name.replace("_", " "),
+                                       scale=colour_bar(MAP_STYLES[map_name])))
         if report.reference is not None:
             figures.insert(0, _figure(report.files["reference"]["png"], "reference"))
         parts.append('<div class=row>' + "".join(figures) + "</div>")

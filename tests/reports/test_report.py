@@ -8,6 +8,7 @@ import re
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 from translucent.errors import InputError
 from translucent.fast import base as fast_base
@@ -190,6 +191,27 @@ def test_tiny_report_shows_every_image_it_wrote(tiny):
     page = (tiny["out"] / "index.html").read_text()
     assert "no transfer: a flat image needs none" in page
     assert not list(tiny["folder"].glob(".report.*")), "a temporary folder was left behind"
+
+
+def test_every_error_map_has_its_colour_bar_with_range_and_unit(tiny):
+    from translucent.reports.error_maps import MAP_STYLES, colour_map
+    from translucent.reports.report_page import colour_bar
+
+    page = (tiny["out"] / "index.html").read_text()
+    for name in ("flip", "relative_error", "ciede2000", "ssim"):
+        style = MAP_STYLES[name]
+        bar = colour_bar(style)
+        figure = re.search(r'<figure class=""><img src="[^"]*_' + name
+                           + r'\.png"[^>]*>(.*?)</figure>', page)
+        assert figure is not None, f"no {name} map in the page"
+        assert bar in figure.group(1)
+        ends = re.findall(r"<span>([^<]*)</span>", bar)
+        assert ends == [f"{style.vmin:g}", html.escape(style.unit, quote=True),
+                        f"{style.vmax:g}"]
+        first, last = colour_map(np.array([[style.vmin, style.vmax]]), style)[0]
+        stops = re.findall(r"rgb\((\d+),(\d+),(\d+)\) ([\d.]+)%", bar)
+        assert [int(v) for v in stops[0][:3]] == first.tolist() and stops[0][3] == "0"
+        assert [int(v) for v in stops[-1][:3]] == last.tolist() and stops[-1][3] == "100"
 
 
 def test_every_metric_comes_with_its_noise_floor_and_verdict(tiny):
