@@ -73,8 +73,9 @@ The package, one concept a module: :mod:`.knobs`, :mod:`.buffers` (surface buffe
 irradiance mipmap, the camera model), :mod:`.selection` (Eq. 10-11), :mod:`.radius_table`
 (Eq. 14), :mod:`.splats` (Eq. 12-15 and the numpy and Dr.Jit kernels), :mod:`.accumulation`
 (Eq. 17), :mod:`.ground_truth` (brute force), :mod:`.frame`, :mod:`.state` and
-:mod:`.method`; the compiled CPU loops are :mod:`translucent.fast.splatting_kernels`, the
-CUDA ones :mod:`translucent.fast.splatting_cuda`.
+:mod:`.method`; the compiled CPU loops are :mod:`translucent.fast.splatting_kernels` (the
+splat) and :mod:`translucent.fast.splatting_buffer_kernels` (the buffers), the CUDA ones
+:mod:`translucent.fast.splatting_cuda`.
 """
 
 from .accumulation import bilateral_upsample, upsampling_profile_factors

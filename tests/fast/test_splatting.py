@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from translucent.errors import InputError
 from translucent.fast import splatting
+from translucent.fast import splatting_buffer_kernels as buffer_kernels
 from translucent.fast import splatting_kernels as kernels
 from translucent.fast.base import StageLog
 from translucent.fast.splatting import (
@@ -479,8 +480,8 @@ def test_irradiance_level_reads_non_finite_inputs_as_nan_to_num(rng):
         flat[rng.random(flat.size) < 0.05] = -np.inf
     depth = rng.random(shape)
     bounds = (np.where(valid, depth, np.inf), np.where(valid, depth, -np.inf), valid)
-    raw = kernels.irradiance_level(*arrays, *bounds)
-    cleaned = kernels.irradiance_level(*(np.nan_to_num(array) for array in arrays), *bounds)
+    raw = buffer_kernels.irradiance_level(*arrays, *bounds)
+    cleaned = buffer_kernels.irradiance_level(*(np.nan_to_num(array) for array in arrays), *bounds)
     for a, b in zip(raw, cleaned, strict=True):
         assert np.array_equal(a, b)
 
@@ -845,13 +846,13 @@ def test_rasterizer_bits_do_not_depend_on_bands_outlines_or_threads(seed, orthog
     try:
         # one band, no outline test: every pixel of each triangle's box tests its ray
         # against the triangle, triangles in index order, in one thread
-        single_pass = kernels.rasterize(*args, 17, -1.0)
+        single_pass = buffer_kernels.rasterize(*args, 17, -1.0)
     finally:
         numba.set_num_threads(threads)
     assert (single_pass[0] >= 0).any()
     assert not ((single_pass[0] >= 40) & (single_pass[0] < 50)).any()
     for band_rows in (1, 3, 8):
-        banded = kernels.rasterize(*args, band_rows)
+        banded = buffer_kernels.rasterize(*args, band_rows)
         for ours, reference in zip(banded, single_pass, strict=True):
             assert np.array_equal(ours, reference)
 
@@ -862,7 +863,7 @@ def test_compiled_fresnel_transmittance_is_the_numpy_one(eta, cosine):
     from translucent.materials.fresnel import fresnel_transmittance
 
     # the same operations in the same order: the same bits
-    assert kernels.fresnel_transmittance_at(eta, cosine) == float(
+    assert buffer_kernels.fresnel_transmittance_at(eta, cosine) == float(
         fresnel_transmittance(eta, cosine))
 
 
@@ -874,7 +875,7 @@ def test_compiled_fresnel_transmittance_edges():
     for eta in etas:
         for cosine in cosines:
             expected = float(fresnel_transmittance(eta, cosine))
-            assert kernels.fresnel_transmittance_at(eta, cosine) == expected, (eta, cosine)
+            assert buffer_kernels.fresnel_transmittance_at(eta, cosine) == expected, (eta, cosine)
 
 
 @settings(max_examples=25, deadline=None)
@@ -889,7 +890,7 @@ def test_light_view_kernels_equal_the_numpy_formula(seed, eta, point):
         squared = np.maximum(np.einsum("...k,...k->...", offset, offset), 1e-300)
         to_light = offset / np.sqrt(squared)[..., None]
         irradiance = intensity / squared[..., None]
-        flux, cosine = kernels.light_flux(position, normal, valid, footprint,
+        flux, cosine = buffer_kernels.light_flux(position, normal, valid, footprint,
                                           light.reshape(1, 1, 3), intensity.reshape(1, 1, 3),
                                           eta, True)
     else:
@@ -914,7 +915,7 @@ def test_light_view_kernel_reads_nan_as_nothing():
     valid[:] = True
     normal[0, 0] = np.nan
     footprint[1, 1] = np.nan
-    flux, cosine = kernels.light_flux(position, normal, valid, footprint, np.broadcast_to(
+    flux, cosine = buffer_kernels.light_flux(position, normal, valid, footprint, np.broadcast_to(
         [0.0, 0.0, 1.0], normal.shape), np.ones(normal.shape), 1.3, False)
     expected_flux, expected_cosine = _numpy_flux(normal, valid, footprint,
                                                  np.array([0.0, 0.0, 1.0]), np.ones(3), 1.3)
@@ -936,7 +937,7 @@ def test_exitant_radiance_kernel_equals_the_numpy_formula(seed, eta):
     exitance[0, 1, 1] = np.inf
     valid[0, :2] = True
     origin = rng.uniform(3.0, 5.0, 3)
-    radiance = kernels.exitant_radiance(exitance, position, normal, valid, origin, eta)
+    radiance = buffer_kernels.exitant_radiance(exitance, position, normal, valid, origin, eta)
     # Eq. 7 as numpy evaluated it before the kernel
     to_camera = origin - position
     to_camera /= np.maximum(np.linalg.norm(to_camera, axis=-1, keepdims=True), 1e-300)
@@ -958,7 +959,7 @@ def test_perspective_footprint_kernel_equals_the_numpy_formula(seed):
     tan_y = tan_x * height / width
     triangle = np.where(rng.random((height, width)) < 0.6, 5, -1)
     depth = np.where(triangle >= 0, rng.uniform(0.5, 10.0, (height, width)), np.inf)
-    footprint = kernels.perspective_footprint(triangle, depth, tan_x, tan_y)
+    footprint = buffer_kernels.perspective_footprint(triangle, depth, tan_x, tan_y)
     sx = tan_x * (1.0 - 2.0 * (np.arange(width) + 0.5) / width)
     sy = tan_y * (1.0 - 2.0 * (np.arange(height) + 0.5) / height)
     cosine = 1.0 / np.sqrt(1.0 + sx[None, :] ** 2 + sy[:, None] ** 2)
@@ -972,8 +973,8 @@ def test_interpolated_normals_fall_back_to_the_face_normal():
     vertices = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]])
     faces = np.array([[0, 1, 2]], np.int64)
     args = _rasterize_args(vertices, faces, [0.0, 0.0, -2.0], [0.0, 0.0, 1.0], 9, 9, True)
-    triangle, barycentric, depth = kernels.rasterize(*args)
-    valid, position, normal, uv, *_ = kernels.interpolate_surface(
+    triangle, barycentric, depth = buffer_kernels.rasterize(*args)
+    valid, position, normal, uv, *_ = buffer_kernels.interpolate_surface(
         triangle, barycentric, depth, np.ones(depth.shape), 0, 1, vertices, faces,
         np.zeros((3, 3)), np.zeros((0, 2)))
     assert valid.any() and np.array_equal(valid, triangle == 0)
@@ -985,7 +986,7 @@ def test_interpolated_normals_fall_back_to_the_face_normal():
 @settings(max_examples=30, deadline=None)
 @given(st.integers(min_value=0, max_value=2000))
 def test_parallel_row_order_visits_every_row_once(count):
-    order = kernels._spread(count)
+    order = buffer_kernels._spread(count)
     assert np.array_equal(np.sort(order), np.arange(count))
     if count >= 32:
         # each of four threads' consecutive chunks reaches into every quarter of the rows
@@ -1049,5 +1050,5 @@ def test_add_scaled_by_texel_is_the_numpy_expression(seed):
     exitance, upsampled = rng.random((2, 5, 7, 3))
     factors = rng.random((11, 3)) + 0.1
     texel = rng.integers(0, 11, (5, 7))
-    assert np.array_equal(kernels.add_scaled_by_texel(exitance, upsampled, factors, texel),
+    assert np.array_equal(buffer_kernels.add_scaled_by_texel(exitance, upsampled, factors, texel),
                           exitance + factors[texel] * upsampled)
