@@ -300,10 +300,15 @@ class DiscrepancyModel(ProfileModel):
                                    if not k.startswith("discrepancy")})
 
     def residual_scale(self, channel, stderr, predicted, theta):
-        """Return the standard errors inflated by the discrepancy, ``sqrt(s^2 + f^2 mu^2)``."""
-        _, ln_f = self._split(theta)
+        """Return the base model's scale inflated by the discrepancy, ``sqrt(s^2 + f^2 mu^2)``.
+
+        ``s`` is the base model's own scale: the standard errors, plus what the model adds
+        (the walk table's noise).
+        """
+        base_theta, ln_f = self._split(theta)
+        scale = self.base.residual_scale(channel, stderr, predicted, base_theta)
         f = np.exp(ln_f[:, self.channels.index(channel)])[:, None]
-        return np.sqrt(stderr**2 + (f * predicted) ** 2)
+        return np.sqrt(scale**2 + (f * predicted) ** 2)
 
     def scale_normalisation(self, scale):
         """Return ``sum(ln scale)`` per row: the inflated scale varies with ``ln f``."""

@@ -580,6 +580,32 @@ class WalkModel(DipoleModel):
         return np.moveaxis(np.concatenate([first[..., None], values], axis=-1), 1, -1)
 
 
+    def residual_scale(self, channel: int, stderr, predicted, theta) -> np.ndarray:
+        r"""Return the standard errors with the table's own noise added, per annulus.
+
+        :math:`\sqrt{s^2 + (\epsilon\,\mu)^2}`, with :math:`\epsilon` the table's
+        relative standard error (:meth:`~.walk_table.WalkProfileTable.relative_error`) at
+        the annulus's mid radius in this channel's reduced units: the prediction is a Monte
+        Carlo estimate too, and without its noise the intervals were too narrow.
+        """
+        theta = np.atleast_2d(np.asarray(theta, dtype=np.float64))
+        sigma_a, sigma_s_prime, eta, _ = self.split(theta)
+        sigma_t = sigma_a[:, channel] + sigma_s_prime[:, channel]
+        radius = self._annulus_radius(channel)
+        epsilon = self.table.relative_error(sigma_t[:, None] * radius[None, :],
+                                            sigma_s_prime[:, channel] / sigma_t, eta)
+        return np.sqrt(stderr ** 2 + (epsilon * predicted) ** 2)
+
+    def scale_normalisation(self, scale) -> np.ndarray:
+        """Return ``sum(ln scale)`` per row: the table's part varies with the parameters."""
+        return np.sum(np.log(scale), axis=-1)
+
+    def _annulus_radius(self, channel: int) -> np.ndarray:
+        """Mid radius of each annulus of ``channel`` that enters the fit, mm."""
+        edges = self.profile.edges_mm
+        return (0.5 * (edges[:-1] + edges[1:]))[self.profile.used[:, channel]]
+
+
 class SubEditModel(ProfileModel):
     r"""SubEdit profile: ``n + 1`` knots of :math:`\ln P` per channel (Chen et al. 2012, Eq. 9).
 

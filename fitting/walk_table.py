@@ -436,6 +436,38 @@ class WalkProfileTable:
                     np.exp(ln_r[where]), np.exp(ln_end), kappa[profile])))
         return np.exp(value) * albedo[..., None]
 
+    def relative_error(self, radius, albedo, eta) -> np.ndarray:
+        r"""Return the table's own relative standard error at reduced radii.
+
+        The ring holding each radius in the nearest tabulated (eta, albedo) row; beyond the
+        row's last resolved ring, that ring's (the far-field continuation starts from its
+        value). A ring without a finite estimate gets :data:`MAX_RELATIVE_SE`.
+
+        Parameters
+        ----------
+        radius : array_like, shape (..., m)
+            Reduced radii :math:`\sigma'_t r` >= 0.
+        albedo, eta : array_like, shape (...)
+            One per profile, as :meth:`reduced_profile`.
+
+        Returns
+        -------
+        ndarray, shape (..., m)
+            Relative standard error of :math:`\hat R` (dimensionless).
+        """
+        radius = np.asarray(radius, dtype=np.float64)
+        albedo, eta = np.broadcast_arrays(np.asarray(albedo, dtype=np.float64),
+                                          np.asarray(eta, dtype=np.float64))
+        e = np.abs(np.clip(eta, self.etas[0], self.etas[-1])[..., None]
+                   - self.etas).argmin(axis=-1)
+        s = np.sqrt(3.0 * np.clip(1.0 - albedo, 0.0, None))
+        a = np.abs(s[..., None] - self.attenuation).argmin(axis=-1)
+        ring = np.searchsorted(self.edges, radius, side="right") - 1
+        ring = np.minimum(np.clip(ring, 0, self.edges.size - 2),
+                          self._last_resolved[e, a][..., None])
+        rse = self.relative_se[e[..., None], a[..., None], ring]
+        return np.where(np.isfinite(rse), rse, MAX_RELATIVE_SE)
+
     @cached_property
     def _single_scattering_table(self) -> tuple[np.ndarray, np.ndarray]:
         """Return ln r and ln :func:`single_scattering` on a fine grid, per tabulated eta."""

@@ -180,6 +180,47 @@ def test_model_first_interval_holds_the_exitance_inside_it(walk_model):
     assert np.all(values[0] > 0)
 
 
+def test_the_tables_own_error_is_read_at_its_rows_and_rings():
+    table = walk_table.load_table()
+    e, a = 3, 40
+    eta, albedo = table.etas[e], table.albedos[a]
+    last = int(table._last_resolved[e, a])
+    rings = np.array([0, last // 2, last])
+    inside = np.sqrt(table.edges[rings] * table.edges[rings + 1])[None, :]
+    inside[0, 0] = 0.5 * table.edges[1]
+    expected = table.relative_se[e, a, rings]
+    assert np.all(np.isfinite(expected))
+    np.testing.assert_array_equal(table.relative_error(inside, [albedo], [eta]), expected[None])
+    # beyond the last resolved ring: that ring's error, where the far field starts
+    far = np.array([[table.edges[-1] * 2.0]])
+    assert table.relative_error(far, [albedo], [eta])[0, 0] == table.relative_se[e, a, last]
+    # between rows: the nearest
+    nudged = table.relative_error(inside, [albedo], [eta + 0.2 * (table.etas[1] - table.etas[0])])
+    np.testing.assert_array_equal(nudged, expected[None])
+
+
+def test_walk_likelihood_adds_the_tables_noise_to_the_standard_errors(walk_model):
+    from translucent.fitting.models import DipoleModel
+
+    theta = walk_model.initial_guess()[None, :]
+    sigma_a, sigma_s_prime, eta, _ = walk_model.split(theta)
+    predicted = walk_model.predictions(theta)
+    for c in walk_model.channels:
+        _, stderr, _ = walk_model.observations(c)
+        scale = walk_model.residual_scale(c, stderr, predicted[c], theta)
+        sigma_t = sigma_a[0, c] + sigma_s_prime[0, c]
+        edges = walk_model.profile.edges_mm
+        radius = (0.5 * (edges[:-1] + edges[1:]))[walk_model.profile.used[:, c]]
+        epsilon = walk_model.table.relative_error(sigma_t * radius[None], [sigma_s_prime[0, c]
+                                                  / sigma_t], eta)
+        np.testing.assert_allclose(scale, np.sqrt(stderr**2 + (epsilon * predicted[c]) ** 2))
+        assert np.all(scale > stderr) and np.all(epsilon > 0)
+    # the scale depends on the parameters: its normalisation is in the likelihood
+    dipole = DipoleModel(walk_model.profile, walk_model.spec)
+    assert np.ndim(dipole.scale_normalisation(scale)) == 0
+    assert walk_model.scale_normalisation(scale).shape == (1,)
+
+
 def test_walk_model_refuses_what_its_table_does_not_hold():
     from dataclasses import replace
 
