@@ -103,6 +103,9 @@ def precompute(scene, **knobs) -> RadiosityState:
     translucent (and the labels of heterogeneous ones) and the knobs -- never the lights or
     the homogeneous materials, so relighting and translucency changes reuse it. With
     ``max_distance_mm=None`` the cut-off comes from the scene's profiles (part of the key).
+    A precomputation larger than the cache's entry limit
+    (:func:`~translucent.cache.entry_limit`, set by the report) is not stored, and the log
+    says so.
 
     Parameters
     ----------

@@ -236,7 +236,7 @@ def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -
     edit_wall = float(np.median(edit_times))
     # what the product reads and writes: the stored matrix, E^w (one channel for one-colour
     # lights, as the bench's, else three) and the per-basis vectors, float32
-    channels = 1 if prt._single_colour(transfer.samples.to_wavelets(irradiance)) is not None \
+    channels = 1 if prt.single_colour(transfer.samples.to_wavelets(irradiance)) is not None \
         else 3
     frame_bytes = transfer.transfer.nbytes + 4 * channels * (len(transfer.samples)
                                                              + transfer.transfer.rows)

@@ -1,0 +1,179 @@
+"""The PRT method's entry points: applicability, precomputation, the command line."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ...errors import InputError
+from ...image import Image
+from ...materials import Dipole, measured_medium
+from ...materials.dipole_pca import (
+    PARAMETERISATIONS,
+)
+from ..base import StageLog, refuse_inapplicable
+from .knobs import DEFAULT_KNOBS, check_knobs
+from .state import PRTState
+from .transfer import ObjectTransfer, precompute_object, spatial_decision, transfer_key
+
+
+def _translucent_objects(scene) -> list[int]:
+    return [i for i, item in enumerate(scene.objects) if isinstance(item.material, Dipole)]
+
+
+def _other_objects_in_view(scene) -> list[str]:
+    """Names of the objects that are not homogeneous translucent and that the camera sees."""
+    translucent = set(_translucent_objects(scene))
+    if len(translucent) == len(scene.objects):
+        return []
+    from ...scenes.raycast import gbuffer
+
+    seen = set(np.unique(gbuffer(scene).object_id).tolist()) - {-1}
+    return [scene.objects[i].name for i in sorted(seen - translucent)]
+
+
+def applies_to(scene) -> str | None:
+    """None when the method renders ``scene``; otherwise why not.
+
+    It needs a homogeneous translucent object (a :class:`~translucent.materials.Dipole`
+    material), at least one light, and no other object in the camera's view: the method
+    (Wang et al. 2008) computes the multiple scattering of homogeneous translucent objects
+    only, so any other surface the camera sees would be black (its direct light alone would
+    still miss the light it receives from the other objects). Other objects outside the
+    view are fine: they cast shadows through the ray queries.
+    """
+    if not _translucent_objects(scene):
+        return "no homogeneous translucent object (Dipole material) in the scene"
+    if not scene.lights:
+        return "the scene has no light"
+    others = _other_objects_in_view(scene)
+    if others:
+        kinds = ", ".join(f"'{name}' ({type(scene.object(name).material).__name__})"
+                          for name in others)
+        return (f"objects that are not homogeneous translucent are visible in the camera: "
+                f"{kinds}; the method renders only homogeneous translucent objects and would "
+                f"leave them black")
+    return None
+
+
+def precompute(scene, **knobs) -> PRTState:
+    """Precompute the transfer of every homogeneous translucent object (Sect. 3.2).
+
+    Cached on disk (namespace ``prt``) by the object's geometry, ``mm_per_unit`` and the
+    knobs (not the lights, not the material): a second call with the same inputs loads it.
+
+    Parameters
+    ----------
+    scene : Scene
+    **knobs
+        See :data:`DEFAULT_KNOBS`.
+
+    Returns
+    -------
+    PRTState
+
+    Raises
+    ------
+    InputError
+        The method does not apply (see :func:`applies_to`) or a knob is invalid.
+    """
+    from ...cache import Cache
+
+    refuse_inapplicable(scene, applies_to(scene), "the prt method cannot render this scene")
+    knobs = check_knobs(knobs)
+    log = StageLog()
+    cache = Cache("prt")
+    transfers = []
+    start = time.perf_counter()
+    for index in _translucent_objects(scene):
+        item = scene.objects[index]
+        key = transfer_key(item, scene.mm_per_unit, knobs)
+        transfer = cache.load_pickle(key)
+        if isinstance(transfer, ObjectTransfer):
+            log.notes.setdefault("cache", {})[item.name] = "loaded from the cache"
+            spatial_decision(item, knobs, log)
+        else:
+            transfer = precompute_object(item, scene.mm_per_unit, knobs, log)
+            cache.store_pickle(key, transfer)
+            log.notes.setdefault("cache", {})[item.name] = "computed and stored"
+        transfers.append(transfer)
+    others = [o.name for o in scene.objects if not isinstance(o.material, Dipole)]
+    if others:
+        log.skip(f"objects {', '.join(others)} are not homogeneous translucent and outside "
+                 f"the camera's view: they only cast shadows")
+    log.seconds["precompute"] = time.perf_counter() - start
+    return PRTState(scene, knobs, transfers, log)
+
+
+
+# ====================================================================== command line
+
+
+def add_approx_arguments(parser) -> None:
+    """Options of ``translucent approx prt SCENE``."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--material", default=None,
+                       help="a measured medium of Jensen et al. 2001 (Marble, Skin1, ...)")
+    group.add_argument("--sigma-a", type=float, nargs=3, metavar=("R", "G", "B"),
+                       help="absorption coefficient, mm^-1 (with --sigma-s-prime)")
+    parser.add_argument("--sigma-s-prime", type=float, nargs=3, metavar=("R", "G", "B"),
+                        help="reduced scattering coefficient, mm^-1 (with --sigma-a)")
+    parser.add_argument("--eta", type=float, default=None,
+                        help="relative index of refraction (default 1.3, or the medium's)")
+    parser.add_argument("--samples", type=int, default=DEFAULT_KNOBS["samples"],
+                        help="illumination samples: parts x 4^n (default 16384)")
+    parser.add_argument("--parts", type=int, default=DEFAULT_KNOBS["parts"],
+                        help="quadtree parts m (default 4)")
+    parser.add_argument("--terms", type=int, default=DEFAULT_KNOBS["terms"],
+                        help="Haar terms kept per transfer row (default 256)")
+    parser.add_argument("--energy", type=float, default=DEFAULT_KNOBS["energy"],
+                        help="energy fraction kept per transfer row (default 0.9999)")
+    parser.add_argument("--basis", choices=sorted(PARAMETERISATIONS),
+                        default=DEFAULT_KNOBS["basis"], help="R_d basis parameterisation")
+    parser.add_argument("--basis-terms", type=int, default=DEFAULT_KNOBS["basis_terms"],
+                        help="K, PCA terms of R_d (default 12)")
+    parser.add_argument("--spatial", choices=("auto", "on", "off"),
+                        default=DEFAULT_KNOBS["spatial"], help="CDF 9/7 spatial compression")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def material_from_arguments(args) -> Dipole | None:
+    """Return the Dipole the options ask for (None: keep the scene's).
+
+    Raises
+    ------
+    InputError
+        ``--sigma-a`` without ``--sigma-s-prime`` (or the reverse), ``--sigma-s-prime``
+        with ``--material``, bad coefficients.
+    """
+    if args.material and args.sigma_s_prime is not None:
+        raise InputError("give --material or --sigma-a/--sigma-s-prime, not both",
+                         field="sigma_s_prime", value=args.sigma_s_prime)
+    if args.material:
+        medium = measured_medium(args.material)
+        if args.eta is None:
+            return medium
+        return Dipole(medium.sigma_a, medium.sigma_s_prime, args.eta, medium.g, medium.name)
+    if (args.sigma_a is None) != (args.sigma_s_prime is None):
+        raise InputError("give both --sigma-a and --sigma-s-prime (mm^-1, R G B)",
+                         field="sigma_s_prime" if args.sigma_a else "sigma_a", value=None)
+    if args.sigma_a is not None:
+        return Dipole(args.sigma_a, args.sigma_s_prime, 1.3 if args.eta is None else args.eta)
+    if args.eta is not None:
+        raise InputError("--eta needs --material or --sigma-a/--sigma-s-prime", field="eta",
+                         value=args.eta)
+    return None
+
+
+def approx(scene, args) -> Image:
+    """Render ``scene`` with the options parsed by :func:`add_approx_arguments`."""
+    material = material_from_arguments(args)
+    knobs = {"samples": args.samples, "parts": args.parts, "terms": args.terms,
+             "energy": args.energy, "basis": args.basis, "basis_terms": args.basis_terms,
+             "spatial": args.spatial, "progress": not args.no_progress}
+    state = precompute(scene, **knobs)
+    image = state.render(material=material)
+    for sentence in image.metadata.get("skipped", []):
+        print(f"skipped: {sentence}")
+    return image.with_metadata(seconds_precompute=state.log.seconds.get("precompute"))
