@@ -26,7 +26,7 @@ from .atomic import atomic_path
 from .errors import InputError
 
 __all__ = ["cache_dir", "content_hash", "private_cache", "limited_entries", "entry_limit",
-           "ENTRY_LIMIT_VARIABLE", "Cache"]
+           "environment_variable", "ENTRY_LIMIT_VARIABLE", "Cache"]
 
 #: The largest entry, in bytes, that :meth:`Cache.store_pickle` keeps when told its size;
 #: unset or empty: no limit. Set by :func:`limited_entries`, inherited by worker processes.
@@ -43,22 +43,38 @@ def cache_dir() -> Path:
 
 
 @contextlib.contextmanager
+def environment_variable(name: str, value: str | None):
+    """Set the environment variable ``name`` to ``value`` (None: unset) for the block.
+
+    The previous setting comes back afterwards; worker processes started inside inherit
+    the block's.
+    """
+    previous = os.environ.get(name)
+    if value is None:
+        os.environ.pop(name, None)
+    else:
+        os.environ[name] = value
+    try:
+        yield
+    finally:
+        if previous is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = previous
+
+
+@contextlib.contextmanager
 def private_cache(prefix: str = "translucent-cold-"):
     """Point ``TRANSLUCENT_CACHE`` at an empty temporary folder for the block.
 
     Precomputations inside run cold (what a benchmark or a cold-cache report measures);
     the folder is removed and the previous setting restored afterwards. Yields the folder.
     """
-    previous = os.environ.get("TRANSLUCENT_CACHE")
     folder = tempfile.mkdtemp(prefix=prefix)
-    os.environ["TRANSLUCENT_CACHE"] = folder
     try:
-        yield Path(folder)
+        with environment_variable("TRANSLUCENT_CACHE", folder):
+            yield Path(folder)
     finally:
-        if previous is None:
-            os.environ.pop("TRANSLUCENT_CACHE", None)
-        else:
-            os.environ["TRANSLUCENT_CACHE"] = previous
         shutil.rmtree(folder, ignore_errors=True)
 
 
@@ -90,21 +106,12 @@ def limited_entries(max_bytes: int | None):
     Sets :data:`ENTRY_LIMIT_VARIABLE`, so worker processes started inside inherit it; the
     previous setting is restored afterwards.
     """
-    previous = os.environ.get(ENTRY_LIMIT_VARIABLE)
-    if max_bytes is None:
-        os.environ.pop(ENTRY_LIMIT_VARIABLE, None)
-    else:
-        if int(max_bytes) != max_bytes or max_bytes < 0:
-            raise InputError("must be a whole number of bytes >= 0", field="max_bytes",
-                             value=max_bytes)
-        os.environ[ENTRY_LIMIT_VARIABLE] = str(int(max_bytes))
-    try:
+    if max_bytes is not None and (int(max_bytes) != max_bytes or max_bytes < 0):
+        raise InputError("must be a whole number of bytes >= 0", field="max_bytes",
+                         value=max_bytes)
+    with environment_variable(ENTRY_LIMIT_VARIABLE,
+                              None if max_bytes is None else str(int(max_bytes))):
         yield
-    finally:
-        if previous is None:
-            os.environ.pop(ENTRY_LIMIT_VARIABLE, None)
-        else:
-            os.environ[ENTRY_LIMIT_VARIABLE] = previous
 
 
 def _canonical(value: Any) -> Any:

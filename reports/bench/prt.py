@@ -29,7 +29,6 @@ tracing for the 12 measured media is ``translucent bench model_error``
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import time
@@ -38,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ...atomic import atomic_save_figure, atomic_write_text, check_output_file
-from ...cache import private_cache
+from ...cache import environment_variable, private_cache
 from ...errors import check_count
 from ...fast import prt
 from ...materials import Dipole, measured_medium
@@ -147,23 +146,9 @@ def brute_force_error(state, material, vertex_count: int, seed: int = 0) -> floa
                  / np.linalg.norm(reference))
 
 
-@contextlib.contextmanager
-def _environment(name: str, value: str):
-    """Set the environment variable ``name`` to ``value`` for the block."""
-    previous = os.environ.get(name)
-    os.environ[name] = value
-    try:
-        yield
-    finally:
-        if previous is None:
-            os.environ.pop(name, None)
-        else:
-            os.environ[name] = previous
-
-
 def _ray_engine(name: str):
     """Route the scene's ray queries through the engine ``name`` for the block."""
-    return _environment("TRANSLUCENT_RAY_ENGINE", name)
+    return environment_variable("TRANSLUCENT_RAY_ENGINE", name)
 
 
 def shadow_ray_timings(mesh, counts=(16384, 65536), repeats: int = 5) -> list[dict]:
