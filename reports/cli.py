@@ -6,6 +6,9 @@ subcommand lives in its own module under :mod:`translucent.reports.commands` wit
 functions, ``add_arguments(parser)`` and ``run(args) -> int``; the CLI is thin and the work
 happens in the library.
 
+Every command that prints results takes ``--no-progress``, ``--quiet`` and ``--json FILE``
+(:mod:`translucent.reports.commands.record`).
+
 ``TRANSLUCENT_OPTIONS`` (environment) is split like a shell line and put before the
 arguments of the command (after its name, and after the method or benchmark name of
 ``approx`` and ``bench``), so a CI suite can change behaviour in one place; an option given
@@ -24,6 +27,7 @@ import sys
 from .. import signals
 from ..errors import InputError
 from ..signals import Terminated
+from .commands.record import add_common_options, json_target, quiet, write_record
 
 __all__ = ["main", "COMMANDS"]
 
@@ -71,15 +75,14 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def _add_common_options(parser: argparse.ArgumentParser) -> None:
-    """Give every command (and sub-command) ``--no-progress``, the one convention of all."""
+    """Give every command (and sub-command) ``--no-progress``, ``--quiet`` and ``--json``."""
     choices = next((action.choices for action in parser._actions
                     if isinstance(action, argparse._SubParsersAction)), None)
     if choices:
         for command in choices.values():
             _add_common_options(command)
-    elif "--no-progress" not in parser._option_string_actions:
-        parser.add_argument("--no-progress", action="store_true",
-                            help="no progress bars (of the steps that show one)")
+    else:
+        add_common_options(parser)
 
 
 @contextlib.contextmanager
@@ -105,6 +108,16 @@ def _progress_bars(shown: bool):
         yield
     finally:
         std.tqdm.__init__ = original
+
+
+@contextlib.contextmanager
+def _standard_output(silent: bool):
+    """Send what the command prints on standard output nowhere while ``silent``."""
+    if not silent:
+        yield
+        return
+    with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
+        yield
 
 
 def _command_end(parser: argparse.ArgumentParser, argv: list[str]):
@@ -224,8 +237,17 @@ def main(argv: list[str] | None = None) -> int:
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
         previous_interrupt = signal.signal(signal.SIGINT, _on_sigint)
     try:
-        with _progress_bars(not getattr(args, "no_progress", False)):
-            return int(args.run(args) or 0)
+        target = json_target(args)
+        if target not in (None, "-"):
+            from ..atomic import check_output_file
+
+            check_output_file(target, "--json", what="a file name for the JSON record")
+        silent = quiet(args)
+        with _progress_bars(not (silent or getattr(args, "no_progress", False))), \
+                _standard_output(silent):
+            code = int(args.run(args) or 0)
+        write_record(args, code)
+        return code
     except InputError as error:
         print(f"translucent {args.command}: error: {error}", file=sys.stderr)
         return 2

@@ -40,6 +40,7 @@ def run(args) -> int:
     from ...atomic import check_output_file
     from ...errors import InputError
     from ...scenes import load_scene
+    from .record import record
 
     if args.out is not None and Path(args.out).suffix.lower() != ".exr":
         raise InputError("the output must be an OpenEXR file ending in .exr", field="--out",
@@ -52,4 +53,9 @@ def run(args) -> int:
     seconds = image.metadata.get("seconds")
     timing = f" in {seconds:.3g} s" if isinstance(seconds, (int, float)) else ""
     print(f"wrote {out} ({image.shape[1]} x {image.shape[0]}){timing}")
+    record(args, method=args.method, scene=scene.name, out=str(out),
+           width=image.shape[1], height=image.shape[0],
+           seconds=seconds if isinstance(seconds, (int, float)) else None,
+           stage_seconds=image.metadata.get("stage_seconds", {}),
+           skipped=image.metadata.get("skipped", []), notes=image.metadata.get("notes", []))
     return 0

@@ -163,6 +163,11 @@ def run(args) -> int:
 
     write_capture(out, stored, spec)
     saturated = int((stored >= camera.saturation_level).any(axis=2).sum())
+    from .record import record
+
+    record(args, sidecar=str(out), image=str(out.parent / spec.image), size=args.size,
+           pixel_size_mm=pixel, generator=args.generator, saturated_pixels=saturated,
+           exposure_known=bool(spec.exposure), detail=detail)
     print(f"wrote {out} and {spec.image} ({args.size} x {args.size}, {pixel:.4g} mm/px, "
           f"{detail}; {saturated} saturated pixels; exposure "
           f"{'written' if spec.exposure else 'unknown (null)'})")

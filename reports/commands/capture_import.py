@@ -76,4 +76,10 @@ def run(args) -> int:
           f"{result.saturated_pixels} clipped pixels")
     print(f"wrote {result.sidecar}, {result.image.name} and {result.preview.name}: check the "
           f"preview, then `translucent fit {result.sidecar}`")
+    from .record import record
+
+    record(args, sidecar=str(result.sidecar), image=str(result.image),
+           preview=str(result.preview), incident_px=list(result.incident_px),
+           pixel_size_mm=result.pixel_size_mm, saturated_pixels=result.saturated_pixels,
+           spot_contrast=result.spot_contrast)
     return 0

@@ -66,26 +66,42 @@ def _threshold(args):
     return definition, threshold
 
 
-def _table(metrics, definition, threshold, floor=None) -> list[str]:
+def _rows(metrics, definition, threshold, floor=None) -> list[dict]:
+    """Return one entry per metric: value, noise floor, verdict and the threshold's outcome."""
     from ..metrics import METRICS, noise_verdict
 
     values = metrics.as_dict()
     floors = floor.as_dict() if floor is not None else {}
-    rows = [f"{'metric':<10} {'value':>12}  {'noise floor':>12}  {'verdict':<22}  about"]
+    rows = []
     for name, entry in METRICS.items():
         if name == "flip":
             continue  # the same number as hdr-flip
         value = values[entry.field]
         noise = floors.get(entry.field)
-        verdict = noise_verdict(entry.field, value, noise) or "no floor (no variance)"
-        mark = ""
+        row = {"metric": name, "value": value, "noise_floor": noise,
+               "verdict": noise_verdict(entry.field, value, noise),
+               "lower_is_better": entry.lower_is_better, "about": entry.description}
         if threshold is not None and entry.field == definition.field:
-            passed = "ok" if definition.within(value, threshold) else "FAIL"
-            mark = f"  {'<=' if entry.lower_is_better else '>='} {threshold:g}  {passed}"
-        noise_text = f"{noise:>12.4g}" if noise is not None else f"{'-':>12}"
-        rows.append(f"{name:<10} {value:>12.6g}  {noise_text}  {verdict:<22}  "
-                    f"{entry.description}{mark}")
+            row["threshold"] = threshold
+            row["within_threshold"] = bool(definition.within(value, threshold))
+        rows.append(row)
     return rows
+
+
+def _table(rows) -> list[str]:
+    """Return the printed table of :func:`_rows`."""
+    lines = [f"{'metric':<10} {'value':>12}  {'noise floor':>12}  {'verdict':<22}  about"]
+    for row in rows:
+        mark = ""
+        if "threshold" in row:
+            passed = "ok" if row["within_threshold"] else "FAIL"
+            mark = f"  {'<=' if row['lower_is_better'] else '>='} {row['threshold']:g}  {passed}"
+        noise = row["noise_floor"]
+        noise_text = f"{noise:>12.4g}" if noise is not None else f"{'-':>12}"
+        verdict = row["verdict"] or "no floor (no variance)"
+        lines.append(f"{row['metric']:<10} {row['value']:>12.6g}  {noise_text}  "
+                     f"{verdict:<22}  {row['about']}{mark}")
+    return lines
 
 
 def run(args) -> int:
@@ -94,6 +110,7 @@ def run(args) -> int:
     from ...noise import reference_noise_warning
     from ..error_maps import write_error_maps
     from ..metrics import NOISE_MARGIN, evaluate, noise_floor
+    from .record import record
 
     definition, threshold = _threshold(args)
     reference = read_exr(args.reference)
@@ -111,8 +128,9 @@ def run(args) -> int:
              else "reference has no variance: nothing discounted")
     print(f"{args.test} against {args.reference} ({test.shape[1]} x {test.shape[0]}; "
           f"{noise}; display white {metrics.display_white:.4g})")
-    for row in _table(metrics, definition, threshold, floor):
-        print(row)
+    rows = _rows(metrics, definition, threshold, floor)
+    for line in _table(rows):
+        print(line)
     if floor is not None:
         print("noise floor: each metric of the reference against itself perturbed by its own "
               "noise; 'within reference noise': the value does not clear the floor by a "
@@ -122,6 +140,11 @@ def run(args) -> int:
         print(f"warning: {warning}", file=sys.stderr)
     if files:
         print(f"error maps: {', '.join(str(f.png) for f in files.values())} (and .exr)")
+    record(args, reference=args.reference, test=args.test,
+           width=test.shape[1], height=test.shape[0],
+           noise_discounted=metrics.noise_discounted, display_white=metrics.display_white,
+           metrics=rows, reference_warning=warning or None,
+           maps={name: {"png": str(f.png), "exr": str(f.exr)} for name, f in files.items()})
     if threshold is None:
         return 0
     return 0 if definition.within(getattr(metrics, definition.field), threshold) else 1

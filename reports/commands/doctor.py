@@ -38,6 +38,7 @@ def run(args) -> int:
     from ...backend import backend_facts
     from ...errors import InputError
     from ...fast.splatting_cuda import available
+    from .record import record
 
     status = 0
     try:
@@ -51,4 +52,5 @@ def run(args) -> int:
     width = max(len(key) for key in facts)
     for key, value in facts.items():
         print(f"{key:<{width}}  {value}")
+    record(args, facts={key: str(value) for key, value in facts.items()})
     return status

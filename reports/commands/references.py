@@ -3,8 +3,9 @@
 Without a sub-command, lists each built-in scene's committed reference: its file, spp x
 passes, the median and 99th-percentile relative standard error over its lit pixels (the
 pixels the report scores), how long it took to render, and whether it is current (rendered
-from the scene as it loads now). ``--json FILE`` (``-`` for standard output) writes the same
-for scripts. Exit code 1 when any committed reference is missing or stale.
+from the scene as it loads now). The common ``--json FILE`` (``-`` for standard output) writes
+the same for scripts, under ``references``. Exit code 1 when any committed reference is
+missing or stale.
 
 ``translucent references render NAME ...`` renders the named references again (``all`` for
 every one): passes are added until the noise target of the scene's plan is met or its budget
@@ -14,14 +15,12 @@ is complete.
 
 from __future__ import annotations
 
-import json
-import sys
-
 from ...errors import InputError
+from .record import record
 
 
 def add_arguments(parser):
-    """``[render NAME ...] [--budget S] [--json FILE] [--no-progress]``."""
+    """``[render NAME ...] [--budget S]``, and the common options."""
     parser.add_argument("action", nargs="?", choices=["list", "render"], default="list",
                         help="list the committed references (default) or render them again")
     parser.add_argument("names", nargs="*", metavar="NAME",
@@ -29,9 +28,6 @@ def add_arguments(parser):
     parser.add_argument("--budget", type=float, default=None, metavar="SECONDS",
                         help="with render: rendering time at most per scene (default: the "
                         "scene's plan)")
-    parser.add_argument("--json", default=None, metavar="FILE",
-                        help="also write the listing as JSON ('-': standard output)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def _row(name: str) -> dict:
@@ -87,25 +83,11 @@ def run(args) -> int:
                              field="NAME", value=args.names)
         if args.budget is not None:
             raise InputError("goes with 'render'", field="--budget", value=args.budget)
-        if args.json not in (None, "-"):
-            from ...atomic import check_output_file
-
-            check_output_file(args.json, "--json", what="a file name for the listing")
         rows = [_row(name) for name in names]
         _print_rows(rows)
-        if args.json is not None:
-            text = json.dumps({"references": rows}, indent=2)
-            if args.json == "-":
-                sys.stdout.write(text + "\n")
-            else:
-                from ...atomic import atomic_write_text
-
-                atomic_write_text(args.json, text + "\n")
+        record(args, references=rows)
         return 0 if all(row["current"] for row in rows) else 1
 
-    if args.json is not None:
-        raise InputError("goes with the listing, not with 'render'", field="--json",
-                         value=args.json)
     wanted = names if args.names == ["all"] else list(args.names)
     if not wanted:
         raise InputError(f"name the scenes to render, or 'all' (planned: {', '.join(names)})",
@@ -116,11 +98,16 @@ def run(args) -> int:
                          f"{', '.join(names)})", field="NAME", value=unknown[0])
     if args.budget is not None and not args.budget > 0:
         raise InputError("must be > 0 seconds", field="--budget", value=args.budget)
+    rendered = []
     for name in wanted:
         image = render_committed(name, budget_seconds=args.budget,
                                  progress=not args.no_progress)
         meta = image.metadata
         noise = meta["noise"]
+        rendered.append({"scene": name, "spp": meta["spp"], "passes": meta["passes"],
+                         "seconds": meta["seconds"], "stopped": meta["stopped"],
+                         "noise": noise})
+        record(args, rendered=rendered)
         print(f"wrote {name}: {meta['spp']} spp x {meta['passes']} passes in "
               f"{meta['seconds']:.0f} s ({meta['stopped']}); relative standard error median "
               f"{100 * noise['median']:.3g} %, 99th percentile {100 * noise['p99']:.3g} %")

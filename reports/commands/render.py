@@ -145,4 +145,14 @@ def _render_and_write(args, scene, out: Path, progressive: bool) -> int:
     warning = reference_noise_warning(image.rgb, image.variance)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
+    from ...noise import noise_summary
+    from .record import record
+
+    record(args, scene=scene.name, out=str(out), width=image.shape[1], height=image.shape[0],
+           noise=(noise_summary(image.rgb, image.variance).as_dict()
+                  if image.variance is not None else None),
+           reference_warning=warning or None,
+           header={key: meta.get(key) for key in (
+               "spp", "passes", "seconds", "integrator", "variant", "mitsuba", "per_channel",
+               "stopped", "substitutions", "manifold_nee", "scene_hash")})
     return 0

@@ -81,4 +81,9 @@ def run(args) -> int:
                          serial=args.serial, spp=args.spp, passes=args.passes,
                          progress=not args.no_progress,
                          keep_precomputations=args.keep_precomputations)
+    from .record import record
+
+    record(args, out=str(result.out), metrics=str(result.out / "metrics.json"),
+           page=str(result.out / "index.html"), seconds=result.seconds,
+           regressions=result.regressions, summary=result.summary)
     return result.exit_code

@@ -16,12 +16,15 @@ def add_arguments(parser):
 def run(args) -> int:
     """Print the catalogue, or the summary of one scene."""
     from ...scenes import builtin_scene_descriptions, load_scene
+    from .record import record
 
     if args.show is None:
         descriptions = builtin_scene_descriptions()
         width = max((len(name) for name in descriptions), default=0)
         for name, description in descriptions.items():
             print(f"{name + ':':<{width + 1}} {description}")
+        record(args, scenes=[{"name": name, "description": description}
+                             for name, description in descriptions.items()])
         return 0
     scene = load_scene(args.show)
     camera = scene.camera
@@ -39,4 +42,16 @@ def run(args) -> int:
               f"{label}")
     for light in scene.lights:
         print(f"  light {type(light).__name__}")
+    record(args, scene={
+        "name": scene.name, "description": scene.description, "source": str(scene.source),
+        "mm_per_unit": scene.mm_per_unit,
+        "camera": {"width": camera.width, "height": camera.height, "fov": camera.fov,
+                   "origin": camera.origin, "target": camera.target},
+        "objects": [{"name": item.name, "vertices": len(item.mesh.vertices),
+                     "faces": len(item.mesh.faces),
+                     "area_mm2": item.mesh.area * scene.mm_per_unit ** 2,
+                     "material": type(item.material).__name__,
+                     "material_name": getattr(item.material, "name", None)}
+                    for item in scene.objects],
+        "lights": [type(light).__name__ for light in scene.lights]})
     return 0

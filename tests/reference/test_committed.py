@@ -194,7 +194,6 @@ def test_references_command_with_the_shipped_files(capsys, tmp_path):
     (["--budget", "5"], "--budget"),
     (["render", "glossy", "--budget", "0"], "--budget"),
     (["render", "glossy", "--budget", "nan"], "--budget"),
-    (["render", "glossy", "--json", "x.json"], "--json"),
 ])
 def test_references_command_bad_usage(capsys, arguments, field):
     assert main(["references", *arguments]) == 2
