@@ -6,8 +6,13 @@ The suite is organised one folder a concept, data flowing left to right::
                        \-> fast      -/
     materials -> fitting -------------/
 
-Importing the top-level package is cheap: Mitsuba is loaded only when a ray query or a
-reference render first needs it (see :mod:`translucent.backend`).
+From Python, the package offers what the command line does (:mod:`translucent.api`):
+``load_scene``, ``render``, ``compare``, ``approx``, ``method`` and ``fit``, with ``Image``
+and ``InputError``.
+
+Importing the top-level package is cheap: those functions are imported when first used,
+and Mitsuba only when a ray query or a reference render first needs it (see
+:mod:`translucent.backend`).
 """
 
 from .backend import configure_libllvm
@@ -18,4 +23,19 @@ configure_libllvm()
 
 __version__ = "0.1.0"
 
-__all__ = ["Image", "InputError", "__version__"]
+#: The functions of :mod:`translucent.api`, imported on first use.
+API = ("load_scene", "render", "compare", "approx", "method", "fit")
+
+__all__ = ["Image", "InputError", "__version__", *API]
+
+
+def __getattr__(name):
+    if name in API:
+        from . import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'translucent' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(API))

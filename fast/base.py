@@ -17,7 +17,9 @@ path: relighting (new lights) and editing (new material) without precomputing ag
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import time
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -25,7 +27,7 @@ from ..errors import InputError
 from ..image import Image
 
 __all__ = ["METHODS", "PrecomputedState", "method", "refuse_inapplicable", "StageLog",
-           "with_defaults"]
+           "StageProgress", "with_defaults"]
 
 #: method name -> module under translucent.fast
 METHODS: dict[str, str] = {
@@ -58,6 +60,57 @@ class StageLog:
     def skip(self, sentence: str) -> None:
         """Record that a step was skipped and why."""
         self.skipped.append(sentence)
+
+
+class StageProgress:
+    """Time a precomputation's stages into a :class:`StageLog`, one progress-bar step each.
+
+    The bar (tqdm, on standard error) names the stage under way; it stays hidden where
+    standard error is not a terminal, and under the command line's ``--no-progress`` or
+    ``--quiet``.
+
+    Parameters
+    ----------
+    log : StageLog
+        Where each stage's wall-clock seconds go (``log.seconds[name]``).
+    description : str
+        The bar's label (``"radiosity precomputation"``).
+    stages : int
+        How many stages the bar counts.
+    enabled : bool
+        False hides the bar (the seconds are still recorded).
+
+    Examples
+    --------
+    >>> log = StageLog()
+    >>> with StageProgress(log, "example", stages=1, enabled=False) as progress:
+    ...     with progress.stage("patches"):
+    ...         pass
+    >>> list(log.seconds)
+    ['patches']
+    """
+
+    def __init__(self, log: StageLog, description: str, stages: int, enabled: bool = True):
+        from tqdm import tqdm
+
+        self.log = log
+        self._bar = tqdm(total=stages, desc=description, unit="stage", leave=False,
+                         disable=not enabled or None)
+
+    @contextlib.contextmanager
+    def stage(self, name: str):
+        """Time the block as stage ``name`` and advance the bar when it ends."""
+        self._bar.set_postfix_str(name, refresh=True)
+        started = time.perf_counter()
+        yield
+        self.log.seconds[name] = time.perf_counter() - started
+        self._bar.update(1)
+
+    def __enter__(self) -> StageProgress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._bar.close()
 
 
 def method(name: str):

@@ -99,7 +99,7 @@ from ..scenes.scene import (
     SphereAreaLight,
     SpotLight,
 )
-from .base import StageLog, refuse_inapplicable, with_defaults
+from .base import StageLog, StageProgress, refuse_inapplicable, with_defaults
 from .sparse_transport import QuantisedRows, SparseRows, _product_rgb, nonlinear_approximation
 from .wavelets import haar2d_forward, haar2d_support_weights, quadtree_layout
 
@@ -1075,25 +1075,28 @@ def _gather_matrix(scene, gather, columns, knobs) -> QuantisedRows:
 
 def _compute(scene, knobs) -> Precomputation:
     log = StageLog()
+    with StageProgress(log, "brdf_pca precomputation", stages=6) as progress:
+        return _compute_stages(scene, knobs, log, progress)
+
+
+def _compute_stages(scene, knobs, log: StageLog, progress: StageProgress) -> Precomputation:
     rng = np.random.default_rng(knobs["seed"])
-    started = time.perf_counter()
-    view = _view_samples(scene)
+    with progress.stage("view_samples"):
+        view = _view_samples(scene)
     shape, pixel, _, _, _, obj = view
     if len(pixel) == 0:
         raise InputError("the camera sees no surface", field="camera", value=scene.name)
-    log.seconds["view_samples"] = time.perf_counter() - started
     glossy_objects = [i for i, o in enumerate(scene.objects) if _is_glossy(o.material)]
     diffuse_names = [o.name for o in scene.objects if not _is_glossy(o.material)]
     if diffuse_names:
         log.skip(f"no PCA transfer for objects without an analytic BRDF: "
                  f"{', '.join(diffuse_names)} (diffuse transfer D only)")
-    started = time.perf_counter()
-    positions, normals, objects, glossy = _shoot_gather_samples(
-        scene, view, np.isin(obj, glossy_objects), knobs["gather_samples"], knobs, rng, log)
-    log.seconds["gather_samples"] = time.perf_counter() - started
-    started = time.perf_counter()
-    area = _gather_areas(scene, positions, normals, knobs["area_samples_per_gather"], rng)
-    log.seconds["gather_areas"] = time.perf_counter() - started
+    with progress.stage("gather_samples"):
+        positions, normals, objects, glossy = _shoot_gather_samples(
+            scene, view, np.isin(obj, glossy_objects), knobs["gather_samples"], knobs, rng,
+            log)
+    with progress.stage("gather_areas"):
+        area = _gather_areas(scene, positions, normals, knobs["area_samples_per_gather"], rng)
     columns = knobs["gather_samples"]
     missing = columns - len(positions)
     if missing > 0:
@@ -1107,25 +1110,23 @@ def _compute(scene, knobs) -> Precomputation:
     order = _gather_layout(positions, normals)
     positions, normals, objects, glossy, area = (positions[order], normals[order],
                                                  objects[order], glossy[order], area[order])
-    started = time.perf_counter()
-    bases = {i: build_pca_basis(scene.objects[i].material.model, knobs["n_basis"])
-             for i in glossy_objects}
-    log.seconds["pca_bases"] = time.perf_counter() - started
+    with progress.stage("pca_bases"):
+        bases = {i: build_pca_basis(scene.objects[i].material.model, knobs["n_basis"])
+                 for i in glossy_objects}
     if not knobs["subarea"]:
         log.skip("no sub-area sampling: switched off by the subarea knob")
-    started = time.perf_counter()
     gather = (positions, normals, area)
-    diffuse, transfer, budgets = _transfer(scene, view, gather, columns, knobs, bases, log)
-    log.seconds["transfer"] = time.perf_counter() - started
-    started = time.perf_counter()
-    if knobs["bounces"] == 0:
-        log.skip("no multi-bounce series: bounces = 0 (one bounce of indirect light only)")
-        empty = SparseRows(np.zeros(len(positions) + 1, dtype=np.int64),
-                           np.zeros(0, dtype=np.int32), np.zeros(0, dtype=np.float32), columns)
-        matrix = empty.quantised()
-    else:
-        matrix = _gather_matrix(scene, gather, columns, knobs)
-    log.seconds["gather_matrix"] = time.perf_counter() - started
+    with progress.stage("transfer"):
+        diffuse, transfer, budgets = _transfer(scene, view, gather, columns, knobs, bases, log)
+    with progress.stage("gather_matrix"):
+        if knobs["bounces"] == 0:
+            log.skip("no multi-bounce series: bounces = 0 (one bounce of indirect light only)")
+            empty = SparseRows(np.zeros(len(positions) + 1, dtype=np.int64),
+                               np.zeros(0, dtype=np.int32), np.zeros(0, dtype=np.float32),
+                               columns)
+            matrix = empty.quantised()
+        else:
+            matrix = _gather_matrix(scene, gather, columns, knobs)
     log.notes.update(view_samples=len(pixel), gather_samples=len(positions),
                      glossy_gather_samples=int(glossy.sum()), columns=columns,
                      budgets={scene.objects[i].name: b for i, b in budgets.items()})

@@ -57,6 +57,7 @@ __all__ = [
     "noise_verdict",
     "evaluate",
     "metric",
+    "metric_rows",
     "relative_mse",
     "relative_error_map",
     "rmse",
@@ -855,3 +856,44 @@ def metric(name: str) -> MetricDefinition:
         raise InputError(f"unknown metric; valid: {', '.join(METRICS)}", field="metric",
                          value=name)
     return METRICS[key]
+
+
+def metric_rows(metrics: Metrics, floor: Metrics | None = None, *,
+                definition: MetricDefinition | None = None,
+                threshold: float | None = None) -> list[dict]:
+    """Return each metric of ``metrics`` beside its noise floor and verdict, as plain data.
+
+    Parameters
+    ----------
+    metrics : Metrics
+        The scores (:func:`compare`).
+    floor : Metrics, optional
+        The same metrics of the reference against its own noise (:func:`noise_floor`);
+        None: no verdicts.
+    definition, threshold : optional
+        A metric and the bound it is held to: its row gains ``threshold`` and
+        ``within_threshold``.
+
+    Returns
+    -------
+    list of dict
+        One per metric of :data:`METRICS` (``flip`` folded into ``hdr-flip``): ``metric``,
+        ``value``, ``noise_floor``, ``verdict`` (:data:`RESOLVED`, :data:`WITHIN_NOISE` or
+        None), ``lower_is_better``, ``about``.
+    """
+    values = metrics.as_dict()
+    floors = floor.as_dict() if floor is not None else {}
+    rows = []
+    for name, entry in METRICS.items():
+        if name == "flip":
+            continue  # the same number as hdr-flip
+        value = values[entry.field]
+        noise = floors.get(entry.field)
+        row = {"metric": name, "value": value, "noise_floor": noise,
+               "verdict": noise_verdict(entry.field, value, noise),
+               "lower_is_better": entry.lower_is_better, "about": entry.description}
+        if threshold is not None and definition is not None and entry.field == definition.field:
+            row["threshold"] = threshold
+            row["within_threshold"] = bool(definition.within(value, threshold))
+        rows.append(row)
+    return rows

@@ -11,7 +11,7 @@ from ...materials.profiles import (
     MixedProfiles,
     profile_for,
 )
-from ..base import StageLog, refuse_inapplicable, with_defaults
+from ..base import StageLog, StageProgress, refuse_inapplicable, with_defaults
 from ..form_factors import build_patches, form_factors, needs_form_factors
 from ..optical_distance import (
     closed_surface,
@@ -143,29 +143,30 @@ def precompute(scene, **knobs) -> RadiosityState:
             log.notes["solid medium"] = solid_notes
         return RadiosityState(scene, patches, F, geometry, resolved, log)
     log = StageLog()
-    started = time.perf_counter()
-    patches = build_patches(scene, triangles_per_patch=resolved["triangles_per_patch"],
-                            two_sided=sheets)
-    for index in sheets:
-        log.notes.setdefault("thin sheets", []).append(scene.objects[index].name)
-    log.seconds["patches"] = time.perf_counter() - started
-    log.notes["patches"] = len(patches)
     reason = needs_form_factors(scene)
-    if reason is not None:
-        log.skip(reason)
-        F = None
-    else:
-        started = time.perf_counter()
-        F, facts = form_factors(scene, patches, rays_per_patch=resolved["rays_per_patch"],
-                                threshold=resolved["form_factor_threshold"],
-                                seed=resolved["seed"])
-        log.seconds["form_factors"] = time.perf_counter() - started
-        log.notes["form_factors"] = facts
-    started = time.perf_counter()
-    geometry = scattering_geometry(scene, patches, translucent,
-                                   max_distance_mm=resolved["max_distance_mm"], knobs=resolved,
-                                   log=log, sheet_thickness_mm=resolved["sheet_thickness_mm"])
-    log.seconds["scattering"] = time.perf_counter() - started
+    F = None
+    with StageProgress(log, "radiosity precomputation",
+                       stages=2 if reason else 3) as progress:
+        with progress.stage("patches"):
+            patches = build_patches(scene, triangles_per_patch=resolved["triangles_per_patch"],
+                                    two_sided=sheets)
+        for index in sheets:
+            log.notes.setdefault("thin sheets", []).append(scene.objects[index].name)
+        log.notes["patches"] = len(patches)
+        if reason is not None:
+            log.skip(reason)
+        else:
+            with progress.stage("form_factors"):
+                F, facts = form_factors(scene, patches,
+                                        rays_per_patch=resolved["rays_per_patch"],
+                                        threshold=resolved["form_factor_threshold"],
+                                        seed=resolved["seed"])
+            log.notes["form_factors"] = facts
+        with progress.stage("scattering"):
+            geometry = scattering_geometry(scene, patches, translucent,
+                                           max_distance_mm=resolved["max_distance_mm"],
+                                           knobs=resolved, log=log,
+                                           sheet_thickness_mm=resolved["sheet_thickness_mm"])
     log.notes["scattering_bytes"] = geometry.bytes
     log.notes["max_distance_mm"] = resolved["max_distance_mm"]
     log.notes["cache"] = "miss"

@@ -66,30 +66,8 @@ def _threshold(args):
     return definition, threshold
 
 
-def _rows(metrics, definition, threshold, floor=None) -> list[dict]:
-    """Return one entry per metric: value, noise floor, verdict and the threshold's outcome."""
-    from ..metrics import METRICS, noise_verdict
-
-    values = metrics.as_dict()
-    floors = floor.as_dict() if floor is not None else {}
-    rows = []
-    for name, entry in METRICS.items():
-        if name == "flip":
-            continue  # the same number as hdr-flip
-        value = values[entry.field]
-        noise = floors.get(entry.field)
-        row = {"metric": name, "value": value, "noise_floor": noise,
-               "verdict": noise_verdict(entry.field, value, noise),
-               "lower_is_better": entry.lower_is_better, "about": entry.description}
-        if threshold is not None and entry.field == definition.field:
-            row["threshold"] = threshold
-            row["within_threshold"] = bool(definition.within(value, threshold))
-        rows.append(row)
-    return rows
-
-
 def _table(rows) -> list[str]:
-    """Return the printed table of :func:`_rows`."""
+    """Return the printed table of :func:`~translucent.reports.metrics.metric_rows`."""
     lines = [f"{'metric':<10} {'value':>12}  {'noise floor':>12}  {'verdict':<22}  about"]
     for row in rows:
         mark = ""
@@ -109,7 +87,7 @@ def run(args) -> int:
     from ...image import read_exr
     from ...noise import reference_noise_warning
     from ..error_maps import write_error_maps
-    from ..metrics import NOISE_MARGIN, evaluate, noise_floor
+    from ..metrics import NOISE_MARGIN, evaluate, metric_rows, noise_floor
     from .record import record
 
     definition, threshold = _threshold(args)
@@ -128,7 +106,7 @@ def run(args) -> int:
              else "reference has no variance: nothing discounted")
     print(f"{args.test} against {args.reference} ({test.shape[1]} x {test.shape[0]}; "
           f"{noise}; display white {metrics.display_white:.4g})")
-    rows = _rows(metrics, definition, threshold, floor)
+    rows = metric_rows(metrics, floor, definition=definition, threshold=threshold)
     for line in _table(rows):
         print(line)
     if floor is not None:
