@@ -74,13 +74,11 @@ PLANS: dict[str, ReferencePlan] = {
     "solid_checker": ReferencePlan(spp=256, budget_seconds=1500.0),
     "solid_veins": ReferencePlan(spp=256, budget_seconds=2400.0),
     "solid_gradient": ReferencePlan(spp=256, budget_seconds=1500.0),
-    # manifold next-event estimation costs 15-20x volpath's time per sample, and Skin1's
-    # shadowed half is lit only by light diffused round the sphere (the darkest quarter of
-    # the lit pixels has 4x the median's error, and the median fell only as passes^-0.32
-    # between 132 and 182 passes as dim pixels got lit; the 99th percentile, those dim
-    # pixels, stayed at 35-36 % from 182 to 228 passes): 1 % / 5 % would take many hours
-    # on this 2-core CPU (docs/references.md), so the target is looser until a GPU
-    # renders it
+    # manifold next-event estimation costs 15-20x volpath's time per sample, and the
+    # sphere's refraction caustic lies inside the medium, in the shadowed half: the
+    # connection's weight is unbounded there, the median fell only as passes^-0.32 and the
+    # 99th percentile stayed at 35-36 % from 182 to 251 passes (docs/references.md). The
+    # target is looser until a light-side strategy (or a GPU) renders it
     "sphere_dielectric": ReferencePlan(spp=64, budget_seconds=5400.0, target_rse=0.02,
                                        target_p99_rse=0.40),
 }

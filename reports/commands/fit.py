@@ -56,7 +56,7 @@ def add_arguments(parser):
 def run(args) -> int:
     """Fit, write the outputs, print the summary; 1 if a chain did not converge or misfit."""
     from ...fitting.fit import fit_capture
-    from .record import record
+    from .record import json_target, record
 
     capture = Path(args.capture)
     out_dir = Path(args.out) if args.out else capture.with_name(f"{capture.stem}_fit")
@@ -100,6 +100,7 @@ def run(args) -> int:
             print(f"  note: {note}")
         status = max(status, 0 if result.converged and not result.misfit else 1)
     print(f"wrote {out_dir}/")
-    record(args, capture=str(capture), out=str(out_dir),
-           fits={kind: result.summary() for kind, result in results.items()})
+    if json_target(args) is not None:
+        record(args, capture=str(capture), out=str(out_dir),
+               fits={kind: result.summary() for kind, result in results.items()})
     return status

@@ -54,6 +54,8 @@ def quiet(args) -> bool:
 
 def record(args, **fields) -> None:
     """Add ``fields`` to the command's record (kept only where ``--json`` asks for it)."""
+    if json_target(args) is None:
+        return
     held = getattr(args, _RECORD, None)
     if held is None:
         held = {}
