@@ -102,7 +102,13 @@ def walk_exits(seed, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius, 
                                           beam_radius, r_kill, capacity,
                                           interactions=interactions)
         if count <= capacity:
-            return [array[:count] for array in arrays], lost
+            # the kernel appends exits through an atomic counter, in whatever order the
+            # lanes reach it; ordered by photon (each photon's own exits stay in the order
+            # it made them), the scoring that follows draws the same rotation for the same
+            # exit every run, so one seed gives one capture
+            photon = arrays[6][:count]
+            order = np.argsort(photon, kind="stable")
+            return [array[:count][order] for array in arrays], lost
         capacity = int(count * 1.25) + 1
 
 
