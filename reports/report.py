@@ -64,7 +64,7 @@ from .regression import (
     load_baseline,
     updated_baseline,
 )
-from .report_page import format_seconds, format_value, html_page
+from .report_page import format_seconds, format_speedup, format_value, html_page
 from .runs import (
     MethodRun,
     backend_versions,
@@ -76,6 +76,7 @@ from .runs import (
     run_method,
     timestamp,
 )
+from .speedup import PATH_TRACING_SPP, scored_curve, speedup, tradeoff_plot
 
 __all__ = [
     "METRIC_LABELS",
@@ -126,6 +127,9 @@ REPORT_CACHE_ENTRY_LIMIT = 256 * 2**20
 
 #: Bumped when what a cached method run holds changes, so older entries miss.
 RUN_FORMAT = 1
+
+#: The owner name of a scene's path-tracing ladder task (not a method).
+PATH_TRACING = "path tracing"
 
 #: Built-in scenes the default run leaves out, and why (shown in the page).
 EXCLUDED_SCENES: dict[str, str] = {
@@ -268,6 +272,11 @@ class SceneReport:
     metric_errors: dict[str, str] = field(default_factory=dict)
     checks: dict[str, BaselineCheck] = field(default_factory=dict)
     files: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: what the path-tracing ladder task returned, its scored curve, each method's speed-up
+    #: (:mod:`translucent.reports.speedup`)
+    path_tracing: Any = None
+    curve: Any = None
+    speedups: dict[str, dict] = field(default_factory=dict)
 
 
 @dataclass
@@ -502,11 +511,22 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 continue
             tasks.append(("method", portable(report), name, {}))
             owners.append((report, name, key))
+        # the path-tracing ladder, for the speed-ups of the methods that will be scored
+        if not report.reference_error and any(
+                report.runs.get(n) is None or report.runs[n].status == "ok" for n in chosen):
+            key = content_hash("path tracing", report.scene_hash, PATH_TRACING_SPP, versions,
+                               fingerprint)
+            report.path_tracing = run_cache.load_pickle(key)
+            if report.path_tracing is None:
+                tasks.append(("path tracing", portable(report), list(PATH_TRACING_SPP)))
+                owners.append((report, PATH_TRACING, key))
 
     if tasks:
         print(f"running {len(tasks)} task(s): "
               f"{sum(1 for t in tasks if t[0] == 'reference')} reference render(s), "
-              f"{sum(1 for t in tasks if t[0] == 'method')} method run(s)", file=stream,
+              f"{sum(1 for t in tasks if t[0] == 'method')} method run(s), "
+              f"{sum(1 for t in tasks if t[0] == 'path tracing')} path-tracing ladder(s)",
+              file=stream,
               flush=True)
         with limited_entries(None if keep_precomputations else REPORT_CACHE_ENTRY_LIMIT):
             results = run_tasks(report_task, tasks, scheduler=scheduler, local=serial,
@@ -514,6 +534,11 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     else:
         results = []
     for (report, name, key), result in zip(owners, results, strict=True):
+        if name == PATH_TRACING:
+            report.path_tracing = result
+            if isinstance(result, list) and not any("error" in p for p in result):
+                run_cache.store_pickle(key, result)
+            continue
         if name is None:
             if isinstance(result, Image):
                 report.reference = result
@@ -653,6 +678,26 @@ def _compare_and_write(report: SceneReport, folder: Path) -> None:
             or "no floor (the reference has no variance)" for key in NOISE_FLOOR_FIELDS}
         for map_name, map_files in maps.items():
             files[f"map_{map_name}"] = f"{report.slug}/{map_files.png.name}"
+    _speedups(report, scene_folder)
+
+
+def _speedups(report: SceneReport, scene_folder: Path) -> None:
+    """Score the path-tracing ladder; each method's speed-up at equal error; the plot."""
+    if report.reference is None or report.path_tracing is None:
+        return
+    report.curve = scored_curve(report.path_tracing, report.reference, report.scored_mask)
+    points = {}
+    for name, metrics in report.metrics.items():
+        run = report.runs[name]
+        verdict = report.verdicts.get(name, {}).get("relative_mse")
+        report.speedups[name] = speedup(report.curve, metrics.get("relative_mse"),
+                                        run.frame_seconds, verdict)
+        points[name] = (run.frame_seconds, metrics.get("relative_mse"))
+    floor = (report.noise_floor or {}).get("relative_mse")
+    plotted = tradeoff_plot(scene_folder / "tradeoff.png", report.curve, points, floor,
+                            f"{report.name}: run time against error")
+    if plotted is not None:
+        report.files["tradeoff"] = {"png": f"{report.slug}/tradeoff.png"}
 
 
 def _scored_pixels(scene):
@@ -702,10 +747,26 @@ def _summary(reports: list[SceneReport], chosen: list[str]) -> list[dict]:
                                  if verdict == "within reference noise"],
                 "precompute_seconds": run.precompute_seconds if run else None,
                 "frame_seconds": run.frame_seconds if run else None,
+                "first_frame_seconds": run.first_frame_seconds if run else None,
+                **_speedup_fields(report, name),
                 "cached": bool(run and run.cached),
                 "baseline": check.status if check else "",
             })
     return rows
+
+
+def _speedup_fields(report: SceneReport, name: str) -> dict:
+    """Return a method's speed-up over path tracing and why it is missing, for the JSON."""
+    found = report.speedups.get(name)
+    if found is None:
+        reason = ("the method was not scored" if name not in report.metrics else
+                  "no path-tracing ladder on this scene")
+        return {"speedup_vs_path_tracing": None, "speedup_reason": reason,
+                "path_tracing_seconds_at_equal_error": None, "speedup_extrapolated": False}
+    return {"speedup_vs_path_tracing": json_safe(found["speedup_vs_path_tracing"]),
+            "speedup_reason": found["reason"],
+            "path_tracing_seconds_at_equal_error": json_safe(found["path_tracing_seconds"]),
+            "speedup_extrapolated": found["extrapolated"]}
 
 
 def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) -> dict:
@@ -741,11 +802,14 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
             entry["files"] = report.files.get(name, {})
             check = report.checks.get(name)
             entry["baseline"] = check.as_dict() if check else None
+            entry.update(_speedup_fields(report, name))
             methods[name] = entry
         scenes[report.name] = {"source": str(report.scene.source or ""),
                                "description": report.scene.description,
                                "scene_hash": report.scene_hash, "folder": report.slug,
                                "reference": reference, "reference_error": report.reference_error,
+                               "path_tracing": (json_safe(report.curve.as_dict())
+                                                if report.curve is not None else None),
                                "methods": methods}
     tolerances = {name: {"absolute": t.absolute, "relative": t.relative,
                          "lower_is_better": t.lower_is_better} for name, t in TOLERANCES.items()}
@@ -755,7 +819,8 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
 def _print_summary(summary, regressions, out, seconds, updated, baseline_path, stream):
     width = max((len(r["scene"]) for r in summary), default=5)
     print(f"{'scene':<{width}}  {'method':<10} {'HDR-FLIP':>8} {'(noise)':>7} {'relMSE':>9} "
-          f"{'(noise)':>9} {'dE2000':>7} {'SSIM':>6} {'precomp':>8} {'frame':>8}  verdict",
+          f"{'(noise)':>9} {'dE2000':>7} {'SSIM':>6} {'precomp':>8} {'frame':>8} "
+          f"{'vs PT':>7}  verdict",
           file=stream)
     for row in summary:
         if row["status"] != "ok":
@@ -772,7 +837,9 @@ def _print_summary(summary, regressions, out, seconds, updated, baseline_path, s
               f"{format_value(floor['relative_mse'], 2):>9} "
               f"{format_value(row['ciede2000'], 3):>7} "
               f"{format_value(row['ssim'], 3):>6} {format_seconds(row['precompute_seconds']):>8} "
-              f"{format_seconds(row['frame_seconds']):>8}  {row['baseline']}{cached}{noisy}",
+              f"{format_seconds(row['frame_seconds']):>8} "
+              f"{format_speedup(row['speedup_vs_path_tracing'], row['speedup_extrapolated']):>7}  "
+              f"{row['baseline']}{cached}{noisy}",
               file=stream)
     for line in regressions:
         print(f"REGRESSION {line}", file=stream)

@@ -37,6 +37,14 @@ def format_seconds(value) -> str:
 
 
 
+def format_speedup(value, extrapolated: bool = False) -> str:
+    """Return a speed-up over path tracing: ``"38x"``, ``"~5x"`` (extrapolated), "–" (None)."""
+    if value is None:
+        return "–"
+    text = f"{value:.2g}x" if value < 100 else f"{value:.0f}x"
+    return ("~" if extrapolated else "") + text
+
+
 def _reference_text(settings: dict) -> str:
     if settings.get("committed"):
         return (f"the committed ones of the built-in scenes, other scenes rendered to a median "
@@ -161,14 +169,11 @@ def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
             check = report.checks.get(name)
             css = _verdict_class(check.status) if check else "note"
             if metrics is not None:
-                noisy = report.verdicts.get(name, {}).get("hdr_flip") == \
-                    "within reference noise"
-                floor = (report.noise_floor or {}).get("hdr_flip")
-                floor_text = f" (noise {floor:.3f})" if floor is not None else ""
-                text = (f'<a href="#{_e(report.slug)}-{_e(name)}">FLIP '
-                        f"{metrics['hdr_flip']:.3f}</a>{_e(floor_text)}<br><small>"
-                        f"{'within reference noise; ' if noisy else ''}{_e(check.status)}"
-                        "</small>")
+                text = (f'<a href="#{_e(report.slug)}-{_e(name)}">'
+                        f"{_score_line(report, name, 'hdr_flip', 'FLIP', 3)}</a><br>"
+                        f"{_score_line(report, name, 'relative_mse', 'relMSE', 2)}<br>"
+                        f"{_times_line(report, name, run)}<br>"
+                        f"<small>baseline: {_e(check.status)}</small>")
             elif run is not None and run.status in ("not applicable", "not built", "not run"):
                 text, css = f"<small>{_e(run.status)}</small>", "muted"
                 if check is not None and check.status == "regression":
@@ -185,9 +190,35 @@ def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
         rows.append(f'<tr><th><a href="#{_e(report.slug)}">{_e(report.name)}</a></th>'
                     + "".join(cells) + "</tr>")
     return (f'<table class=summary><tr><th>scene</th>{head}</tr>{"".join(rows)}</table>'
-            "<p class=meta>HDR-FLIP of each method against the reference (0 is identical), "
-            "beside its noise floor (what the reference's own noise alone gives), and its "
-            "verdict against the baseline.</p>")
+            "<p class=meta>Per method: HDR-FLIP and relative MSE against the reference (0 is "
+            "identical) over the pixels of the objects, each beside its noise floor (what "
+            "the reference's own noise alone gives; <i>within noise</i>: the value does not "
+            "clear it); the precomputation, the warm frame (median of the relit frames; the "
+            "first frame, which can include compiling kernels, is in the scene's section) "
+            "and the speed-up over Mitsuba path tracing at the same relative MSE (~: "
+            "extrapolated beyond the path-tracing ladder); the verdict against the "
+            "baseline.</p>")
+
+
+def _score_line(report: SceneReport, name: str, key: str, label: str, digits: int) -> str:
+    """Return one metric of a summary cell: its value, its noise floor, whether within it."""
+    value = report.metrics[name].get(key)
+    floor = (report.noise_floor or {}).get(key)
+    noisy = report.verdicts.get(name, {}).get(key) == "within reference noise"
+    floor_text = f" <small>(noise {format_value(floor, 2)})</small>" if floor is not None else ""
+    mark = " <small class=fail>within noise</small>" if noisy else ""
+    return f"{label} {_e(format_value(value, digits))}{floor_text}{mark}"
+
+
+def _times_line(report: SceneReport, name: str, run) -> str:
+    """Return a summary cell's times: precomputation, warm frame, speed-up."""
+    found = report.speedups.get(name) or {}
+    speed = format_speedup(found.get("speedup_vs_path_tracing"), found.get("extrapolated"))
+    why = found.get("reason") if found.get("speedup_vs_path_tracing") is None else None
+    title = f' title="{_e(why)}"' if why else ""
+    return (f"<small>precompute {_e(format_seconds(run.precompute_seconds))}, frame "
+            f"{_e(format_seconds(run.frame_seconds))}, <span{title}>vs path tracing "
+            f"{_e(speed)}</span></small>")
 
 
 def _legend(styles) -> str:
@@ -207,8 +238,11 @@ def _scene_section(report: SceneReport, chosen: list[str]) -> str:
         caption = (f"reference: {meta.get('integrator', '?')}, {meta.get('spp')} spp x "
                    f"{meta.get('passes')} passes, rendered in {format_seconds(meta.get('seconds'))}"
                    f"{_reference_origin(report)}")
-        parts.append('<div class=row>' + _figure(report.files["reference"]["png"], caption,
-                                                 css="reference") + "</div>")
+        row = _figure(report.files["reference"]["png"], caption, css="reference")
+        if "tradeoff" in report.files:
+            row += _figure(report.files["tradeoff"]["png"], _tradeoff_caption(report),
+                           css="tradeoff")
+        parts.append('<div class=row>' + row + "</div>")
         for sentence in meta.get("substitutions") or []:
             parts.append(f"<p class=note>Reference: {_e(sentence)}</p>")
         source = {"committed": "committed with the suite (translucent references)",
@@ -246,6 +280,19 @@ def _scene_section(report: SceneReport, chosen: list[str]) -> str:
         parts.append("<h3>Methods not run on this scene</h3><ul>" + "".join(not_run) + "</ul>")
     parts.append("</section>")
     return "\n".join(parts)
+
+
+def _tradeoff_caption(report: SceneReport) -> str:
+    """Caption of the run-time-against-error plot: what is drawn, the speed-ups."""
+    spp = ", ".join(str(n) for n in report.curve.spp) if report.curve is not None else ""
+    speeds = "; ".join(
+        f"{name} {format_speedup(v['speedup_vs_path_tracing'], v['extrapolated'])}"
+        for name, v in report.speedups.items() if v["speedup_vs_path_tracing"] is not None)
+    missing = report.curve.error if report.curve is not None and report.curve.error else ""
+    return (f"run time against relative MSE: path tracing at {spp} spp, each method's warm "
+            f"frame; the dashed line is the reference's noise floor"
+            f"{'; speed-up at equal error: ' + speeds if speeds else ''}"
+            f"{'; path tracing: ' + missing if missing else ''}")
 
 
 def _reference_origin(report: SceneReport) -> str:

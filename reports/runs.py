@@ -243,7 +243,7 @@ def committed_reference_for(scene):
 
 
 def report_task(kind: str, scene, *arguments):
-    """Run one task of the report on a worker: a reference render or a method run.
+    """Run one task of the report on a worker: a reference render, a method run or a ladder.
 
     ``scene`` is a Scene, or the path of the scene file it was loaded from (a local worker
     reads the file instead of receiving the pickled meshes and textures).
@@ -254,6 +254,10 @@ def report_task(kind: str, scene, *arguments):
         scene = load_scene(scene)
     if kind == "reference":
         return render_reference(scene, *arguments)
+    if kind == "path tracing":
+        from .speedup import path_tracing_ladder
+
+        return path_tracing_ladder(scene, *arguments)
     return run_method(arguments[0], scene, *arguments[1:])
 
 

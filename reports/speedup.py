@@ -1,0 +1,246 @@
+"""How much faster than path tracing, at equal error: the report's path-tracing ladder.
+
+For each scene with a reference, Mitsuba renders the scene at :data:`PATH_TRACING_SPP`
+samples per pixel (one timed render each, after an untimed one that compiles the kernels:
+:func:`~translucent.reports.bench.tradeoff.path_tracing_point`, the estimator the
+reference itself uses), and each render is scored against the reference on the pixels the
+methods are scored on: relative MSE, the reference's noise discounted. A method's speed-up
+is the path tracer's time at the method's relative MSE (interpolated on the log-log curve,
+or extrapolated along its power law beyond the swept spp and flagged so:
+:func:`~translucent.reports.bench.tradeoff.equal_error_seconds`) over the method's warm
+frame time. Where the method's error does not clear the reference's noise, the speed-up is
+not given: the error it would be matched at is not known.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["PATH_TRACING_SPP", "PathTracingCurve", "path_tracing_ladder", "scored_curve",
+           "speedup", "tradeoff_plot"]
+
+#: The report's path-tracing ladder, samples per pixel (per channel where the reference
+#: renders one channel at a time).
+PATH_TRACING_SPP = (1, 4, 16)
+
+
+def path_tracing_ladder(scene, spp_values=PATH_TRACING_SPP) -> list[dict]:
+    """Render ``scene`` with Mitsuba at each of ``spp_values``, timed (a report task).
+
+    Returns
+    -------
+    list of dict
+        Per spp: ``spp``, ``seconds`` and ``images`` (one), or ``error`` (a string).
+    """
+    from .bench.tradeoff import path_tracing_point
+
+    return [path_tracing_point(scene, int(spp), repeats=1) for spp in spp_values]
+
+
+@dataclass
+class PathTracingCurve:
+    """Path tracing's run time against error on one scene.
+
+    Attributes
+    ----------
+    spp : list of int
+    seconds : list of float
+        Wall-clock seconds of one render at each spp.
+    relative_mse : list of float
+        Its relative MSE against the reference over the scored pixels.
+    error : str
+        Why the curve is missing or short ("" when every point was rendered).
+    """
+
+    spp: list[int] = field(default_factory=list)
+    seconds: list[float] = field(default_factory=list)
+    relative_mse: list[float] = field(default_factory=list)
+    error: str = ""
+
+    def as_dict(self) -> dict:
+        """JSON-able."""
+        return {"spp": self.spp, "seconds": self.seconds, "relative_mse": self.relative_mse,
+                "error": self.error or None}
+
+
+def scored_curve(points, reference, mask=None) -> PathTracingCurve:
+    """Score the renders of :func:`path_tracing_ladder` against ``reference``.
+
+    Parameters
+    ----------
+    points : list of dict, or an exception's text
+        What the ladder task returned.
+    reference : Image
+    mask : array_like of bool, shape (H, W), optional
+        The scored pixels (those of the objects).
+    """
+    from ..errors import InputError
+
+    if not isinstance(points, list):
+        return PathTracingCurve(error=str(points))
+    curve = PathTracingCurve()
+    errors = []
+    for point in points:
+        if "error" in point:
+            errors.append(f"{point['spp']} spp: {point['error']}")
+            continue
+        try:
+            score = _scored_relative_mse(reference, point["images"][0], mask)
+        except (InputError, TypeError) as error:
+            errors.append(f"{point['spp']} spp: {error}")
+            continue
+        curve.spp.append(int(point["spp"]))
+        curve.seconds.append(float(point["seconds"]))
+        curve.relative_mse.append(float(score))
+    curve.error = "; ".join(errors)
+    return curve
+
+
+def _scored_relative_mse(reference, image, mask) -> float:
+    """Relative MSE over the scored pixels, the reference's noise discounted, as the methods'."""
+    import numpy as np
+
+    from .metrics import relative_mse
+
+    ref, test, variance = reference.rgb, image.rgb, reference.variance
+    if ref.shape != test.shape:
+        from ..errors import InputError
+
+        raise InputError(f"the render is {test.shape}, the reference {ref.shape}",
+                         field="shape", value=test.shape)
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        ref, test = ref[mask], test[mask]
+        variance = None if variance is None else variance[mask]
+    return relative_mse(ref, test, reference_variance=variance)
+
+
+def speedup(curve: PathTracingCurve | None, relative_mse, frame_seconds,
+            verdict: str | None) -> dict:
+    """Return a method's speed-up over path tracing at its own relative MSE.
+
+    Parameters
+    ----------
+    curve : PathTracingCurve or None
+    relative_mse : float or None
+        The method's relative MSE over the scored pixels.
+    frame_seconds : float or None
+        The method's warm frame time.
+    verdict : str or None
+        Its relative MSE's noise verdict (:func:`~translucent.reports.metrics.noise_verdict`).
+
+    Returns
+    -------
+    dict
+        ``speedup_vs_path_tracing`` (None when not measured), ``path_tracing_seconds``
+        (path tracing's time at that error), ``extrapolated`` and ``reason`` (why it is
+        None, or what qualifies it).
+    """
+    from .bench.tradeoff import equal_error_seconds
+    from .metrics import WITHIN_NOISE
+
+    empty = {"speedup_vs_path_tracing": None, "path_tracing_seconds": None,
+             "extrapolated": False}
+    if curve is None:
+        return {**empty, "reason": "no path-tracing ladder on this scene"}
+    if len(curve.relative_mse) < 2:
+        return {**empty, "reason": f"path tracing's ladder has under two points "
+                                   f"({curve.error or 'nothing rendered'})"}
+    if relative_mse is None or not math.isfinite(relative_mse) or relative_mse <= 0:
+        return {**empty, "reason": "the method's relative MSE is not positive and finite"}
+    if verdict == WITHIN_NOISE:
+        return {**empty, "reason": "the method's relative MSE is within the reference's "
+                                   "noise: the error to match is not resolved"}
+    if not frame_seconds or frame_seconds <= 0:
+        return {**empty, "reason": "the method's frame time is not known"}
+    seconds, extrapolated = equal_error_seconds(curve.relative_mse, curve.seconds,
+                                                relative_mse)
+    if not math.isfinite(seconds):
+        return {**empty, "reason": "path tracing's curve gives no time at this error"}
+    reason = None
+    if extrapolated:
+        reason = (f"extrapolated beyond path tracing's {min(curve.spp)}-{max(curve.spp)} spp "
+                  "along its power law")
+    return {"speedup_vs_path_tracing": seconds / frame_seconds,
+            "path_tracing_seconds": seconds, "extrapolated": extrapolated, "reason": reason}
+
+
+def tradeoff_plot(path, curve: PathTracingCurve | None, methods: dict,
+                  noise_floor: float | None, title: str) -> Path | None:
+    """Draw run time against relative MSE, log-log: path tracing's curve, each method's point.
+
+    Parameters
+    ----------
+    path : str or Path
+        The PNG (written atomically).
+    curve : PathTracingCurve or None
+    methods : dict
+        ``name -> (frame_seconds, relative_mse)``.
+    noise_floor : float or None
+        The relative MSE the reference's noise alone gives, drawn as a band: errors below
+        it are not resolved.
+    title : str
+
+    Returns
+    -------
+    Path or None
+        None when there is nothing to draw.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..atomic import atomic_save_figure
+
+    usable = {name: (t, e) for name, (t, e) in methods.items()
+              if t and e and t > 0 and e > 0 and math.isfinite(t) and math.isfinite(e)}
+    traced = curve is not None and len(curve.relative_mse) > 0
+    if not usable and not traced:
+        return None
+    figure, axes = plt.subplots(figsize=(5.2, 3.6))
+    if traced:
+        positive = [(s, e, n) for s, e, n in zip(curve.seconds, curve.relative_mse, curve.spp,
+                                                  strict=True) if s > 0 and e > 0]
+        if positive:
+            seconds, errors, spp = zip(*positive, strict=True)
+            axes.plot(seconds, errors, "o-", color="0.35", label="path tracing")
+            lowest = min((e for _, e in usable.values()), default=min(errors))
+            if len(positive) >= 2 and lowest < min(errors):
+                # where a method's error lies beyond the ladder: the power law its speed-up
+                # is extrapolated along
+                from .bench.tradeoff import equal_error_seconds
+
+                reach = equal_error_seconds(errors, seconds, lowest)[0]
+                if math.isfinite(reach):
+                    axes.plot([seconds[errors.index(min(errors))], reach],
+                              [min(errors), lowest], ":", color="0.35",
+                              label="path tracing, extrapolated")
+            for s, e, n in positive:
+                axes.annotate(f"{n} spp", (s, e), textcoords="offset points", xytext=(4, 4),
+                              fontsize=7, color="0.35")
+    markers = "sD^v<>p*"
+    for index, (name, (seconds, error)) in enumerate(sorted(usable.items())):
+        axes.plot([seconds], [error], markers[index % len(markers)], markersize=8,
+                  label=name)
+    drawn = [e for _, e in usable.values()] + (list(curve.relative_mse) if traced else [])
+    floor = noise_floor if noise_floor is not None and math.isfinite(noise_floor) \
+        and noise_floor > 0 else None
+    values = [v for v in drawn + ([floor] if floor else []) if v > 0 and math.isfinite(v)]
+    low, high = min(values) / 3.0, max(values) * 3.0
+    if floor:
+        # errors below the floor are not resolved against this reference
+        axes.axhspan(low, floor, color="tab:red", alpha=0.12, lw=0)
+        axes.axhline(floor, color="tab:red", lw=1, ls="--", label="reference noise floor")
+    axes.set_xscale("log")
+    axes.set_yscale("log")
+    axes.set_ylim(low, high)
+    axes.set_xlabel("seconds per frame (path tracing: per render)")
+    axes.set_ylabel("relative MSE over the scored pixels")
+    axes.set_title(title, fontsize=9)
+    axes.grid(True, which="both", alpha=0.3)
+    axes.legend(fontsize=7, loc="best")
+    figure.tight_layout()
+    return atomic_save_figure(path, figure)
