@@ -240,6 +240,28 @@ def test_every_metric_comes_with_its_noise_floor_and_verdict(tiny):
     assert "noise floor" in page and "Warning: the reference is noisy" in page
 
 
+def test_each_method_has_its_speedup_over_path_tracing_or_the_reason(tiny):
+    from translucent.reports.speedup import PATH_TRACING_SPP
+
+    scene = _data(tiny["out"])
+    curve = scene["path_tracing"]
+    assert curve["spp"] == list(PATH_TRACING_SPP) and curve["error"] is None
+    assert all(seconds > 0 for seconds in curve["seconds"])
+    # Monte Carlo: more samples, less error
+    assert curve["relative_mse"][0] > curve["relative_mse"][-1]
+    flat = scene["methods"]["flat"]
+    assert flat["first_frame_seconds"] > 0
+    if flat["speedup_vs_path_tracing"] is None:
+        assert flat["speedup_reason"]
+    else:
+        assert flat["speedup_vs_path_tracing"] == pytest.approx(
+            flat["path_tracing_seconds_at_equal_error"] / flat["frame_seconds"])
+    assert scene["methods"]["failing"]["speedup_vs_path_tracing"] is None
+    assert scene["methods"]["failing"]["speedup_reason"] == "the method was not scored"
+    page = (tiny["out"] / "index.html").read_text()
+    assert "tiny_sphere/tradeoff.png" in page and "vs path tracing" in page
+
+
 def test_a_scene_without_committed_reference_is_rendered_to_a_noise_target(tmp_path,
                                                                              monkeypatch):
     monkeypatch.setattr(report_module, "DEFAULT_TARGET_RSE", 0.5)
