@@ -18,6 +18,7 @@ import os
 import re
 import sys
 import sysconfig
+import threading
 import warnings
 from pathlib import Path
 
@@ -82,9 +83,16 @@ def configure_libllvm() -> str | None:
     return os.environ.get("DRJIT_LIBLLVM_PATH")
 
 
-@functools.lru_cache(maxsize=None)
+#: Held while Mitsuba is imported and its variant chosen: threads of one process (a Dask
+#: worker's) that first need it together must not see a half-imported module.
+_MITSUBA_LOCK = threading.RLock()
+
+
 def mitsuba():
     """Import Mitsuba with a working variant set and return the module.
+
+    Safe to call from several threads at once: the first import and the choice of the
+    variant happen once, under a lock.
 
     Returns
     -------
@@ -99,6 +107,13 @@ def mitsuba():
         this machine cannot run (a CUDA variant without a usable GPU, an LLVM variant
         without a working libLLVM).
     """
+    with _MITSUBA_LOCK:
+        return _import_mitsuba()
+
+
+@functools.lru_cache(maxsize=None)
+def _import_mitsuba():
+    """Do what :func:`mitsuba` says (once; its caller holds the lock)."""
     configure_libllvm()
     import mitsuba as mi
 
@@ -145,6 +160,9 @@ def mitsuba():
         return mi
     raise RuntimeError(f"none of the Mitsuba variants {VARIANT_ORDER} could be set")
 
+
+#: Forget the imported state (tests that change ``TRANSLUCENT_VARIANT``).
+mitsuba.cache_clear = _import_mitsuba.cache_clear
 
 def variant() -> str:
     """Return the Mitsuba variant in use (imports Mitsuba on first call)."""

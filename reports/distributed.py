@@ -14,7 +14,7 @@ from typing import Any
 
 from ..errors import InputError
 
-__all__ = ["run_tasks", "dask_client", "worker_environment"]
+__all__ = ["run_tasks", "dask_client", "prepare_worker", "worker_environment"]
 
 
 @contextlib.contextmanager
@@ -52,6 +52,18 @@ def dask_client(scheduler: str | None = None, *, workers: int = 2, threads_per_w
                          processes=True, host="127.0.0.1", dashboard_address=None) as cluster, \
             Client(cluster) as client:
         yield client
+
+
+def prepare_worker() -> str:
+    """Import Mitsuba with its variant in this (worker) process; return the variant.
+
+    Run on every worker by :func:`run_tasks` before its tasks. A variant the worker cannot
+    run (``TRANSLUCENT_VARIANT`` naming a CUDA one on a machine without a GPU) raises the
+    :class:`~translucent.errors.InputError` there, and the run stops before any task.
+    """
+    from ..backend import variant
+
+    return variant()
 
 
 def worker_environment(threads: int) -> dict[str, str]:
@@ -108,6 +120,9 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
     from dask.distributed import as_completed
 
     with dask_client(scheduler, workers=workers) as client:
+        # each worker process imports Mitsuba and sets its variant once, before any task:
+        # a worker's threads must not race through the first import
+        client.run(prepare_worker)
         futures = [client.submit(function, *args, pure=False) for args in arguments]
         index = {future.key: position for position, future in enumerate(futures)}
         results: list[Any] = [None] * len(futures)

@@ -24,3 +24,40 @@ def test_local_cluster_on_loopback_gives_the_numbers_of_the_local_run():
 def test_bad_scheduler_address():
     with pytest.raises(InputError, match="--scheduler"):
         run_tasks(_sweep_point, ARGUMENTS, scheduler="not an address", progress=False)
+
+
+def test_workers_of_two_threads_each_set_the_variant_once_before_any_task():
+    # eight tasks that each need Mitsuba, on fresh workers of two threads: none may see a
+    # half-imported Mitsuba (the first import races between a worker's threads otherwise)
+    from translucent.backend import variant
+
+    with dask_client(workers=2, threads_per_worker=2) as client:
+        infos = client.scheduler_info()["workers"].values()
+        assert [info["nthreads"] for info in infos] == [2, 2]
+        found = run_tasks(variant, [()] * 8, scheduler=client.scheduler.address,
+                          progress=False)
+    assert found == [variant()] * 8
+
+
+def test_the_variant_is_chosen_once_under_concurrent_first_calls():
+    import subprocess
+    import sys
+
+    program = (
+        "import threading\n"
+        "from translucent import backend\n"
+        "found, errors = [], []\n"
+        "def call():\n"
+        "    try:\n"
+        "        found.append(backend.variant())\n"
+        "    except Exception as error:\n"
+        "        errors.append(repr(error))\n"
+        "threads = [threading.Thread(target=call) for _ in range(8)]\n"
+        "[t.start() for t in threads]; [t.join() for t in threads]\n"
+        "assert not errors, errors\n"
+        "assert len(set(found)) == 1 and len(found) == 8, found\n"
+        "print(found[0])\n")
+    result = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() in ("llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")
