@@ -13,7 +13,7 @@ from ...image import Image
 from ...materials.homogeneous import Dipole
 from ...materials.solid import SolidMedium
 from ...materials.subedit import SubEditProfiles
-from ...scenes.scene import DirectionalLight, PointLight
+from ...scenes.scene import DirectionalLight, PointLight, SpotLight
 from ..base import StageLog, refuse_inapplicable, with_defaults
 from ..solid_inputs import subedit_from_solid
 from .buffers import CameraModel, SurfaceBuffer
@@ -21,7 +21,7 @@ from .frame import LightView, as_subedit, gather_frame, light_view, splat_frame
 from .knobs import BACKENDS, DEFAULT_KNOBS
 from .selection import SAMPLING_RANGES
 
-_LIGHTS = (PointLight, DirectionalLight)
+_LIGHTS = (PointLight, SpotLight, DirectionalLight)
 #: Widest irradiance-buffer cone for a point light (degrees): a light inside the object's
 #: bounding sphere sees only this cone of it.
 MAX_LIGHT_FOV = 160.0
@@ -41,15 +41,16 @@ def _translucent_objects(scene) -> list[int]:
 def applies_to(scene) -> str | None:
     """None when the method renders ``scene``; otherwise why not.
 
-    It needs a translucent object (Dipole, SubEdit or solid material) and point or directional
-    lights only (Chen et al. 2012, Sect. 6: other lights are future work there).
+    It needs a translucent object (Dipole, SubEdit or solid material) and point, spot or
+    directional lights (Chen et al. 2012, Sect. 6: other lights are future work there; a
+    spot is its point light with the spot's fall-off in the irradiance buffer).
     """
     if not _translucent_objects(scene):
         return "no translucent object (Dipole, SubEdit or solid material) in the scene"
     others = sorted({type(light).__name__ for light in scene.lights
                      if not isinstance(light, _LIGHTS)})
     if others:
-        return (f"the method handles point and directional lights only; the scene has "
+        return (f"the method handles point, spot and directional lights only; the scene has "
                 f"{', '.join(others)}")
     if not scene.lights:
         return "the scene has no light"
@@ -219,7 +220,7 @@ class SplattingState:
 
         Parameters
         ----------
-        lights : sequence of PointLight / DirectionalLight, optional
+        lights : sequence of PointLight / SpotLight / DirectionalLight, optional
             Replace the scene's lights.
         material : SubEditProfiles or Dipole, optional
             Replace the material of every translucent object.
@@ -321,7 +322,7 @@ class SplattingState:
         size = self.knobs["irradiance_resolution"]
         raster = self.knobs["buffers"] == "raster"
         uv = scene.objects[index].mesh.uv
-        if isinstance(light, PointLight):
+        if isinstance(light, PointLight | SpotLight):
             towards = centre - light.position
             distance = float(np.linalg.norm(towards))
             if distance <= radius * VIEW_MARGIN:
@@ -346,6 +347,12 @@ class SplattingState:
                 np.reshape(np.asarray(light.position, np.float64), (1, 1, 3)),
                 np.reshape(np.asarray(light.intensity, np.float64), (1, 1, 3)), float(eta),
                 True)
+            if isinstance(light, SpotLight):
+                # the spot's intensity towards each buffer pixel: its fall-off in angle
+                leaving = buffer.position - light.position
+                length = np.linalg.norm(leaving, axis=-1, keepdims=True)
+                falloff = light.falloff(leaving / np.maximum(length, 1e-300))
+                flux = flux * np.where(buffer.valid, falloff, 0.0)[..., None]
             return LightView(buffer, flux, cosine)
         else:
             if raster:

@@ -685,7 +685,7 @@ def test_applies_to_and_knob_errors(heterogeneous_scene):
 
     assert splatting.applies_to(heterogeneous_scene) is None
     area = heterogeneous_scene.with_lights([SphereAreaLight([0, 3, 0], 0.2, 1.0)])
-    assert "point and directional lights only" in splatting.applies_to(area)
+    assert "point, spot and directional lights only" in splatting.applies_to(area)
     with pytest.raises(InputError, match="cannot render this scene"):
         splatting.precompute(area)
     with pytest.raises(InputError, match="unknown knob"):
