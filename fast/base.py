@@ -13,6 +13,13 @@ A fast method is a module of :mod:`translucent.fast` with three module-level fun
 
 and a state whose ``render(lights=None, material=None) -> Image`` is the interactive
 path: relighting (new lights) and editing (new material) without precomputing again.
+
+A method that renders only some of a scene's objects (the translucent ones, others left
+black) also has
+
+``scored_objects(scene) -> list[str]``
+    The names of the objects it renders: the report scores it on their pixels only
+    (:func:`scored_object_names`), and says so.
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ from ..errors import InputError
 from ..image import Image
 
 __all__ = ["METHODS", "PrecomputedState", "method", "refuse_inapplicable", "StageLog",
-           "StageProgress", "with_defaults"]
+           "StageProgress", "scored_object_names", "with_defaults"]
 
 #: method name -> module under translucent.fast
 METHODS: dict[str, str] = {
@@ -125,6 +132,12 @@ def method(name: str):
             raise InputError("this fast method is not built yet", field="method",
                              value=name) from error
         raise
+
+
+def scored_object_names(module, scene) -> list[str]:
+    """Return the objects a method is scored on: its ``scored_objects``, else all of them."""
+    chosen = getattr(module, "scored_objects", None)
+    return list(chosen(scene)) if chosen is not None else [o.name for o in scene.objects]
 
 
 def with_defaults(knobs: dict, defaults: dict) -> dict:

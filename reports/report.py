@@ -47,8 +47,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ..atomic import atomic_write_text, check_output_folder
 from ..errors import InputError, check_count
 from ..image import Image
@@ -76,7 +74,8 @@ from .runs import (
     run_method,
     timestamp,
 )
-from .speedup import PATH_TRACING_SPP, scored_curve, speedup, tradeoff_plot
+from .scoring import score_scene
+from .speedup import PATH_TRACING_SPP
 
 __all__ = [
     "METRIC_LABELS",
@@ -277,6 +276,21 @@ class SceneReport:
     path_tracing: Any = None
     curve: Any = None
     speedups: dict[str, dict] = field(default_factory=dict)
+    #: per method, the objects it is scored on; where fewer than the scene's, its pixels
+    #: and noise floor (:mod:`translucent.reports.scoring`), kept per set of objects
+    scored_objects: dict[str, list[str]] = field(default_factory=dict)
+    method_masks: dict[str, Any] = field(default_factory=dict)
+    method_floors: dict[str, dict | None] = field(default_factory=dict)
+    object_masks: dict[tuple, tuple] = field(default_factory=dict)
+    object_curves: dict[tuple, Any] = field(default_factory=dict)
+
+    def mask_of(self, name: str):
+        """Return the pixels method ``name`` is scored on (None: the whole image)."""
+        return self.method_masks.get(name, self.scored_mask)
+
+    def floor_of(self, name: str) -> dict | None:
+        """Return the noise floor of every metric over the pixels ``name`` is scored on."""
+        return self.method_floors.get(name, self.noise_floor)
 
 
 @dataclass
@@ -554,7 +568,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         staging = _staging_folder(out)
         for report in tqdm(reports, desc="metrics and error maps", disable=not progress,
                            leave=False, file=sys.stderr):
-            _compare_and_write(report, staging)
+            score_scene(report, staging)
         regressions = []
         for report in reports:
             reference = _made_with(report)
@@ -630,104 +644,6 @@ def _replace_folder(staging: Path, out: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
-def _compare_and_write(report: SceneReport, folder: Path) -> None:
-    """Write the scene's images and error maps; compute the metrics of each method."""
-    from .error_maps import write_error_maps, write_linear_png
-    from .metrics import NOISE_FLOOR_FIELDS, display_white, evaluate, noise_floor, noise_verdict
-
-    scene_folder = folder / report.slug
-    scene_folder.mkdir(parents=True, exist_ok=True)
-    white = None
-    if report.reference is not None:
-        report.scored_mask = _scored_pixels(report.scene)
-        _reference_noise(report)
-        try:
-            floor = noise_floor(report.reference, mask=report.scored_mask)
-        except InputError:
-            floor = None
-        report.noise_floor = floor.as_dict() if floor is not None else None
-        report.reference.write(scene_folder / "reference.exr")
-        white = display_white(report.reference.rgb)
-        write_linear_png(scene_folder / "reference.png", report.reference, white=white)
-        report.files["reference"] = {"png": f"{report.slug}/reference.png",
-                                     "exr": f"{report.slug}/reference.exr"}
-    for name, run in report.runs.items():
-        if run.status != "ok" or run.image is None:
-            continue
-        files = {"exr": f"{report.slug}/{name}.exr", "png": f"{report.slug}/{name}.png"}
-        run.image.write(folder / files["exr"])
-        rgb = np.nan_to_num(run.image.rgb, nan=0.0, posinf=0.0, neginf=0.0)
-        write_linear_png(folder / files["png"], rgb, white=white)
-        report.files[name] = files
-        if report.reference is None:
-            report.metric_errors[name] = f"no reference: {report.reference_error}"
-            continue
-        try:
-            comparison = evaluate(report.reference, run.image)
-            maps = write_error_maps(report.reference, run.image, scene_folder,
-                                    prefix=f"{name}_", comparison=comparison)
-            scored = evaluate(report.reference, run.image, mask=report.scored_mask)
-        except (InputError, TypeError) as error:
-            report.metric_errors[name] = str(error)
-            continue
-        report.metrics[name] = scored.metrics.as_dict()
-        report.image_metrics[name] = comparison.metrics.as_dict()
-        floors = report.noise_floor or {}
-        report.verdicts[name] = {
-            key: noise_verdict(key, report.metrics[name][key], floors.get(key))
-            or "no floor (the reference has no variance)" for key in NOISE_FLOOR_FIELDS}
-        for map_name, map_files in maps.items():
-            files[f"map_{map_name}"] = f"{report.slug}/{map_files.png.name}"
-    _speedups(report, scene_folder)
-
-
-def _speedups(report: SceneReport, scene_folder: Path) -> None:
-    """Score the path-tracing ladder; each method's speed-up at equal error; the plot."""
-    if report.reference is None or report.path_tracing is None:
-        return
-    report.curve = scored_curve(report.path_tracing, report.reference, report.scored_mask)
-    points = {}
-    for name, metrics in report.metrics.items():
-        run = report.runs[name]
-        verdict = report.verdicts.get(name, {}).get("relative_mse")
-        report.speedups[name] = speedup(report.curve, metrics.get("relative_mse"),
-                                        run.frame_seconds, verdict)
-        points[name] = (run.frame_seconds, metrics.get("relative_mse"))
-    floor = (report.noise_floor or {}).get("relative_mse")
-    plotted = tradeoff_plot(scene_folder / "tradeoff.png", report.curve, points, floor,
-                            f"{report.name}: run time against error")
-    if plotted is not None:
-        report.files["tradeoff"] = {"png": f"{report.slug}/tradeoff.png"}
-
-
-def _scored_pixels(scene):
-    """Return the pixels a method is scored on: those whose centre ray sees an object.
-
-    The background (an environment seen directly, or black) is the same in every method's
-    image and the reference's, so it would only dilute the averages; None (the whole image)
-    when no pixel sees an object.
-    """
-    from ..scenes import gbuffer
-
-    hit = gbuffer(scene).hit
-    return hit if hit.any() else None
-
-
-def _reference_noise(report: SceneReport) -> None:
-    """Summarise the reference's own noise; warn when it is too noisy to judge by."""
-    from ..noise import noise_summary, noise_warning
-
-    reference = report.reference
-    if reference.variance is None:
-        report.noise_warning = ("the reference has no variance: its noise is unknown, no "
-                                "noise floor can be given")
-        return
-    summary = noise_summary(reference.rgb, reference.variance, report.scored_mask,
-                            mask_name="scored")
-    report.reference_noise = summary
-    report.noise_warning = noise_warning(summary) or ""
-
-
 def _summary(reports: list[SceneReport], chosen: list[str]) -> list[dict]:
     rows = []
     for report in reports:
@@ -741,7 +657,7 @@ def _summary(reports: list[SceneReport], chosen: list[str]) -> list[dict]:
                 "reason": (report.metric_errors.get(name) or (run.reason if run else "")),
                 "hdr_flip": metrics.get("hdr_flip"), "relative_mse": metrics.get("relative_mse"),
                 "ciede2000": metrics.get("ciede2000"), "ssim": metrics.get("ssim"),
-                "noise_floor": {key: (report.noise_floor or {}).get(key)
+                "noise_floor": {key: (report.floor_of(name) or {}).get(key)
                                 for key in ("hdr_flip", "relative_mse", "ciede2000", "ssim")},
                 "within_noise": [key for key, verdict in report.verdicts.get(name, {}).items()
                                  if verdict == "within reference noise"],
@@ -790,12 +706,13 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
             run = report.runs.get(name)
             entry = run.as_dict() if run else {"status": "not run"}
             entry["metrics"] = json_safe(report.metrics.get(name))
-            entry["pixels_scored"] = ("object" if report.scored_mask is not None else "image")
+            entry["pixels_scored"] = ("object" if report.mask_of(name) is not None else "image")
+            entry["objects_scored"] = report.scored_objects.get(name)
             entry["image_metrics"] = json_safe(report.image_metrics.get(name))
             metrics = report.metrics.get(name)
             entry["noise"] = None if metrics is None else {
                 key: {"value": json_safe(metrics[key]),
-                      "noise_floor": json_safe((report.noise_floor or {}).get(key)),
+                      "noise_floor": json_safe((report.floor_of(name) or {}).get(key)),
                       "verdict": report.verdicts[name][key]}
                 for key in report.verdicts.get(name, {})}
             entry["metrics_error"] = report.metric_errors.get(name, "")
@@ -810,6 +727,9 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
                                "reference": reference, "reference_error": report.reference_error,
                                "path_tracing": (json_safe(report.curve.as_dict())
                                                 if report.curve is not None else None),
+                               "path_tracing_on_objects": {
+                                   ", ".join(key): json_safe(curve.as_dict())
+                                   for key, curve in report.object_curves.items()},
                                "methods": methods}
     tolerances = {name: {"absolute": t.absolute, "relative": t.relative,
                          "lower_is_better": t.lower_is_better} for name, t in TOLERANCES.items()}

@@ -203,7 +203,7 @@ def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
 def _score_line(report: SceneReport, name: str, key: str, label: str, digits: int) -> str:
     """Return one metric of a summary cell: its value, its noise floor, whether within it."""
     value = report.metrics[name].get(key)
-    floor = (report.noise_floor or {}).get(key)
+    floor = (report.floor_of(name) or {}).get(key)
     noisy = report.verdicts.get(name, {}).get(key) == "within reference noise"
     floor_text = f" <small>(noise {format_value(floor, 2)})</small>" if floor is not None else ""
     mark = " <small class=fail>within noise</small>" if noisy else ""
@@ -332,8 +332,14 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         parts.append(f'<p class="{_verdict_class(check.status)}">Baseline: {_e(check.message)}'
                      "</p>")
     metrics = report.metrics.get(name)
+    if metrics is not None and name in report.method_masks:
+        mask = report.method_masks[name]
+        count = int(mask.sum()) if mask is not None else 0
+        parts.append(f"<p class=meta>Scored on the {count} pixels of the objects it renders "
+                     f"({_e(', '.join(report.scored_objects[name]))}); the others it leaves "
+                     "black, and they are not scored.</p>")
     if metrics is not None:
-        parts.append(_metrics_table(metrics, check, report.noise_floor,
+        parts.append(_metrics_table(metrics, check, report.floor_of(name),
                                     report.verdicts.get(name, {})))
     if run.status == "ok":
         cached = (f" Image and times from the run of {_e(run.measured_at)} (cached: nothing "
@@ -342,9 +348,13 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         from_cache = (" The method loaded its precomputation from its own cache; the stage "
                       "times below are those of the run that computed it." if cache_note == "hit"
                       else "")
+        first = run.first_frame_seconds if run.first_frame_seconds is not None \
+            else run.frame_seconds
         parts.append(f"<p>Precomputation {format_seconds(run.precompute_seconds)}, first frame "
                      f"(the first <code>state.render()</code>, first-call costs included) "
-                     f"{format_seconds(run.frame_seconds)}.{cached}{from_cache}</p>")
+                     f"{format_seconds(first)}, warm frame (the median of the relit frames) "
+                     f"{format_seconds(run.frame_seconds)}{_speedup_sentence(report, name)}."
+                     f"{cached}{from_cache}</p>")
         if run.stage_seconds:
             parts.append("<details><summary>stage times</summary><table class=small>" + "".join(
                 f"<tr><td>{_e(stage)}</td><td>{format_seconds(seconds)}</td></tr>"
@@ -359,6 +369,19 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         parts.append("<p class=meta>The method skipped nothing for this scene.</p>")
     parts.append("</div>")
     return "\n".join(parts)
+
+
+def _speedup_sentence(report: SceneReport, name: str) -> str:
+    """Return ", N x faster than path tracing at equal error" or why it is not given."""
+    found = report.speedups.get(name)
+    if not found:
+        return ""
+    if found["speedup_vs_path_tracing"] is None:
+        return f"; no speed-up over path tracing: {_e(found['reason'])}"
+    extra = f" ({_e(found['reason'])})" if found["reason"] else ""
+    return (f"; {format_speedup(found['speedup_vs_path_tracing'], found['extrapolated'])} "
+            f"faster than Mitsuba path tracing at the same relative MSE "
+            f"({format_seconds(found['path_tracing_seconds'])}){extra}")
 
 
 def _solid_note(method_name: str, conversions: dict) -> str:

@@ -167,15 +167,17 @@ def speedup(curve: PathTracingCurve | None, relative_mse, frame_seconds,
             "path_tracing_seconds": seconds, "extrapolated": extrapolated, "reason": reason}
 
 
-def tradeoff_plot(path, curve: PathTracingCurve | None, methods: dict,
-                  noise_floor: float | None, title: str) -> Path | None:
-    """Draw run time against relative MSE, log-log: path tracing's curve, each method's point.
+def tradeoff_plot(path, curves: dict, methods: dict, noise_floor: float | None,
+                  title: str) -> Path | None:
+    """Draw run time against relative MSE, log-log: path tracing's curves, each method's point.
 
     Parameters
     ----------
     path : str or Path
         The PNG (written atomically).
-    curve : PathTracingCurve or None
+    curves : dict
+        ``label -> PathTracingCurve`` (or None): path tracing scored on each set of pixels
+        a method is scored on.
     methods : dict
         ``name -> (frame_seconds, relative_mse)``.
     noise_floor : float or None
@@ -197,35 +199,39 @@ def tradeoff_plot(path, curve: PathTracingCurve | None, methods: dict,
 
     usable = {name: (t, e) for name, (t, e) in methods.items()
               if t and e and t > 0 and e > 0 and math.isfinite(t) and math.isfinite(e)}
-    traced = curve is not None and len(curve.relative_mse) > 0
+    traced = {label: curve for label, curve in curves.items()
+              if curve is not None and len(curve.relative_mse) > 0}
     if not usable and not traced:
         return None
     figure, axes = plt.subplots(figsize=(5.2, 3.6))
-    if traced:
+    drawn = [e for _, e in usable.values()]
+    for number, (label, curve) in enumerate(traced.items()):
+        colour = ("0.35", "tab:brown", "tab:olive", "tab:cyan")[number % 4]
         positive = [(s, e, n) for s, e, n in zip(curve.seconds, curve.relative_mse, curve.spp,
                                                   strict=True) if s > 0 and e > 0]
-        if positive:
-            seconds, errors, spp = zip(*positive, strict=True)
-            axes.plot(seconds, errors, "o-", color="0.35", label="path tracing")
-            lowest = min((e for _, e in usable.values()), default=min(errors))
-            if len(positive) >= 2 and lowest < min(errors):
-                # where a method's error lies beyond the ladder: the power law its speed-up
-                # is extrapolated along
-                from .bench.tradeoff import equal_error_seconds
+        if not positive:
+            continue
+        seconds, errors, spp = zip(*positive, strict=True)
+        drawn += list(errors)
+        axes.plot(seconds, errors, "o-", color=colour, label=label)
+        lowest = min((e for _, e in usable.values()), default=min(errors))
+        if len(positive) >= 2 and lowest < min(errors):
+            # where a method's error lies beyond the ladder: the power law its speed-up is
+            # extrapolated along
+            from .bench.tradeoff import equal_error_seconds
 
-                reach = equal_error_seconds(errors, seconds, lowest)[0]
-                if math.isfinite(reach):
-                    axes.plot([seconds[errors.index(min(errors))], reach],
-                              [min(errors), lowest], ":", color="0.35",
-                              label="path tracing, extrapolated")
-            for s, e, n in positive:
-                axes.annotate(f"{n} spp", (s, e), textcoords="offset points", xytext=(4, 4),
-                              fontsize=7, color="0.35")
+            reach = equal_error_seconds(errors, seconds, lowest)[0]
+            if math.isfinite(reach):
+                axes.plot([seconds[errors.index(min(errors))], reach], [min(errors), lowest],
+                          ":", color=colour, label=f"{label}, extrapolated")
+        if number == 0:
+            for s_, e_, n_ in positive:
+                axes.annotate(f"{n_} spp", (s_, e_), textcoords="offset points",
+                              xytext=(4, 4), fontsize=7, color=colour)
     markers = "sD^v<>p*"
     for index, (name, (seconds, error)) in enumerate(sorted(usable.items())):
         axes.plot([seconds], [error], markers[index % len(markers)], markersize=8,
                   label=name)
-    drawn = [e for _, e in usable.values()] + (list(curve.relative_mse) if traced else [])
     floor = noise_floor if noise_floor is not None and math.isfinite(noise_floor) \
         and noise_floor > 0 else None
     values = [v for v in drawn + ([floor] if floor else []) if v > 0 and math.isfinite(v)]

@@ -68,13 +68,21 @@ from .lighting import (
     precompute_environment,
     sample_irradiance,
 )
-from .method import add_approx_arguments, applies_to, approx, material_from_arguments, precompute
+from .method import (
+    add_approx_arguments,
+    applies_to,
+    approx,
+    material_from_arguments,
+    precompute,
+    scored_objects,
+)
 from .state import PRTState, brute_force_radiance, projection_blend, single_colour
 from .transfer import IlluminationSamples, ObjectTransfer, illumination_samples
 
 __all__ = [
     "DEFAULT_KNOBS",
     "applies_to",
+    "scored_objects",
     "precompute",
     "PRTState",
     "ObjectTransfer",

@@ -37,24 +37,22 @@ def applies_to(scene) -> str | None:
     """None when the method renders ``scene``; otherwise why not.
 
     It needs a homogeneous translucent object (a :class:`~translucent.materials.Dipole`
-    material), at least one light, and no other object in the camera's view: the method
-    (Wang et al. 2008) computes the multiple scattering of homogeneous translucent objects
-    only, so any other surface the camera sees would be black (its direct light alone would
-    still miss the light it receives from the other objects). Other objects outside the
-    view are fine: they cast shadows through the ray queries.
+    material) and at least one light. The method (Wang et al. 2008) computes the multiple
+    scattering of homogeneous translucent objects only: other objects cast shadows through
+    the ray queries but are left black, and are not scored (:func:`scored_objects`); the
+    light they would bounce onto the translucent objects is missing, and counts in the
+    method's error there.
     """
     if not _translucent_objects(scene):
         return "no homogeneous translucent object (Dipole material) in the scene"
     if not scene.lights:
         return "the scene has no light"
-    others = _other_objects_in_view(scene)
-    if others:
-        kinds = ", ".join(f"'{name}' ({type(scene.object(name).material).__name__})"
-                          for name in others)
-        return (f"objects that are not homogeneous translucent are visible in the camera: "
-                f"{kinds}; the method renders only homogeneous translucent objects and would "
-                f"leave them black")
     return None
+
+
+def scored_objects(scene) -> list[str]:
+    """Return the objects the method renders, and is scored on: the homogeneous translucent."""
+    return [scene.objects[i].name for i in _translucent_objects(scene)]
 
 
 def precompute(scene, **knobs) -> PRTState:
@@ -86,6 +84,13 @@ def precompute(scene, **knobs) -> PRTState:
     cache = Cache("prt")
     transfers = []
     start = time.perf_counter()
+    others = _other_objects_in_view(scene)
+    if others:
+        kinds = ", ".join(f"'{name}' ({type(scene.object(name).material).__name__})"
+                          for name in others)
+        log.skip(f"objects left black (the method renders homogeneous translucent objects "
+                 f"only; they are not scored): {kinds}; the light they bounce onto the "
+                 "translucent objects is missing from its image")
     for index in _translucent_objects(scene):
         item = scene.objects[index]
         key = transfer_key(item, scene.mm_per_unit, knobs)

@@ -100,7 +100,14 @@ from .selection import (
     select_irradiance_samples,
 )
 from .splats import effective_rendering_ranges, splat_level
-from .state import RasterView, SplattingState, applies_to, precompute, rasterize_view
+from .state import (
+    RasterView,
+    SplattingState,
+    applies_to,
+    precompute,
+    rasterize_view,
+    scored_objects,
+)
 
 __all__ = [
     "BACKENDS",
@@ -118,6 +125,7 @@ __all__ = [
     "SurfaceBuffer",
     "add_approx_arguments",
     "applies_to",
+    "scored_objects",
     "approx",
     "bilateral_upsample",
     "brute_force_exitance",

@@ -57,6 +57,14 @@ def applies_to(scene) -> str | None:
     return None
 
 
+def scored_objects(scene) -> list[str]:
+    """Return the objects the method renders, and is scored on: the translucent ones.
+
+    Each is splatted from its own buffers; other objects stay black in its image.
+    """
+    return [scene.objects[i].name for i in _translucent_objects(scene)]
+
+
 def _check_knobs(knobs: dict) -> dict:
     merged = with_defaults(knobs, DEFAULT_KNOBS)
     for name in ("irradiance_resolution", "levels"):

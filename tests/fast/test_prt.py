@@ -431,19 +431,28 @@ def test_scenes_it_cannot_render():
     assert "no light" in prt.applies_to(sphere_scene(lights=()))
 
 
-def test_other_objects_in_view_are_named_and_refused():
-    for name, others in (("bowl", ("'ball' (Lambertian)", "'floor' (Lambertian)")),
-                         ("cornell_block", ("'floor' (Lambertian)", "'back_wall'"))):
-        reason = prt.applies_to(load_scene(name))
-        assert reason is not None and "visible in the camera" in reason
-        assert all(other in reason for other in others), reason
-    # a diffuse object behind the camera only casts shadows: the method applies
-    behind = SceneObject("wall", icosphere(1, radius=0.5, center=(0.0, 0.0, 9.0)),
-                         Lambertian(0.5))
-    scene = sphere_scene()
-    scene = Scene(list(scene.objects) + [behind], list(scene.lights), scene.camera,
+def test_other_objects_in_view_are_left_black_named_and_not_scored():
+    for name in ("bowl", "cornell_block"):
+        scene = load_scene(name)
+        assert prt.applies_to(scene) is None
+        assert prt.scored_objects(scene) == [o.name for o in scene.objects
+                                             if o.material.__class__.__name__ == "Dipole"]
+    # a diffuse ball beside the translucent sphere, in view
+    ball = SceneObject("ball", icosphere(2, radius=0.4, center=(1.2, 0.0, 0.0)),
+                       Lambertian(0.5))
+    plain = sphere_scene()
+    scene = Scene(list(plain.objects) + [ball], list(plain.lights), plain.camera,
                   mm_per_unit=MM_PER_UNIT)
-    assert prt.applies_to(scene) is None
+    assert prt.scored_objects(scene) == ["sphere"]
+    image = prt.precompute(scene, samples=SAMPLES, progress=False).render()
+    from translucent.scenes import gbuffer
+
+    seen = gbuffer(scene).object_id
+    assert (seen == 1).any() and (seen == 0).any()
+    assert np.all(image.rgb[seen == 1] == 0)  # the ball: black
+    assert image.rgb[seen == 0].sum() > 0
+    assert any("objects left black" in s and "'ball' (Lambertian)" in s
+               for s in image.metadata["skipped"]), image.metadata["skipped"]
 
 
 def test_bad_materials_are_rejected(state):

@@ -262,6 +262,77 @@ def test_each_method_has_its_speedup_over_path_tracing_or_the_reason(tiny):
     assert "tiny_sphere/tradeoff.png" in page and "vs path tracing" in page
 
 
+SPHERE_ONLY_METHOD = textwrap.dedent('''
+    """A stand-in that renders the translucent sphere only (the ball left black)."""
+    import numpy as np
+    from translucent.fast.base import StageLog
+    from translucent.image import Image
+    from translucent.scenes import gbuffer
+
+    DEFAULT_KNOBS = {}
+
+
+    def applies_to(scene):
+        return None
+
+
+    def scored_objects(scene):
+        return ["sphere"]
+
+
+    class State:
+        def __init__(self, scene):
+            self.scene, self.log = scene, StageLog()
+
+        def render(self, lights=None, material=None):
+            seen = gbuffer(self.scene).object_id
+            rgb = np.where((seen == 0)[..., None], 0.3, 0.0).astype(np.float32)
+            return Image(np.broadcast_to(rgb, seen.shape + (3,)).copy(),
+                         metadata={"producer": "sphere_only"})
+
+
+    def precompute(scene, **knobs):
+        return State(scene)
+''')
+
+
+def test_a_method_is_scored_on_the_objects_it_renders(tmp_path, monkeypatch):
+    from translucent.image import read_exr
+    from translucent.reports.metrics import noise_floor
+    from translucent.scenes import gbuffer, load_scene
+
+    (tmp_path / "report_sphere_only.py").write_text(SPHERE_ONLY_METHOD)
+    (tmp_path / "report_flat_method.py").write_text(STAND_IN_METHODS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setitem(fast_base.METHODS, "sphere_only", "report_sphere_only")
+    monkeypatch.setitem(fast_base.METHODS, "flat", "report_flat_method")
+    scene_path = tmp_path / "two.toml"
+    scene_path.write_text(TINY_SCENE.replace('name = "tiny_sphere"', 'name = "two"') + """
+    [[objects]]
+    name = "ball"
+    mesh = { type = "icosphere", subdivisions = 2, radius = 0.4, center = [1.3, 0.0, 0.0] }
+    material = { type = "lambertian", albedo = 0.5 }
+    """.replace("\n    ", "\n"))
+    out = tmp_path / "report"
+    assert _run(scene_path, out, tmp_path / "baseline.json", "--update-baseline",
+                methods=["flat", "sphere_only"]) == 0
+    scene = json.loads((out / "metrics.json").read_text())["scenes"]["two"]
+    ids = gbuffer(load_scene(str(scene_path))).object_id
+    reference = read_exr(out / "two" / "reference.exr")
+    flat, only = scene["methods"]["flat"], scene["methods"]["sphere_only"]
+    assert flat["objects_scored"] == ["sphere", "ball"]
+    assert only["objects_scored"] == ["sphere"]
+    assert flat["metrics"]["pixels_scored"] == int((ids >= 0).sum())
+    assert only["metrics"]["pixels_scored"] == int((ids == 0).sum()) < int((ids >= 0).sum())
+    floor = noise_floor(reference, mask=ids == 0)
+    for field, entry in only["noise"].items():
+        assert entry["noise_floor"] == pytest.approx(getattr(floor, field), rel=1e-4)
+    # its speed-up is measured against path tracing scored on the sphere's pixels too
+    assert set(scene["path_tracing_on_objects"]) == {"sphere"}
+    page = (out / "index.html").read_text()
+    assert "pixels of the objects it renders (sphere)" in page
+
+
 def test_a_scene_without_committed_reference_is_rendered_to_a_noise_target(tmp_path,
                                                                              monkeypatch):
     monkeypatch.setattr(report_module, "DEFAULT_TARGET_RSE", 0.5)

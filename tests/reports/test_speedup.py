@@ -69,10 +69,10 @@ def test_the_ladder_is_scored_on_the_scored_pixels(rng):
 
 
 def test_the_plot_is_written_or_nothing_when_there_is_nothing_to_draw(tmp_path):
-    path = tradeoff_plot(tmp_path / "t.png", _power_law(), {"prt": (0.01, 1e-3),
+    path = tradeoff_plot(tmp_path / "t.png", {"path tracing": _power_law()}, {"prt": (0.01, 1e-3),
                                                            "broken": (None, 0.1)},
                          1e-4, "sphere")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert tradeoff_plot(tmp_path / "none.png", None, {"broken": (0.0, 0.1)}, None,
-                         "x") is None
+    assert tradeoff_plot(tmp_path / "none.png", {"path tracing": None},
+                         {"broken": (0.0, 0.1)}, None, "x") is None
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.png"]

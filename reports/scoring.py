@@ -1,0 +1,172 @@
+"""What each method of a report is scored on, and against what.
+
+A method is scored on the pixels of the objects it renders: every object the camera sees,
+or, for a method with ``scored_objects(scene)`` (PRT and splatting render the translucent
+objects and leave the others black), those objects' pixels only
+(:func:`~translucent.fast.base.scored_object_names`); object ids come from the camera's
+G-buffer. Each set of pixels has its own noise floor (what the reference's noise alone
+gives there, :func:`~translucent.reports.metrics.noise_floor`), its own verdicts and its
+own path-tracing curve for the speed-up at equal error (:mod:`translucent.reports.speedup`).
+Whole-image scores are kept beside them.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import InputError
+from .speedup import scored_curve, speedup, tradeoff_plot
+
+if TYPE_CHECKING:  # annotations only: the report imports this module
+    from .report import SceneReport
+
+__all__ = ["score_scene", "scored_pixels"]
+
+
+def score_scene(report: SceneReport, folder: Path) -> None:
+    """Write the scene's images and error maps; score each method on its own pixels."""
+    from .error_maps import write_error_maps, write_linear_png
+    from .metrics import display_white, evaluate
+
+    scene_folder = folder / report.slug
+    scene_folder.mkdir(parents=True, exist_ok=True)
+    white = None
+    if report.reference is not None:
+        report.scored_mask = scored_pixels(report.scene)
+        _reference_noise(report)
+        report.noise_floor = _floor(report, report.scored_mask)
+        report.reference.write(scene_folder / "reference.exr")
+        white = display_white(report.reference.rgb)
+        write_linear_png(scene_folder / "reference.png", report.reference, white=white)
+        report.files["reference"] = {"png": f"{report.slug}/reference.png",
+                                     "exr": f"{report.slug}/reference.exr"}
+    for name, run in report.runs.items():
+        if run.status != "ok" or run.image is None:
+            continue
+        files = {"exr": f"{report.slug}/{name}.exr", "png": f"{report.slug}/{name}.png"}
+        run.image.write(folder / files["exr"])
+        rgb = np.nan_to_num(run.image.rgb, nan=0.0, posinf=0.0, neginf=0.0)
+        write_linear_png(folder / files["png"], rgb, white=white)
+        report.files[name] = files
+        if report.reference is None:
+            report.metric_errors[name] = f"no reference: {report.reference_error}"
+            continue
+        _object_scoring(report, name)
+        try:
+            comparison = evaluate(report.reference, run.image)
+            maps = write_error_maps(report.reference, run.image, scene_folder,
+                                    prefix=f"{name}_", comparison=comparison)
+            scored = evaluate(report.reference, run.image, mask=report.mask_of(name))
+        except (InputError, TypeError) as error:
+            report.metric_errors[name] = str(error)
+            continue
+        report.metrics[name] = scored.metrics.as_dict()
+        report.image_metrics[name] = comparison.metrics.as_dict()
+        report.verdicts[name] = _verdicts(report.metrics[name], report.floor_of(name))
+        for map_name, map_files in maps.items():
+            files[f"map_{map_name}"] = f"{report.slug}/{map_files.png.name}"
+    _speedups(report, scene_folder)
+
+
+def scored_pixels(scene, objects=None):
+    """Return the pixels that see an object of ``scene`` (or one named in ``objects``).
+
+    The background (an environment seen directly, or black) is the same in every method's
+    image and the reference's, so it would only dilute the averages; None (the whole image)
+    when no pixel sees such an object.
+    """
+    from ..scenes import gbuffer
+
+    buffer = gbuffer(scene)
+    if objects is None:
+        hit = buffer.hit
+    else:
+        indices = [i for i, item in enumerate(scene.objects) if item.name in set(objects)]
+        hit = np.isin(buffer.object_id, indices)
+    return hit if hit.any() else None
+
+
+def _object_scoring(report: SceneReport, name: str) -> None:
+    """Record which objects ``name`` is scored on and, where fewer than all, their pixels."""
+    from ..fast.base import method, scored_object_names
+
+    try:
+        objects = scored_object_names(method(name), report.scene)
+    except InputError:  # not a registered method: scored as one that renders everything
+        objects = [item.name for item in report.scene.objects]
+    report.scored_objects[name] = objects
+    if set(objects) == {item.name for item in report.scene.objects}:
+        return
+    key = tuple(sorted(objects))
+    if key not in report.object_masks:
+        mask = scored_pixels(report.scene, objects)
+        report.object_masks[key] = (mask, _floor(report, mask))
+    mask, floor = report.object_masks[key]
+    report.method_masks[name] = mask
+    report.method_floors[name] = floor
+
+
+def _floor(report: SceneReport, mask) -> dict | None:
+    """Return every metric's noise floor over ``mask`` (None without a usable variance)."""
+    from .metrics import noise_floor
+
+    try:
+        floor = noise_floor(report.reference, mask=mask)
+    except InputError:
+        return None
+    return floor.as_dict() if floor is not None else None
+
+
+def _verdicts(metrics: dict, floors: dict | None) -> dict[str, str]:
+    from .metrics import NOISE_FLOOR_FIELDS, noise_verdict
+
+    floors = floors or {}
+    return {key: noise_verdict(key, metrics[key], floors.get(key))
+            or "no floor (the reference has no variance)" for key in NOISE_FLOOR_FIELDS}
+
+
+def _speedups(report: SceneReport, scene_folder: Path) -> None:
+    """Score the path-tracing ladder on each method's pixels; speed-ups; the plot."""
+    if report.reference is None or report.path_tracing is None:
+        return
+    report.curve = scored_curve(report.path_tracing, report.reference, report.scored_mask)
+    points = {}
+    for name, metrics in report.metrics.items():
+        run = report.runs[name]
+        curve = report.curve
+        if name in report.method_masks:
+            key = tuple(sorted(report.scored_objects[name]))
+            if key not in report.object_curves:
+                report.object_curves[key] = scored_curve(
+                    report.path_tracing, report.reference, report.method_masks[name])
+            curve = report.object_curves[key]
+        verdict = report.verdicts.get(name, {}).get("relative_mse")
+        report.speedups[name] = speedup(curve, metrics.get("relative_mse"),
+                                        run.frame_seconds, verdict)
+        points[name] = (run.frame_seconds, metrics.get("relative_mse"))
+    curves = {"path tracing": report.curve}
+    for key, curve in report.object_curves.items():
+        curves[f"path tracing on {', '.join(key)}"] = curve
+    floor = (report.noise_floor or {}).get("relative_mse")
+    plotted = tradeoff_plot(scene_folder / "tradeoff.png", curves, points, floor,
+                            f"{report.name}: run time against error")
+    if plotted is not None:
+        report.files["tradeoff"] = {"png": f"{report.slug}/tradeoff.png"}
+
+
+def _reference_noise(report: SceneReport) -> None:
+    """Summarise the reference's own noise; warn when it is too noisy to judge by."""
+    from ..noise import noise_summary, noise_warning
+
+    reference = report.reference
+    if reference.variance is None:
+        report.noise_warning = ("the reference has no variance: its noise is unknown, no "
+                                "noise floor can be given")
+        return
+    summary = noise_summary(reference.rgb, reference.variance, report.scored_mask,
+                            mask_name="scored")
+    report.reference_noise = summary
+    report.noise_warning = noise_warning(summary) or ""
