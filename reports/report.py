@@ -596,6 +596,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         atomic_write_text(staging / "metrics.json",
                           json.dumps(_metrics_json(reports, chosen, context), indent=2,
                                      sort_keys=False, allow_nan=False))
+        context["overview"] = _overview(reports, staging)
         atomic_write_text(staging / "index.html", html_page(reports, chosen, context))
         _replace_folder(staging, out)
         staging = None
@@ -669,6 +670,17 @@ def _summary(reports: list[SceneReport], chosen: list[str]) -> list[dict]:
                 "baseline": check.status if check else "",
             })
     return rows
+
+
+def _overview(reports: list[SceneReport], folder: Path) -> str | None:
+    """Draw every scored method on every scene in one plot; return its path in the report."""
+    from .speedup import overview_plot
+
+    points = [(report.name, name, report.runs[name].frame_seconds,
+               metrics.get("relative_mse"),
+               report.verdicts.get(name, {}).get("relative_mse") == "within reference noise")
+              for report in reports for name, metrics in report.metrics.items()]
+    return "overview.png" if overview_plot(folder / "overview.png", points) else None
 
 
 def _speedup_fields(report: SceneReport, name: str) -> dict:

@@ -145,7 +145,14 @@ def html_page(reports: list[SceneReport], chosen: list[str], context: dict) -> s
             parts.append(f'<p class="verdict fail">Nothing was compared with the baseline '
                          f"{baseline} ({reasons or 'no result to compare'}){rewritten}; no "
                          "regression can be told.</p>")
-    parts.append(_summary_table(reports, chosen))
+    summary = _summary_table(reports, chosen)
+    if context.get("overview"):
+        summary = (f'<div class="row overview">{summary}'
+                   + _figure(context["overview"], "every method on every scene: warm frame "
+                             "time against relative MSE over the pixels it is scored on",
+                             css="overview") + "</div>")
+    parts.append(summary)
+    parts.append(_summary_note())
     parts.append(_legend(MAP_STYLES))
     if context["excluded"]:
         parts.append("<h2>Built-in scenes left out</h2><ul>" + "".join(
@@ -172,8 +179,8 @@ def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
                 text = (f'<a href="#{_e(report.slug)}-{_e(name)}">'
                         f"{_score_line(report, name, 'hdr_flip', 'FLIP', 3)}</a><br>"
                         f"{_score_line(report, name, 'relative_mse', 'relMSE', 2)}<br>"
-                        f"{_times_line(report, name, run)}<br>"
-                        f"<small>baseline: {_e(check.status)}</small>")
+                        f"{_times_line(report, name, run)} "
+                        f'<span class="tag">{_e(check.status)}</span>')
             elif run is not None and run.status in ("not applicable", "not built", "not run"):
                 text, css = f"<small>{_e(run.status)}</small>", "muted"
                 if check is not None and check.status == "regression":
@@ -189,8 +196,12 @@ def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
             cells.append(f'<td class="{css}">{text}</td>')
         rows.append(f'<tr><th><a href="#{_e(report.slug)}">{_e(report.name)}</a></th>'
                     + "".join(cells) + "</tr>")
-    return (f'<table class=summary><tr><th>scene</th>{head}</tr>{"".join(rows)}</table>'
-            "<p class=meta>Per method: HDR-FLIP and relative MSE against the reference (0 is "
+    return f'<table class=summary><tr><th>scene</th>{head}</tr>{"".join(rows)}</table>'
+
+
+def _summary_note() -> str:
+    """Return what the summary table's cells hold."""
+    return ("<p class=meta>Per method: HDR-FLIP and relative MSE against the reference (0 is "
             "identical) over the pixels of the objects, each beside its noise floor (what "
             "the reference's own noise alone gives; <i>within noise</i>: the value does not "
             "clear it); the precomputation, the warm frame (median of the relit frames; the "

@@ -18,8 +18,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["PATH_TRACING_SPP", "PathTracingCurve", "path_tracing_ladder", "scored_curve",
-           "speedup", "tradeoff_plot"]
+__all__ = ["PATH_TRACING_SPP", "PathTracingCurve", "overview_plot", "path_tracing_ladder",
+           "scored_curve", "speedup", "tradeoff_plot"]
 
 #: The report's path-tracing ladder, samples per pixel (per channel where the reference
 #: renders one channel at a time).
@@ -194,6 +194,7 @@ def tradeoff_plot(path, curves: dict, methods: dict, noise_floor: float | None,
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     from ..atomic import atomic_save_figure
 
@@ -242,11 +243,69 @@ def tradeoff_plot(path, curves: dict, methods: dict, noise_floor: float | None,
         axes.axhline(floor, color="tab:red", lw=1, ls="--", label="reference noise floor")
     axes.set_xscale("log")
     axes.set_yscale("log")
+    axes.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     axes.set_ylim(low, high)
     axes.set_xlabel("seconds per frame (path tracing: per render)")
     axes.set_ylabel("relative MSE over the scored pixels")
     axes.set_title(title, fontsize=9)
     axes.grid(True, which="both", alpha=0.3)
     axes.legend(fontsize=7, loc="best")
+    figure.tight_layout()
+    return atomic_save_figure(path, figure)
+
+
+def overview_plot(path, points: list[tuple], title: str = "every scene") -> Path | None:
+    """Draw each method on each scene at its warm frame time and relative MSE, log-log.
+
+    Parameters
+    ----------
+    path : str or Path
+        The PNG (written atomically).
+    points : list of tuple
+        ``(scene, method, frame_seconds, relative_mse, within_noise)``; a point whose
+        error is within the reference's noise is drawn hollow.
+    title : str
+
+    Returns
+    -------
+    Path or None
+        None when no point has a positive time and error.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+
+    from ..atomic import atomic_save_figure
+
+    usable = [p for p in points if p[2] and p[3] and p[2] > 0 and p[3] > 0
+              and math.isfinite(p[2]) and math.isfinite(p[3])]
+    if not usable:
+        return None
+    methods = sorted({p[1] for p in usable})
+    scenes = sorted({p[0] for p in usable})
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    markers = "osD^v<>p*hX"
+    figure, axes = plt.subplots(figsize=(5.0, 3.9))
+    for scene, name, seconds, error, within_noise in usable:
+        colour = colours[methods.index(name) % len(colours)]
+        axes.plot([seconds], [error], markers[scenes.index(scene) % len(markers)],
+                  markersize=7, color=colour,
+                  markerfacecolor="none" if within_noise else colour)
+    for index, name in enumerate(methods):
+        axes.plot([], [], "s", color=colours[index % len(colours)], label=name)
+    for index, scene in enumerate(scenes):
+        axes.plot([], [], markers[index % len(markers)], color="0.4", markerfacecolor="none",
+                  label=scene)
+    axes.set_xscale("log")
+    axes.set_yscale("log")
+    axes.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    axes.set_xlabel("seconds per frame (warm)")
+    axes.set_ylabel("relative MSE over the scored pixels")
+    axes.set_title(f"{title}: how wrong and how fast (hollow: within reference noise)",
+                   fontsize=8)
+    axes.grid(True, which="both", alpha=0.3)
+    axes.legend(fontsize=6.5, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
     figure.tight_layout()
     return atomic_save_figure(path, figure)

@@ -22,6 +22,25 @@ def test_coverage_of_95_percent_intervals_on_exact_model_captures():
 
 
 @pytest.mark.slow
+def test_coverage_of_the_walk_model_on_random_walk_captures():
+    # the walk's captures are made by a generator that shares no code with the fitter's
+    # tabulated profile; 40 captures, 240 coefficients
+    result = coverage_study(40, seed=7, generator="walk", photons=500_000)
+    assert result.converged.all()
+    assert result.fraction >= COVERAGE_TARGET, (result.fraction, result.inside.mean(axis=0))
+    assert not result.misfit.any()
+
+
+@pytest.mark.slow
+def test_every_random_walk_capture_of_a_measured_medium_misfits_the_dipole():
+    # the dipole is not transport: a walk capture fitted with it must say so, medium by medium
+    rows = model_bias_table(photons=100_000, size=96, seed=7, forward="dipole")
+    assert [row.material for row in rows] == measured_medium_names()
+    unflagged = [row.material for row in rows if not row.misfit]
+    assert not unflagged, unflagged
+
+
+@pytest.mark.slow
 def test_model_bias_table_of_the_measured_media(tmp_path):
     rows = model_bias_table(photons=20000, size=64, seed=7)
     assert [row.material for row in rows] == measured_medium_names()
