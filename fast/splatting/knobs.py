@@ -18,12 +18,16 @@ DEFAULT_KNOBS: dict = {
     "sampling_range": "shortest",   # RGB reading of Eq. 11's range, one of SAMPLING_RANGES
     "level_sampling": 0.0,          # > 0: coarser samples for coarse splatting levels (pixels)
     "profile_upsampling": True,     # Eq. 17 on B / sqrt(P_o): see upsampling_profile_factors
+    "area_light_points": 4,         # point emitters an area light becomes (emitters.py)
 }
 #: The splatting kernels: compiled loops (numba, the default: measured fastest on the CPU,
 #: see reports/bench/splatting.py), CUDA (numba.cuda, :mod:`.splatting_cuda`: the same tiles
 #: on a GPU), Dr.Jit (LLVM on the CPU, CUDA where a GPU is there) and plain numpy (the
 #: reference the others are tested against).
 BACKENDS = ("numba", "cuda", "drjit", "numpy")
+
+#: The most point emitters one area light may become (each is an irradiance buffer a frame).
+MAX_AREA_LIGHT_POINTS = 256
 
 #: Pairs evaluated at once by the numpy splatting kernel (bounds its memory to ~1 GB).
 PAIR_CHUNK = 1 << 21

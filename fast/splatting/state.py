@@ -17,11 +17,12 @@ from ...scenes.scene import DirectionalLight, PointLight, SpotLight
 from ..base import StageLog, refuse_inapplicable, with_defaults
 from ..solid_inputs import subedit_from_solid
 from .buffers import CameraModel, SurfaceBuffer
+from .emitters import AREA_LIGHTS, PointEmitter, point_emitters
 from .frame import LightView, as_subedit, gather_frame, light_view, splat_frame
-from .knobs import BACKENDS, DEFAULT_KNOBS
+from .knobs import BACKENDS, DEFAULT_KNOBS, MAX_AREA_LIGHT_POINTS
 from .selection import SAMPLING_RANGES
 
-_LIGHTS = (PointLight, SpotLight, DirectionalLight)
+_LIGHTS = (PointLight, SpotLight, DirectionalLight, *AREA_LIGHTS)
 #: Widest irradiance-buffer cone for a point light (degrees): a light inside the object's
 #: bounding sphere sees only this cone of it.
 MAX_LIGHT_FOV = 160.0
@@ -41,16 +42,18 @@ def _translucent_objects(scene) -> list[int]:
 def applies_to(scene) -> str | None:
     """None when the method renders ``scene``; otherwise why not.
 
-    It needs a translucent object (Dipole, SubEdit or solid material) and point, spot or
-    directional lights (Chen et al. 2012, Sect. 6: other lights are future work there; a
-    spot is its point light with the spot's fall-off in the irradiance buffer).
+    It needs a translucent object (Dipole, SubEdit or solid material) and point, spot,
+    directional, rectangular or spherical lights (Chen et al. 2012 splat point and
+    directional lights; the others become point emitters,
+    :mod:`~translucent.fast.splatting.emitters`). Environments are refused.
     """
     if not _translucent_objects(scene):
         return "no translucent object (Dipole, SubEdit or solid material) in the scene"
     others = sorted({type(light).__name__ for light in scene.lights
                      if not isinstance(light, _LIGHTS)})
     if others:
-        return (f"the method handles point, spot and directional lights only; the scene has "
+        return (f"the method handles point, spot, directional and area lights only; the "
+                f"scene has "
                 f"{', '.join(others)}")
     if not scene.lights:
         return "the scene has no light"
@@ -91,6 +94,12 @@ def _check_knobs(knobs: dict) -> dict:
     merged["multiresolution"] = bool(merged["multiresolution"])
     merged["profile_upsampling"] = bool(merged["profile_upsampling"])
     merged["adaptive"] = bool(merged["adaptive"])
+    points = merged["area_light_points"]
+    if isinstance(points, bool) or not isinstance(points, int | np.integer) \
+            or not 1 <= points <= MAX_AREA_LIGHT_POINTS:
+        raise InputError(f"must be an integer in [1, {MAX_AREA_LIGHT_POINTS}]",
+                         field="area_light_points", value=points)
+    merged["area_light_points"] = int(points)
     return merged
 
 
@@ -228,7 +237,7 @@ class SplattingState:
 
         Parameters
         ----------
-        lights : sequence of PointLight / SpotLight / DirectionalLight, optional
+        lights : sequence of PointLight / SpotLight / DirectionalLight / area lights, optional
             Replace the scene's lights.
         material : SubEditProfiles or Dipole, optional
             Replace the material of every translucent object.
@@ -300,8 +309,11 @@ class SplattingState:
         else:
             camera_buffer = _surface_buffer(camera_view, index, mesh.uv,
                                             _perspective_footprint(camera_view))
-        views = [self._light_view(scene, index, light, centre, radius, material.eta)
-                 for light in scene.lights]
+        count = self.knobs["area_light_points"]
+        views = [self._light_view(scene, index, emitter, centre, radius, material.eta)
+                 for light in scene.lights
+                 for emitter in ([light] if isinstance(light, DirectionalLight)
+                                 else point_emitters(light, count, centre))]
         return camera_buffer, views, material, radius
 
     def _render_object(self, scene, index, camera_view, camera, log, ground_truth):
@@ -330,7 +342,7 @@ class SplattingState:
         size = self.knobs["irradiance_resolution"]
         raster = self.knobs["buffers"] == "raster"
         uv = scene.objects[index].mesh.uv
-        if isinstance(light, PointLight | SpotLight):
+        if isinstance(light, PointEmitter):
             towards = centre - light.position
             distance = float(np.linalg.norm(towards))
             if distance <= radius * VIEW_MARGIN:
@@ -355,8 +367,9 @@ class SplattingState:
                 np.reshape(np.asarray(light.position, np.float64), (1, 1, 3)),
                 np.reshape(np.asarray(light.intensity, np.float64), (1, 1, 3)), float(eta),
                 True)
-            if isinstance(light, SpotLight):
-                # the spot's intensity towards each buffer pixel: its fall-off in angle
+            if light.falloff is not None:
+                # the emitter's intensity towards each buffer pixel: a spot's fall-off in
+                # angle, an area light patch's cosine
                 leaving = buffer.position - light.position
                 length = np.linalg.norm(leaving, axis=-1, keepdims=True)
                 falloff = light.falloff(leaving / np.maximum(length, 1e-300))

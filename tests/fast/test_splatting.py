@@ -681,13 +681,15 @@ def test_object_out_of_view_is_black(heterogeneous_scene):
 
 
 def test_applies_to_and_knob_errors(heterogeneous_scene):
-    from translucent.scenes import SphereAreaLight
+    from translucent.scenes import ConstantEnvironment
 
     assert splatting.applies_to(heterogeneous_scene) is None
-    area = heterogeneous_scene.with_lights([SphereAreaLight([0, 3, 0], 0.2, 1.0)])
-    assert "point, spot and directional lights only" in splatting.applies_to(area)
+    sky = heterogeneous_scene.with_lights([ConstantEnvironment(1.0)])
+    assert "point, spot, directional and area lights only" in splatting.applies_to(sky)
     with pytest.raises(InputError, match="cannot render this scene"):
-        splatting.precompute(area)
+        splatting.precompute(sky)
+    with pytest.raises(InputError, match="area_light_points = 0: must be an integer"):
+        splatting.precompute(heterogeneous_scene, area_light_points=0)
     with pytest.raises(InputError, match="unknown knob"):
         splatting.precompute(heterogeneous_scene, colour=1)
     with pytest.raises(InputError, match=r"levels = 0: must be an integer in \[1, 8192\]"):

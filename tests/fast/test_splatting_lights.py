@@ -53,3 +53,38 @@ def test_a_spot_on_part_of_the_object_matches_its_gather_and_lights_less(state):
     truth = state.render_ground_truth(lights=[spot]).rgb
     assert 0.05 * point.sum() < image.sum() < 0.9 * point.sum()
     assert float(np.abs(image - truth).sum() / truth.sum()) < SPLAT_TOLERANCE
+
+
+def test_a_sphere_light_is_its_intensity_at_its_centre_in_one_point(state):
+    from translucent.scenes import SphereAreaLight
+
+    radius, radiance = 0.2, 40.0
+    sphere = SphereAreaLight(POSITION, radius, radiance)
+    point = PointLight(POSITION, radiance * math.pi * radius ** 2)
+    one = state.render(lights=[sphere], material=None)
+    # area_light_points is a knob of the state: a state with one point per area light
+    single = splatting.precompute(state.scene, irradiance_resolution=32, area_light_points=1)
+    np.testing.assert_allclose(single.render(lights=[sphere]).rgb,
+                               single.render(lights=[point]).rgb, rtol=1e-6, atol=0)
+    # several points share that intensity: the lit side's light is the same up to the
+    # penumbrae they make
+    assert one.rgb.sum() == pytest.approx(single.render(lights=[point]).rgb.sum(), rel=0.05)
+
+
+def test_a_rectangle_light_is_its_lambertian_patches():
+    from translucent.fast.splatting.emitters import point_emitters
+    from translucent.scenes import RectangularAreaLight
+
+    light = RectangularAreaLight(center=[0, 2.0, 0], u_axis=[0.25, 0, 0], v_axis=[0, 0, 0.25],
+                                 radiance=[17.0, 12.0, 4.0])
+    for count in (1, 4, 9, 16):
+        emitters = point_emitters(light, count, towards=[0, 0, 0])
+        assert len(emitters) == count
+        # the patches share the rectangle's area: total power L A pi, one-sided
+        total = sum(e.intensity for e in emitters)
+        np.testing.assert_allclose(total, np.array([17.0, 12.0, 4.0]) * light.area)
+        points = np.array([e.position for e in emitters])
+        assert np.all(np.abs(points - light.center) <= [0.25, 0.0, 0.25])
+        down, up = np.array([[0.0, -1.0, 0.0]]), np.array([[0.0, 1.0, 0.0]])
+        assert emitters[0].falloff(down)[0] == pytest.approx(1.0)  # it faces down
+        assert emitters[0].falloff(up)[0] == 0.0
