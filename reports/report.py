@@ -124,8 +124,13 @@ PROGRESSIVE_SPP = 32
 #: radiosity's dense operators on the default spheres (1-3 GB each) are not.
 REPORT_CACHE_ENTRY_LIMIT = 256 * 2**20
 
-#: Bumped when what a cached method run holds changes, so older entries miss.
-RUN_FORMAT = 1
+#: Bumped when what a cached method run holds changes, so older entries miss (2: the warm
+#: frame is the median of relit frames).
+RUN_FORMAT = 2
+
+#: Frames rendered after the first, with the scene's lights given again: their median is
+#: the warm frame time the page shows (compiling kernels and first-call costs excluded).
+REPORT_RELIGHT_FRAMES = 3
 
 #: The owner name of a scene's path-tracing ladder task (not a method).
 PATH_TRACING = "path tracing"
@@ -523,7 +528,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 stored.cached = True
                 report.runs[name] = stored
                 continue
-            tasks.append(("method", portable(report), name, {}))
+            tasks.append(("method", portable(report), name, {}, REPORT_RELIGHT_FRAMES))
             owners.append((report, name, key))
         # the path-tracing ladder, for the speed-ups of the methods that will be scored
         if not report.reference_error and any(

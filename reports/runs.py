@@ -258,7 +258,8 @@ def report_task(kind: str, scene, *arguments):
         from .speedup import path_tracing_ladder
 
         return path_tracing_ladder(scene, *arguments)
-    return run_method(arguments[0], scene, *arguments[1:])
+    name, knobs, *relight = arguments
+    return run_method(name, scene, knobs, relight_frames=relight[0] if relight else 0)
 
 
 def portable_scene(scene, scene_hash: str, local_workers: bool):
