@@ -144,11 +144,12 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
         Run against an empty temporary cache, so that the method's own precomputation
         cache cannot make it look fast (the benchmarks use this).
     relight_frames : int
-        After the first frame, render this many more with the scene's lights given again
-        (``state.render(lights=scene.lights)``: the relighting path, nothing reused from the
-        first frame's lighting); ``frame_seconds`` is then their median and
-        ``first_frame_seconds`` the first frame's, which can include first-call costs
-        (compiled kernels loading). 0: ``frame_seconds`` is the first frame.
+        After the first frame, render this many more with the lights moved a little each
+        time (:func:`nudged_lights`: the interactive relighting path, as when a user drags
+        a light, so that no method can reuse the first frame's lighting);
+        ``frame_seconds`` is then their median and ``first_frame_seconds`` the first
+        frame's, which can include first-call costs (compiled kernels loading). 0:
+        ``frame_seconds`` is the first frame. The image kept is the first frame's.
 
     Returns
     -------
@@ -176,9 +177,10 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
             image = state.render()
             finished = time.perf_counter()
             relit = []
-            for _ in range(relight_frames):
+            for frame in range(relight_frames):
+                lights = nudged_lights(scene.lights, frame + 1)
                 relight_started = time.perf_counter()
-                state.render(lights=scene.lights)
+                state.render(lights=lights)
                 relit.append(time.perf_counter() - relight_started)
     except Exception as error:  # a failing method is shown in the page; the run goes on
         return MethodRun(status="failed", reason=f"{type(error).__name__}: {error}",
@@ -240,6 +242,33 @@ def committed_reference_for(scene):
     if Path(scene.source).resolve() != Path(builtin).resolve():
         return None  # a scene file of its own that happens to share the name
     return committed_reference(scene.name, scene).require()
+
+
+#: How far :func:`nudged_lights` moves a light per frame, scene units (a direction: radians).
+LIGHT_NUDGE = 1e-4
+
+
+def nudged_lights(lights, step: int) -> list:
+    """Return ``lights`` moved by ``step`` x :data:`LIGHT_NUDGE`: new lights, the same light.
+
+    Positions and centres move along x, directions turn about the axis they are least
+    aligned with; environments stay as they are (nothing to move).
+    """
+    from dataclasses import replace
+
+    moved = []
+    offset = step * LIGHT_NUDGE
+    for light in lights:
+        if hasattr(light, "position"):
+            light = replace(light, position=light.position + [offset, 0.0, 0.0])
+        elif hasattr(light, "center"):
+            light = replace(light, center=light.center + [offset, 0.0, 0.0])
+        elif hasattr(light, "direction"):
+            axis = np.eye(3)[int(np.argmin(np.abs(light.direction)))]
+            turned = light.direction + offset * axis
+            light = replace(light, direction=turned / np.linalg.norm(turned))
+        moved.append(light)
+    return moved
 
 
 def report_task(kind: str, scene, *arguments):

@@ -76,3 +76,34 @@ def test_the_plot_is_written_or_nothing_when_there_is_nothing_to_draw(tmp_path):
     assert tradeoff_plot(tmp_path / "none.png", {"path tracing": None},
                          {"broken": (0.0, 0.1)}, None, "x") is None
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.png"]
+
+
+def test_relit_frames_move_every_light_a_little():
+    from translucent.reports.runs import LIGHT_NUDGE, nudged_lights
+    from translucent.scenes import (
+        ConstantEnvironment,
+        DirectionalLight,
+        PointLight,
+        RectangularAreaLight,
+        SphereAreaLight,
+        SpotLight,
+    )
+
+    lights = [PointLight([1.0, 2.0, 3.0], 5.0),
+              SpotLight([0.0, 1.0, 0.0], [0.0, -1.0, 0.0], 5.0),
+              DirectionalLight([0.0, 0.0, -1.0], 1.0),
+              SphereAreaLight([0.0, 3.0, 0.0], 0.2, 1.0),
+              RectangularAreaLight([0, 2.0, 0], [0.25, 0, 0], [0, 0, 0.25], 1.0),
+              ConstantEnvironment(1.0)]
+    moved = nudged_lights(lights, 2)
+    assert [type(a) for a in moved] == [type(b) for b in lights]
+    for before, after in zip(lights[:5], moved[:5], strict=True):
+        # a new light: no method may reuse the last frame's lighting
+        assert after is not before
+        assert any(not np.array_equal(getattr(before, name), getattr(after, name))
+                   for name in ("position", "center", "direction") if hasattr(before, name))
+    np.testing.assert_allclose(moved[0].position - lights[0].position, [2 * LIGHT_NUDGE, 0, 0])
+    np.testing.assert_allclose(moved[3].center - lights[3].center, [2 * LIGHT_NUDGE, 0, 0])
+    assert np.linalg.norm(moved[2].direction) == pytest.approx(1.0)
+    assert np.degrees(np.arccos(moved[2].direction @ lights[2].direction)) < 0.1
+    assert moved[5] is lights[5]
