@@ -9,6 +9,7 @@ element by element.
 from __future__ import annotations
 
 import contextlib
+import os
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
@@ -46,12 +47,31 @@ def dask_client(scheduler: str | None = None, *, workers: int = 2, threads_per_w
         finally:
             client.close()
         return
-    with dask.config.set({"distributed.nanny.pre-spawn-environ":
-                          worker_environment(threads_per_worker)}), \
-            LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker,
-                         processes=True, host="127.0.0.1", dashboard_address=None) as cluster, \
-            Client(cluster) as client:
-        yield client
+    environment = worker_environment(threads_per_worker)
+    # Dask's nanny writes the workers' variables into this process's own environment before
+    # it spawns them, and leaves them there; numba re-reads NUMBA_NUM_THREADS at every
+    # compilation and refuses a value other than its running pool's, so they are put back
+    # when the cluster is gone (not before: a worker may still be spawning)
+    touched = [*environment, "PYTHONHASHSEED"]
+    saved = {name: os.environ.get(name) for name in touched}
+    try:
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": environment}), \
+                LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker,
+                             processes=True, host="127.0.0.1",
+                             dashboard_address=None) as cluster, \
+                Client(cluster) as client:
+            yield client
+    finally:
+        _restore(saved)
+
+
+def _restore(saved: dict) -> None:
+    """Put environment variables back as ``saved`` holds them (None: unset)."""
+    for name, value in saved.items():
+        if value is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = value
 
 
 def prepare_worker() -> str:

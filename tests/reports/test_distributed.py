@@ -21,6 +21,20 @@ def test_local_cluster_on_loopback_gives_the_numbers_of_the_local_run():
     assert np.all(np.diff([serial[i] for i in range(0, 12, 3)]) < 0)
 
 
+def test_a_local_cluster_leaves_this_process_environment_as_it_was(monkeypatch):
+    import os
+
+    # numba re-reads NUMBA_NUM_THREADS at every compilation and refuses a change once its
+    # pool runs: the nanny must not leave the workers' value in this process
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")  # a user's own setting: kept, and passed on
+    with dask_client(workers=1, threads_per_worker=1) as client:
+        worker = client.run(lambda: {name: os.environ.get(name)
+                                     for name in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS")})
+        assert list(worker.values()) == [{"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "2"}]
+    assert "NUMBA_NUM_THREADS" not in os.environ and os.environ["OMP_NUM_THREADS"] == "2"
+
+
 def test_bad_scheduler_address():
     with pytest.raises(InputError, match="--scheduler"):
         run_tasks(_sweep_point, ARGUMENTS, scheduler="not an address", progress=False)
