@@ -10,6 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from translucent.errors import InputError
 from translucent.fast import brdf_pca as bp
+from translucent.fast import brdf_pca_kernels as bk
+from translucent.fast import brdf_pca_lighting as bl
+from translucent.fast import brdf_pca_transfer as bt
 from translucent.materials import Dipole, Lambertian
 from translucent.materials.brdf_pca import build_pca_basis
 from translucent.materials.brdfs import (
@@ -71,24 +74,24 @@ def test_gather_wavelets_keep_inner_products(rng):
     from translucent.fast.wavelets import haar2d_inverse
 
     rows = rng.normal(size=(5, 64)).astype(np.float32)
-    coefficients = bp._haar_rows(rows)
+    coefficients = bt._haar_rows(rows)
     np.testing.assert_allclose(haar2d_inverse(coefficients.reshape(5, 8, 8)).reshape(5, 64),
                                rows, atol=1e-5)
     other = rng.normal(size=64).astype(np.float32)
-    np.testing.assert_allclose(coefficients @ bp._haar_rows(other[None])[0], rows @ other,
+    np.testing.assert_allclose(coefficients @ bt._haar_rows(other[None])[0], rows @ other,
                                rtol=1e-4, atol=1e-4)
 
 
 def test_weighted_selection_keeps_the_coarse_terms(rng):
     """Selection by magnitude times sqrt(support) (Ng et al. 2003): a coarse coefficient
     beats a fine one of the same magnitude, and the kept values are the row's own."""
-    weights = bp._support_weights(64)
+    weights = bt._support_weights(64)
     row = np.zeros((1, 64), dtype=np.float32)
     row[0, 0], row[0, 63] = 1.0, 2.0           # scaling coefficient, a finest detail
-    kept = bp._select(row, 1, weights)
+    kept = bt._select(row, 1, weights)
     assert kept.indices.tolist() == [0] and kept.values.tolist() == [1.0]
     dense = rng.normal(size=(3, 64)).astype(np.float32)
-    kept = bp._select(dense, 10, weights)
+    kept = bt._select(dense, 10, weights)
     assert np.all(np.diff(kept.indptr) == 10)
     np.testing.assert_allclose(kept.to_dense()[kept.to_dense() != 0],
                                dense[kept.to_dense() != 0], rtol=1e-6)
@@ -106,10 +109,10 @@ def test_compiled_terms_match_the_materials(model, cos_l, cos_v, azimuth):
     sin_l, sin_v = math.sqrt(1 - cos_l**2), math.sqrt(1 - cos_v**2)
     l_dot_v = cos_l * cos_v + sin_l * sin_v * math.cos(azimuth)
     c = (-0.7, 0.9)
-    got = bp._fixed_scalar(bp.MODEL_CODES[model], cos_l, cos_v, l_dot_v, 0.3)
+    got = bk._fixed_scalar(bk.MODEL_CODES[model], cos_l, cos_v, l_dot_v, 0.3)
     assert got == pytest.approx(float(fixed_term(model, cos_l, cos_v, l_dot_v, f0=0.3)),
                                 rel=KERNEL_RTOL)
-    got = bp._variable_scalar(bp.MODEL_CODES[model], cos_l, cos_v, l_dot_v, *c)
+    got = bk._variable_scalar(bk.MODEL_CODES[model], cos_l, cos_v, l_dot_v, *c)
     assert got == pytest.approx(float(pca_variable(model, cos_l, cos_v, l_dot_v,
                                                    lafortune_c=c)), rel=KERNEL_RTOL,
                                 abs=1e-15)
@@ -119,16 +122,16 @@ def test_compiled_terms_match_the_materials(model, cos_l, cos_v, azimuth):
 def test_compiled_basis_matches_interpolated_pca(model, rng):
     material = AnalyticBRDF(model, GAMMA_RANGES[model][0], f0=0.3, lafortune_c=(-0.8, 1.0))
     basis = build_pca_basis(model, 4, gamma_samples=50, delta_samples=128)
-    parameters = bp._material_parameters(material, basis)
+    parameters = bt._material_parameters(material, basis)
     out = np.empty(5)
     for _ in range(50):
         cos_l, cos_v = rng.uniform(0.01, 1, 2)
         l_dot_v = cos_l * cos_v + math.sqrt((1 - cos_l**2) * (1 - cos_v**2)) * rng.uniform(-1, 1)
-        bp._glossy_basis(parameters[0], cos_l, cos_v, l_dot_v, *parameters[1:], out)
+        bk._glossy_basis(parameters[0], cos_l, cos_v, l_dot_v, *parameters[1:], out)
         expected = fixed_term(model, cos_l, cos_v, l_dot_v, f0=0.3) * basis.basis_values(
             pca_variable(model, cos_l, cos_v, l_dot_v, lafortune_c=(-0.8, 1.0)))
         np.testing.assert_allclose(out, expected, rtol=KERNEL_RTOL, atol=1e-300)
-    bp._glossy_basis(parameters[0], -0.1, 0.5, 0.0, *parameters[1:], out)
+    bk._glossy_basis(parameters[0], -0.1, 0.5, 0.0, *parameters[1:], out)
     np.testing.assert_array_equal(out, 0.0)
 
 
@@ -138,7 +141,7 @@ def test_compiled_basis_matches_interpolated_pca(model, rng):
 def _disk_quadrature(material, basis, x, n_x, out, centre, normal, area, n=800):
     """Midpoint rule in polar coordinates on the disk: the integral Eq. 3 estimates."""
     radius = math.sqrt(area / math.pi)
-    first, second = (v[0] for v in bp._tangent_frames(np.asarray(normal)[None]))
+    first, second = (v[0] for v in bl._tangent_frames(np.asarray(normal)[None]))
     rr = (np.arange(n) + 0.5) / n * radius
     phi = (np.arange(n) + 0.5) / n * 2 * math.pi
     r, p = np.meshgrid(rr, phi, indexing="ij")
@@ -167,7 +170,7 @@ def test_subarea_estimate_converges_to_the_disk_integral():
     normal = -mirror
     area = math.pi * 0.12**2
     exact = _disk_quadrature(material, basis, x, n_x, out, centre, normal, area)
-    estimate = bp.disk_transfer(material, basis, x, n_x, out, centre, normal, area,
+    estimate = bt.disk_transfer(material, basis, x, n_x, out, centre, normal, area,
                                 points=4096)
     np.testing.assert_allclose(estimate, exact, rtol=DISK_QMC_RTOL,
                                atol=DISK_QMC_RTOL * np.abs(exact).max())

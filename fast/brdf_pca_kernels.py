@@ -1,0 +1,292 @@
+"""The compiled loops of BRDF editing with global illumination (Nguyen et al. 2010).
+
+The per-pair BRDF terms (the formulas of :mod:`translucent.materials.brdfs`, compiled),
+the front-facing pair counts and rays, and the transfer rows with their sub-area estimate
+(Sect. 5.1). :mod:`translucent.fast.brdf_pca` assembles the precomputation from them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..materials.brdfs import (
+    COSINE_FLOOR,
+    MODELS,
+)
+
+#: Sub-area samples are drawn in rounds of this many; convergence is judged between rounds.
+SUBAREA_ROUND = 8
+
+#: |M_g| allowed per solid angle of the narrowest lobe: 16 points (4 x 4) across a lobe
+#: resolve its peak; pairs whose disk subtends less than 1/16 of a lobe keep one point.
+SUBAREA_DENSITY = 16.0
+
+#: Model codes of the compiled kernels, in the order of :data:`MODELS`.
+MODEL_CODES = {name: code for code, name in enumerate(MODELS)}
+_BP, _W, _WD, _LA, _CT, _AS = range(6)
+
+#: Roberts' R2 sequence (powers of the plastic number): a 2D low-discrepancy sequence whose
+#: every prefix is well spread, so sub-area points can be added until convergence. Each
+#: pair shifts it by its own hashed offset (Cranley-Patterson rotation).
+_PLASTIC = 1.324717957244746
+_R2_X, _R2_Y = 1.0 / _PLASTIC, 1.0 / _PLASTIC**2
+
+_SQRT_HALF = math.sqrt(0.5)
+
+
+# ---------------------------------------------------------------------------------------
+# compiled BRDF terms (the formulas of translucent.materials.brdfs, per pair)
+
+
+@numba.njit(cache=True, nogil=True)
+def _fixed_scalar(model, cos_l, cos_v, l_dot_v, f0):  # pragma: no cover - compiled
+    """:func:`translucent.materials.brdfs.fixed_term` for one pair (Table 4)."""
+    if model == _BP or model == _LA:
+        return 1.0
+    nl = max(cos_l, COSINE_FLOOR)
+    nv = max(cos_v, COSINE_FLOOR)
+    if model == _W:
+        return 1.0 / math.sqrt(nl * nv)
+    if model == _WD:
+        return 1.0 / (nl * nv)
+    length = math.sqrt(max(2.0 + 2.0 * l_dot_v, COSINE_FLOOR * COSINE_FLOOR))
+    v_dot_h = max(0.5 * length, COSINE_FLOOR)
+    one_minus = 1.0 - min(max(v_dot_h, 0.0), 1.0)
+    fresnel = f0 + (1.0 - f0) * (one_minus * one_minus) * (one_minus * one_minus) * one_minus
+    if model == _AS:
+        return fresnel / (v_dot_h * max(nl, nv))
+    n_dot_h = max((nl + nv) / length, COSINE_FLOOR)
+    shadowing = min(1.0, min(2.0 * n_dot_h * nv / v_dot_h, 2.0 * n_dot_h * nl / v_dot_h))
+    cos4 = (n_dot_h * n_dot_h) * (n_dot_h * n_dot_h)
+    return shadowing * fresnel / ((nl * nv) * cos4)
+
+
+@numba.njit(cache=True, nogil=True)
+def _variable_scalar(model, cos_l, cos_v, l_dot_v, c_xy, c_z):  # pragma: no cover
+    """:func:`translucent.materials.brdfs.pca_variable` for one pair."""
+    if model == _LA:
+        product = cos_l * cos_v
+        return (c_xy * (l_dot_v - product) + c_z * product) / max(abs(c_xy), abs(c_z))
+    length = math.sqrt(max(2.0 + 2.0 * l_dot_v, COSINE_FLOOR * COSINE_FLOOR))
+    return min(max((cos_l + cos_v) / length, 0.0), 1.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _glossy_basis(model, cos_l, cos_v, l_dot_v, f0, c_xy, c_z, grid0, step, matrix,
+                  out):  # pragma: no cover - compiled
+    """Write f_F b_j (j = 0..K) of one direction pair into ``out`` (Eq. 6, Table 4)."""
+    count = out.shape[0]
+    if cos_l <= 0.0 or cos_v <= 0.0:
+        for j in range(count):
+            out[j] = 0.0
+        return
+    variable = _variable_scalar(model, cos_l, cos_v, l_dot_v, c_xy, c_z)
+    if model == _LA:
+        if variable <= 0.0:
+            for j in range(count):
+                out[j] = 0.0
+            return
+        delta = variable
+    else:
+        delta = math.acos(variable)
+    fixed = _fixed_scalar(model, cos_l, cos_v, l_dot_v, f0)
+    last = matrix.shape[0] - 1
+    position = min(max((delta - grid0) / step, 0.0), float(last))
+    index = min(int(position), last - 1)
+    fraction = position - index
+    for j in range(count):
+        out[j] = fixed * (matrix[index, j] * (1.0 - fraction) + matrix[index + 1, j] * fraction)
+
+
+# ---------------------------------------------------------------------------------------
+# pairs, rays and transfer rows (compiled)
+
+
+@numba.njit(cache=True, nogil=True)
+def _front_facing(x, n_x, positions, normals, b, g):  # pragma: no cover - compiled
+    """Whether view sample b and gather sample g are in front of each other."""
+    dx = positions[g, 0] - x[b, 0]
+    dy = positions[g, 1] - x[b, 1]
+    dz = positions[g, 2] - x[b, 2]
+    facing = dx * n_x[b, 0] + dy * n_x[b, 1] + dz * n_x[b, 2]
+    back = dx * normals[g, 0] + dy * normals[g, 1] + dz * normals[g, 2]
+    return facing > 0.0 and back < 0.0
+
+
+@numba.njit(cache=True, parallel=True)
+def _front_counts(x, n_x, positions, normals, counts):  # pragma: no cover - compiled
+    for b in numba.prange(x.shape[0]):
+        found = 0
+        for g in range(positions.shape[0]):
+            if _front_facing(x, n_x, positions, normals, b, g):
+                found += 1
+        counts[b] = found
+
+
+@numba.njit(cache=True, parallel=True)
+def _front_rays(x, n_x, positions, normals, offset, starts, columns, origins, directions,
+                reach):  # pragma: no cover - compiled
+    """Fill the shadow rays of the front-facing pairs of a block.
+
+    Both ends move ``offset`` along their normals, the convention of
+    :func:`translucent.scenes.raycast.visible`.
+    """
+    for b in numba.prange(x.shape[0]):
+        k = starts[b]
+        for g in range(positions.shape[0]):
+            if not _front_facing(x, n_x, positions, normals, b, g):
+                continue
+            ox = x[b, 0] + offset * n_x[b, 0]
+            oy = x[b, 1] + offset * n_x[b, 1]
+            oz = x[b, 2] + offset * n_x[b, 2]
+            ex = positions[g, 0] + offset * normals[g, 0] - ox
+            ey = positions[g, 1] + offset * normals[g, 1] - oy
+            ez = positions[g, 2] + offset * normals[g, 2] - oz
+            length = math.sqrt(ex * ex + ey * ey + ez * ez)
+            columns[k] = g
+            origins[0, k] = ox
+            origins[1, k] = oy
+            origins[2, k] = oz
+            if length <= 2.0 * offset:
+                directions[0, k] = 0.0
+                directions[1, k] = 0.0
+                directions[2, k] = 1.0
+                reach[k] = 0.0
+            else:
+                directions[0, k] = ex / length
+                directions[1, k] = ey / length
+                directions[2, k] = ez / length
+                reach[k] = length - offset
+            k += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _hash_unit(key):  # pragma: no cover - compiled
+    """Two numbers in [0, 1) from an integer key (splitmix64)."""
+    z = np.uint64(key) + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return (float(z >> np.uint64(40)) / 16777216.0,
+            float((z >> np.uint64(16)) & np.uint64(0xFFFFFF)) / 16777216.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _concentric_disk(u, v):  # pragma: no cover - compiled
+    """Shirley-Chiu map of the unit square onto the unit disk (area-preserving)."""
+    a = 2.0 * u - 1.0
+    b = 2.0 * v - 1.0
+    if a == 0.0 and b == 0.0:
+        return 0.0, 0.0
+    if abs(a) > abs(b):
+        radius = a
+        angle = 0.25 * math.pi * (b / a)
+    else:
+        radius = b
+        angle = 0.5 * math.pi - 0.25 * math.pi * (a / b)
+    return radius * math.cos(angle), radius * math.sin(angle)
+
+
+@numba.njit(cache=True, nogil=True)
+def _disk_estimate(x, n_x, out, g_pos, g_nor, area, first, second, model, f0, c_xy, c_z,
+                   grid0, step, matrix, budget, tolerance, key, sums,
+                   values):  # pragma: no cover - compiled
+    """Estimate Eq. 3 with points of the disk K_g; return the number of points used.
+
+    ``sums`` receives the mean of f_F b_j cos cos |A_g| / r^2 over them.
+    """
+    radius = math.sqrt(area / math.pi)
+    min_r2 = area / (math.pi * budget)
+    count = sums.shape[0]
+    for j in range(count):
+        sums[j] = 0.0
+    cos_v = out[0] * n_x[0] + out[1] * n_x[1] + out[2] * n_x[2]
+    shift_u, shift_v = _hash_unit(key)
+    used = 0
+    previous = np.nan
+    while used < budget:
+        for _ in range(SUBAREA_ROUND):
+            u = (shift_u + used * _R2_X) % 1.0
+            v = (shift_v + used * _R2_Y) % 1.0
+            px, py = _concentric_disk(u, v)
+            qx = g_pos[0] + radius * (px * first[0] + py * second[0]) - x[0]
+            qy = g_pos[1] + radius * (px * first[1] + py * second[1]) - x[1]
+            qz = g_pos[2] + radius * (px * first[2] + py * second[2]) - x[2]
+            r2 = qx * qx + qy * qy + qz * qz
+            used += 1
+            if r2 <= 0.0:
+                continue
+            inverse = 1.0 / math.sqrt(r2)
+            wx, wy, wz = qx * inverse, qy * inverse, qz * inverse
+            cos_x = wx * n_x[0] + wy * n_x[1] + wz * n_x[2]
+            cos_q = -(wx * g_nor[0] + wy * g_nor[1] + wz * g_nor[2])
+            if cos_x <= 0.0 or cos_q <= 0.0:
+                continue
+            geometry = cos_x * cos_q * area / max(r2, min_r2)
+            l_dot_v = wx * out[0] + wy * out[1] + wz * out[2]
+            _glossy_basis(model, cos_x, cos_v, l_dot_v, f0, c_xy, c_z, grid0, step, matrix,
+                          values)
+            for j in range(count):
+                sums[j] += geometry * values[j]
+        mean = sums[0] / used
+        if abs(mean - previous) <= tolerance * max(abs(mean), 1e-300):
+            break
+        previous = mean
+    for j in range(count):
+        sums[j] /= used
+    return used
+
+
+@numba.njit(cache=True, parallel=True)
+def _transfer_rows(x, n_x, out, positions, normals, area, first, second, starts, columns,
+                   seen, diffuse, glossy_rows, is_glossy, model, f0, c_xy, c_z, grid0, step,
+                   matrix, lobe, subarea, subarea_max, tolerance, row_offset,
+                   used):  # pragma: no cover - compiled
+    """D (and, for glossy rows, T_j) of every visible front-facing pair of a block."""
+    count = positions.shape[0]
+    bases = matrix.shape[1]
+    for b in numba.prange(x.shape[0]):
+        values = np.empty(bases)
+        sums = np.empty(bases)
+        cos_v = out[b, 0] * n_x[b, 0] + out[b, 1] * n_x[b, 1] + out[b, 2] * n_x[b, 2]
+        total_used = 0
+        for k in range(starts[b], starts[b + 1]):
+            if not seen[k]:
+                continue
+            g = columns[k]
+            dx = positions[g, 0] - x[b, 0]
+            dy = positions[g, 1] - x[b, 1]
+            dz = positions[g, 2] - x[b, 2]
+            r2 = dx * dx + dy * dy + dz * dz
+            inverse = 1.0 / math.sqrt(r2)
+            wx, wy, wz = dx * inverse, dy * inverse, dz * inverse
+            cos_x = wx * n_x[b, 0] + wy * n_x[b, 1] + wz * n_x[b, 2]
+            cos_g = -(wx * normals[g, 0] + wy * normals[g, 1] + wz * normals[g, 2])
+            # the disk's cosine-weighted solid angle, bounded as the disk comes close
+            factor = cos_x * cos_g * area[g] / (r2 + area[g] / math.pi)
+            diffuse[b, g] = factor
+            if not is_glossy:
+                continue
+            l_dot_v = wx * out[b, 0] + wy * out[b, 1] + wz * out[b, 2]
+            budget = 1
+            if subarea:
+                solid_angle = area[g] * cos_g / r2
+                budget = min(subarea_max, int(math.ceil(SUBAREA_DENSITY * solid_angle / lobe)))
+            if budget > 1:
+                used_here = _disk_estimate(x[b], n_x[b], out[b], positions[g], normals[g],
+                                           area[g], first[g], second[g], model, f0, c_xy,
+                                           c_z, grid0, step, matrix, budget, tolerance,
+                                           (row_offset + b) * count + g,
+                                           sums, values)
+                total_used += used_here
+                for j in range(bases):
+                    glossy_rows[b, j, g] = sums[j]
+            else:
+                _glossy_basis(model, cos_x, cos_v, l_dot_v, f0, c_xy, c_z, grid0, step,
+                              matrix, values)
+                for j in range(bases):
+                    glossy_rows[b, j, g] = factor * values[j]
+        used[b] = total_used

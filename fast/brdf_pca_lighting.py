@@ -1,0 +1,175 @@
+"""Geometry and lights of BRDF editing with global illumination (Nguyen et al. 2010).
+
+Oriented normals, tangent frames, hemisphere directions, ray visibility between samples,
+and the direct light of every supported light at the gather samples.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import InputError
+from ..scenes.scene import (
+    ConstantEnvironment,
+    DirectionalLight,
+    ImageEnvironment,
+    PointLight,
+    RectangularAreaLight,
+    SphereAreaLight,
+    SpotLight,
+)
+from .brdf_pca_kernels import (
+    _front_counts,
+    _front_rays,
+)
+
+# ---------------------------------------------------------------------------------------
+# geometry helpers
+
+
+def _oriented(normals, towards):
+    """Flip unit normals to the side of the unit vectors ``towards``."""
+    side = np.where(np.einsum("...d,...d->...", normals, towards) < 0, -1.0, 1.0)
+    return normals * side[..., None]
+
+
+def _tangent_frames(normals):
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    first = np.cross(normals, helper)
+    first /= np.linalg.norm(first, axis=1, keepdims=True)
+    return first, np.cross(normals, first)
+
+
+def _hemisphere_directions(normals, rng, exponent=None, axes=None):
+    """Directions about ``normals``: uniform (exponent None) or power-cosine about ``axes``."""
+    count = len(normals)
+    u1, u2 = rng.random(count), rng.random(count)
+    cos_t = u1 if exponent is None else u1 ** (1.0 / (exponent + 1.0))
+    sin_t = np.sqrt(np.clip(1.0 - cos_t**2, 0.0, None))
+    phi = 2.0 * math.pi * u2
+    centre = normals if axes is None else axes
+    first, second = _tangent_frames(centre)
+    return (cos_t[:, None] * centre + (sin_t * np.cos(phi))[:, None] * first
+            + (sin_t * np.sin(phi))[:, None] * second)
+
+
+def _engine(scene):
+    from ..scenes.raycast import OFFSET_FRACTION, ray_engine
+
+    engine = ray_engine(scene)
+    return engine, engine.diagonal * OFFSET_FRACTION
+
+
+def _occluded(engine, origins, directions, reach) -> np.ndarray:
+    """Any-hit tests of rays given as (3, N) float32 arrays, through the scene's engine."""
+    # (N, 3) views of the (3, N) arrays: the Mitsuba engine's rays take their transposes,
+    # so a batch within one of its calls is not copied
+    return engine.occluded_unit(origins.T, directions.T, reach)
+
+
+def _pair_visibility(engine, offset, x, n_x, positions, normals):
+    """Front-facing (view, gather) pairs of a block and whether each is unoccluded.
+
+    Returns ``starts`` (B + 1,), the gather index of each pair and its visibility.
+    """
+    counts = np.zeros(len(x), dtype=np.int64)
+    _front_counts(x, n_x, positions, normals, counts)
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    total = int(starts[-1])
+    columns = np.empty(total, dtype=np.int64)
+    origins = np.empty((3, total), dtype=np.float32)
+    directions = np.empty((3, total), dtype=np.float32)
+    reach = np.empty(total, dtype=np.float32)
+    _front_rays(x, n_x, positions, normals, offset, starts, columns, origins, directions, reach)
+    seen = ~_occluded(engine, origins, directions, reach) | (reach == 0)
+    return starts, columns, seen
+
+
+# ---------------------------------------------------------------------------------------
+# lights
+
+
+def _check_lights(lights) -> None:
+    for index, light in enumerate(lights):
+        if isinstance(light, (ConstantEnvironment, ImageEnvironment)):
+            raise InputError("environment lights are not supported by the BRDF-editing method "
+                             "(point, spot, directional, rect and sphere lights are)",
+                             field=f"lights[{index}]", value=type(light).__name__)
+        if not isinstance(light, (PointLight, SpotLight, DirectionalLight,
+                                  RectangularAreaLight, SphereAreaLight)):
+            raise InputError("unknown light type", field=f"lights[{index}]",
+                             value=type(light).__name__)
+
+
+def _emitter_points(light, count: int, rng):
+    """Return fixed sample points of a light: positions, RGB weights, emitter normals."""
+    if isinstance(light, (PointLight, SpotLight)):
+        return light.position[None], light.intensity[None], None
+    if isinstance(light, RectangularAreaLight):
+        side = int(math.ceil(math.sqrt(count)))
+        cells = np.arange(side * side)[:count]
+        u = (cells % side + rng.random(count)) / side * 2.0 - 1.0
+        v = (cells // side + rng.random(count)) / side * 2.0 - 1.0
+        positions = light.center + u[:, None] * light.u_axis + v[:, None] * light.v_axis
+        weights = np.broadcast_to(light.radiance * light.area / count, (count, 3))
+        return positions, weights, np.broadcast_to(light.normal, (count, 3))
+    # sphere: stratified uniform points on the surface, each 1/count of its area
+    z = 1.0 - 2.0 * (np.arange(count) + rng.random(count)) / count
+    phi = 2.0 * math.pi * rng.random(count)
+    radial = np.sqrt(np.clip(1.0 - z**2, 0.0, None))
+    outward = np.stack([radial * np.cos(phi), radial * np.sin(phi), z], axis=1)
+    weights = np.broadcast_to(light.radiance * 4.0 * math.pi * light.radius**2 / count,
+                              (count, 3))
+    return light.center + light.radius * outward, weights, outward
+
+
+def _shadowed(engine, offset, points, normals, wi, reach, lit) -> np.ndarray:
+    rows = np.flatnonzero(lit)
+    origins = (points[rows] + offset * normals[rows]).T.astype(np.float32)
+    blocked = np.zeros(len(points), dtype=bool)
+    if len(rows):
+        limit = np.maximum(reach[rows] - offset, 0.0) if np.ndim(reach) else \
+            np.full(len(rows), np.float32(np.finfo(np.float32).max))
+        blocked[rows] = _occluded(engine, origins, wi[rows].T.astype(np.float32),
+                                  limit.astype(np.float32))
+    return blocked
+
+
+def _direct_samples(scene, lights, points, normals, samples: int, seed: int):
+    r"""Per point and light sample: the direction to the light and the irradiance it brings.
+
+    Returns ``(wi, irradiance)`` of shapes (N, S, 3): the reflected radiance towards
+    :math:`\omega_o` is :math:`\sum_s f(\omega_{i,s}, \omega_o) E_s`, shadows included.
+    Point, spot (Mitsuba's linear falloff) and directional lights are exact; rectangles
+    and spheres use ``samples`` fixed stratified points each.
+    """
+    engine, offset = _engine(scene)
+    rng = np.random.default_rng(seed)
+    directions, irradiance = [], []
+    for light in lights:
+        if isinstance(light, DirectionalLight):
+            wi = np.ascontiguousarray(np.broadcast_to(-light.direction, points.shape))
+            strength = np.clip(normals @ -light.direction, 0.0, None)
+            strength[_shadowed(engine, offset, points, normals, wi, np.inf, strength > 0)] = 0
+            directions.append(wi[:, None])
+            irradiance.append((strength[:, None] * light.irradiance)[:, None])
+            continue
+        positions, weights, emitter_normals = _emitter_points(light, samples, rng)
+        for k, position in enumerate(positions):
+            to_light = position - points
+            distance = np.sqrt(np.maximum(np.einsum("ij,ij->i", to_light, to_light), 1e-300))
+            wi = to_light / distance[:, None]
+            strength = np.clip(np.einsum("ij,ij->i", normals, wi), 0.0, None) / distance**2
+            if emitter_normals is not None:
+                strength = strength * np.clip(-(wi @ emitter_normals[k]), 0.0, None)
+            if isinstance(light, SpotLight):
+                strength = strength * light.falloff(-wi)
+            strength[_shadowed(engine, offset, points, normals, wi, distance, strength > 0)] = 0
+            directions.append(wi[:, None])
+            irradiance.append((strength[:, None] * weights[k])[:, None])
+    if not directions:
+        empty = np.zeros((len(points), 0, 3))
+        return empty, empty
+    return np.concatenate(directions, axis=1), np.concatenate(irradiance, axis=1)
