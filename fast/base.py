@@ -1,15 +1,19 @@
 """What every fast method offers, so that the command line and the report treat them alike.
 
-A fast method is a module of :mod:`translucent.fast` with three module-level functions:
+A fast method is a module (of :mod:`translucent.fast`, or of any distribution that
+registers it: :mod:`translucent.fast.registry`) with these module-level names:
 
-``applies_to(scene) -> str | None``
-    None when the method can render the scene; otherwise the reason it cannot (shown in
-    the report as "skipped: ...").
+``applies_to(scene) -> Refusal | str | None``
+    None when the method can render the scene; otherwise why it cannot, best as a
+    :class:`Refusal` (a reason code and a sentence; shown in the report as "not
+    applicable: ...").
 ``precompute(scene, **knobs) -> PrecomputedState``
     The slow step: cached on disk by a hash of what it depends on (geometry, knobs), never
     by lights or materials when those are edited interactively.
 ``DEFAULT_KNOBS: dict``
-    The knobs and their defaults (quality settings the benchmarks sweep).
+    The knobs and their defaults (quality settings the benchmarks sweep). An unknown
+    knob given to ``precompute`` is an :class:`~translucent.errors.InputError`
+    (:func:`with_defaults`).
 
 and a state whose ``render(lights=None, material=None) -> Image`` is the interactive
 path: relighting (new lights) and editing (new material) without precomputing again.
@@ -20,29 +24,58 @@ black) also has
 ``scored_objects(scene) -> list[str]``
     The names of the objects it renders: the report scores it on their pixels only
     (:func:`scored_object_names`), and says so.
+
+and may have ``QUICK_KNOBS`` (cheap knobs for smoke runs and the conformance checks of
+:mod:`translucent.fast.conformance`) and ``approx(scene, args)`` with
+``add_approx_arguments(parser)`` (its own ``translucent approx`` options; without them
+the command takes ``--knob NAME=VALUE``).
 """
 
 from __future__ import annotations
 
 import contextlib
-import importlib
 import time
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from ..errors import InputError
 from ..image import Image
+from .registry import METHODS, method
 
-__all__ = ["METHODS", "PrecomputedState", "method", "refuse_inapplicable", "StageLog",
-           "StageProgress", "scored_object_names", "with_defaults"]
+__all__ = ["METHODS", "PrecomputedState", "Refusal", "method", "refusal_of",
+           "refuse_inapplicable", "StageLog", "StageProgress", "scored_object_names",
+           "with_defaults"]
 
-#: method name -> module under translucent.fast
-METHODS: dict[str, str] = {
-    "prt": "translucent.fast.prt",
-    "radiosity": "translucent.fast.radiosity",
-    "splatting": "translucent.fast.splatting",
-    "brdf_pca": "translucent.fast.brdf_pca",
-}
+@dataclass(frozen=True)
+class Refusal:
+    """Why a method does not apply to a scene: a reason code for programs, a sentence for people.
+
+    Parameters
+    ----------
+    code : str
+        A short stable identifier (``"no_translucent_object"``) that callers branch on.
+    sentence : str
+        What is shown to the user.
+
+    Examples
+    --------
+    >>> reason = Refusal("no_translucent_object", "no translucent object in the scene")
+    >>> str(reason), reason.code
+    ('no translucent object in the scene', 'no_translucent_object')
+    """
+
+    code: str
+    sentence: str
+
+    def __str__(self) -> str:
+        return self.sentence
+
+
+def refusal_of(reason) -> Refusal | None:
+    """Return what ``applies_to`` gave as a :class:`Refusal` (a plain sentence: code "other")."""
+    if reason is None or isinstance(reason, Refusal):
+        return reason
+    return Refusal("other", str(reason))
 
 
 class PrecomputedState(Protocol):
@@ -118,20 +151,6 @@ class StageProgress:
 
     def __exit__(self, *exc) -> None:
         self._bar.close()
-
-
-def method(name: str):
-    """Return the module of the fast method ``name``; an unknown name lists the valid ones."""
-    if name not in METHODS:
-        raise InputError(f"unknown fast method; valid: {', '.join(METHODS)}", field="method",
-                         value=name)
-    try:
-        return importlib.import_module(METHODS[name])
-    except ModuleNotFoundError as error:
-        if error.name == METHODS[name]:
-            raise InputError("this fast method is not built yet", field="method",
-                             value=name) from error
-        raise
 
 
 def scored_object_names(module, scene) -> list[str]:

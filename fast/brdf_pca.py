@@ -86,19 +86,19 @@ from ..materials.brdfs import (
 from ..materials.homogeneous import Lambertian
 from .base import refuse_inapplicable, with_defaults
 from .brdf_pca_lighting import (
-    _check_lights,
-    _direct_samples,
+    check_lights,
+    direct_samples,
 )
 from .brdf_pca_transfer import (
     Precomputation,
-    _compute,
-    _diffuse_albedo,
-    _haar_rows,
-    _is_glossy,
-    _product,
-    _sparse_to_scipy,
-    _truncate,
+    compute_precomputation,
+    diffuse_albedo,
     disk_transfer,
+    haar_rows,
+    is_glossy_material,
+    quantised_product,
+    sparse_to_scipy,
+    truncate_rows,
 )
 
 __all__ = [
@@ -107,6 +107,7 @@ __all__ = [
     "Precomputation",
     "add_approx_arguments",
     "applies_to",
+    "QUICK_KNOBS",
     "approx",
     "disk_transfer",
     "precompute",
@@ -148,6 +149,11 @@ DEFAULT_KNOBS = {
     "seed": 0,
 }
 
+#: Cheap knobs for smoke runs and the conformance checks (fast.conformance).
+QUICK_KNOBS = dict(gather_samples=256, bounces=1, transfer_coefficients=96,
+                   diffuse_coefficients=48, gather_coefficients=48, frozen_coefficients=48,
+                   light_samples=4, block_pairs=1 << 14)
+
 
 
 # ---------------------------------------------------------------------------------------
@@ -165,10 +171,10 @@ def applies_to(scene) -> str | None:
         if not isinstance(obj.material, (AnalyticBRDF, Lambertian)):
             return (f"object '{obj.name}' has a {type(obj.material).__name__} material; the "
                     "BRDF-editing method takes opaque surfaces (Lambertian or analytic BRDFs)")
-    if not any(_is_glossy(o.material) for o in scene.objects):
+    if not any(is_glossy_material(o.material) for o in scene.objects):
         return "no object has an analytic BRDF: there is nothing to edit"
     try:
-        _check_lights(scene.lights)
+        check_lights(scene.lights)
     except InputError as error:
         return str(error)
     return None
@@ -221,7 +227,7 @@ def _structure_key(scene) -> list:
     out = []
     for obj in scene.objects:
         material = obj.material
-        if _is_glossy(material):
+        if is_glossy_material(material):
             out.append([obj.name, material.model, material.f0, list(material.lafortune_c)])
         else:
             out.append([obj.name, "diffuse"])
@@ -263,7 +269,7 @@ def precompute(scene, **knobs) -> BRDFPCAState:
         stored.log.notes["cache"] = "hit"
         return BRDFPCAState(scene, stored)
     started = time.perf_counter()
-    data = _compute(scene, resolved)
+    data = compute_precomputation(scene, resolved)
     data.log.seconds["total"] = time.perf_counter() - started
     data.log.notes["cache"] = "miss"
     cache.store_pickle(key, data)
@@ -277,7 +283,7 @@ def precompute(scene, **knobs) -> BRDFPCAState:
 def _combine(matrices, coefficients) -> scipy.sparse.csr_matrix:
     combined = None
     for weight, matrix in zip(coefficients, matrices, strict=True):
-        term = _sparse_to_scipy(matrix.dequantised()) * float(weight)
+        term = sparse_to_scipy(matrix.dequantised()) * float(weight)
         combined = term if combined is None else combined + term
     return combined.tocsr()
 
@@ -337,7 +343,7 @@ class BRDFPCAState:
     # -- lighting ----------------------------------------------------------------------
     def _albedo(self, which: str) -> np.ndarray:
         r"""Return :math:`\rho_d/\pi` of every gather (``which="gather"``) or view sample."""
-        table = np.array([_diffuse_albedo(self.materials[o.name]) for o in self.scene.objects])
+        table = np.array([diffuse_albedo(self.materials[o.name]) for o in self.scene.objects])
         key = table.tobytes()
         cached = self._albedos.get(which)
         if cached is None or cached[0] != key:
@@ -348,28 +354,28 @@ class BRDFPCAState:
 
     def _wavelet(self, values) -> np.ndarray:
         """Return :math:`L^w`: radiance per gather sample (G, 3) in Haar coefficients."""
-        return np.ascontiguousarray(_haar_rows(np.ascontiguousarray(values.T,
+        return np.ascontiguousarray(haar_rows(np.ascontiguousarray(values.T,
                                                                     dtype=np.float32)).T)
 
     def _relight(self):
         """Compute direct lighting, the Eq. 17 series and the view-sample caches (relight)."""
         data = self.data
         samples, seed = self.knobs["light_samples"], self.knobs["seed"]
-        _, gather_e = _direct_samples(self.scene, self.lights, data.gather_position,
+        _, gather_e = direct_samples(self.scene, self.lights, data.gather_position,
                                       data.gather_normal, samples, seed)
         albedo_g = self._albedo("gather")
         direct_g = albedo_g * gather_e.sum(axis=1).astype(np.float32)
         total, current = direct_g.copy(), direct_g
         count = len(direct_g)
         for _ in range(self.knobs["bounces"]):        # Eq. 17
-            current = albedo_g * _product(data.gather, self._wavelet(current))[:count]
+            current = albedo_g * quantised_product(data.gather, self._wavelet(current))[:count]
             total += current
         self._radiance_w = self._wavelet(total)
-        wi, view_e = _direct_samples(self.scene, self.lights, data.view_position,
+        wi, view_e = direct_samples(self.scene, self.lights, data.view_position,
                                      data.view_normal, samples, seed + 1)
         albedo_x = self._albedo("view")
         direct = albedo_x * view_e.sum(axis=1)
-        indirect = albedo_x * _product(data.diffuse, self._radiance_w)
+        indirect = albedo_x * quantised_product(data.diffuse, self._radiance_w)
         self._parts = {"direct": direct, "indirect": indirect, "all": direct + indirect}
         self._view_lighting = {}
         for name, rows in self._members.items():
@@ -408,8 +414,9 @@ class BRDFPCAState:
         frozen = name in self.frozen
         products = self._products.get(name)
         if products is None:
-            products = (_product(self.frozen[name][1], self._radiance_w) if frozen else
-                        np.stack([_product(m, self._radiance_w) for m in self._transfer[name]]))
+            products = (quantised_product(self.frozen[name][1], self._radiance_w) if frozen
+                        else np.stack([quantised_product(m, self._radiance_w)
+                                       for m in self._transfer[name]]))
             self._products[name] = products
         indirect = (products if frozen else
                     np.einsum("j,jpc->pc", self.coefficients(name), products))
@@ -446,7 +453,8 @@ class BRDFPCAState:
                 raise InputError(f"no such object; objects: {', '.join(self.materials)}",
                                  field="material", value=name)
             old = self.materials[name]
-            same_kind = _is_glossy(old) == _is_glossy(new) and (not _is_glossy(old) or (
+            glossy = is_glossy_material(old)
+            same_kind = glossy == is_glossy_material(new) and (not glossy or (
                 old.model == new.model and old.f0 == new.f0
                 and old.lafortune_c == new.lafortune_c))
             if not same_kind:
@@ -454,7 +462,7 @@ class BRDFPCAState:
                                  "precomputation (the model, f0 and the Lafortune lobe are "
                                  "fixed terms)", field=f"material[{name!r}]",
                                  value=getattr(new, "model", type(new).__name__))
-            albedo_changed |= not np.array_equal(_diffuse_albedo(old), _diffuse_albedo(new))
+            albedo_changed |= not np.array_equal(diffuse_albedo(old), diffuse_albedo(new))
             self.materials[name] = new
             if name in self.frozen and self.frozen[name][0] != new.gamma:
                 self.unfreeze(name)
@@ -486,7 +494,7 @@ class BRDFPCAState:
                              value=component)
         if lights is not None:
             lights = tuple(lights)
-            _check_lights(lights)
+            check_lights(lights)
             self.lights = lights
             self._lit = False
         self._set_materials(material)
@@ -529,7 +537,7 @@ class BRDFPCAState:
             if name == editing or name in self.frozen:
                 continue
             combined = _combine(matrices, self.coefficients(name))
-            rows = _truncate(combined, self.knobs["frozen_coefficients"])
+            rows = truncate_rows(combined, self.knobs["frozen_coefficients"])
             self.frozen[name] = (self.materials[name].gamma, rows.quantised())
             self._products.pop(name, None)
             self._glossy_parts.pop(name, None)
@@ -573,7 +581,7 @@ def approx(scene, args) -> Image:
     """Precompute (or load) and render ``scene`` for ``translucent approx brdf_pca``."""
     started = time.perf_counter()
     # the edit is checked against the scene before the (slow) precomputation
-    glossy = [o.name for o in scene.objects if _is_glossy(o.material)]
+    glossy = [o.name for o in scene.objects if is_glossy_material(o.material)]
     name = args.object
     if name is None and args.gamma is not None:
         if len(glossy) != 1:

@@ -117,7 +117,8 @@ def _front_facing(x, n_x, positions, normals, b, g):  # pragma: no cover - compi
 
 
 @numba.njit(cache=True, parallel=True)
-def _front_counts(x, n_x, positions, normals, counts):  # pragma: no cover - compiled
+def front_counts(x, n_x, positions, normals, counts):  # pragma: no cover - compiled
+    """Count, for each point ``x[b]``, the samples it and they face (into ``counts``)."""
     for b in numba.prange(x.shape[0]):
         found = 0
         for g in range(positions.shape[0]):
@@ -127,7 +128,7 @@ def _front_counts(x, n_x, positions, normals, counts):  # pragma: no cover - com
 
 
 @numba.njit(cache=True, parallel=True)
-def _front_rays(x, n_x, positions, normals, offset, starts, columns, origins, directions,
+def front_rays(x, n_x, positions, normals, offset, starts, columns, origins, directions,
                 reach):  # pragma: no cover - compiled
     """Fill the shadow rays of the front-facing pairs of a block.
 
@@ -191,7 +192,7 @@ def _concentric_disk(u, v):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _disk_estimate(x, n_x, out, g_pos, g_nor, area, first, second, model, f0, c_xy, c_z,
+def disk_estimate(x, n_x, out, g_pos, g_nor, area, first, second, model, f0, c_xy, c_z,
                    grid0, step, matrix, budget, tolerance, key, sums,
                    values):  # pragma: no cover - compiled
     """Estimate Eq. 3 with points of the disk K_g; return the number of points used.
@@ -241,7 +242,7 @@ def _disk_estimate(x, n_x, out, g_pos, g_nor, area, first, second, model, f0, c_
 
 
 @numba.njit(cache=True, parallel=True)
-def _transfer_rows(x, n_x, out, positions, normals, area, first, second, starts, columns,
+def transfer_rows(x, n_x, out, positions, normals, area, first, second, starts, columns,
                    seen, diffuse, glossy_rows, is_glossy, model, f0, c_xy, c_z, grid0, step,
                    matrix, lobe, subarea, subarea_max, tolerance, row_offset,
                    used):  # pragma: no cover - compiled
@@ -276,7 +277,7 @@ def _transfer_rows(x, n_x, out, positions, normals, area, first, second, starts,
                 solid_angle = area[g] * cos_g / r2
                 budget = min(subarea_max, int(math.ceil(SUBAREA_DENSITY * solid_angle / lobe)))
             if budget > 1:
-                used_here = _disk_estimate(x[b], n_x[b], out[b], positions[g], normals[g],
+                used_here = disk_estimate(x[b], n_x[b], out[b], positions[g], normals[g],
                                            area[g], first[g], second[g], model, f0, c_xy,
                                            c_z, grid0, step, matrix, budget, tolerance,
                                            (row_offset + b) * count + g,

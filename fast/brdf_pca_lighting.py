@@ -21,28 +21,29 @@ from ..scenes.scene import (
     SpotLight,
 )
 from .brdf_pca_kernels import (
-    _front_counts,
-    _front_rays,
+    front_counts,
+    front_rays,
 )
 
 # ---------------------------------------------------------------------------------------
 # geometry helpers
 
 
-def _oriented(normals, towards):
+def oriented_normals(normals, towards):
     """Flip unit normals to the side of the unit vectors ``towards``."""
     side = np.where(np.einsum("...d,...d->...", normals, towards) < 0, -1.0, 1.0)
     return normals * side[..., None]
 
 
-def _tangent_frames(normals):
+def tangent_frames(normals):
+    """Return two unit tangents orthogonal to each normal and to each other."""
     helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     first = np.cross(normals, helper)
     first /= np.linalg.norm(first, axis=1, keepdims=True)
     return first, np.cross(normals, first)
 
 
-def _hemisphere_directions(normals, rng, exponent=None, axes=None):
+def hemisphere_directions(normals, rng, exponent=None, axes=None):
     """Directions about ``normals``: uniform (exponent None) or power-cosine about ``axes``."""
     count = len(normals)
     u1, u2 = rng.random(count), rng.random(count)
@@ -50,40 +51,41 @@ def _hemisphere_directions(normals, rng, exponent=None, axes=None):
     sin_t = np.sqrt(np.clip(1.0 - cos_t**2, 0.0, None))
     phi = 2.0 * math.pi * u2
     centre = normals if axes is None else axes
-    first, second = _tangent_frames(centre)
+    first, second = tangent_frames(centre)
     return (cos_t[:, None] * centre + (sin_t * np.cos(phi))[:, None] * first
             + (sin_t * np.sin(phi))[:, None] * second)
 
 
-def _engine(scene):
+def scene_ray_engine(scene):
+    """Return the scene's ray engine and the offset its rays start at."""
     from ..scenes.raycast import OFFSET_FRACTION, ray_engine
 
     engine = ray_engine(scene)
     return engine, engine.diagonal * OFFSET_FRACTION
 
 
-def _occluded(engine, origins, directions, reach) -> np.ndarray:
+def occluded_rays(engine, origins, directions, reach) -> np.ndarray:
     """Any-hit tests of rays given as (3, N) float32 arrays, through the scene's engine."""
     # (N, 3) views of the (3, N) arrays: the Mitsuba engine's rays take their transposes,
     # so a batch within one of its calls is not copied
     return engine.occluded_unit(origins.T, directions.T, reach)
 
 
-def _pair_visibility(engine, offset, x, n_x, positions, normals):
+def pair_visibility(engine, offset, x, n_x, positions, normals):
     """Front-facing (view, gather) pairs of a block and whether each is unoccluded.
 
     Returns ``starts`` (B + 1,), the gather index of each pair and its visibility.
     """
     counts = np.zeros(len(x), dtype=np.int64)
-    _front_counts(x, n_x, positions, normals, counts)
+    front_counts(x, n_x, positions, normals, counts)
     starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     total = int(starts[-1])
     columns = np.empty(total, dtype=np.int64)
     origins = np.empty((3, total), dtype=np.float32)
     directions = np.empty((3, total), dtype=np.float32)
     reach = np.empty(total, dtype=np.float32)
-    _front_rays(x, n_x, positions, normals, offset, starts, columns, origins, directions, reach)
-    seen = ~_occluded(engine, origins, directions, reach) | (reach == 0)
+    front_rays(x, n_x, positions, normals, offset, starts, columns, origins, directions, reach)
+    seen = ~occluded_rays(engine, origins, directions, reach) | (reach == 0)
     return starts, columns, seen
 
 
@@ -91,7 +93,8 @@ def _pair_visibility(engine, offset, x, n_x, positions, normals):
 # lights
 
 
-def _check_lights(lights) -> None:
+def check_lights(lights) -> None:
+    """Refuse the lights the method does not take (environments), naming each."""
     for index, light in enumerate(lights):
         if isinstance(light, (ConstantEnvironment, ImageEnvironment)):
             raise InputError("environment lights are not supported by the BRDF-editing method "
@@ -132,12 +135,12 @@ def _shadowed(engine, offset, points, normals, wi, reach, lit) -> np.ndarray:
     if len(rows):
         limit = np.maximum(reach[rows] - offset, 0.0) if np.ndim(reach) else \
             np.full(len(rows), np.float32(np.finfo(np.float32).max))
-        blocked[rows] = _occluded(engine, origins, wi[rows].T.astype(np.float32),
+        blocked[rows] = occluded_rays(engine, origins, wi[rows].T.astype(np.float32),
                                   limit.astype(np.float32))
     return blocked
 
 
-def _direct_samples(scene, lights, points, normals, samples: int, seed: int):
+def direct_samples(scene, lights, points, normals, samples: int, seed: int):
     r"""Per point and light sample: the direction to the light and the irradiance it brings.
 
     Returns ``(wi, irradiance)`` of shapes (N, S, 3): the reflected radiance towards
@@ -145,7 +148,7 @@ def _direct_samples(scene, lights, points, normals, samples: int, seed: int):
     Point, spot (Mitsuba's linear falloff) and directional lights are exact; rectangles
     and spheres use ``samples`` fixed stratified points each.
     """
-    engine, offset = _engine(scene)
+    engine, offset = scene_ray_engine(scene)
     rng = np.random.default_rng(seed)
     directions, irradiance = [], []
     for light in lights:

@@ -25,18 +25,18 @@ from ..materials.homogeneous import Lambertian
 from .base import StageLog, StageProgress
 from .brdf_pca_kernels import (
     MODEL_CODES,
-    _disk_estimate,
-    _transfer_rows,
+    disk_estimate,
+    transfer_rows,
 )
 from .brdf_pca_lighting import (
-    _engine,
-    _hemisphere_directions,
-    _occluded,
-    _oriented,
-    _pair_visibility,
-    _tangent_frames,
+    hemisphere_directions,
+    occluded_rays,
+    oriented_normals,
+    pair_visibility,
+    scene_ray_engine,
+    tangent_frames,
 )
-from .sparse_transport import QuantisedRows, SparseRows, _product_rgb, nonlinear_approximation
+from .sparse_transport import QuantisedRows, SparseRows, nonlinear_approximation, product_rgb
 from .wavelets import haar2d_forward, haar2d_support_weights, quadtree_layout
 
 # ---------------------------------------------------------------------------------------
@@ -58,7 +58,7 @@ def _gather_layout(positions, normals) -> np.ndarray:
     return quadtree_layout(features, level).reshape(-1)
 
 
-def _haar_rows(rows: np.ndarray) -> np.ndarray:
+def haar_rows(rows: np.ndarray) -> np.ndarray:
     """Non-standard 2D Haar of rows laid out on the gather square (the last axis)."""
     side = int(round(math.sqrt(rows.shape[-1])))
     shape = rows.shape
@@ -92,21 +92,23 @@ def _select(rows: np.ndarray, keep: int, weights: np.ndarray) -> SparseRows:
 #: (measured on 2 shared cores: 25 ms per threaded call whatever its size, against 5 ms
 #: serial for 20k rows of 96). Not cached on disk: the cache is keyed by the Python
 #: function, whose threaded build it would load instead.
-_product_serial = numba.njit(cache=False)(_product_rgb.py_func)
+_product_serial = numba.njit(cache=False)(product_rgb.py_func)
 
 
-def _product(matrix: QuantisedRows, vector) -> np.ndarray:
+def quantised_product(matrix: QuantisedRows, vector) -> np.ndarray:
+    """Multiply quantised rows by an RGB vector: one row of the product per row."""
     out = np.empty((matrix.rows, 3), dtype=np.float32)
     _product_serial(matrix.indptr, matrix.packed, matrix.scales, matrix.index_bits, vector, out)
     return out
 
 
-def _sparse_to_scipy(rows: SparseRows) -> scipy.sparse.csr_matrix:
+def sparse_to_scipy(rows: SparseRows) -> scipy.sparse.csr_matrix:
+    """Return the rows as a scipy CSR matrix."""
     return scipy.sparse.csr_matrix((rows.values, rows.indices, rows.indptr),
                                    shape=(rows.rows, rows.columns))
 
 
-def _truncate(matrix: scipy.sparse.csr_matrix, keep: int) -> SparseRows:
+def truncate_rows(matrix: scipy.sparse.csr_matrix, keep: int) -> SparseRows:
     """Keep ``keep`` entries of each row of a CSR matrix of Haar coefficients (:func:`_select`)."""
     parts = []
     weights = _support_weights(matrix.shape[1])
@@ -158,22 +160,24 @@ def disk_transfer(material: AnalyticBRDF, basis: PCABasis, x, n_x, out, position
     """
     model, f0, c_xy, c_z, grid0, step, matrix = _material_parameters(material, basis)
     normal = np.asarray(normal, dtype=np.float64)
-    first, second = (v[0] for v in _tangent_frames(normal[None]))
+    first, second = (v[0] for v in tangent_frames(normal[None]))
     sums = np.empty(matrix.shape[1])
     values = np.empty(matrix.shape[1])
-    _disk_estimate(np.asarray(x, np.float64), np.asarray(n_x, np.float64),
+    disk_estimate(np.asarray(x, np.float64), np.asarray(n_x, np.float64),
                    np.asarray(out, np.float64), np.asarray(position, np.float64), normal,
                    float(area), first, second, model, f0, c_xy, c_z, grid0, step, matrix,
                    int(points), float(tolerance), int(key), sums, values)
     return sums
 
 
-def _is_glossy(material) -> bool:
+def is_glossy_material(material) -> bool:
+    """Return True for an analytic BRDF (a material the method edits)."""
     return isinstance(material, AnalyticBRDF)
 
 
 
-def _diffuse_albedo(material) -> np.ndarray:
+def diffuse_albedo(material) -> np.ndarray:
+    """Return the diffuse albedo of a Lambertian or an analytic BRDF, per channel."""
     if isinstance(material, Lambertian):
         return np.asarray(material.albedo, dtype=np.float64)
     return np.asarray(material.rho_d, dtype=np.float64)
@@ -249,7 +253,7 @@ def _view_samples(scene):
     buffer = gbuffer(scene)
     pixel = np.flatnonzero(buffer.hit.reshape(-1))
     out = buffer.view_direction.reshape(-1, 3)[pixel]
-    normal = _oriented(buffer.normal.reshape(-1, 3)[pixel], out)
+    normal = oriented_normals(buffer.normal.reshape(-1, 3)[pixel], out)
     return (buffer.shape, pixel, buffer.position.reshape(-1, 3)[pixel], normal, out,
             buffer.object_id.reshape(-1)[pixel])
 
@@ -264,7 +268,7 @@ def _shoot_gather_samples(scene, view, glossy_view, count, knobs, rng, log):
         glossy_count = 0
     wanted = {"diffuse": count - glossy_count, "glossy": glossy_count}
     candidates = {"diffuse": np.arange(len(position)), "glossy": np.flatnonzero(glossy_view)}
-    _, offset = _engine(scene)
+    _, offset = scene_ray_engine(scene)
     parts = []
     for kind in ("diffuse", "glossy"):
         have = 0
@@ -275,16 +279,16 @@ def _shoot_gather_samples(scene, view, glossy_view, count, knobs, rng, log):
             shots = rng.choice(candidates[kind], size=int(need * 1.5) + 16)
             n = normal[shots]
             if kind == "diffuse":
-                directions = _hemisphere_directions(n, rng)
+                directions = hemisphere_directions(n, rng)
             else:
                 mirror = 2.0 * np.einsum("ij,ij->i", out[shots], n)[:, None] * n - out[shots]
-                directions = _hemisphere_directions(n, rng, knobs["glossy_exponent"], mirror)
+                directions = hemisphere_directions(n, rng, knobs["glossy_exponent"], mirror)
             above = np.einsum("ij,ij->i", directions, n) > 0
             shots, directions = shots[above], directions[above]
             hits = trace(scene, position[shots] + offset * normal[shots], directions)
             keep = np.flatnonzero(hits.hit)[:need]
             parts.append((hits.position[keep],
-                          _oriented(hits.shading_normal[keep], -directions[keep]),
+                          oriented_normals(hits.shading_normal[keep], -directions[keep]),
                           hits.object_id[keep], np.full(len(keep), kind == "glossy")))
             have += len(keep)
         if have < wanted[kind]:
@@ -334,14 +338,14 @@ def _gather_areas(scene, positions, normals, per_gather: int, rng) -> np.ndarray
     # a sample and its gather sample lie on one plane: lift both ends to the side the
     # gather sample faces (choosing the side by the sign of a near-zero dot product, as
     # for points that face each other, would often pierce the surface between them)
-    engine, offset = _engine(scene)
+    engine, offset = scene_ray_engine(scene)
     lift = offset * normals[owner[assigned]]
     start = points[assigned] + lift
     segment = positions[owner[assigned]] + lift - start
     length = np.linalg.norm(segment, axis=1)
     direction = segment / np.maximum(length, 1e-300)[:, None]
     direction[length == 0] = (0.0, 0.0, 1.0)
-    seen = ~_occluded(engine, start.T.astype(np.float32), direction.T.astype(np.float32),
+    seen = ~occluded_rays(engine, start.T.astype(np.float32), direction.T.astype(np.float32),
                       np.maximum(length - offset, 0.0).astype(np.float32))
     assigned = assigned[seen]
     area = np.bincount(owner[assigned], weights=weights[assigned], minlength=len(positions))
@@ -377,7 +381,7 @@ def _budgets(basis: PCABasis, total: int) -> list[int]:
 
 def _haar_select(rows: np.ndarray, keep: int) -> SparseRows:
     """Haar-transform dense rows over the gather square and keep ``keep`` coefficients."""
-    return _select(_haar_rows(rows), keep, _support_weights(rows.shape[-1]))
+    return _select(haar_rows(rows), keep, _support_weights(rows.shape[-1]))
 
 
 def _transfer(scene, view, gather, columns, knobs, bases, log):
@@ -385,8 +389,8 @@ def _transfer(scene, view, gather, columns, knobs, bases, log):
     _, _, x_all, n_all, out_all, obj_all = view
     positions, normals, area = gather
     count = len(positions)
-    first, second = _tangent_frames(normals)
-    engine, offset = _engine(scene)
+    first, second = tangent_frames(normals)
+    engine, offset = scene_ray_engine(scene)
     block = max(1, knobs["block_pairs"] // count)
     diffuse_parts, transfer, budgets, subarea_points = [], {}, {}, 0
     order = np.argsort(obj_all, kind="stable")
@@ -407,14 +411,14 @@ def _transfer(scene, view, gather, columns, knobs, bases, log):
         for start in range(0, len(members), block):
             rows = members[start:start + block]
             x, n_x, out = x_all[rows], n_all[rows], out_all[rows]
-            starts, pair_columns, seen = _pair_visibility(engine, offset, x, n_x, positions,
+            starts, pair_columns, seen = pair_visibility(engine, offset, x, n_x, positions,
                                                           normals)
             diffuse = np.zeros((len(rows), columns), dtype=np.float32)
             bases_count = parameters[6].shape[1]
             rows_glossy = np.zeros((len(rows), bases_count, columns) if glossy else (1, 1, 1),
                                    dtype=np.float32)
             used = np.zeros(len(rows), dtype=np.int64)
-            _transfer_rows(x, n_x, out, positions, normals, area, first, second, starts,
+            transfer_rows(x, n_x, out, positions, normals, area, first, second, starts,
                            pair_columns, seen, diffuse, rows_glossy, glossy, *parameters,
                            lobe, knobs["subarea"], knobs["subarea_max"],
                            knobs["subarea_tolerance"], int(rows[0]), used)
@@ -429,7 +433,7 @@ def _transfer(scene, view, gather, columns, knobs, bases, log):
                                          for p in pieces])
     # D rows back in view-sample order
     member_order = np.concatenate([p[0] for p in diffuse_parts])
-    stacked = _sparse_to_scipy(SparseRows.concatenate([p[1] for p in diffuse_parts]))
+    stacked = sparse_to_scipy(SparseRows.concatenate([p[1] for p in diffuse_parts]))
     inverse = np.empty(len(member_order), dtype=np.int64)
     inverse[member_order] = np.arange(len(member_order))
     reordered = stacked[inverse]
@@ -443,17 +447,17 @@ def _gather_matrix(scene, gather, columns, knobs) -> QuantisedRows:
     """M_s^w without the receiving albedo: gather-to-gather diffuse transfer (Sect. 5.2)."""
     positions, normals, area = gather
     count = len(positions)
-    engine, offset = _engine(scene)
+    engine, offset = scene_ray_engine(scene)
     block = max(1, knobs["block_pairs"] // count)
     parts = []
     parameters = (0, 0.0, 0.0, 0.0, 0.0, 1.0, np.zeros((2, 1)))
     for start in range(0, count, block):
         stop = min(count, start + block)
         x, n_x = positions[start:stop], normals[start:stop]
-        starts, pair_columns, seen = _pair_visibility(engine, offset, x, n_x, positions,
+        starts, pair_columns, seen = pair_visibility(engine, offset, x, n_x, positions,
                                                       normals)
         rows = np.zeros((stop - start, columns), dtype=np.float32)
-        _transfer_rows(x, n_x, n_x, positions, normals, area, normals, normals, starts,
+        transfer_rows(x, n_x, n_x, positions, normals, area, normals, normals, starts,
                        pair_columns, seen, rows, np.zeros((1, 1, 1), dtype=np.float32), False,
                        *parameters, 1.0, False, 1, 0.0, start,
                        np.zeros(stop - start, dtype=np.int64))
@@ -461,7 +465,8 @@ def _gather_matrix(scene, gather, columns, knobs) -> QuantisedRows:
     return SparseRows.concatenate(parts).quantised()
 
 
-def _compute(scene, knobs) -> Precomputation:
+def compute_precomputation(scene, knobs) -> Precomputation:
+    """Compute the gather samples, bases and compressed transfers (uncached)."""
     log = StageLog()
     with StageProgress(log, "brdf_pca precomputation", stages=6) as progress:
         return _compute_stages(scene, knobs, log, progress)
@@ -474,8 +479,8 @@ def _compute_stages(scene, knobs, log: StageLog, progress: StageProgress) -> Pre
     shape, pixel, _, _, _, obj = view
     if len(pixel) == 0:
         raise InputError("the camera sees no surface", field="camera", value=scene.name)
-    glossy_objects = [i for i, o in enumerate(scene.objects) if _is_glossy(o.material)]
-    diffuse_names = [o.name for o in scene.objects if not _is_glossy(o.material)]
+    glossy_objects = [i for i, o in enumerate(scene.objects) if is_glossy_material(o.material)]
+    diffuse_names = [o.name for o in scene.objects if not is_glossy_material(o.material)]
     if diffuse_names:
         log.skip(f"no PCA transfer for objects without an analytic BRDF: "
                  f"{', '.join(diffuse_names)} (diffuse transfer D only)")

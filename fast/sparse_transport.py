@@ -335,7 +335,7 @@ def _quantise(indptr, indices, values, index_bits, value_max, packed, scales):  
 
 
 @numba.njit(cache=True, parallel=True, fastmath=True)
-def _product_rgb(indptr, packed, scales, index_bits, vector, out):  # pragma: no cover
+def product_rgb(indptr, packed, scales, index_bits, vector, out):  # pragma: no cover
     mask = (1 << index_bits) - 1
     for r in numba.prange(len(indptr) - 1):
         red = np.float32(0.0)
@@ -439,7 +439,7 @@ class QuantisedRows(_RowPointers):
         vector = _product_vector(vector, self.columns)
         if out is None:
             out = np.empty((self.rows,) + vector.shape[1:], dtype=np.float32)
-        kernel = _product_rgb if vector.ndim == 2 else _product_scalar
+        kernel = product_rgb if vector.ndim == 2 else _product_scalar
         kernel(self.indptr, self.packed, self.scales, self.index_bits, vector, out)
         return out
 

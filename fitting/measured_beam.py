@@ -101,7 +101,7 @@ def measure_beam(image, pixel_size_mm: float, *, path=None) -> MeasuredBeam:
     InputError
         An image with no light above its border, or a beam that reaches the image border.
     """
-    from .profile import refine_incident_point
+    from .incident_point import refine_incident_point
 
     values = np.asarray(image, dtype=np.float64)
     if values.ndim == 3:

@@ -35,7 +35,8 @@ import numpy as np
 from ..atomic import atomic_path, check_output_file
 from ..errors import InputError
 from .capture import CaptureSpec, read_capture, write_capture, write_exr_pixels
-from .profile import annulus_edges, refine_incident_point
+from .incident_point import refine_incident_point
+from .profile import annulus_edges
 
 __all__ = ["ImportedCapture", "MIN_SPOT_CONTRAST", "RAW_SUFFIXES", "import_photo",
            "ruler_pixel_size"]

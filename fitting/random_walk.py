@@ -40,7 +40,8 @@ import numpy as np
 from ..errors import InputError
 from ..materials import Dipole
 from ..materials.fresnel import fresnel_reflectance
-from .synthetic import Camera, _capture_spec, _check_geometry, _check_incident, apply_camera
+from .synthetic import Camera, apply_camera, capture_spec, check_geometry, check_incident
+from .walk_scoring import score_exits
 
 __all__ = ["Film", "WalkTally", "photon_random_walk", "walk_capture"]
 
@@ -141,56 +142,6 @@ def _scatter(rng, ux, uy, uz, g):
         new_y[vertical] = sin_t[vertical] * sin_p[vertical]
         new_z[vertical] = np.sign(uz[vertical]) * cos_t[vertical]
     return new_x, new_y, new_z
-
-
-def score_exits(rng, side, dx, dy, x0, y0, weight, batch, edges, film, rotations, radial,
-                totals, film_sum) -> None:
-    """Add exits to the tallies, in place.
-
-    Parameters
-    ----------
-    rng : numpy.random.Generator
-        Draws the random offset of the film rotations.
-    side : int
-        0 for exits through the lit surface, 1 through the far one.
-    dx, dy : ndarray
-        Exit point minus entry point, mm.
-    x0, y0 : ndarray
-        Entry points, mm from the beam axis.
-    weight : ndarray
-        Weight leaving.
-    batch : ndarray of int
-        Batch of each exit's photon.
-    edges : ndarray
-        Radial bin edges, mm.
-    film : Film or None
-    rotations : int
-        Each exit lands on the film at this many rotations about its entry point, equally
-        spaced from a random offset (the slab is invariant under them), each with
-        ``weight / rotations``.
-    radial : ndarray, shape (2, batches, bins)
-    totals : ndarray, shape (2, batches)
-    film_sum : ndarray, shape (H * W,) or None
-    """
-    n_bins = edges.size - 1
-    r = np.hypot(dx, dy)
-    bins = np.searchsorted(edges, r, side="right") - 1
-    inside = (bins >= 0) & (bins < n_bins)
-    np.add.at(radial[side], (batch[inside], bins[inside]), weight[inside])
-    np.add.at(totals[side], batch, weight)
-    if film_sum is None or side != (0 if film.side == "reflection" else 1):
-        return
-    height, width = film.shape
-    offset = rng.random(r.size)
-    for k in range(rotations):
-        angle = 2.0 * np.pi * (offset + k / rotations)
-        c, s = np.cos(angle), np.sin(angle)
-        fx = film.centre_px[0] + (x0 + c * dx - s * dy) / film.pixel_size_mm
-        fy = film.centre_px[1] + (y0 + s * dx + c * dy) / film.pixel_size_mm
-        ix, iy = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
-        on = (ix >= 0) & (ix < width) & (iy >= 0) & (iy < height)
-        film_sum += np.bincount(iy[on] * width + ix[on], weight[on] / rotations,
-                                minlength=height * width)
 
 
 def _walk_channel(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_radius, r_kill,
@@ -415,8 +366,8 @@ def walk_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
     height, width = (size, size) if np.isscalar(size) else size
     if incident_px is None:
         incident_px = (width / 2.0, height / 2.0)
-    incident_px = _check_incident(incident_px, width, height)
-    _check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm)
+    incident_px = check_incident(incident_px, width, height)
+    check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm)
     if side == "transmission" and thickness_mm is None:
         raise InputError("transmission needs a finite thickness", field="thickness_mm",
                          value=None)
@@ -426,7 +377,7 @@ def walk_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
                                beam_radius_mm=beam_radius_mm, film=film, rotations=rotations,
                                seed=int(rng.integers(2**31)), progress=progress)
     stored, exposure = apply_camera(tally.film, camera, rng)
-    spec = _capture_spec(material, camera, image_name=image_name, pixel_size_mm=pixel_size_mm,
+    spec = capture_spec(material, camera, image_name=image_name, pixel_size_mm=pixel_size_mm,
                          incident_px=incident_px, side=side, thickness_mm=thickness_mm,
                          beam_radius_mm=beam_radius_mm, exposure=exposure, eta_known=eta_known,
                          generator="photon random walk",

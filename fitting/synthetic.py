@@ -292,21 +292,21 @@ def dipole_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
     height, width = (size, size) if np.isscalar(size) else size
     if incident_px is None:
         incident_px = (width / 2.0, height / 2.0)
-    incident_px = _check_incident(incident_px, width, height)
-    _check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm)
+    incident_px = check_incident(incident_px, width, height)
+    check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm)
     profile_fn = material_profile_function(material, side=side, thickness_mm=thickness_mm)
     exitance = exitance_image(profile_fn, (height, width), pixel_size_mm, incident_px,
                               beam_radius_mm, beam_profile)
     rng = np.random.default_rng(seed)
     stored, exposure = apply_camera(exitance, camera, rng)
-    spec = _capture_spec(material, camera, image_name=image_name, pixel_size_mm=pixel_size_mm,
+    spec = capture_spec(material, camera, image_name=image_name, pixel_size_mm=pixel_size_mm,
                          incident_px=incident_px, side=side, thickness_mm=thickness_mm,
                          beam_radius_mm=beam_radius_mm, exposure=exposure, eta_known=eta_known,
                          generator="dipole")
     return stored, replace(spec, beam_profile=beam_profile)
 
 
-def _check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm):
+def check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm):
     """:class:`InputError` naming the first length that is not finite or out of range (mm)."""
     if not (np.isfinite(pixel_size_mm) and pixel_size_mm > 0):
         raise InputError("must be finite and > 0, mm", field="pixel_size_mm",
@@ -319,7 +319,7 @@ def _check_geometry(pixel_size_mm, thickness_mm, beam_radius_mm):
                          field="beam_radius_mm", value=beam_radius_mm)
 
 
-def _check_incident(incident_px, width, height):
+def check_incident(incident_px, width, height):
     """Return ``incident_px`` as floats; :class:`InputError` unless it lies inside the image.
 
     The capture format takes an incident point inside the image only (the fitter refuses
@@ -332,7 +332,7 @@ def _check_incident(incident_px, width, height):
     return x, y
 
 
-def _capture_spec(material, camera, *, image_name, pixel_size_mm, incident_px, side,
+def capture_spec(material, camera, *, image_name, pixel_size_mm, incident_px, side,
                   thickness_mm, beam_radius_mm, exposure, eta_known, generator, extra=None):
     """Return the sidecar of a synthetic capture, with its truth under ``synthetic``."""
     truth = {"generator": generator, "sigma_a": material.sigma_a.tolist(),

@@ -72,7 +72,7 @@ from ..errors import InputError, check_count
 from ..materials import Dipole
 from ..materials.dipole import reduced_albedo, reduced_extinction
 from ..materials.profiles import diffuse_entry_transmittance
-from .synthetic import Camera, _capture_spec, apply_camera
+from .synthetic import Camera, apply_camera, capture_spec
 
 __all__ = ["BEAM_DEPTH_MM", "CHANNEL_MODES", "DEFAULT_BEAM_FRACTION", "VolpathRender",
            "beam_pixel_image", "collimated_powers", "exitance_per_normal_radiance",
@@ -729,7 +729,7 @@ def volpath_capture(material: Dipole, *, size: int | tuple[int, int] = 96,
                              sensor=sensor, channels=channels, seed=int(rng.integers(2**31)),
                              progress=progress)
     stored, exposure = apply_camera(render.exitance, camera, rng)
-    spec = _capture_spec(material, camera, image_name=image_name, pixel_size_mm=pixel_size_mm,
+    spec = capture_spec(material, camera, image_name=image_name, pixel_size_mm=pixel_size_mm,
                          incident_px=incident_px, side=side, thickness_mm=thickness_mm,
                          beam_radius_mm=beam_radius_mm, exposure=exposure, eta_known=eta_known,
                          generator="mitsuba volpath",

@@ -38,7 +38,7 @@ def walk_channel_drjit(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_r
 
     The kernel only walks: every exit (position, entry point, weight, side, photon) is
     appended to a buffer through an atomic counter, and the buffer is scored afterwards by
-    :func:`~translucent.fitting.random_walk.score_exits`, the numpy walk's own scoring. A
+    :func:`~translucent.fitting.walk_scoring.score_exits`, the numpy walk's own scoring. A
     buffer that overflows is enlarged and the (deterministic) walk run again.
 
     Parameters
@@ -55,7 +55,7 @@ def walk_channel_drjit(rng, photons, sigma_a, sigma_s, g, eta, thickness, beam_r
         Radial sums per side and batch, totals per side and batch, weight lost at the kill
         radius, film sums (flat, H * W) or None.
     """
-    from .random_walk import score_exits
+    from .walk_scoring import score_exits
 
     n_bins = edges.size - 1
     radial = np.zeros((2, batches, n_bins))

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fresnel import _float_dtype, diffuse_fresnel_reflectance
+from .fresnel import diffuse_fresnel_reflectance, float_dtype
 
 __all__ = [
     "reduced_extinction",
@@ -32,13 +32,13 @@ __all__ = [
 
 def reduced_extinction(sigma_a, sigma_s_prime):
     r""":math:`\sigma'_t = \sigma_a + \sigma'_s` in mm^-1."""
-    dtype = _float_dtype(sigma_a, sigma_s_prime)
+    dtype = float_dtype(sigma_a, sigma_s_prime)
     return np.asarray(sigma_a, dtype) + np.asarray(sigma_s_prime, dtype)
 
 
 def reduced_albedo(sigma_a, sigma_s_prime):
     r""":math:`\alpha' = \sigma'_s / \sigma'_t`, dimensionless; 0 where :math:`\sigma'_t = 0`."""
-    dtype = _float_dtype(sigma_a, sigma_s_prime)
+    dtype = float_dtype(sigma_a, sigma_s_prime)
     sigma_s_prime = np.asarray(sigma_s_prime, dtype)
     sigma_t_prime = reduced_extinction(sigma_a, sigma_s_prime)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -51,7 +51,7 @@ def effective_transport_coefficient(sigma_a, sigma_s_prime):
 
     Jensen et al. 2001; Wang et al. 2008, text after Eq. 2. In mm^-1.
     """
-    dtype = _float_dtype(sigma_a, sigma_s_prime)
+    dtype = float_dtype(sigma_a, sigma_s_prime)
     return np.sqrt(3.0 * np.asarray(sigma_a, dtype) * reduced_extinction(sigma_a, sigma_s_prime))
 
 
@@ -105,7 +105,7 @@ def dipole_reflectance_profile(r, sigma_a, sigma_s_prime, eta):
         :math:`R_d(r)` in mm^-2, broadcast shape of the inputs. Its integral over the plane,
         :math:`2\pi\int_0^\infty R_d(r) r\,dr`, is :func:`total_diffuse_reflectance`.
     """
-    dtype = _float_dtype(r, sigma_a, sigma_s_prime, eta)
+    dtype = float_dtype(r, sigma_a, sigma_s_prime, eta)
     r = np.asarray(r, dtype)
     sigma_a = np.asarray(sigma_a, dtype)
     sigma_s_prime = np.asarray(sigma_s_prime, dtype)
@@ -143,7 +143,7 @@ def total_diffuse_reflectance(sigma_a, sigma_s_prime, eta):
     ndarray
         Dimensionless, in [0, 1).
     """
-    dtype = _float_dtype(sigma_a, sigma_s_prime, eta)
+    dtype = float_dtype(sigma_a, sigma_s_prime, eta)
     sigma_a = np.asarray(sigma_a, dtype)
     sigma_t_prime = reduced_extinction(sigma_a, sigma_s_prime)
     albedo = reduced_albedo(sigma_a, sigma_s_prime)

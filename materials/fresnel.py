@@ -15,7 +15,7 @@ import numpy as np
 __all__ = ["diffuse_fresnel_reflectance", "fresnel_reflectance", "fresnel_transmittance"]
 
 
-def _float_dtype(*arrays) -> np.dtype:
+def float_dtype(*arrays) -> np.dtype:
     """float32 when every input is float32 (or narrower), float64 otherwise."""
     dtype = np.result_type(*[np.asarray(a) for a in arrays], np.float32)
     return dtype if dtype in (np.float32, np.float64) else np.dtype(np.float64)
@@ -39,7 +39,7 @@ def diffuse_fresnel_reflectance(eta):
     ndarray
         :math:`F_{dr}`, dimensionless; 0.0064 at eta = 1 (the fit's residual).
     """
-    eta = np.asarray(eta, dtype=_float_dtype(eta))
+    eta = np.asarray(eta, dtype=float_dtype(eta))
     return -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
 
 
@@ -62,7 +62,7 @@ def fresnel_reflectance(eta, cos_theta_i):
     ndarray
         :math:`F_r \in [0, 1]`.
     """
-    dtype = _float_dtype(eta, cos_theta_i)
+    dtype = float_dtype(eta, cos_theta_i)
     eta = np.asarray(eta, dtype=dtype)
     cos_i = np.clip(np.asarray(cos_theta_i, dtype=dtype), 0.0, 1.0)
     # (1 - cos)(1 + cos) keeps its digits near normal incidence, where 1 - cos^2 cancels

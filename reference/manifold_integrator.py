@@ -14,7 +14,7 @@ mi = mitsuba()
 import drjit as dr  # noqa: E402  (after mitsuba(): it points Dr.Jit at a working libLLVM)
 from mitsuba.python.ad.integrators.common import ADIntegrator, mis_weight  # noqa: E402
 
-from .manifold_nee import (  # noqa: E402
+from .manifold_settings import (  # noqa: E402
     COUNTERS,
     DIFFERENCE_STEP,
     INTEGRATOR_NAME,

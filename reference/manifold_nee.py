@@ -70,42 +70,16 @@ from ..backend import mitsuba
 
 __all__ = ["INTEGRATOR_NAME", "COUNTERS", "register", "counts"]
 
-#: The name under which the integrator is registered with Mitsuba.
-INTEGRATOR_NAME = "volpath_mnee"
-
-#: What the integrator counts, in this order (read with :func:`counts`).
-COUNTERS = (
-    "connections",        # medium vertices whose shadow ray met a dielectric boundary
-    "solved",             # ... whose Newton solve converged to a valid refraction
-    "not_converged",      # the solve ran out of iterations or step length
-    "not_refraction",     # converged to total internal reflection or a back-facing light
-    "area_hits_kept",     # refracted hits of an area light the solver would not have found
+from .manifold_settings import (  # noqa: F401  (the settings are read from here too)
+    COUNTERS,
+    DIFFERENCE_STEP,
+    INTEGRATOR_NAME,
+    MAX_ITERATIONS,
+    MIN_STEP,
+    POSITION_PRECISION,
+    ROULETTE_TRANSMITTANCE,
+    TOLERANCE,
 )
-
-#: Newton iterations before a solve is given up.
-MAX_ITERATIONS = 32
-
-#: A solve has converged when the tangential Snell mismatch :math:`|C|` (a sine) is below
-#: this (float32 positions give about 1e-6).
-TOLERANCE = 2e-5
-
-#: Relative precision of a float32 position (a few units in the last place): a vertex at
-#: distance d from its refraction point y knows the direction to it only to about this
-#: times (1 + |y|) / d, which is added to :data:`TOLERANCE`.
-POSITION_PRECISION = 8.0 * 2.0**-24
-
-#: Step of the central differences, as a fraction of the distance from the medium vertex to
-#: the boundary plus the scene's size.
-DIFFERENCE_STEP = 1e-3
-
-#: A connection whose straight segment to the boundary transmits less than this (in its
-#: clearest channel) is made with probability transmittance / this and weighted by the
-#: inverse (Russian roulette: unbiased; the refracted segment is close to the straight
-#: one, so the weight stays near this value's inverse times the contribution).
-ROULETTE_TRANSMITTANCE = 0.05
-
-#: A proposed Newton step shorter than this fraction of a full step ends the solve.
-MIN_STEP = 1.0 / 1024.0
 
 
 def register() -> None:

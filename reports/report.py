@@ -439,6 +439,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
 
     from ..cache import Cache, content_hash, limited_entries
     from ..fast.base import method as method_module
+    from ..fast.base import refusal_of
+    from ..fast.registry import MethodContractError, method_fingerprint
     from ..scenes import Scene, load_scene
     from .distributed import run_tasks
 
@@ -510,19 +512,24 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 continue
             try:
                 module = method_module(name)
+            except MethodContractError as error:
+                report.runs[name] = MethodRun(name, report.name, "failed", error.reason)
+                continue
             except InputError as error:
                 report.runs[name] = MethodRun(name, report.name, "not built", error.reason)
                 continue
             try:
-                reason = module.applies_to(report.scene)
+                reason = refusal_of(module.applies_to(report.scene))
             except Exception as error:  # the method's own check failed: show it
                 report.runs[name] = MethodRun(name, report.name, "failed",
                                               f"applies_to: {type(error).__name__}: {error}")
                 continue
             if reason is not None:
-                report.runs[name] = MethodRun(name, report.name, "not applicable", str(reason))
+                report.runs[name] = MethodRun(name, report.name, "not applicable",
+                                              reason.sentence, reason_code=reason.code)
                 continue
-            key = _run_key(name, report.scene, {}, fingerprint, versions)
+            key = _run_key(name, report.scene, {}, fingerprint + method_fingerprint(name),
+                           versions)
             stored = run_cache.load_pickle(key)
             if isinstance(stored, MethodRun) and stored.status == "ok":
                 stored.cached = True

@@ -41,6 +41,9 @@ class MethodRun:
         What happened ("not run": the scene has no reference to compare with).
     reason : str
         Why a method did not run, or the error it raised.
+    reason_code : str
+        The code of the method's :class:`~translucent.fast.base.Refusal` ("not
+        applicable"; "other" where the method gave a plain sentence), else "".
     image : Image, optional
         The rendered image (status "ok").
     precompute_seconds, frame_seconds : float, optional
@@ -69,6 +72,7 @@ class MethodRun:
     status: str
     reason: str = ""
     image: Image | None = None
+    reason_code: str = ""
     precompute_seconds: float | None = None
     frame_seconds: float | None = None
     first_frame_seconds: float | None = None
@@ -83,6 +87,7 @@ class MethodRun:
     def as_dict(self) -> dict:
         """Return everything but the image, JSON-safe."""
         return {"method": self.method, "status": self.status, "reason": self.reason,
+                "reason_code": self.reason_code,
                 "precompute_seconds": self.precompute_seconds,
                 "frame_seconds": self.frame_seconds,
                 "first_frame_seconds": self.first_frame_seconds, "skipped": list(self.skipped),
@@ -157,19 +162,23 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
         Status "ok" with the image, "not built", "not applicable" (with the method's
         reason) or "failed" (with the error and its traceback).
     """
-    from ..fast.base import method
+    from ..fast.base import method, refusal_of
+    from ..fast.registry import MethodContractError
 
     knobs = dict(knobs or {})
     base = {"method": method_name, "scene": scene.name, "knobs": knobs,
             "measured_at": timestamp()}
     try:
         module = method(method_name)
+    except MethodContractError as error:
+        return MethodRun(status="failed", reason=error.reason, **base)
     except InputError as error:
         return MethodRun(status="not built", reason=error.reason, **base)
     try:
-        reason = module.applies_to(scene)
+        reason = refusal_of(module.applies_to(scene))
         if reason is not None:
-            return MethodRun(status="not applicable", reason=str(reason), **base)
+            return MethodRun(status="not applicable", reason=reason.sentence,
+                             reason_code=reason.code, **base)
         with private_cache() if cold else contextlib.nullcontext():
             started = time.perf_counter()
             state = module.precompute(scene, **_quiet_knobs(module, knobs))
@@ -254,21 +263,9 @@ def nudged_lights(lights, step: int) -> list:
     Positions and centres move along x, directions turn about the axis they are least
     aligned with; environments stay as they are (nothing to move).
     """
-    from dataclasses import replace
+    from ..scenes.scene import moved_lights
 
-    moved = []
-    offset = step * LIGHT_NUDGE
-    for light in lights:
-        if hasattr(light, "position"):
-            light = replace(light, position=light.position + [offset, 0.0, 0.0])
-        elif hasattr(light, "center"):
-            light = replace(light, center=light.center + [offset, 0.0, 0.0])
-        elif hasattr(light, "direction"):
-            axis = np.eye(3)[int(np.argmin(np.abs(light.direction)))]
-            turned = light.direction + offset * axis
-            light = replace(light, direction=turned / np.linalg.norm(turned))
-        moved.append(light)
-    return moved
+    return moved_lights(lights, step * LIGHT_NUDGE)
 
 
 def report_task(kind: str, scene, *arguments):

@@ -15,10 +15,14 @@ not given: the error it would be matched at is not known.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["PATH_TRACING_SPP", "PathTracingCurve", "overview_plot", "path_tracing_ladder",
+import numpy as np
+
+__all__ = ["PATH_TRACING_REPEATS", "PATH_TRACING_SPP", "equal_error_seconds",
+           "path_tracing_point", "PathTracingCurve", "overview_plot", "path_tracing_ladder",
            "scored_curve", "speedup", "tradeoff_plot"]
 
 #: The report's path-tracing ladder, samples per pixel (per channel where the reference
@@ -34,8 +38,6 @@ def path_tracing_ladder(scene, spp_values=PATH_TRACING_SPP) -> list[dict]:
     list of dict
         Per spp: ``spp``, ``seconds`` and ``images`` (one), or ``error`` (a string).
     """
-    from .bench.tradeoff import path_tracing_point
-
     return [path_tracing_point(scene, int(spp), repeats=1) for spp in spp_values]
 
 
@@ -138,7 +140,6 @@ def speedup(curve: PathTracingCurve | None, relative_mse, frame_seconds,
         (path tracing's time at that error), ``extrapolated`` and ``reason`` (why it is
         None, or what qualifies it).
     """
-    from .bench.tradeoff import equal_error_seconds
     from .metrics import WITHIN_NOISE
 
     empty = {"speedup_vs_path_tracing": None, "path_tracing_seconds": None,
@@ -219,7 +220,6 @@ def tradeoff_plot(path, curves: dict, methods: dict, noise_floor: float | None,
         if len(positive) >= 2 and lowest < min(errors):
             # where a method's error lies beyond the ladder: the power law its speed-up is
             # extrapolated along
-            from .bench.tradeoff import equal_error_seconds
 
             reach = equal_error_seconds(errors, seconds, lowest)[0]
             if math.isfinite(reach):
@@ -309,3 +309,94 @@ def overview_plot(path, points: list[tuple], title: str = "every scene") -> Path
     axes.legend(fontsize=6.5, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
     figure.tight_layout()
     return atomic_save_figure(path, figure)
+
+
+#: Timed renders per path-tracing point: the median time and the mean error over them (a
+#: 1-spp render of a small image lasts tens of milliseconds, where one timing is noisy, and
+#: one low-spp render's error depends much on its fireflies).
+PATH_TRACING_REPEATS = 3
+
+
+def path_tracing_point(scene, spp: int, seed: int = 1, repeats: int = PATH_TRACING_REPEATS):
+    """Render ``scene`` with Mitsuba at ``spp`` and time it (a sweep task).
+
+    The estimator is the reference's (:func:`translucent.reference.render`): one RGB render,
+    or one render per channel where the conversion recommends it (chromatic media of high
+    albedo), so the path tracer is timed as the suite itself would run it. The scene is
+    converted and loaded first and rendered once untimed (which compiles the kernels), then
+    ``repeats`` times with the seeds ``seed, seed + 1, ...``, each timed.
+
+    Parameters
+    ----------
+    scene : Scene
+    spp : int
+        Samples per pixel (>= 1), per channel where rendered per channel.
+    seed : int
+        Seed of the first timed render (the untimed one uses ``seed + repeats``).
+    repeats : int
+        Timed renders.
+
+    Returns
+    -------
+    dict
+        ``spp``, ``seconds`` (the median of the timed renders), ``per_channel`` and
+        ``images`` (one :class:`~translucent.image.Image` per timed render), or ``error`` (a
+        string) when Mitsuba failed.
+    """
+    from ..image import Image
+    from ..reference.render import load_scenes, render_sample
+
+    try:
+        channels, conversions, loaded = load_scenes(scene, spp=spp)
+        per_channel = channels != (None,)
+        render_sample(channels, loaded, spp, seed + repeats)
+        timings, images = [], []
+        for k in range(repeats):
+            started = time.perf_counter()
+            rgb = render_sample(channels, loaded, spp, seed + k)
+            timings.append(time.perf_counter() - started)
+            images.append(Image(rgb, metadata={"producer": "path tracing", "spp": spp,
+                                               "seed": seed + k, "per_channel": per_channel,
+                                               "integrator": conversions[0].integrator}))
+    except Exception as error:  # reported in the JSON; the sweep goes on
+        return {"spp": spp, "error": f"{type(error).__name__}: {error}"}
+    return {"spp": spp, "seconds": float(np.median(timings)), "per_channel": per_channel,
+            "images": images}
+
+
+def equal_error_seconds(errors, seconds, error: float) -> tuple[float, bool]:
+    """Return the path tracer's time at ``error``, interpolated on its log-log curve.
+
+    Inside the range of measured errors: linear interpolation of log seconds against log
+    error between the two neighbouring points. Outside: the least-squares power law
+    ``seconds = a * error^b`` through all points (Monte Carlo error falls as 1/spp, so
+    b is near -1).
+
+    Parameters
+    ----------
+    errors, seconds : array_like
+        The path-tracing sweep: relative MSE and seconds per point (> 0).
+    error : float
+        The error to match (> 0).
+
+    Returns
+    -------
+    seconds : float
+        Path-tracing seconds at that error; NaN when it cannot be estimated.
+    extrapolated : bool
+        True when ``error`` lies outside the measured errors.
+    """
+    errors = np.asarray(errors, dtype=np.float64)
+    seconds = np.asarray(seconds, dtype=np.float64)
+    usable = np.isfinite(errors) & np.isfinite(seconds) & (errors > 0) & (seconds > 0)
+    errors, seconds = errors[usable], seconds[usable]
+    if not (math.isfinite(error) and error > 0) or len(np.unique(errors)) < 2:
+        return math.nan, True
+    log_e, log_t = np.log(errors), np.log(seconds)
+    order = np.argsort(log_e)
+    log_e, log_t = log_e[order], log_t[order]
+    target = math.log(error)
+    if log_e[0] <= target <= log_e[-1]:
+        return float(np.exp(np.interp(target, log_e, log_t))), False
+    slope, intercept = np.polyfit(log_e, log_t, 1)
+    return float(np.exp(intercept + slope * target)), True

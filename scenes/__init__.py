@@ -36,6 +36,7 @@ from .scene import (
     SceneObject,
     SphereAreaLight,
     SpotLight,
+    moved_lights,
 )
 from .scene_file import (
     builtin_scene_descriptions,
@@ -81,6 +82,7 @@ __all__ = [
     "PointLight",
     "RectangularAreaLight",
     "Scene",
+    "moved_lights",
     "SceneObject",
     "SphereAreaLight",
     "SpotLight",

@@ -28,6 +28,7 @@ __all__ = [
     "Light",
     "Camera",
     "Scene",
+    "moved_lights",
     "vector3",
 ]
 
@@ -573,3 +574,31 @@ class Scene:
         """Geometry alone (no lights, no materials): what precomputations depend on."""
         return {"meshes": [o.mesh.cache_key() for o in self.objects],
                 "mm_per_unit": self.mm_per_unit}
+
+
+def moved_lights(lights, offset: float) -> list:
+    """Return ``lights`` moved by ``offset``: new lights, the same kind and power.
+
+    Positions and centres move ``offset`` scene units along x; directions turn by about
+    ``offset`` radians about the axis they are least aligned with; environments stay as
+    they are (nothing to move). Used to relight without changing what is lit.
+
+    Examples
+    --------
+    >>> [light.position.tolist() for light in moved_lights([PointLight([0, 1, 2], 1.0)], 0.5)]
+    [[0.5, 1.0, 2.0]]
+    """
+    from dataclasses import replace
+
+    moved = []
+    for light in lights:
+        if hasattr(light, "position"):
+            light = replace(light, position=light.position + [offset, 0.0, 0.0])
+        elif hasattr(light, "center"):
+            light = replace(light, center=light.center + [offset, 0.0, 0.0])
+        elif hasattr(light, "direction"):
+            axis = np.eye(3)[int(np.argmin(np.abs(light.direction)))]
+            turned = light.direction + offset * axis
+            light = replace(light, direction=turned / np.linalg.norm(turned))
+        moved.append(light)
+    return moved

@@ -8,7 +8,8 @@ import translucent
 
 #: Modules whose numpydoc Examples are run as tests.
 DOCTESTED = ["translucent.api", "translucent.noise", "translucent.fast.base",
-             "translucent.reports.metrics"]
+             "translucent.fast.registry", "translucent.scenes.scene",
+             "translucent.reports.commands.approx", "translucent.reports.metrics"]
 
 
 @pytest.mark.parametrize("name", DOCTESTED)

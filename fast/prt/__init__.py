@@ -61,6 +61,7 @@ from .knobs import (
     LOCAL_BLEND_END,
     LOCAL_BLEND_START,
     LOCAL_KERNEL_WIDTH,
+    QUICK_KNOBS,
 )
 from .lighting import (
     EnvironmentTransfer,
@@ -81,6 +82,7 @@ from .transfer import IlluminationSamples, ObjectTransfer, illumination_samples
 
 __all__ = [
     "DEFAULT_KNOBS",
+    "QUICK_KNOBS",
     "applies_to",
     "scored_objects",
     "precompute",

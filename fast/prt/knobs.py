@@ -58,6 +58,10 @@ DEFAULT_KNOBS: dict = {
     "progress": True,
 }
 
+#: Cheap knobs for smoke runs and the conformance checks (fast.conformance): 256
+#: illumination samples (4 parts x 8 x 8) on one core.
+QUICK_KNOBS: dict = {"samples": 256, "workers": 1}
+
 #: Knobs that change how, not what, is computed: left out of the cache key.
 EXECUTION_KNOBS = ("workers", "progress")
 

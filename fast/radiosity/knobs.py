@@ -36,6 +36,11 @@ DEFAULT_KNOBS: dict = {
     "seed": 0,
 }
 
+#: Cheap knobs for smoke runs and the conformance checks (fast.conformance): few
+#: form-factor rays, and a tight solve, so that relighting through T and an iterative
+#: solve agree far below the checks' tolerance.
+QUICK_KNOBS: dict = {"rays_per_patch": 16, "tolerance": 1e-7}
+
 #: Knobs that only steer solving and lighting: not part of the precomputation's cache key.
 RUNTIME_KNOBS = ("solver", "tolerance", "max_iterations", "warm_start", "transfer",
                  "transfer_budget_mb", "light_samples", "diffuse_light_samples",

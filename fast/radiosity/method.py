@@ -11,7 +11,7 @@ from ...materials.profiles import (
     MixedProfiles,
     profile_for,
 )
-from ..base import StageLog, StageProgress, refuse_inapplicable, with_defaults
+from ..base import Refusal, StageLog, StageProgress, refuse_inapplicable, with_defaults
 from ..form_factors import build_patches, form_factors, needs_form_factors
 from ..optical_distance import (
     closed_surface,
@@ -21,8 +21,12 @@ from .geometry import scattering_geometry
 from .knobs import COMPONENTS, DEFAULT_KNOBS, FORMAT_VERSION, RUNTIME_KNOBS, SOLVERS
 from .state import RadiosityState, materials_of
 
+#: The reason code of a scene with no translucent object: still solved (classical radiosity)
+#: when asked for directly, but not this method's to be scored on.
+NO_TRANSLUCENT_OBJECT = "no_translucent_object"
 
-def applies_to(scene) -> str | None:
+
+def applies_to(scene) -> Refusal | None:
     """None when every material is Lambertian, a Dipole, a RadialProfile or MixedProfiles.
 
     Translucent radiosity assumes diffuse surfaces and isotropic multiple scattering
@@ -34,12 +38,14 @@ def applies_to(scene) -> str | None:
         try:
             profile = profile_for(obj.material)
         except InputError:
-            return (f"object '{obj.name}' has a {type(obj.material).__name__} material; "
-                    "translucent radiosity takes diffuse (Lambertian) surfaces and dipole or "
-                    "tabulated radial profiles only")
+            return Refusal("unsupported_material",
+                           f"object '{obj.name}' has a {type(obj.material).__name__} "
+                           "material; translucent radiosity takes diffuse (Lambertian) "
+                           "surfaces and dipole or tabulated radial profiles only")
         translucent |= profile is not None
     if not translucent:
-        return "no translucent object: this is classical radiosity (every S entry is an albedo)"
+        return Refusal(NO_TRANSLUCENT_OBJECT, "no translucent object: this is classical "
+                       "radiosity (every S entry is an albedo)")
     return None
 
 
@@ -121,7 +127,7 @@ def precompute(scene, **knobs) -> RadiosityState:
 
     scene, solid_notes = surface_scene(scene, mixed_profiles_from_solid)
     reason = applies_to(scene)
-    if reason is not None and not reason.startswith("no translucent"):
+    if reason is not None and reason.code != NO_TRANSLUCENT_OBJECT:
         refuse_inapplicable(scene, reason, "radiosity does not apply")
     resolved = _resolve_knobs(scene, knobs)
     translucent = [i for i, o in enumerate(scene.objects) if profile_for(o.material) is not None]

@@ -20,6 +20,9 @@ DEFAULT_KNOBS: dict = {
     "profile_upsampling": True,     # Eq. 17 on B / sqrt(P_o): see upsampling_profile_factors
     "area_light_points": 4,         # point emitters an area light becomes (emitters.py)
 }
+
+#: Cheap knobs for smoke runs and the conformance checks (fast.conformance).
+QUICK_KNOBS: dict = {"irradiance_resolution": 64}
 #: The splatting kernels: compiled loops (numba, the default: measured fastest on the CPU,
 #: see reports/bench/splatting.py), CUDA (numba.cuda, :mod:`.splatting_cuda`: the same tiles
 #: on a GPU), Dr.Jit (LLVM on the CPU, CUDA where a GPU is there) and plain numpy (the

@@ -13,7 +13,7 @@ timed in full, then renders its first frame and :data:`RELIGHT_FRAMES` relit one
 scene's lights given again: the interactive relighting path); the frame time is their
 median, the first image's time the precomputation plus the first frame. Mitsuba's
 volumetric path tracer renders the same scene at 1, 2, 4, ... ``--max-spp`` samples per
-pixel (:data:`PATH_TRACING_REPEATS` timed renders each, after an untimed one that compiles
+pixel (:data:`~translucent.reports.speedup.PATH_TRACING_REPEATS` timed renders each, after an untimed one that compiles
 its kernels: the median time, the mean error). Every image is compared with a converged
 reference
 (``--reference-spp`` x ``--reference-passes``, from the reference cache); the error is the
@@ -38,13 +38,13 @@ import datetime
 import json
 import math
 import os
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ...atomic import atomic_save_figure, atomic_write_text, check_output_file
 from ...errors import InputError, check_count
+from ..speedup import equal_error_seconds, path_tracing_point
 from . import at_width
 
 __all__ = ["LADDERS", "DEFAULT_SCENES", "add_arguments", "run", "sweep",
@@ -112,11 +112,6 @@ QUALITY_WORDS = ("terms", "samples", "iterations", "levels", "resolution", "rays
 #: Fractions of the default a generated ladder takes for such a knob.
 GENERATED_FRACTIONS = (0.125, 0.25, 0.5)
 
-#: Timed renders per path-tracing point: the median time and the mean error over them (a
-#: 1-spp render of a small image lasts tens of milliseconds, where one timing is noisy, and
-#: one low-spp render's error depends much on its fireflies).
-PATH_TRACING_REPEATS = 3
-
 #: Relit frames per method point after the first frame: the median is the frame time.
 RELIGHT_FRAMES = 3
 
@@ -157,53 +152,6 @@ def add_arguments(parser):
 # ====================================================================== tasks
 
 
-def path_tracing_point(scene, spp: int, seed: int = 1, repeats: int = PATH_TRACING_REPEATS):
-    """Render ``scene`` with Mitsuba at ``spp`` and time it (a sweep task).
-
-    The estimator is the reference's (:func:`translucent.reference.render`): one RGB render,
-    or one render per channel where the conversion recommends it (chromatic media of high
-    albedo), so the path tracer is timed as the suite itself would run it. The scene is
-    converted and loaded first and rendered once untimed (which compiles the kernels), then
-    ``repeats`` times with the seeds ``seed, seed + 1, ...``, each timed.
-
-    Parameters
-    ----------
-    scene : Scene
-    spp : int
-        Samples per pixel (>= 1), per channel where rendered per channel.
-    seed : int
-        Seed of the first timed render (the untimed one uses ``seed + repeats``).
-    repeats : int
-        Timed renders.
-
-    Returns
-    -------
-    dict
-        ``spp``, ``seconds`` (the median of the timed renders), ``per_channel`` and
-        ``images`` (one :class:`~translucent.image.Image` per timed render), or ``error`` (a
-        string) when Mitsuba failed.
-    """
-    from ...image import Image
-    from ...reference.render import load_scenes, render_sample
-
-    try:
-        channels, conversions, loaded = load_scenes(scene, spp=spp)
-        per_channel = channels != (None,)
-        render_sample(channels, loaded, spp, seed + repeats)
-        timings, images = [], []
-        for k in range(repeats):
-            started = time.perf_counter()
-            rgb = render_sample(channels, loaded, spp, seed + k)
-            timings.append(time.perf_counter() - started)
-            images.append(Image(rgb, metadata={"producer": "path tracing", "spp": spp,
-                                               "seed": seed + k, "per_channel": per_channel,
-                                               "integrator": conversions[0].integrator}))
-    except Exception as error:  # reported in the JSON; the sweep goes on
-        return {"spp": spp, "error": f"{type(error).__name__}: {error}"}
-    return {"spp": spp, "seconds": float(np.median(timings)), "per_channel": per_channel,
-            "images": images}
-
-
 def _task(kind: str, scene, *arguments):
     """Run one sweep point: the converged reference, a path-traced render or a method run."""
     from ..runs import render_reference, run_method
@@ -223,7 +171,7 @@ def _ladders(module, name: str) -> tuple[dict[str, list[dict]], list[str]]:
     """Return the ladders of a method, restricted to its knobs, and notes on what was dropped."""
     defaults = getattr(module, "DEFAULT_KNOBS", {}) or {}
     notes = []
-    ladders = LADDERS.get(name)
+    ladders = getattr(module, "LADDERS", None) or LADDERS.get(name)
     if ladders is None:
         ladders = {}
         for knob, default in defaults.items():
@@ -247,47 +195,6 @@ def _ladders(module, name: str) -> tuple[dict[str, list[dict]], list[str]]:
                 cleaned.append(point)
         kept[ladder] = cleaned
     return kept, notes
-
-
-# ====================================================================== equal error
-
-
-def equal_error_seconds(errors, seconds, error: float) -> tuple[float, bool]:
-    """Return the path tracer's time at ``error``, interpolated on its log-log curve.
-
-    Inside the range of measured errors: linear interpolation of log seconds against log
-    error between the two neighbouring points. Outside: the least-squares power law
-    ``seconds = a * error^b`` through all points (Monte Carlo error falls as 1/spp, so
-    b is near -1).
-
-    Parameters
-    ----------
-    errors, seconds : array_like
-        The path-tracing sweep: relative MSE and seconds per point (> 0).
-    error : float
-        The error to match (> 0).
-
-    Returns
-    -------
-    seconds : float
-        Path-tracing seconds at that error; NaN when it cannot be estimated.
-    extrapolated : bool
-        True when ``error`` lies outside the measured errors.
-    """
-    errors = np.asarray(errors, dtype=np.float64)
-    seconds = np.asarray(seconds, dtype=np.float64)
-    usable = np.isfinite(errors) & np.isfinite(seconds) & (errors > 0) & (seconds > 0)
-    errors, seconds = errors[usable], seconds[usable]
-    if not (math.isfinite(error) and error > 0) or len(np.unique(errors)) < 2:
-        return math.nan, True
-    log_e, log_t = np.log(errors), np.log(seconds)
-    order = np.argsort(log_e)
-    log_e, log_t = log_e[order], log_t[order]
-    target = math.log(error)
-    if log_e[0] <= target <= log_e[-1]:
-        return float(np.exp(np.interp(target, log_e, log_t))), False
-    slope, intercept = np.polyfit(log_e, log_t, 1)
-    return float(np.exp(intercept + slope * target)), True
 
 
 # ====================================================================== the sweep
@@ -345,7 +252,8 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
     dict
         ``{"scenes": {name: {...}}, ...}``; see the module docstring.
     """
-    from ...fast.base import METHODS, method
+    from ...fast.base import METHODS, method, refusal_of
+    from ...fast.registry import MethodContractError
     from ...scenes import Scene, load_scene
     from ..distributed import run_tasks
     from ..runs import backend_versions
@@ -381,12 +289,16 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
         for name in chosen:
             try:
                 module = method(name)
+            except MethodContractError as error:
+                entry["methods"][name] = {"status": "failed", "reason": error.reason}
+                continue
             except InputError as error:
                 entry["methods"][name] = {"status": "not built", "reason": error.reason}
                 continue
-            reason = module.applies_to(scene)
+            reason = refusal_of(module.applies_to(scene))
             if reason is not None:
-                entry["methods"][name] = {"status": "not applicable", "reason": str(reason)}
+                entry["methods"][name] = {"status": "not applicable",
+                                          "reason": reason.sentence, "code": reason.code}
                 continue
             ladders, notes = _ladders(module, name)
             entry["methods"][name] = {"status": "ok", "notes": notes,

@@ -74,11 +74,11 @@ def test_gather_wavelets_keep_inner_products(rng):
     from translucent.fast.wavelets import haar2d_inverse
 
     rows = rng.normal(size=(5, 64)).astype(np.float32)
-    coefficients = bt._haar_rows(rows)
+    coefficients = bt.haar_rows(rows)
     np.testing.assert_allclose(haar2d_inverse(coefficients.reshape(5, 8, 8)).reshape(5, 64),
                                rows, atol=1e-5)
     other = rng.normal(size=64).astype(np.float32)
-    np.testing.assert_allclose(coefficients @ bt._haar_rows(other[None])[0], rows @ other,
+    np.testing.assert_allclose(coefficients @ bt.haar_rows(other[None])[0], rows @ other,
                                rtol=1e-4, atol=1e-4)
 
 
@@ -141,7 +141,7 @@ def test_compiled_basis_matches_interpolated_pca(model, rng):
 def _disk_quadrature(material, basis, x, n_x, out, centre, normal, area, n=800):
     """Midpoint rule in polar coordinates on the disk: the integral Eq. 3 estimates."""
     radius = math.sqrt(area / math.pi)
-    first, second = (v[0] for v in bl._tangent_frames(np.asarray(normal)[None]))
+    first, second = (v[0] for v in bl.tangent_frames(np.asarray(normal)[None]))
     rr = (np.arange(n) + 0.5) / n * radius
     phi = (np.arange(n) + 0.5) / n * 2 * math.pi
     r, p = np.meshgrid(rr, phi, indexing="ij")

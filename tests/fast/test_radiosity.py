@@ -537,9 +537,13 @@ def test_fewer_diffuse_light_samples_leave_the_translucent_patches_alone():
 
 def test_applies_to_names_what_it_cannot_do():
     assert applies_to(_block_scene()) is None
-    assert "no translucent object" in applies_to(_inside_sphere(0.5))
+    classical = applies_to(_inside_sphere(0.5))
+    assert classical.code == "no_translucent_object"
+    assert "no translucent object" in str(classical)
     scene = _block_scene(material="a glossy paint")
-    assert "object 'block' has a str material" in applies_to(scene)
+    refusal = applies_to(scene)
+    assert refusal.code == "unsupported_material"
+    assert "object 'block' has a str material" in str(refusal)
 
 
 # ---------------------------------------------------------------------------------------

@@ -15,8 +15,8 @@ from translucent.fitting.models import DipoleModel
 from translucent.fitting.profile import measure_profile
 from translucent.fitting.synthetic import (
     Camera,
-    _capture_spec,
     apply_camera,
+    capture_spec,
     dipole_capture,
     exitance_image,
     material_profile_function,
@@ -52,7 +52,7 @@ def _misfit_capture(size=40, pixel_size_mm=0.25, seed=11):
     exitance = exitance_image(lambda r: dipole(r) * (1.0 + 0.6 * np.asarray(r)[..., None]),
                               (size, size), pixel_size_mm, (size / 2, size / 2))
     stored, exposure = apply_camera(exitance, camera, np.random.default_rng(seed))
-    spec = _capture_spec(SKIN, camera, image_name="capture.exr", pixel_size_mm=pixel_size_mm,
+    spec = capture_spec(SKIN, camera, image_name="capture.exr", pixel_size_mm=pixel_size_mm,
                          incident_px=(size / 2, size / 2), side="reflection",
                          thickness_mm=None, beam_radius_mm=0.0, exposure=exposure,
                          eta_known=True, generator="dipole times a ramp")

@@ -1,0 +1,352 @@
+"""Checks that a fast method keeps the contract, run the same way over every registered method.
+
+Each check takes a method's module (or object), a small scene it applies to and the knobs
+to run it with, and raises :class:`ConformanceFailure` (an :class:`AssertionError`) saying
+what broke, or returns a sentence on what it checked, or raises :class:`NotChecked` where
+the scene gives it nothing to check. :func:`check_method` runs them all; the suite's own
+tests run it over every method of :data:`~translucent.fast.registry.METHODS`, and a
+method kept elsewhere can run it in its own tests::
+
+    from translucent.fast.conformance import check_method
+    check_method("lambert")
+
+The checks, and why each matters to a user of the report:
+
+``contract``
+    The module has the contract's names (:func:`~translucent.fast.registry.contract_problems`).
+``knobs``
+    An unknown knob is refused with an :class:`~translucent.errors.InputError` (a typo in
+    a benchmark must not run the defaults silently).
+``render``
+    ``precompute(scene).render()`` is an :class:`~translucent.image.Image` of the
+    camera's size, three channels, finite and non-negative radiance.
+``determinism``
+    Two precomputations in empty caches give the same image (a report is reproducible).
+``relighting``
+    ``state.render(lights=moved)`` equals a fresh precomputation of the scene lit by the
+    moved lights, and differs from the first frame: relighting reuses the precomputation
+    and really uses the new lights.
+``editing``
+    ``state.render(material=edited)`` equals a fresh precomputation of the scene with
+    the edited material (Dipole: another measured medium; analytic BRDF: another
+    gamma; Lambertian: half the albedo).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import InputError
+from ..image import Image
+from .base import refusal_of, scored_object_names
+from .registry import contract_problems, method
+
+__all__ = ["CHECKS", "ConformanceFailure", "IMAGE_RTOL", "NotChecked", "check_method",
+           "conformance_scene", "edited_material", "run_check"]
+
+#: A 320-face skin sphere under a point light: the first scene tried (small enough that
+#: every check of a precomputing method takes seconds).
+TINY_SPHERE = """
+[scene]
+name = "conformance_sphere"
+description = "a 320-face skin sphere under a point light"
+mm_per_unit = 10.0
+
+[camera]
+origin = [0.0, 0.0, 5.0]
+target = [0.0, 0.0, 0.0]
+fov = 30.0
+width = 16
+height = 16
+
+[[objects]]
+name = "sphere"
+mesh = { type = "icosphere", subdivisions = 2, radius = 1.0 }
+material = { type = "measured", name = "Skin1" }
+
+[[lights]]
+type = "point"
+position = [3.0, 4.0, 4.0]
+intensity = 100.0
+"""
+
+#: Scenes tried, in order, for the first one a method applies to: the tiny sphere, then
+#: catalogue scenes.
+SCENES = ("conformance_sphere", "glossy", "cornell_block", "heterogeneous", "solid_gradient",
+          "bowl")
+
+#: Width of the conformance scenes, pixels (the height keeps the camera's aspect).
+WIDTH = 16
+
+#: Two renders of the same thing agree to this relative L2 difference. Methods solve with
+#: iterative solvers whose stopping point depends on the starting guess (radiosity's
+#: tolerance is 1e-4), and sum in parallel in an order that varies: float32 round-off and
+#: solver tolerance are far below it; a method that ignores its new lights or material is
+#: off by the size of the change (the moved lights change the images by more than 1e-2).
+IMAGE_RTOL = 2e-3
+
+#: How far the relighting check moves the lights: scene units, or radians for directions.
+LIGHT_OFFSET = 0.3
+
+#: The smallest relative change moving the lights must make for the relighting check to
+#: test anything.
+MIN_RELIGHT_CHANGE = 1e-2
+
+#: An unknown knob name no method has.
+UNKNOWN_KNOB = "no_such_knob_of_any_method"
+
+
+class ConformanceFailure(AssertionError):
+    """A method broke the contract: the message says which check and how."""
+
+
+class NotChecked(Exception):
+    """The scene gives the check nothing to test (say why)."""
+
+
+def conformance_scene(module, scenes=SCENES, width: int = WIDTH):
+    """Return the first catalogue scene ``module`` applies to, at ``width`` pixels.
+
+    Raises
+    ------
+    NotChecked
+        When the method applies to none of them (then give :func:`check_method` a scene).
+    """
+    from ..scenes import load_scene, loads_scene
+
+    reasons = []
+    for name in scenes:
+        scene = loads_scene(TINY_SPHERE) if name == "conformance_sphere" else load_scene(name)
+        reason = refusal_of(module.applies_to(scene))
+        if reason is None:
+            camera = scene.camera
+            height = max(1, round(width * camera.height / camera.width))
+            return scene.with_camera(replace(camera, width=width, height=height))
+        reasons.append(f"{name}: {reason}")
+    raise NotChecked("applies to no catalogue scene (" + "; ".join(reasons) + ")")
+
+
+@contextlib.contextmanager
+def _empty_cache():
+    from ..cache import private_cache
+
+    with private_cache():
+        yield
+
+
+def _precompute(module, scene, knobs):
+    with _empty_cache():
+        return module.precompute(scene, **knobs)
+
+
+def _pixels(image, scene, what: str) -> np.ndarray:
+    if not isinstance(image, Image):
+        raise ConformanceFailure(f"{what} returned a {type(image).__name__}, not an Image")
+    pixels = np.asarray(image.rgb)
+    shape = (scene.camera.height, scene.camera.width, 3)
+    if pixels.shape != shape:
+        raise ConformanceFailure(f"{what} is {pixels.shape}, the camera's size is {shape}")
+    if not np.all(np.isfinite(pixels)):
+        raise ConformanceFailure(f"{what} has {int((~np.isfinite(pixels)).sum())} values "
+                                 "that are not finite")
+    if (pixels < 0).any():
+        raise ConformanceFailure(f"{what} has negative radiance (min {pixels.min():.3g})")
+    return pixels.astype(np.float64)
+
+
+def _relative_difference(a: np.ndarray, b: np.ndarray) -> float:
+    scale = max(float(np.sqrt(np.mean(b**2))), 1e-30)
+    return float(np.sqrt(np.mean((a - b) ** 2))) / scale
+
+
+def _agree(a, b, what: str) -> str:
+    difference = _relative_difference(a, b)
+    if not difference <= IMAGE_RTOL:
+        raise ConformanceFailure(f"{what}: relative L2 difference {difference:.3g} > "
+                                 f"{IMAGE_RTOL:g}")
+    return f"{what}: relative L2 difference {difference:.2g}"
+
+
+def check_contract(module, scene, knobs) -> str:
+    """Check that the contract's names are there."""
+    problems = contract_problems(module)
+    if problems:
+        raise ConformanceFailure("; ".join(problems))
+    return "applies_to, precompute and DEFAULT_KNOBS are there"
+
+
+def check_knobs(module, scene, knobs) -> str:
+    """Check that an unknown knob is an InputError."""
+    try:
+        _precompute(module, scene, {**knobs, UNKNOWN_KNOB: 1})
+    except InputError as error:
+        return f"an unknown knob is refused: {error.reason}"
+    raise ConformanceFailure(f"precompute accepted the unknown knob {UNKNOWN_KNOB!r}: it "
+                             "must raise translucent.errors.InputError "
+                             "(translucent.fast.base.with_defaults does it)")
+
+
+def check_render(module, scene, knobs) -> str:
+    """Check that a frame is a finite, non-negative image of the camera's size."""
+    pixels = _pixels(_precompute(module, scene, knobs).render(), scene, "render()")
+    if not pixels.any():
+        raise ConformanceFailure("render() is black on a scene the method applies to")
+    return f"a {pixels.shape[1]} x {pixels.shape[0]} image, finite and non-negative"
+
+
+def check_determinism(module, scene, knobs) -> str:
+    """Check that two precomputations in empty caches give the same image."""
+    first = _pixels(_precompute(module, scene, knobs).render(), scene, "render()")
+    second = _pixels(_precompute(module, scene, knobs).render(), scene, "render()")
+    return _agree(second, first, "two precomputations")
+
+
+def check_relighting(module, scene, knobs) -> str:
+    """Check that relighting equals precomputing the relit scene, and changes the image."""
+    from ..scenes import moved_lights
+
+    lights = moved_lights(scene.lights, LIGHT_OFFSET)
+    state = _precompute(module, scene, knobs)
+    before = _pixels(state.render(), scene, "render()")
+    relit = _pixels(state.render(lights=lights), scene, "render(lights=moved)")
+    change = _relative_difference(relit, before)
+    if change < MIN_RELIGHT_CHANGE:
+        if _relative_difference(
+                _pixels(_precompute(module, scene.with_lights(lights), knobs).render(), scene,
+                        "render() of the relit scene"), before) < MIN_RELIGHT_CHANGE:
+            raise NotChecked("moving the lights does not change this scene's image")
+        raise ConformanceFailure(f"render(lights=moved) changed the image by {change:.2g} "
+                                 "only: the new lights were not used")
+    fresh = _pixels(_precompute(module, scene.with_lights(lights), knobs).render(), scene,
+                    "render() of the relit scene")
+    return _agree(relit, fresh, "relit against precomputed with the moved lights")
+
+
+def edited_material(material):
+    """Return another material of the same kind (None where the kind is not known here)."""
+    from ..materials import Dipole, Lambertian, measured_medium
+    from ..materials.brdfs import GAMMA_RANGES, AnalyticBRDF
+
+    if isinstance(material, Dipole):
+        for name in ("Ketchup", "Marble"):
+            other = measured_medium(name)
+            if not np.allclose(other.sigma_a, material.sigma_a):
+                return replace(other, eta=material.eta)
+    if isinstance(material, AnalyticBRDF):
+        low, high = GAMMA_RANGES[material.model]
+        middle = 0.5 * (low + high)
+        gamma = middle if abs(material.gamma - middle) > 0.1 * (high - low) else \
+            low + 0.25 * (high - low)
+        return replace(material, gamma=gamma)
+    if isinstance(material, Lambertian):
+        return Lambertian(material.albedo * 0.5)
+    return None
+
+
+def _edit_candidates(module, scene):
+    """Scored objects with an editable material: translucent and glossy before Lambertian."""
+    from ..materials import Lambertian
+
+    names = scored_object_names(module, scene)
+    kinds: dict = {}
+    for name in names:
+        kinds.setdefault(type(scene.object(name).material), []).append(name)
+    ordered = sorted(names, key=lambda n: isinstance(scene.object(n).material, Lambertian))
+    for name in ordered:
+        material = edited_material(scene.object(name).material)
+        if material is not None:
+            alone = len(kinds[type(scene.object(name).material)]) == 1
+            yield name, material, (material if alone else {name: material})
+
+
+def check_editing(module, scene, knobs) -> str:
+    """Check that editing equals precomputing the edited scene.
+
+    The edit is one material where the object is the only one of its kind, else
+    ``{object name: material}``; an edit the method refuses (an InputError) moves on to
+    the next object.
+    """
+    refused = []
+    state = None
+    for chosen, material, argument in _edit_candidates(module, scene):
+        edited_scene = scene.with_material(chosen, material)
+        if refusal_of(module.applies_to(edited_scene)) is not None:
+            refused.append(f"{chosen}: {refusal_of(module.applies_to(edited_scene))}")
+            continue
+        state = state or _precompute(module, scene, knobs)
+        _pixels(state.render(), scene, "render()")
+        try:
+            edited = _pixels(state.render(material=argument), scene,
+                             "render(material=edited)")
+        except InputError as error:
+            refused.append(f"{chosen}: {error.reason}")
+            state = None  # a refused edit may have left the state half-edited
+            continue
+        fresh = _pixels(_precompute(module, edited_scene, knobs).render(), scene,
+                        "render() of the edited scene")
+        return _agree(edited, fresh,
+                      f"{chosen} edited against precomputed with the new material")
+    raise NotChecked("no scored object whose edit the method takes"
+                     + (" (" + "; ".join(refused) + ")" if refused else ""))
+
+
+#: The checks by name, in the order :func:`check_method` runs them.
+CHECKS = {"contract": check_contract, "knobs": check_knobs, "render": check_render,
+          "determinism": check_determinism, "relighting": check_relighting,
+          "editing": check_editing}
+
+
+def run_check(name: str, check: str, scene=None, knobs: dict | None = None) -> str:
+    """Run one check on method ``name``; see :func:`check_method` for the arguments.
+
+    Raises
+    ------
+    ConformanceFailure
+        The check failed.
+    NotChecked
+        The check has nothing to test on this scene.
+    """
+    module = method(name)
+    if scene is None:
+        scene = conformance_scene(module)
+    chosen = dict(getattr(module, "QUICK_KNOBS", {}) or {}) if knobs is None else dict(knobs)
+    if "progress" in getattr(module, "DEFAULT_KNOBS", {}):
+        chosen.setdefault("progress", False)
+    return CHECKS[check](module, scene, chosen)
+
+
+def check_method(name: str, scene=None, knobs: dict | None = None) -> dict[str, str]:
+    """Run every check on the registered method ``name``; the first failure raises.
+
+    Parameters
+    ----------
+    name : str
+        A registered method (:data:`~translucent.fast.registry.METHODS`).
+    scene : Scene, optional
+        Where to run it; default the first catalogue scene it applies to, at 16 pixels
+        wide (:func:`conformance_scene`).
+    knobs : dict, optional
+        Default the method's ``QUICK_KNOBS`` (else its defaults).
+
+    Returns
+    -------
+    dict
+        Check name -> what it found ("not checked: ..." where it had nothing to test).
+
+    Raises
+    ------
+    ConformanceFailure
+        Naming the check that failed and how.
+    """
+    found = {}
+    for check in CHECKS:
+        try:
+            found[check] = run_check(name, check, scene, knobs)
+        except NotChecked as why:
+            found[check] = f"not checked: {why}"
+        except ConformanceFailure as failure:
+            raise ConformanceFailure(f"{name}: {check}: {failure}") from None
+    return found
