@@ -219,3 +219,25 @@ def read_exr(path) -> Image:
             raise InputError("metadata attribute is not valid JSON", file=path,
                              field=METADATA_ATTRIBUTE) from error
     return Image(rgb, variance, metadata)
+
+
+def header_number(path, names) -> float | None:
+    """Return the first of the header attributes ``names`` of an EXR that is a number.
+
+    For times written by other renderers (``renderTime``, ``seconds``, ...); None where
+    there is none, or the file cannot be read (:func:`read_exr` says why).
+    """
+    import OpenEXR
+
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as exr:
+            header = {name: exr.header().get(name) for name in names}
+    except Exception:  # the file's own problems are read_exr's to report
+        return None
+    for name in names:
+        value = header.get(name)
+        if isinstance(value, (int, float, np.floating, np.integer)) and \
+                not isinstance(value, bool) and np.isfinite(value):
+            return float(value)
+    return None
+

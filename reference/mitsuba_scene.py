@@ -295,6 +295,9 @@ class MitsubaConversion:
         One sentence for each light replaced by an emitter of finite size.
     media : dict of str to str
         Object name -> what its converter says of its medium (heterogeneous ones).
+    shape_props : dict of str to dict
+        Shape key of ``scene_dict`` -> the plugins attached to that mesh (``bsdf``,
+        ``interior``), as dictionaries: what an exported XML file writes beside the mesh.
     """
 
     scene_dict: dict
@@ -305,6 +308,7 @@ class MitsubaConversion:
     per_channel_recommended: bool = False
     substitutions: list[str] = field(default_factory=list)
     media: dict[str, str] = field(default_factory=dict)
+    shape_props: dict[str, dict] = field(default_factory=dict)
 
 
 def _shape_key(name: str, used: set) -> str:
@@ -444,6 +448,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     long_chromatic_walks = False
     media: dict[str, str] = {}
     blocking: list[int] = []
+    shape_props: dict[str, dict] = {}
     for index, obj in enumerate(scene.objects):
         context = ConversionContext(scene, obj.name, channel)
         parts = material_converter(obj.material, object_name=obj.name)(obj.material, context)
@@ -461,6 +466,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         if parts.interior is not None:
             props["interior"] = parts.interior
         shapes[key] = to_mitsuba_mesh(obj.mesh, key, props=props)
+        shape_props[key] = props
 
     notes: list[str] = []
     has_delta_lights = any(isinstance(light, DELTA_LIGHTS) for light in scene.lights)
@@ -505,7 +511,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         **emitters,
     }
     return MitsubaConversion(scene_dict, integrator, int(max_depth), int(rr_depth), has_media,
-                             long_chromatic_walks, notes, media)
+                             long_chromatic_walks, notes, media, shape_props)
 
 
 def to_mitsuba_dict(scene: Scene, *, integrator: str | None = None,

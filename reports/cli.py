@@ -39,6 +39,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "references": ("references", "the built-in scenes' committed references: list, render"),
     "compare": ("compare", "compare a test image with a reference: metrics and error maps"),
     "approx": ("approx", "render a scene with a fast method"),
+    "export": ("export", "write a scene for another renderer (Mitsuba 3 XML with meshes)"),
     "report": ("report", "the main job: fast methods against references, as an HTML report"),
     "bench": ("bench", "run-time-versus-error benchmarks"),
     "stress": ("stress", "numerical stability sweeps of every kernel"),

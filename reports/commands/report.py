@@ -60,6 +60,10 @@ def add_arguments(parser):
                              f"those up to {REPORT_CACHE_ENTRY_LIMIT // 2**20} MiB; "
                              "radiosity's of the default spheres, 1-3 GB each, are "
                              "computed again on the next run)")
+    parser.add_argument("--images", default=None, metavar="DIR",
+                        help="score another renderer's images too: DIR/<renderer>/<scene>.exr "
+                             "(times from the EXR header's 'seconds'); without --methods, only "
+                             "them")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -80,7 +84,8 @@ def run(args) -> int:
                          update_baseline=args.update_baseline, scheduler=args.scheduler,
                          serial=args.serial, spp=args.spp, passes=args.passes,
                          progress=not args.no_progress,
-                         keep_precomputations=args.keep_precomputations)
+                         keep_precomputations=args.keep_precomputations,
+                         images=args.images)
     from .record import record
 
     record(args, out=str(result.out), metrics=str(result.out / "metrics.json"),
