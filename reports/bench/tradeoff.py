@@ -14,9 +14,8 @@ scene's lights given again: the interactive relighting path); the frame time is 
 median, the first image's time the precomputation plus the first frame. Mitsuba's
 volumetric path tracer renders the same scene at 1, 2, 4, ... ``--max-spp`` samples per
 pixel (:data:`~translucent.reports.speedup.PATH_TRACING_REPEATS` timed renders each, after
-an untimed one that compiles its kernels: the median time, the mean error). Every image is compared with a converged
-reference
-(``--reference-spp`` x ``--reference-passes``, from the reference cache); the error is the
+an untimed one that compiles its kernels: the median time, the mean error). Every image is
+compared with a converged reference (``--reference-spp`` x ``--reference-passes``, from the reference cache); the error is the
 relative MSE with the reference's noise discounted (see
 :func:`translucent.reports.metrics.relative_mse`).
 
