@@ -15,8 +15,8 @@ median, the first image's time the precomputation plus the first frame. Mitsuba'
 volumetric path tracer renders the same scene at 1, 2, 4, ... ``--max-spp`` samples per
 pixel (:data:`~translucent.reports.speedup.PATH_TRACING_REPEATS` timed renders each, after
 an untimed one that compiles its kernels: the median time, the mean error). Every image is
-compared with a converged reference (``--reference-spp`` x ``--reference-passes``, from the reference cache); the error is the
-relative MSE with the reference's noise discounted (see
+compared with a converged reference (``--reference-spp`` x ``--reference-passes``, from
+the reference cache); the error is the relative MSE with the reference's noise discounted (see
 :func:`translucent.reports.metrics.relative_mse`).
 
 Times are given in seconds and as ratios to the 1-spp path-traced render of the same scene
