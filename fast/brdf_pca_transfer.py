@@ -248,7 +248,7 @@ class Precomputation:
 
 
 def _view_samples(scene):
-    from ..scenes.raycast import gbuffer
+    from ..scenes.gbuffer import gbuffer
 
     buffer = gbuffer(scene)
     pixel = np.flatnonzero(buffer.hit.reshape(-1))

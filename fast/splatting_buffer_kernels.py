@@ -394,7 +394,7 @@ def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, heig
 
     For each triangle, the pixels of its projected bounding box are tested with the
     pixel's own ray (Möller-Trumbore, float64), exactly the rays of
-    :func:`translucent.scenes.raycast.camera_rays` (perspective: from ``eye`` through the
+    :func:`translucent.scenes.gbuffer.camera_rays` (perspective: from ``eye`` through the
     pixel centres, starting at the near plane ``near`` along ``forward``; orthographic:
     parallel to ``forward`` from the image plane through ``eye``, half-widths ``tan_x``,
     ``tan_y`` in scene units). Edges are inclusive, so no ray slips between two triangles;

@@ -1,5 +1,6 @@
 """Where things are: meshes, lights, cameras, scene files and Mitsuba ray queries."""
 
+from .gbuffer import GBuffer, gbuffer, gbuffer_from_point, gbuffer_orthographic
 from .meshes import (
     MESH_GENERATORS,
     bowl,
@@ -14,16 +15,7 @@ from .meshes import (
     slab,
     torus,
 )
-from .raycast import (
-    GBuffer,
-    RayHits,
-    gbuffer,
-    gbuffer_from_point,
-    gbuffer_orthographic,
-    trace,
-    visibility_matrix,
-    visible,
-)
+from .raycast import RayHits, trace, visibility_matrix, visible
 from .scene import (
     Camera,
     ConstantEnvironment,

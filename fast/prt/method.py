@@ -27,7 +27,7 @@ def _other_objects_in_view(scene) -> list[str]:
     translucent = set(_translucent_objects(scene))
     if len(translucent) == len(scene.objects):
         return []
-    from ...scenes.raycast import gbuffer
+    from ...scenes.gbuffer import gbuffer
 
     seen = set(np.unique(gbuffer(scene).object_id).tolist()) - {-1}
     return [scene.objects[i].name for i in sorted(seen - translucent)]

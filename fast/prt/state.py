@@ -362,7 +362,7 @@ class PRTState:
 
     def _pixel_maps(self) -> dict:
         if self._pixels is None:
-            from ...scenes.raycast import gbuffer
+            from ...scenes.gbuffer import gbuffer
 
             view = gbuffer(self.scene)
             maps = {}

@@ -275,7 +275,7 @@ class RadiosityState:
 
     def _gbuffer(self):
         if self._cached_gbuffer is None:
-            from ...scenes.raycast import gbuffer
+            from ...scenes.gbuffer import gbuffer
 
             self._cached_gbuffer = gbuffer(self.scene)
         return self._cached_gbuffer

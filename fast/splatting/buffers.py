@@ -132,7 +132,7 @@ class CameraModel:
     @classmethod
     def from_camera(cls, camera) -> CameraModel:
         """From a :class:`~translucent.scenes.Camera` (horizontal fov, Mitsuba's look-at)."""
-        from ...scenes.raycast import camera_frame
+        from ...scenes.gbuffer import camera_frame
 
         forward, left, up = camera_frame(camera)
         return cls(camera.origin, forward, -left, up, math.tan(math.radians(camera.fov) / 2),

@@ -170,14 +170,15 @@ def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None
     Buffer generation of Chen et al. 2012 (Sect. 4) by rasterisation, as the paper does:
     :func:`.splatting_buffer_kernels.rasterize` tests each pixel's own ray against the triangles
     of its projected bounding box, so the buffers are those of the ray queries of
-    :func:`translucent.scenes.raycast.gbuffer` (perspective) and
-    :func:`~translucent.scenes.raycast.gbuffer_orthographic` (``direction``, a square of
+    :func:`translucent.scenes.gbuffer.gbuffer` (perspective) and
+    :func:`~translucent.scenes.gbuffer.gbuffer_orthographic` (``direction``, a square of
     ``size`` pixels and half-width ``extent`` around ``centre``, scene units) up to
     rounding, in milliseconds instead of seconds. The perspective footprint is
     :func:`.splatting_buffer_kernels.perspective_footprint`, computed at hit pixels only.
     """
     # the ray-cast G-buffers' own image frames, so that both kinds of buffer agree
-    from ...scenes.raycast import NEAR_CLIP, camera_frame, default_up
+    from ...scenes.gbuffer import camera_frame, default_up
+    from ...scenes.raycast import NEAR_CLIP
     from ..splatting_buffer_kernels import perspective_footprint, rasterize
 
     meshes = [item.mesh for item in scene.objects]
@@ -291,7 +292,7 @@ class SplattingState:
         """Return the camera's buffers: a :class:`RasterView` or a ray-cast G-buffer."""
         if self.knobs["buffers"] == "raster":
             return rasterize_view(scene, camera=scene.camera)
-        from ...scenes.raycast import gbuffer
+        from ...scenes.gbuffer import gbuffer
 
         return gbuffer(scene)
 
@@ -336,7 +337,7 @@ class SplattingState:
                            knobs=self.knobs, log=log)
 
     def _light_view(self, scene, index, light, centre, radius, eta) -> LightView:
-        from ...scenes.raycast import default_up, gbuffer_from_point, gbuffer_orthographic
+        from ...scenes.gbuffer import default_up, gbuffer_from_point, gbuffer_orthographic
         from ...scenes.scene import Camera
 
         size = self.knobs["irradiance_resolution"]

@@ -241,7 +241,7 @@ def interior_pixels(scene) -> np.ndarray:
     Edges are anti-aliased by the reference's pixel filter but not by the one-ray
     G-buffer, so they are left out of the relative MSE.
     """
-    from ...scenes.raycast import gbuffer
+    from ...scenes.gbuffer import gbuffer
 
     ids = gbuffer(scene).object_id
     padded = np.pad(ids, 1, mode="edge")

@@ -155,7 +155,7 @@ def _print_overhead(result) -> None:
 
 
 def _object_mask(scene) -> np.ndarray:
-    from ...scenes.raycast import gbuffer
+    from ...scenes.gbuffer import gbuffer
 
     return gbuffer(scene).hit
 

@@ -910,7 +910,7 @@ SWEEP_SCALES = (8.0, 0.25)
 def test_translucency_sweep_matches_the_reference_at_both_ends(scale):
     """The block's mean radiance per channel against an index-matched reference."""
     from translucent.scenes import load_scene
-    from translucent.scenes.raycast import gbuffer
+    from translucent.scenes.gbuffer import gbuffer
 
     scene = _index_matched(load_scene("cornell_block"), scale)
     # no Russian roulette (the default above albedo 0.99): with roulette from depth 5 the

@@ -732,7 +732,7 @@ def test_approx_command_writes_an_exr(tmp_path):
 
 @pytest.mark.parametrize("view", ["camera", "point light", "directional light"])
 def test_rasterized_buffers_match_ray_queries(heterogeneous_scene, view):
-    from translucent.scenes.raycast import gbuffer, gbuffer_from_point, gbuffer_orthographic
+    from translucent.scenes.gbuffer import gbuffer, gbuffer_from_point, gbuffer_orthographic
 
     scene = heterogeneous_scene
     mesh = scene.objects[0].mesh

@@ -35,7 +35,7 @@ from translucent.scenes import (
     SceneObject,
     icosphere,
 )
-from translucent.scenes.raycast import gbuffer
+from translucent.scenes.gbuffer import gbuffer
 
 render_module = importlib.import_module("translucent.reference.render")
 

@@ -9,16 +9,18 @@ from hypothesis import strategies as st
 from translucent.errors import InputError
 from translucent.materials import Lambertian
 from translucent.scenes import Camera, PointLight, Scene, SceneObject, load_scene
-from translucent.scenes.meshes import box, icosphere, plane
-from translucent.scenes.raycast import (
-    NEAR_CLIP,
+from translucent.scenes.gbuffer import (
     camera_rays,
-    embree_available,
     gbuffer,
     gbuffer_from_point,
     gbuffer_orthographic,
-    perspective_sensor_dict,
     project,
+)
+from translucent.scenes.meshes import box, icosphere, plane
+from translucent.scenes.raycast import (
+    NEAR_CLIP,
+    embree_available,
+    perspective_sensor_dict,
     ray_engine,
     to_mitsuba_mesh,
     trace,
