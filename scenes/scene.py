@@ -393,7 +393,7 @@ class ImageEnvironment:
 
     Parameters
     ----------
-    radiance : ndarray, shape (H >= 2, W, 3), W sr^-1 m^-2, or a path to an EXR
+    radiance : ndarray, shape (H >= 3, W, 3), W sr^-1 m^-2, or a path to an EXR
     scale : float, >= 0, multiplies the radiance
     """
 
@@ -410,10 +410,12 @@ class ImageEnvironment:
         if value.ndim != 3 or value.shape[2] != 3:
             raise InputError("must be an H x W x 3 radiance map", field="radiance",
                              value=value.shape)
-        if value.shape[0] < 2 or value.shape[1] < 1:
-            # Mitsuba's envmap puts row i at polar angle pi i / (H - 1): one row has no angle
-            raise InputError("must have at least 2 rows (the poles) and 1 column",
-                             field="radiance", value=value.shape)
+        if value.shape[0] < 3 or value.shape[1] < 1:
+            # Mitsuba's envmap puts row i at polar angle pi i / (H - 1): one row has no
+            # angle, and a map of two rows it interpolates otherwise (measured: as if row 1
+            # were at pi / 2), so the fast methods could not see the reference's light
+            raise InputError("must have at least 3 rows (the poles and one between) and 1 "
+                             "column", field="radiance", value=value.shape)
         check_finite(value, "radiance")
         if (value < 0).any():
             raise InputError("radiance must be >= 0", field="radiance", value=float(value.min()))

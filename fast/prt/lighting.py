@@ -13,6 +13,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...materials.fresnel import fresnel_transmittance
+from ...scenes.lighting import environment_radiance
 from ...scenes.scene import (
     ConstantEnvironment,
     DirectionalLight,
@@ -232,26 +233,6 @@ def _environment_directions(resolution: int):
     return squares.reshape(-1, 3), angles.reshape(-1)
 
 
-def _environment_radiance(light, directions) -> np.ndarray:
-    """Radiance of an environment light towards each direction cell's centre, (D, 3)."""
-    if isinstance(light, ConstantEnvironment):
-        return np.broadcast_to(light.radiance, directions.shape).astype(np.float64)
-    image = light.radiance.astype(np.float64) * light.scale
-    height, width = image.shape[:2]
-    u = (np.arctan2(directions[:, 0], -directions[:, 2]) / (2 * np.pi)) % 1.0
-    v = np.arccos(np.clip(directions[:, 1], -1.0, 1.0)) / np.pi
-    # Mitsuba interpolates bilinearly between texel centres u = (j + 1/2)/W, v = i/(H - 1)
-    x = u * width - 0.5
-    y = v * (height - 1)
-    x0 = np.floor(x).astype(int)
-    y0 = np.clip(np.floor(y).astype(int), 0, height - 1)
-    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-    y1 = np.clip(y0 + 1, 0, height - 1)
-    x0w, x1w = x0 % width, (x0 + 1) % width
-    return ((1 - fy) * ((1 - fx) * image[y0, x0w] + fx * image[y0, x1w])
-            + fy * ((1 - fx) * image[y1, x0w] + fx * image[y1, x1w]))
-
-
 @dataclass(frozen=True, eq=False)
 class EnvironmentTransfer:
     r"""Precomputed wavelet-compressed visibility of the environment at every sample.
@@ -268,7 +249,7 @@ class EnvironmentTransfer:
     def irradiance(self, light, eta: float) -> np.ndarray:
         """E at the samples for one environment light and index ``eta``, (N, 3)."""
         directions, _ = _environment_directions(self.resolution)
-        radiance = _environment_radiance(light, directions)
+        radiance = environment_radiance(light, directions)
         images = radiance.T.reshape(3, 2, self.resolution, self.resolution)
         radiance_w = haar2d_forward(images.astype(np.float32)).reshape(3, -1).T
         products = self.transport.product(radiance_w).reshape(FRESNEL_RANK, self.samples, 3)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import InputError
+from ...scenes.lighting import environment_radiance
 from ...scenes.scene import (
     ConstantEnvironment,
     DirectionalLight,
@@ -15,19 +16,6 @@ from ...scenes.scene import (
     SpotLight,
 )
 from .kernels import compiled_shadow_rays
-
-
-def _environment_radiance(light, directions) -> np.ndarray:
-    """Radiance arriving from ``directions`` (pointing away from the scene), (N, 3)."""
-    if isinstance(light, ConstantEnvironment):
-        return np.broadcast_to(light.radiance, directions.shape).copy()
-    # Mitsuba's envmap: u = atan2(x, -z) / 2pi, v = acos(y) / pi, pixel centres
-    height, width = light.radiance.shape[:2]
-    u = (np.arctan2(directions[:, 0], -directions[:, 2]) / (2 * np.pi)) % 1.0
-    v = np.arccos(np.clip(directions[:, 1], -1.0, 1.0)) / np.pi
-    col = np.clip((u * width).astype(int), 0, width - 1)
-    row = np.clip((v * height).astype(int), 0, height - 1)
-    return light.radiance[row, col].astype(np.float64) * light.scale
 
 
 def _cosine_directions(normals, count, rng):
@@ -105,7 +93,7 @@ def direct_irradiance(scene, points, normals, *, lights=None, samples: int = 16,
             flat = directions.reshape(-1, 3)
             origins = np.repeat(points + 1e-5 * normals, samples, axis=0)
             hits = trace(scene, origins, flat)
-            radiance = _environment_radiance(light, flat) * (~hits.hit)[:, None]
+            radiance = environment_radiance(light, flat) * (~hits.hit)[:, None]
             total += np.pi * radiance.reshape(len(points), samples, 3).mean(axis=1)
         else:
             raise InputError("translucent radiosity cannot light with this light type",
@@ -265,7 +253,7 @@ def emitters_seen(scene, gbuffer) -> np.ndarray:
             image[seen] = light.radiance
         elif isinstance(light, (ConstantEnvironment, ImageEnvironment)):
             background = ~gbuffer.hit
-            image[background] += _environment_radiance(light, directions[background])
+            image[background] += environment_radiance(light, directions[background])
     return image
 
 

@@ -40,10 +40,12 @@ def test_image_environment_scale_must_be_a_nonnegative_number(scale):
         ImageEnvironment(np.ones((4, 8, 3)), scale=scale)
 
 
-def test_image_environment_needs_two_rows():
+def test_image_environment_needs_three_rows():
     from translucent.errors import InputError
     from translucent.scenes import ImageEnvironment
 
-    with pytest.raises(InputError, match=r"radiance = \(1, 4, 3\): must have at least 2 rows"):
+    with pytest.raises(InputError, match=r"radiance = \(1, 4, 3\): must have at least 3 rows"):
         ImageEnvironment(np.ones((1, 4, 3)))
-    assert ImageEnvironment(np.ones((2, 1, 3))).radiance.shape == (2, 1, 3)
+    with pytest.raises(InputError, match="at least 3 rows"):
+        ImageEnvironment(np.ones((2, 4, 3)))  # Mitsuba interpolates two rows otherwise
+    assert ImageEnvironment(np.ones((3, 1, 3))).radiance.shape == (3, 1, 3)
