@@ -43,8 +43,31 @@ def make_output_folder(folder, *, field: str, value, file=None, what: str | None
     return folder
 
 
+def _unwritable(folder: Path) -> str | None:
+    """Return why nothing can be written in ``folder``; None when a file can be made there.
+
+    Where ``folder`` does not exist yet, the nearest folder above it that does is tried.
+
+    Tried, not guessed from permission bits (a read-only mount, /proc, a full quota): a
+    temporary file is created and removed at once.
+    """
+    existing = folder.absolute()
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        return None  # a file in the way: the callers say so in their own words
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".translucent-probe-", dir=existing)
+    except OSError as error:
+        return f"cannot write in {existing} ({error.strerror or error})"
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(probe)
+    return None
+
+
 def check_output_file(path, field: str, *, file=None, what: str = "a file name") -> Path:
-    """Refuse an output file path that is a folder, before any work is done.
+    """Refuse an output file path that is a folder or cannot be written, before any work.
 
     Parameters
     ----------
@@ -64,6 +87,9 @@ def check_output_file(path, field: str, *, file=None, what: str = "a file name")
     path = Path(path)
     if path.is_dir():
         raise InputError(f"is a folder; give {what}", file=file, field=field, value=str(path))
+    problem = _unwritable(path.parent)
+    if problem:
+        raise InputError(problem, file=file, field=field, value=str(path))
     return path
 
 
@@ -95,6 +121,9 @@ def check_output_folder(path, field: str) -> Path:
     if not ancestor.is_dir():
         raise InputError(f"cannot be created: {ancestor} is not a folder", field=field,
                          value=str(path))
+    problem = _unwritable(path)
+    if problem:
+        raise InputError(problem, field=field, value=str(path))
     return path
 
 
@@ -117,9 +146,10 @@ def atomic_path(target, suffix: str | None = None):
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{suffix}",
                                    dir=target.parent)
-    except PermissionError as error:
-        raise InputError(f"the folder {target.parent} is not writable", file=target,
-                         field="path", value=str(target)) from error
+    except OSError as error:  # no permission, a read-only mount, /proc, no space, ...
+        raise InputError(f"cannot write in the folder {target.parent} "
+                         f"({error.strerror or error})", file=target, field="path",
+                         value=str(target)) from error
     os.close(fd)
     tmp = Path(tmp)
     # mkstemp creates 0600; give the result the permissions an ordinary file would have
@@ -127,8 +157,14 @@ def atomic_path(target, suffix: str | None = None):
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)
     try:
-        yield tmp
-        os.replace(tmp, target)
+        try:
+            yield tmp
+            os.replace(tmp, target)
+        except OSError as error:
+            if error.filename not in (str(tmp), str(target)):
+                raise  # not the output's: an input read inside the block, for example
+            raise InputError(f"could not write it ({error.strerror or error})", file=target,
+                             field="path", value=str(target)) from error
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()

@@ -191,7 +191,7 @@ def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None) 
     import shutil
     import tempfile
 
-    from ..atomic import atomic_write_text
+    from ..atomic import atomic_write_text, check_output_folder, make_output_folder
     from ..errors import check_count
     from .mitsuba_scene import convert_scene
 
@@ -200,8 +200,9 @@ def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None) 
     if out.exists() and not out.is_dir():
         raise InputError("must be a folder (or a path where one can be made)", field="--out",
                          value=str(out))
+    check_output_folder(out, "--out")
     conversion = convert_scene(scene, spp=spp, integrator=integrator)
-    out.mkdir(parents=True, exist_ok=True)
+    make_output_folder(out, field="--out", value=str(out))
     staging = Path(tempfile.mkdtemp(prefix=".export-", dir=out))
     try:
         writer = _Writer(staging)
