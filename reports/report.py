@@ -647,6 +647,37 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     return ReportResult(exit_code, out, regressions, seconds, summary)
 
 
+#: The verdicts of one metric in ``metrics.json``.
+METRIC_VERDICTS = ("ok", "regression", "within reference noise", "no baseline")
+
+
+def metric_verdict(noise_verdict: str, check, key: str) -> str:
+    """Return one metric's verdict: noise first, then the baseline (:data:`METRIC_VERDICTS`).
+
+    A value that does not clear the reference's own noise is "within reference noise",
+    whatever the baseline says (a difference the reference cannot resolve is not a
+    result); otherwise "regression" where the baseline check found it worse, "no
+    baseline" where there is no entry for it (or the metric is not gated), else "ok".
+
+    Examples
+    --------
+    >>> from translucent.reports.regression import BaselineCheck
+    >>> check = BaselineCheck("regression", "worse", {"hdr_flip": {"verdict": "worse"}})
+    >>> metric_verdict("resolved", check, "hdr_flip"), metric_verdict("resolved", check, "ssim")
+    ('regression', 'no baseline')
+    >>> metric_verdict("within reference noise", check, "hdr_flip")
+    'within reference noise'
+    """
+    from .metrics import WITHIN_NOISE
+
+    if noise_verdict == WITHIN_NOISE:
+        return WITHIN_NOISE
+    gated = (check.metrics.get(key) if check is not None else None) or {}
+    if not gated:
+        return "no baseline"
+    return "regression" if gated.get("verdict") == "worse" else "ok"
+
+
 def _made_with(report: SceneReport) -> dict:
     """Return the reference's spp and passes (what a baseline entry records it was made with)."""
     meta = report.reference.metadata if report.reference is not None else {}
@@ -750,14 +781,15 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
             entry["objects_scored"] = report.scored_objects.get(name)
             entry["image_metrics"] = json_safe(report.image_metrics.get(name))
             metrics = report.metrics.get(name)
+            check = report.checks.get(name)
             entry["noise"] = None if metrics is None else {
                 key: {"value": json_safe(metrics[key]),
                       "noise_floor": json_safe((report.floor_of(name) or {}).get(key)),
-                      "verdict": report.verdicts[name][key]}
+                      "noise_verdict": report.verdicts[name][key],
+                      "verdict": metric_verdict(report.verdicts[name][key], check, key)}
                 for key in report.verdicts.get(name, {})}
             entry["metrics_error"] = report.metric_errors.get(name, "")
             entry["files"] = report.files.get(name, {})
-            check = report.checks.get(name)
             entry["baseline"] = check.as_dict() if check else None
             entry.update(_speedup_fields(report, name))
             methods[name] = entry

@@ -9,7 +9,8 @@ import translucent
 #: Modules whose numpydoc Examples are run as tests.
 DOCTESTED = ["translucent.api", "translucent.noise", "translucent.fast.base",
              "translucent.fast.registry", "translucent.scenes.scene",
-             "translucent.reports.commands.approx", "translucent.reports.metrics"]
+             "translucent.reports.commands.approx", "translucent.reports.metrics",
+             "translucent.reports.report"]
 
 
 @pytest.mark.parametrize("name", DOCTESTED)

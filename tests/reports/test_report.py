@@ -235,7 +235,13 @@ def test_every_metric_comes_with_its_noise_floor_and_verdict(tiny):
     assert flat["image_metrics"]["pixels_scored"] == 24 * 24
     for field, entry in flat["noise"].items():
         assert entry["noise_floor"] == pytest.approx(getattr(floor, field), rel=1e-4)
-        assert entry["verdict"] == noise_verdict(field, entry["value"], entry["noise_floor"])
+        assert entry["noise_verdict"] == noise_verdict(field, entry["value"],
+                                                       entry["noise_floor"])
+        gated = flat["baseline"]["metrics"].get(field)
+        expected = ("within reference noise" if entry["noise_verdict"] != "resolved" else
+                    "no baseline" if not gated else
+                    "regression" if gated["verdict"] == "worse" else "ok")
+        assert entry["verdict"] == expected
     page = (tiny["out"] / "index.html").read_text()
     assert "noise floor" in page and "Warning: the reference is noisy" in page
 
