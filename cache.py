@@ -6,16 +6,25 @@ Entries are written atomically (temporary name, then rename).
 
 The folder is ``TRANSLUCENT_CACHE`` if set, else ``$XDG_CACHE_HOME/translucent`` or
 ``~/.cache/translucent``.
+
+Pickled entries are authenticated: each file starts with an HMAC-SHA256 of its bytes under
+a secret key kept outside the cache (:func:`cache_key_file`), checked before anything is
+unpickled. A file placed in the cache by someone without the key (a crafted pickle that
+would run code, a truncated or altered entry, another version's layout) is a miss, said
+once on standard error, never loaded.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import hmac
 import json
 import os
 import pickle
+import secrets
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -25,8 +34,20 @@ import numpy as np
 from .atomic import atomic_path
 from .errors import InputError
 
-__all__ = ["cache_dir", "content_hash", "private_cache", "limited_entries", "entry_limit",
-           "environment_variable", "ENTRY_LIMIT_VARIABLE", "Cache"]
+__all__ = ["cache_dir", "cache_key_file", "cache_secret", "content_hash", "private_cache",
+           "limited_entries", "entry_limit", "environment_variable", "ENTRY_LIMIT_VARIABLE",
+           "KEY_FILE_VARIABLE", "Cache"]
+
+#: The file of the secret key that authenticates pickled entries; default
+#: ``$XDG_CONFIG_HOME/translucent/cache-key`` (``~/.config/...``). Machines that share one
+#: cache (Dask workers on a shared disk) share this file too.
+KEY_FILE_VARIABLE = "TRANSLUCENT_CACHE_KEY_FILE"
+
+#: First bytes of an authenticated pickle entry; the HMAC-SHA256 of the rest follows.
+PICKLE_MAGIC = b"TLPKL001"
+
+#: Bytes read at a time when an entry is authenticated.
+_CHUNK = 1 << 22
 
 #: The largest entry, in bytes, that :meth:`Cache.store_pickle` keeps when told its size;
 #: unset or empty: no limit. Set by :func:`limited_entries`, inherited by worker processes.
@@ -162,14 +183,21 @@ class Cache:
         return self.folder / key[:2] / f"{key}{suffix}"
 
     def load_pickle(self, key: str):
-        """Return the pickled object stored under ``key``, or None when absent or unreadable."""
+        """Return the pickled object stored under ``key``, or None when absent or unusable.
+
+        The entry's HMAC is checked before anything is unpickled: an entry that fails it is
+        a miss and is said once on standard error.
+        """
         path = self.path(key, ".pkl")
         if not path.is_file():
             return None
         try:
             with open(path, "rb") as handle:
+                if not _authentic(handle):
+                    _report_rejected(path)
+                    return None
                 return pickle.load(handle)
-        except Exception:  # a stale or foreign entry is a miss, not a crash
+        except Exception:  # a stale entry of an older layout is a miss, not a crash
             return None
 
     def store_pickle(self, key: str, value, *, nbytes: int | None = None) -> Path | None:
@@ -195,10 +223,95 @@ class Cache:
             return None
         path = self.path(key, ".pkl")
         try:
-            with atomic_path(path) as tmp, open(tmp, "wb") as handle:
-                pickle.dump(value, handle, protocol=pickle.HIGHEST_PROTOCOL)
+            with atomic_path(path) as tmp, open(tmp, "w+b") as handle:
+                handle.write(PICKLE_MAGIC + bytes(hashlib.sha256().digest_size))
+                signer = _Signing(handle)
+                pickle.dump(value, signer, protocol=pickle.HIGHEST_PROTOCOL)
+                handle.seek(len(PICKLE_MAGIC))
+                handle.write(signer.mac.digest())
         except InputError as error:
             raise InputError(f"the cache cannot be written ({error.reason}); point "
                              "TRANSLUCENT_CACHE at a writable folder", field="TRANSLUCENT_CACHE",
                              value=str(self.root)) from error
         return path
+
+
+def cache_key_file() -> Path:
+    """Return where the secret key of the cache's pickled entries is kept."""
+    given = os.environ.get(KEY_FILE_VARIABLE)
+    if given:
+        return Path(given).expanduser()
+    base = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"),
+                                                             ".config")
+    return Path(base) / "translucent" / "cache-key"
+
+
+_PROCESS_KEY: bytes | None = None
+
+
+def cache_secret() -> bytes:
+    """Return the key (32 bytes), created on first use with permissions 0600.
+
+    Where it can be neither read nor created (an unwritable home), this process makes one
+    of its own: its entries are then authentic to it alone and the next run misses them.
+    """
+    global _PROCESS_KEY
+    path = cache_key_file()
+    try:
+        key = path.read_bytes()
+        if len(key) >= 32:
+            return key
+    except OSError:
+        pass
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".cache-key.", dir=path.parent)  # 0600
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(secrets.token_bytes(32))
+        with contextlib.suppress(FileExistsError):
+            os.link(tmp, path)  # never replaces a key another process made meanwhile
+        os.unlink(tmp)
+        return path.read_bytes()
+    except OSError:
+        if _PROCESS_KEY is None:
+            _PROCESS_KEY = secrets.token_bytes(32)
+        return _PROCESS_KEY
+
+
+class _Signing:
+    """A file wrapper that feeds what is written to an HMAC."""
+
+    def __init__(self, handle):
+        self.handle = handle
+        self.mac = hmac.new(cache_secret(), digestmod=hashlib.sha256)
+
+    def write(self, data) -> int:
+        self.mac.update(data)
+        return self.handle.write(data)
+
+
+def _authentic(handle) -> bool:
+    """Check an entry's magic and HMAC, then leave ``handle`` at the start of the pickle."""
+    size = hashlib.sha256().digest_size
+    head = handle.read(len(PICKLE_MAGIC) + size)
+    if len(head) != len(PICKLE_MAGIC) + size or not head.startswith(PICKLE_MAGIC):
+        return False
+    mac = hmac.new(cache_secret(), digestmod=hashlib.sha256)
+    for chunk in iter(lambda: handle.read(_CHUNK), b""):
+        mac.update(chunk)
+    if not hmac.compare_digest(mac.digest(), head[len(PICKLE_MAGIC):]):
+        return False
+    handle.seek(len(head))
+    return True
+
+
+_REPORTED: set[str] = set()
+
+
+def _report_rejected(path: Path) -> None:
+    if str(path) not in _REPORTED:
+        _REPORTED.add(str(path))
+        print(f"translucent: note: the cache entry {path} is not one this installation "
+              "wrote (its authentication failed); it is ignored and computed again",
+              file=sys.stderr)
+

@@ -90,3 +90,69 @@ def test_a_bad_entry_limit_names_the_variable(monkeypatch):
     with pytest.raises(InputError, match="max_bytes = -5"):
         with limited_entries(-5):
             pass
+
+
+class _RunsCode:
+    """A pickle that runs code when loaded: what a crafted cache entry would hold."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (open, (self.marker, "w"))
+
+
+def test_a_crafted_pickle_in_the_cache_is_never_loaded(tmp_path, capsys):
+    import pickle
+
+    cache = Cache("radiosity", root=tmp_path)
+    marker = tmp_path / "the_code_ran"
+    path = cache.path("k" * 64, ".pkl")
+    path.parent.mkdir(parents=True)
+    path.write_bytes(pickle.dumps(_RunsCode(marker)))  # a plain pickle: no authentication
+    assert cache.load_pickle("k" * 64) is None
+    assert not marker.exists()
+    assert "its authentication failed" in capsys.readouterr().err
+    # the check can fail: unpickled as such, the same bytes run the code
+    pickle.loads(path.read_bytes()).close()
+    assert marker.exists()
+
+
+def test_an_altered_or_truncated_entry_is_a_miss(tmp_path, capsys):
+    cache = Cache("prt", root=tmp_path)
+    path = cache.store_pickle("a" * 64, {"pixels": np.arange(1000.0)})
+    assert cache.load_pickle("a" * 64)["pixels"].sum() == np.arange(1000.0).sum()
+    data = bytearray(path.read_bytes())
+    data[-20] ^= 0xFF  # one byte of the array changed
+    path.write_bytes(bytes(data))
+    assert cache.load_pickle("a" * 64) is None
+    path.write_bytes(bytes(data[:40]))
+    assert cache.load_pickle("a" * 64) is None
+    assert capsys.readouterr().err.count("its authentication failed") == 1  # said once
+
+
+def test_another_key_does_not_authenticate_an_entry(tmp_path, monkeypatch):
+    import stat
+
+    from translucent.cache import cache_key_file
+
+    cache = Cache("prt", root=tmp_path / "cache")
+    monkeypatch.setenv("TRANSLUCENT_CACHE_KEY_FILE", str(tmp_path / "keys" / "first"))
+    cache.store_pickle("b" * 64, [1, 2, 3])
+    assert cache.load_pickle("b" * 64) == [1, 2, 3]
+    key = cache_key_file()
+    assert stat.S_IMODE(key.stat().st_mode) == 0o600 and len(key.read_bytes()) == 32
+    monkeypatch.setenv("TRANSLUCENT_CACHE_KEY_FILE", str(tmp_path / "keys" / "second"))
+    assert cache.load_pickle("b" * 64) is None
+
+
+def test_an_unusable_key_file_keeps_entries_for_the_process_and_doctor_says_so(
+        tmp_path, monkeypatch, capsys):
+    from translucent.reports.cli import main
+
+    monkeypatch.setenv("TRANSLUCENT_CACHE_KEY_FILE", "/proc/no_key_can_be_made_here")
+    cache = Cache("prt", root=tmp_path)
+    cache.store_pickle("c" * 64, "kept")
+    assert cache.load_pickle("c" * 64) == "kept"
+    main(["doctor"])
+    assert "/proc/no_key_can_be_made_here (CANNOT BE MADE" in capsys.readouterr().out
