@@ -133,6 +133,40 @@ RUN_FORMAT = 2
 #: the warm frame time the page shows (compiling kernels and first-call costs excluded).
 REPORT_RELIGHT_FRAMES = 3
 
+#: Points of each method's quality ladder the report runs besides its defaults: the
+#: cheapest settings of its first ladder (``LADDERS`` of the method, else of ``bench
+#: tradeoff``), so that the plot shows which way, and how fast, the error falls with cost.
+#: One point keeps a fresh report within 5 minutes on the 2-core machine (docs/report.md).
+REPORT_LADDER_POINTS = 1
+
+#: The owner of a ladder run among a report's tasks: ``(LADDER, method name)``.
+LADDER = "ladder"
+
+
+def ladder_knobs(module, name: str, points: int = REPORT_LADDER_POINTS) -> list[dict]:
+    """Return the knob settings of the report's ladder for a method (cheap first).
+
+    The first ``points`` settings of the method's first quality ladder that differ from its
+    defaults; [] for a method with none.
+    """
+    from .bench.tradeoff import LADDERS
+
+    ladders = getattr(module, "LADDERS", None) or LADDERS.get(name) or {}
+    defaults = getattr(module, "DEFAULT_KNOBS", {}) or {}
+    for settings in ladders.values():
+        chosen = [knobs for knobs in settings if knobs and set(knobs) <= set(defaults)
+                  and any(defaults[k] != v for k, v in knobs.items())]
+        return chosen[:points]
+    return []
+
+
+def _keep_run(report, owner, run: MethodRun) -> None:
+    """File a finished run under its method, or under its method's ladder."""
+    if isinstance(owner, tuple) and owner[0] == LADDER:
+        report.ladders.setdefault(owner[1], []).append(run)
+    else:
+        report.runs[owner] = run
+
 #: The owner name of a scene's path-tracing ladder task (not a method).
 PATH_TRACING = "path tracing"
 
@@ -289,6 +323,10 @@ class SceneReport:
     method_floors: dict[str, dict | None] = field(default_factory=dict)
     object_masks: dict[tuple, tuple] = field(default_factory=dict)
     object_curves: dict[tuple, Any] = field(default_factory=dict)
+    #: per method, its runs at the cheap end of its quality ladder (:func:`ladder_knobs`),
+    #: and their (frame seconds, relative MSE on its scored pixels)
+    ladders: dict[str, list[MethodRun]] = field(default_factory=dict)
+    ladder_points: dict[str, list[dict]] = field(default_factory=dict)
 
     def mask_of(self, name: str):
         """Return the pixels method ``name`` is scored on (None: the whole image)."""
@@ -537,15 +575,18 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 report.runs[name] = MethodRun(name, report.name, "not applicable",
                                               reason.sentence, reason_code=reason.code)
                 continue
-            key = _run_key(name, report.scene, {}, fingerprint + method_fingerprint(name),
-                           versions)
-            stored = run_cache.load_pickle(key)
-            if isinstance(stored, MethodRun) and stored.status == "ok":
-                stored.cached = True
-                report.runs[name] = stored
-                continue
-            tasks.append(("method", portable(report), name, {}, REPORT_RELIGHT_FRAMES))
-            owners.append((report, name, key))
+            # the method at its defaults, then the cheap end of its quality ladder
+            for knobs in [{}] + ladder_knobs(module, name):
+                key = _run_key(name, report.scene, knobs, fingerprint + method_fingerprint(name),
+                               versions)
+                owner = name if not knobs else (LADDER, name)
+                stored = run_cache.load_pickle(key)
+                if isinstance(stored, MethodRun) and stored.status == "ok":
+                    stored.cached = True
+                    _keep_run(report, owner, stored)
+                    continue
+                tasks.append(("method", portable(report), name, knobs, REPORT_RELIGHT_FRAMES))
+                owners.append((report, owner, key))
         # the path-tracing ladder, for the speed-ups of the methods that will be scored
         if not report.reference_error and any(
                 report.runs.get(n) is None or report.runs[n].status == "ok"
@@ -581,7 +622,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
             else:
                 report.reference_error = str(result)
             continue
-        report.runs[name] = result
+        _keep_run(report, name, result)
         if result.status == "ok":
             run_cache.store_pickle(key, result)
 
@@ -789,6 +830,7 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
                       "verdict": metric_verdict(report.verdicts[name][key], check, key)}
                 for key in report.verdicts.get(name, {})}
             entry["metrics_error"] = report.metric_errors.get(name, "")
+            entry["ladder"] = json_safe(report.ladder_points.get(name, []))
             entry["files"] = report.files.get(name, {})
             entry["baseline"] = check.as_dict() if check else None
             entry.update(_speedup_fields(report, name))

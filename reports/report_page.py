@@ -301,7 +301,9 @@ def _tradeoff_caption(report: SceneReport) -> str:
         for name, v in report.speedups.items() if v["speedup_vs_path_tracing"] is not None)
     missing = report.curve.error if report.curve is not None and report.curve.error else ""
     return (f"run time against relative MSE: path tracing at {spp} spp, each method's warm "
-            f"frame; the dashed line is the reference's noise floor"
+            f"frame at its defaults (filled) and at the cheap end of its quality ladder "
+            f"(hollow, joined by a dashed line); the red dashed line is the reference's noise "
+            f"floor"
             f"{'; speed-up at equal error: ' + speeds if speeds else ''}"
             f"{'; path tracing: ' + missing if missing else ''}")
 
@@ -366,6 +368,7 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
                      f"{format_seconds(first)}, warm frame (the median of the relit frames) "
                      f"{format_seconds(run.frame_seconds)}{_speedup_sentence(report, name)}."
                      f"{cached}{from_cache}</p>")
+        parts.append(_ladder_sentence(report, name))
         if run.stage_seconds:
             parts.append("<details><summary>stage times</summary><table class=small>" + "".join(
                 f"<tr><td>{_e(stage)}</td><td>{format_seconds(seconds)}</td></tr>"
@@ -380,6 +383,24 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         parts.append("<p class=meta>The method skipped nothing for this scene.</p>")
     parts.append("</div>")
     return "\n".join(parts)
+
+
+def _ladder_sentence(report: SceneReport, name: str) -> str:
+    """One line per cheaper setting the report ran: its knobs, error and times."""
+    lines = []
+    for entry in report.ladder_points.get(name, []):
+        knobs = ", ".join(f"{k} = {v}" for k, v in entry["knobs"].items())
+        if entry["relative_mse"] is None:
+            lines.append(f"<li><code>{_e(knobs)}</code>: {_e(entry['status'])} "
+                         f"{_e(entry['reason'])}</li>")
+            continue
+        lines.append(f"<li><code>{_e(knobs)}</code>: relative MSE "
+                     f"{format_value(entry['relative_mse'])}, precomputation "
+                     f"{format_seconds(entry['precompute_seconds'])}, warm frame "
+                     f"{format_seconds(entry['frame_seconds'])}</li>")
+    if not lines:
+        return ""
+    return "<p>At cheaper settings (the plot's hollow point):</p><ul>" + "".join(lines) + "</ul>"
 
 
 def _speedup_sentence(report: SceneReport, name: str) -> str:

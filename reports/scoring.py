@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import InputError
-from .speedup import scored_curve, speedup, tradeoff_plot
+from .speedup import scored_curve, scored_relative_mse, speedup, tradeoff_plot
 
 if TYPE_CHECKING:  # annotations only: the report imports this module
     from .report import SceneReport
@@ -147,14 +147,33 @@ def _speedups(report: SceneReport, scene_folder: Path) -> None:
         report.speedups[name] = speedup(curve, metrics.get("relative_mse"),
                                         run.frame_seconds, verdict)
         points[name] = (run.frame_seconds, metrics.get("relative_mse"))
+        _ladder_points(report, name)
     curves = {"path tracing": report.curve}
     for key, curve in report.object_curves.items():
         curves[f"path tracing on {', '.join(key)}"] = curve
     floor = (report.noise_floor or {}).get("relative_mse")
+    ladders = {name: [(p["frame_seconds"], p["relative_mse"]) for p in entries
+                      if p["relative_mse"] is not None]
+               for name, entries in report.ladder_points.items()}
     plotted = tradeoff_plot(scene_folder / "tradeoff.png", curves, points, floor,
-                            f"{report.name}: run time against error")
+                            f"{report.name}: run time against error", ladders=ladders)
     if plotted is not None:
         report.files["tradeoff"] = {"png": f"{report.slug}/tradeoff.png"}
+
+
+def _ladder_points(report: SceneReport, name: str) -> None:
+    """Score a method's cheaper runs (its quality ladder) on the pixels it is scored on."""
+    for run in report.ladders.get(name, []):
+        entry = {"knobs": dict(run.knobs), "status": run.status, "reason": run.reason,
+                 "precompute_seconds": run.precompute_seconds,
+                 "frame_seconds": run.frame_seconds, "relative_mse": None}
+        if run.status == "ok" and run.image is not None:
+            try:
+                entry["relative_mse"] = float(scored_relative_mse(
+                    report.reference, run.image, report.mask_of(name)))
+            except (InputError, TypeError) as error:
+                entry["reason"] = str(error)
+        report.ladder_points.setdefault(name, []).append(entry)
 
 
 def _reference_noise(report: SceneReport) -> None:

@@ -23,7 +23,7 @@ import numpy as np
 
 __all__ = ["PATH_TRACING_REPEATS", "PATH_TRACING_SPP", "equal_error_seconds",
            "path_tracing_point", "PathTracingCurve", "overview_plot", "path_tracing_ladder",
-           "scored_curve", "speedup", "tradeoff_plot"]
+           "scored_curve", "scored_relative_mse", "speedup", "tradeoff_plot"]
 
 #: The report's path-tracing ladder, samples per pixel (per channel where the reference
 #: renders one channel at a time).
@@ -89,7 +89,7 @@ def scored_curve(points, reference, mask=None) -> PathTracingCurve:
             errors.append(f"{point['spp']} spp: {point['error']}")
             continue
         try:
-            score = _scored_relative_mse(reference, point["images"][0], mask)
+            score = scored_relative_mse(reference, point["images"][0], mask)
         except (InputError, TypeError) as error:
             errors.append(f"{point['spp']} spp: {error}")
             continue
@@ -100,7 +100,7 @@ def scored_curve(points, reference, mask=None) -> PathTracingCurve:
     return curve
 
 
-def _scored_relative_mse(reference, image, mask) -> float:
+def scored_relative_mse(reference, image, mask) -> float:
     """Relative MSE over the scored pixels, the reference's noise discounted, as the methods'."""
     import numpy as np
 
@@ -169,7 +169,7 @@ def speedup(curve: PathTracingCurve | None, relative_mse, frame_seconds,
 
 
 def tradeoff_plot(path, curves: dict, methods: dict, noise_floor: float | None,
-                  title: str) -> Path | None:
+                  title: str, ladders: dict | None = None) -> Path | None:
     """Draw run time against relative MSE, log-log: path tracing's curves, each method's point.
 
     Parameters
@@ -185,6 +185,9 @@ def tradeoff_plot(path, curves: dict, methods: dict, noise_floor: float | None,
         The relative MSE the reference's noise alone gives, drawn as a band: errors below
         it are not resolved.
     title : str
+    ladders : dict, optional
+        ``name -> [(frame_seconds, relative_mse), ...]``: a method at cheaper settings,
+        drawn hollow and joined to its point at the defaults.
 
     Returns
     -------
@@ -231,8 +234,18 @@ def tradeoff_plot(path, curves: dict, methods: dict, noise_floor: float | None,
                               xytext=(4, 4), fontsize=7, color=colour)
     markers = "sD^v<>p*"
     for index, (name, (seconds, error)) in enumerate(sorted(usable.items())):
-        axes.plot([seconds], [error], markers[index % len(markers)], markersize=8,
-                  label=name)
+        marker = markers[index % len(markers)]
+        (line,) = axes.plot([seconds], [error], marker, markersize=8, label=name)
+        cheaper = [(t, e) for t, e in (ladders or {}).get(name, [])
+                   if t and e and t > 0 and e > 0 and math.isfinite(t) and math.isfinite(e)]
+        if cheaper:
+            points = sorted(cheaper + [(seconds, error)])
+            axes.plot([t for t, _ in points], [e for _, e in points], "--",
+                      color=line.get_color(), lw=1)
+            axes.plot([t for t, _ in cheaper], [e for _, e in cheaper], marker, markersize=7,
+                      color=line.get_color(), markerfacecolor="none",
+                      label=f"{name}, cheaper settings")
+            drawn += [e for _, e in cheaper]
     floor = noise_floor if noise_floor is not None and math.isfinite(noise_floor) \
         and noise_floor > 0 else None
     values = [v for v in drawn + ([floor] if floor else []) if v > 0 and math.isfinite(v)]

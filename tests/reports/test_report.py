@@ -98,6 +98,9 @@ STAND_IN_METHODS = textwrap.dedent('''
 
     DEFAULT_KNOBS = {"grey": 0.05}
 
+    #: its quality ladder: the report runs the cheap end beside the defaults
+    LADDERS = {"grey level": [{"grey": 0.02}, {}]}
+
 
     def applies_to(scene):
         return None
@@ -170,6 +173,29 @@ def _metrics(out: Path, method: str) -> dict:
 
 
 # ---------------------------------------------------------------------------- end to end
+
+
+def test_the_cheap_end_of_a_methods_ladder_is_scored_beside_its_defaults(tiny):
+    flat = _metrics(tiny["out"], "flat")
+    (point,) = flat["ladder"]
+    assert point["knobs"] == {"grey": 0.02} and point["status"] == "ok"
+    assert point["frame_seconds"] is not None
+    # a darker flat image than the defaults' 0.05: another error, measured the same way
+    assert point["relative_mse"] > 0 and point["relative_mse"] != flat["metrics"]["relative_mse"]
+    assert "At cheaper settings" in (tiny["out"] / "index.html").read_text()
+    assert _metrics(tiny["out"], "failing")["ladder"] == []
+
+
+def test_ladder_knobs_take_the_cheap_end_of_the_first_ladder():
+    from types import SimpleNamespace
+
+    from translucent.fast import splatting
+    from translucent.reports.report import ladder_knobs
+
+    assert ladder_knobs(splatting, "splatting") == [{"irradiance_resolution": 64}]
+    own = SimpleNamespace(DEFAULT_KNOBS={"n": 8}, LADDERS={"n": [{"n": 8}, {"n": 2}, {}]})
+    assert ladder_knobs(own, "own") == [{"n": 2}]  # the defaults themselves are not a point
+    assert ladder_knobs(SimpleNamespace(DEFAULT_KNOBS={"n": 8}), "unknown") == []
 
 
 def test_tiny_report_shows_every_image_it_wrote(tiny):
