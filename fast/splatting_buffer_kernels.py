@@ -27,6 +27,7 @@ import math
 import numba
 import numpy as np
 
+from ..materials.fresnel import fresnel_transmittance_scalar
 from .splatting_kernels import prefix_sum
 
 __all__ = [
@@ -652,30 +653,9 @@ def _finite(value):
     return value
 
 
-@numba.njit(cache=True)
-def fresnel_transmittance_at(eta, cosine):
-    r"""Fresnel transmittance :math:`F_t = 1 - F_r` of one cosine, compiled.
-
-    The same operations as :func:`translucent.materials.fresnel.fresnel_transmittance`
-    (exact unpolarised Fresnel, 1 at total internal reflection and at grazing incidence),
-    so the same bits for ``eta`` > 0 and ``cosine`` in [0, 1] (clipped there).
-    """
-    cos_i = _clip_unit(cosine)
-    # (1 - cos)(1 + cos) keeps its digits near normal incidence, where 1 - cos^2 cancels
-    sin2_t = (1.0 - cos_i) * (1.0 + cos_i) / eta ** 2
-    if sin2_t >= 1.0:
-        return 0.0
-    cos_t = math.sqrt(_clip_unit(1.0 - sin2_t))
-    divisor_s = cos_i + eta * cos_t
-    divisor_p = eta * cos_i + cos_t
-    if divisor_s == 0.0 or divisor_p == 0.0:
-        return 0.0
-    r_s = (cos_i - eta * cos_t) / divisor_s
-    r_p = (eta * cos_i - cos_t) / divisor_p
-    reflectance = 0.5 * (r_s ** 2 + r_p ** 2)
-    if not math.isfinite(reflectance):
-        return 0.0
-    return 1.0 - _clip_unit(reflectance)
+#: Fresnel transmittance of one cosine, compiled from the materials' own function (the
+#: physics written once: :func:`translucent.materials.fresnel.fresnel_transmittance_scalar`).
+fresnel_transmittance_at = numba.njit(cache=True)(fresnel_transmittance_scalar)
 
 
 @numba.njit(parallel=True, cache=True)

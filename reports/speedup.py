@@ -208,7 +208,7 @@ def tradeoff_plot(path, curves: dict, methods: dict, noise_floor: float | None,
               if curve is not None and len(curve.relative_mse) > 0}
     if not usable and not traced:
         return None
-    figure, axes = plt.subplots(figsize=(5.2, 3.6))
+    figure, axes = plt.subplots(figsize=(7.4, 3.6))
     drawn = [e for _, e in usable.values()]
     for number, (label, curve) in enumerate(traced.items()):
         colour = ("0.35", "tab:brown", "tab:olive", "tab:cyan")[number % 4]
@@ -262,7 +262,8 @@ def tradeoff_plot(path, curves: dict, methods: dict, noise_floor: float | None,
     axes.set_ylabel("relative MSE over the scored pixels")
     axes.set_title(title, fontsize=9)
     axes.grid(True, which="both", alpha=0.3)
-    axes.legend(fontsize=7, loc="best")
+    # outside the axes: with a ladder per method the legend would hide points
+    axes.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     figure.tight_layout()
     return atomic_save_figure(path, figure)
 

@@ -44,3 +44,20 @@ def test_in_unit_interval(eta, cos, dtype):
 def test_nan_input_does_not_crash():
     value = fresnel_transmittance(1.3, np.array([np.nan, 0.5]))
     assert value.shape == (2,)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(0.05, 4.0), st.floats(-0.5, 1.5, allow_nan=False))
+def test_the_scalar_transmittance_is_the_array_one_bit_for_bit(eta, cosine):
+    """Compiled kernels take the scalar function: it must be the same physics, to the bit."""
+    from translucent.materials.fresnel import fresnel_transmittance_scalar
+
+    assert fresnel_transmittance_scalar(eta, cosine) == float(fresnel_transmittance(eta, cosine))
+
+
+def test_the_scalar_transmittance_at_its_limits():
+    from translucent.materials.fresnel import fresnel_transmittance_scalar
+
+    assert fresnel_transmittance_scalar(1.0, 1.0) == 1.0  # index-matched: all through
+    assert fresnel_transmittance_scalar(1.3, 0.0) == 0.0  # grazing: all reflected
+    assert fresnel_transmittance_scalar(0.7, 0.1) == 0.0  # total internal reflection
