@@ -44,14 +44,19 @@ from ..image import Image
 from .base import refusal_of, scored_object_names
 from .registry import contract_problems, method
 
-__all__ = ["CHECKS", "ConformanceFailure", "IMAGE_RTOL", "NotChecked", "check_method",
-           "conformance_scene", "edited_material", "run_check"]
+__all__ = ["CHECKS", "ConformanceFailure", "IMAGE_RTOL", "NotChecked", "TINY_SPHERE",
+           "check_method", "conformance_scene", "edited_material", "run_check",
+           "tiny_sphere_text"]
 
-#: A 320-face skin sphere under a point light: the first scene tried (small enough that
-#: every check of a precomputing method takes seconds).
-TINY_SPHERE = """
+def tiny_sphere_text(name: str = "conformance_sphere", size: int = 16) -> str:
+    """Return a scene file: a 320-face skin sphere under a point light, ``size`` pixels square.
+
+    The first scene the checks try (small enough that every check of a precomputing method
+    takes seconds); tests of the report use it too.
+    """
+    return f"""
 [scene]
-name = "conformance_sphere"
+name = "{name}"
 description = "a 320-face skin sphere under a point light"
 mm_per_unit = 10.0
 
@@ -59,19 +64,23 @@ mm_per_unit = 10.0
 origin = [0.0, 0.0, 5.0]
 target = [0.0, 0.0, 0.0]
 fov = 30.0
-width = 16
-height = 16
+width = {size}
+height = {size}
 
 [[objects]]
 name = "sphere"
-mesh = { type = "icosphere", subdivisions = 2, radius = 1.0 }
-material = { type = "measured", name = "Skin1" }
+mesh = {{ type = "icosphere", subdivisions = 2, radius = 1.0 }}
+material = {{ type = "measured", name = "Skin1" }}
 
 [[lights]]
 type = "point"
 position = [3.0, 4.0, 4.0]
 intensity = 100.0
 """
+
+
+#: The scene file of the first scene the checks try (:func:`tiny_sphere_text`).
+TINY_SPHERE = tiny_sphere_text()
 
 #: Scenes tried, in order, for the first one a method applies to: the tiny sphere, then
 #: catalogue scenes.

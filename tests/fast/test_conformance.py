@@ -258,8 +258,7 @@ def test_approx_gives_a_method_without_options_its_knobs(registered, tmp_path, c
 # ------------------------------------------------- a method from another distribution
 
 
-TINY_SCENE = conformance.TINY_SPHERE.replace('name = "conformance_sphere"',
-                                             'name = "tiny_lambert"')
+TINY_SCENE = conformance.tiny_sphere_text("tiny_lambert")
 
 
 @pytest.fixture(scope="module")

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from translucent.errors import InputError
 from translucent.fast import base as fast_base
+from translucent.fast.conformance import tiny_sphere_text
 from translucent.reports import report as report_module
 from translucent.reports.cli import main
 from translucent.reports.report import (
@@ -36,29 +37,7 @@ QUICK_METHODS = ["flat", "failing", "unbuilt", "brdf_pca"]
 #: Reference samples of the tiny scene: enough for a finite, non-black reference.
 TINY_SPP, TINY_PASSES = 16, 2
 
-TINY_SCENE = textwrap.dedent("""
-    [scene]
-    name = "tiny_sphere"
-    description = "a 320-face skin sphere seen at 24 x 24 pixels"
-    mm_per_unit = 10.0
-
-    [camera]
-    origin = [0.0, 0.0, 5.0]
-    target = [0.0, 0.0, 0.0]
-    fov = 30.0
-    width = 24
-    height = 24
-
-    [[objects]]
-    name = "sphere"
-    mesh = { type = "icosphere", subdivisions = 2, radius = 1.0 }
-    material = { type = "measured", name = "Skin1" }
-
-    [[lights]]
-    type = "point"
-    position = [3.0, 4.0, 4.0]
-    intensity = 100.0
-""")
+TINY_SCENE = tiny_sphere_text("tiny_sphere", 24)
 
 
 def _tiny_scene(folder: Path) -> Path:

@@ -1,36 +1,16 @@
 """``translucent report --images DIR``: another renderer's images scored like a method's."""
 
 import json
-import textwrap
 
 import numpy as np
 import OpenEXR
 import pytest
+from translucent.fast.conformance import tiny_sphere_text
 from translucent.image import Image
 from translucent.reports.cli import main
 
-TINY_SCENE = textwrap.dedent("""
-    [scene]
-    name = "tiny_images"
-    mm_per_unit = 10.0
-
-    [camera]
-    origin = [0.0, 0.0, 5.0]
-    target = [0.0, 0.0, 0.0]
-    fov = 30.0
-    width = 24
-    height = 24
-
-    [[objects]]
-    name = "sphere"
-    mesh = { type = "icosphere", subdivisions = 2, radius = 1.0 }
-    material = { type = "measured", name = "Skin1" }
-
-    [[lights]]
-    type = "point"
-    position = [3.0, 4.0, 4.0]
-    intensity = 100.0
-""")
+#: The conformance checks' tiny skin sphere, at 24 x 24 pixels.
+TINY_SCENE = tiny_sphere_text("tiny_images", 24)
 
 
 def _report(tmp_path, images, *extra):
