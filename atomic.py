@@ -7,13 +7,54 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
+import shutil
 import tempfile
+import time
 from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_output_file",
-           "check_output_folder", "make_output_folder"]
+__all__ = ["ORPHAN_AGE_SECONDS", "atomic_path", "atomic_write_bytes", "atomic_write_text",
+           "check_output_file", "check_output_folder", "make_output_folder", "sweep_orphans"]
+
+#: A temporary file or folder of an interrupted write (``.NAME.XXXXXXXX.part[.EXT]``, or
+#: ``.old`` for a report folder being replaced) older than this is swept when something is
+#: next written beside it: no live write takes that long between creating it and renaming
+#: it, except a render, whose temporary file is made only once the pixels are done.
+ORPHAN_AGE_SECONDS = 600.0
+
+#: The names :func:`atomic_path` and the report's staging folders give their temporaries
+#: (``tempfile``'s 8 random characters between the prefix and the suffix).
+ORPHAN_NAME = re.compile(r"^\..+\.[A-Za-z0-9_]{8}\.(part(\.[A-Za-z0-9]+)?|old)$")
+
+
+def sweep_orphans(folder, *, older_than: float = ORPHAN_AGE_SECONDS) -> list[Path]:
+    """Remove the temporaries that interrupted writes left in ``folder``; return them.
+
+    Only names of the suite's own temporaries (:data:`ORPHAN_NAME`) older than
+    ``older_than`` seconds are removed; a folder that cannot be read is left alone.
+    """
+    removed = []
+    now = time.time()
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        if not ORPHAN_NAME.match(entry.name):
+            continue
+        try:
+            if now - entry.stat(follow_symlinks=False).st_mtime < older_than:
+                continue
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path)
+            else:
+                os.unlink(entry.path)
+            removed.append(Path(entry.path))
+        except OSError:
+            continue  # another process swept it, or it is not ours to remove
+    return removed
 
 
 def make_output_folder(folder, *, field: str, value, file=None, what: str | None = None
@@ -142,6 +183,7 @@ def atomic_path(target, suffix: str | None = None):
     """
     target = check_output_file(target, "path", file=target)
     make_output_folder(target.parent, field="path", value=str(target), file=target)
+    sweep_orphans(target.parent)
     suffix = target.suffix if suffix is None else suffix
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{suffix}",

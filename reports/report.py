@@ -726,8 +726,11 @@ def _made_with(report: SceneReport) -> dict:
 
 
 def _staging_folder(out: Path) -> Path:
+    from ..atomic import sweep_orphans
+
     parent = out.absolute().parent
     parent.mkdir(parents=True, exist_ok=True)
+    sweep_orphans(parent)  # staging folders of reports killed before they finished
     return Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=parent))
 
 

@@ -49,3 +49,30 @@ def test_a_file_in_the_way_of_the_folder_is_bad_input(tmp_path):
     with pytest.raises(InputError, match="cannot create the folder"):
         atomic_write_text(tmp_path / "plain" / "sub" / "x.txt", "text")
     assert (tmp_path / "plain").read_text() == "a file"
+
+
+def test_an_interrupted_writes_temporaries_are_swept_by_the_next_write(tmp_path):
+    import os
+    import time
+
+    from translucent.atomic import ORPHAN_AGE_SECONDS, atomic_write_text
+
+    old = time.time() - 2 * ORPHAN_AGE_SECONDS
+    orphans = [tmp_path / ".sphere.k3j_x9qa.part.exr", tmp_path / ".entry.AbCdEf12.part.pkl"]
+    staging = tmp_path / ".report.zz99yy88.part"  # a report killed while it was written
+    staging.mkdir()
+    (staging / "index.html").write_text("half")
+    for path in orphans:
+        path.write_text("half-written")
+    fresh = tmp_path / ".other.q1w2e3r4.part.exr"  # a write under way in another process
+    fresh.write_text("being written")
+    unrelated = [tmp_path / "sphere.exr", tmp_path / ".hidden_notes.part"]
+    for path in unrelated:
+        path.write_text("keep")
+    for path in orphans + [staging]:
+        os.utime(path, (old, old))
+    os.utime(unrelated[1], (old, old))
+    atomic_write_text(tmp_path / "result.json", "{}")
+    assert not any(p.exists() for p in orphans) and not staging.exists()
+    assert fresh.exists() and all(p.exists() for p in unrelated)
+    assert (tmp_path / "result.json").read_text() == "{}"
