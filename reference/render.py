@@ -138,6 +138,29 @@ def render_sample(channels, mitsuba_scenes, spp: int, seed: int, on_render=None)
     return sample
 
 
+#: Mitsuba numbers the samples of one render in 32 bits: pixels x spp of one pass (times
+#: one per channel rendered alone) must stay below this.
+MAX_SAMPLES_PER_RENDER = 2**32 - 1
+
+
+def check_samples_per_render(scene: Scene, spp: int, field: str = "spp") -> None:
+    """Refuse a pass of more samples than Mitsuba can number, before any work.
+
+    Raises
+    ------
+    InputError
+        Naming ``field``, the samples a pass would take, and the most spp a pass may have
+        at the scene's size (more passes of fewer samples give the same image).
+    """
+    pixels = scene.camera.width * scene.camera.height
+    if pixels * spp > MAX_SAMPLES_PER_RENDER:
+        raise InputError(f"{scene.camera.width} x {scene.camera.height} pixels x {spp} spp = "
+                         f"{pixels * spp:,} samples in one pass; Mitsuba numbers a render's "
+                         f"samples in 32 bits (at most {MAX_SAMPLES_PER_RENDER:,}): give at "
+                         f"most {MAX_SAMPLES_PER_RENDER // pixels} spp a pass and more passes",
+                         file=scene.source, field=field, value=spp)
+
+
 def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
            progress: bool = True, cache: bool = True, integrator: str | None = None,
            max_depth: int | None = None, rr_depth: int | None = None,
@@ -208,6 +231,7 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
     if not isinstance(scene, Scene):
         raise InputError("expected a translucent.scenes.Scene", field="scene",
                          value=type(scene).__name__)
+    check_samples_per_render(scene, spp)
     settings = reference_settings(spp=spp, passes=passes, seed=seed, integrator=integrator,
                                   max_depth=max_depth, rr_depth=rr_depth,
                                   per_channel=per_channel,
@@ -466,6 +490,7 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
     target_rse, target_p99_rse, budget_seconds = check_noise_target(
         target_rse, target_p99_rse, budget_seconds,
         fields=("target_rse", "target_p99_rse", "budget_seconds"))
+    check_samples_per_render(scene, spp)
     if max_passes > PROGRESSIVE_SEED_STRIDE:
         raise InputError(f"must be <= {PROGRESSIVE_SEED_STRIDE}", field="max_passes",
                          value=max_passes)

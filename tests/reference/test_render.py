@@ -329,3 +329,29 @@ def test_progress_bar_appears_only_for_slow_renders(monkeypatch, capsys):
     monkeypatch.setattr(render_module, "_render_pass", slow)
     render(_small_scene(), spp=1, passes=3, cache=False)
     assert "reference scene" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("size, spp", [((96, 96), 466_034), ((16384, 16384), 16)])
+def test_a_pass_mitsuba_cannot_number_is_refused_before_work(size, spp, capsys, tmp_path):
+    """Mitsuba numbers a render's samples in 32 bits: such a pass is refused, with the fix."""
+    from dataclasses import replace
+
+    from translucent.reference.render import MAX_SAMPLES_PER_RENDER, render_to_target
+    from translucent.reports.cli import main
+    from translucent.scenes import load_scene
+
+    scene = load_scene("sphere")
+    scene = scene.with_camera(replace(scene.camera, width=size[0], height=size[1]))
+    assert size[0] * size[1] * spp > MAX_SAMPLES_PER_RENDER
+    most = MAX_SAMPLES_PER_RENDER // (size[0] * size[1])
+    for call in (lambda: render(scene, spp=spp, passes=2, cache=False),
+                 lambda: render_to_target(scene, spp=spp, target_rse=0.1)):
+        with pytest.raises(InputError, match=f"give at most {most} spp a pass") as caught:
+            call()
+        assert caught.value.field == "spp"
+    if size == (96, 96):  # the command line: exit 2, the message, nothing written
+        out = tmp_path / "refused.exr"
+        assert main(["render", "sphere", "--spp", str(spp), "--passes", "1", "--out",
+                     str(out)]) == 2
+        assert "32 bits" in capsys.readouterr().err
+        assert not out.exists()
