@@ -76,7 +76,7 @@ from .runs import (
     timestamp,
 )
 from .scoring import score_scene
-from .speedup import PATH_TRACING_SPP
+from .speedup import PATH_TRACING_SPP, same_run_ratios
 
 __all__ = [
     "METRIC_LABELS",
@@ -797,7 +797,8 @@ def _speedup_fields(report: SceneReport, name: str) -> dict:
     return {"speedup_vs_path_tracing": json_safe(found["speedup_vs_path_tracing"]),
             "speedup_reason": found["reason"],
             "path_tracing_seconds_at_equal_error": json_safe(found["path_tracing_seconds"]),
-            "speedup_extrapolated": found["extrapolated"]}
+            "speedup_extrapolated": found["extrapolated"],
+            **same_run_ratios(report.curve, report.runs.get(name))}
 
 
 def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) -> dict:

@@ -367,7 +367,7 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
                      f"(the first <code>state.render()</code>, first-call costs included) "
                      f"{format_seconds(first)}, warm frame (the median of the relit frames) "
                      f"{format_seconds(run.frame_seconds)}{_speedup_sentence(report, name)}."
-                     f"{cached}{from_cache}</p>")
+                     f"{_ratio_sentence(report, name)}{cached}{from_cache}</p>")
         parts.append(_ladder_sentence(report, name))
         if run.stage_seconds:
             parts.append("<details><summary>stage times</summary><table class=small>" + "".join(
@@ -383,6 +383,22 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         parts.append("<p class=meta>The method skipped nothing for this scene.</p>")
     parts.append("</div>")
     return "\n".join(parts)
+
+
+def _ratio_sentence(report: SceneReport, name: str) -> str:
+    """Return the times as multiples of a 1-spp path-traced render timed in the same run."""
+    from .speedup import same_run_ratios
+
+    ratios = same_run_ratios(report.curve, report.runs.get(name))
+    frame = ratios["frame_in_path_traced_1spp_renders"]
+    if frame is None:
+        return ""
+    precompute = ratios["precompute_in_path_traced_1spp_renders"]
+    return (f" In 1-spp path-traced renders of this scene timed in the same run "
+            f"({format_seconds(ratios['path_tracing_1spp_seconds'])} each): a warm frame takes "
+            f"{format_value(frame)}"
+            + (f", the precomputation {format_value(precompute)}" if precompute is not None
+               else "") + ".")
 
 
 def _ladder_sentence(report: SceneReport, name: str) -> str:

@@ -23,7 +23,8 @@ import numpy as np
 
 __all__ = ["PATH_TRACING_REPEATS", "PATH_TRACING_SPP", "equal_error_seconds",
            "path_tracing_point", "PathTracingCurve", "overview_plot", "path_tracing_ladder",
-           "scored_curve", "scored_relative_mse", "speedup", "tradeoff_plot"]
+           "same_run_ratios", "scored_curve", "scored_relative_mse", "speedup",
+           "tradeoff_plot"]
 
 #: The report's path-tracing ladder, samples per pixel (per channel where the reference
 #: renders one channel at a time).
@@ -414,3 +415,35 @@ def equal_error_seconds(errors, seconds, error: float) -> tuple[float, bool]:
         return float(np.exp(np.interp(target, log_e, log_t))), False
     slope, intercept = np.polyfit(log_e, log_t, 1)
     return float(np.exp(intercept + slope * target)), True
+
+
+def same_run_ratios(curve: PathTracingCurve | None, run) -> dict:
+    """Return a method's times as multiples of one 1-spp path-traced render of the same run.
+
+    Times measured on a shared machine move with its load; the 1-spp render of the
+    path-tracing ladder is timed in the same run on the same scene, so these ratios
+    compare across runs and machines where the seconds do not.
+
+    Parameters
+    ----------
+    curve : PathTracingCurve or None
+        The scene's ladder (its 1-spp point is the unit).
+    run : MethodRun or None
+        The method's run (``frame_seconds``, ``precompute_seconds``).
+
+    Returns
+    -------
+    dict
+        ``path_tracing_1spp_seconds``, ``frame_in_path_traced_1spp_renders`` and
+        ``precompute_in_path_traced_1spp_renders``; None where a time is missing.
+    """
+    base = None
+    if curve is not None and 1 in curve.spp:
+        base = curve.seconds[curve.spp.index(1)]
+    ratios = {"path_tracing_1spp_seconds": base}
+    for key in ("frame", "precompute"):
+        seconds = getattr(run, f"{key}_seconds", None) if run is not None else None
+        ratios[f"{key}_in_path_traced_1spp_renders"] = (
+            float(seconds) / base if base and base > 0 and seconds is not None else None)
+    return ratios
+

@@ -165,6 +165,19 @@ def test_the_cheap_end_of_a_methods_ladder_is_scored_beside_its_defaults(tiny):
     assert _metrics(tiny["out"], "failing")["ladder"] == []
 
 
+def test_times_are_also_given_in_path_traced_renders_of_the_same_run(tiny):
+    data = _data(tiny["out"])
+    flat = data["methods"]["flat"]
+    curve = data["path_tracing"]
+    one_spp = curve["seconds"][curve["spp"].index(1)]
+    assert flat["path_tracing_1spp_seconds"] == pytest.approx(one_spp)
+    assert flat["frame_in_path_traced_1spp_renders"] == pytest.approx(
+        flat["frame_seconds"] / one_spp)
+    assert flat["precompute_in_path_traced_1spp_renders"] == pytest.approx(
+        flat["precompute_seconds"] / one_spp)
+    assert "1-spp path-traced renders" in (tiny["out"] / "index.html").read_text()
+
+
 def test_ladder_knobs_take_the_cheap_end_of_the_first_ladder():
     from types import SimpleNamespace
 
