@@ -317,3 +317,21 @@ def test_an_installed_method_passes_the_conformance_checks(installed_example, tm
                                cwd=tmp_path)
     assert completed.returncode == 0, completed.stderr[-3000:]
     assert completed.stdout.strip() == str(sorted(CHECKS))
+
+
+def test_an_outside_methods_own_files_key_the_report_cache(registered, tmp_path, monkeypatch):
+    from translucent.fast.registry import method_fingerprint
+
+    assert method_fingerprint("prt") == ""  # the suite's own sources key it already
+    source = tmp_path / "keyed_method.py"
+    source.write_text("DEFAULT_KNOBS = {}\ndef applies_to(scene):\n    return None\n"
+                      "def precompute(scene, **knobs):\n    return None\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    registered("keyed", "keyed_method")
+    first = method_fingerprint("keyed")
+    assert len(first) == 64
+    import importlib
+
+    source.write_text(source.read_text() + "# edited\n")
+    importlib.invalidate_caches()
+    assert method_fingerprint("keyed") != first
