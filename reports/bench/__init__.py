@@ -1,5 +1,9 @@
 """Benchmarks, one module each (``translucent bench <module>``)."""
 
+#: A bench's progress bar appears once a step has lasted this long (seconds), as the
+#: reference renders' do.
+PROGRESS_DELAY_SECONDS = 1.0
+
 
 def at_width(scene, width: int):
     """Return ``scene`` seen ``width`` pixels wide, the height following its aspect.

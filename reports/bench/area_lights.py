@@ -15,13 +15,14 @@ frame of the same scene, measured in the same run.
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ...errors import InputError
-from . import count_list
+from . import PROGRESS_DELAY_SECONDS, count_list
 
 #: Scenes lit by area lights whose translucent objects splatting renders.
 DEFAULT_SCENES = ("bowl", "cornell_block")
@@ -58,7 +59,10 @@ def measure(scene_name: str, counts, frames: int) -> dict:
     mask = scored_pixels(scene, splatting.scored_objects(scene))
     floor = noise_floor(reference, mask=mask)
     rows = []
-    for count in counts:
+    from tqdm.auto import tqdm
+
+    for count in tqdm(counts, desc=f"area lights on {scene_name}", unit="count", leave=False,
+                      file=sys.stderr, delay=PROGRESS_DELAY_SECONDS, disable=None):
         state = splatting.precompute(scene, area_light_points=count)
         state.render()  # untimed: compiled kernels, first-call costs
         timings = []

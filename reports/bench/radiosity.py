@@ -39,6 +39,7 @@ import json
 import os
 import re
 import resource
+import sys
 import time
 
 import numpy as np
@@ -50,7 +51,7 @@ from ...materials import Dipole, measured_medium
 from ...scenes import RectangularAreaLight, SceneObject
 from ...scenes.raycast import embree_available, ray_engine
 from ...scenes.scene_file import builtin_scene_path, loads_scene
-from . import count_list
+from . import PROGRESS_DELAY_SECONDS, count_list
 
 #: The paper's Table 1, Cornell box (24,640 polygons, GTX 590).
 PAPER = {"relighting fps": 14.0, "translucency change fps": 4.0,
@@ -488,16 +489,26 @@ def run(args) -> int:
     out = {"baseline seconds": baseline, "bandwidth GB/s": bandwidth, "paper": PAPER}
     scene = _cornell(args.wall_subdivisions, args.block_subdivisions, args.mm_per_unit,
                      measured_medium(args.material))
-    state = _precomputation(scene, args, out)
-    _relighting(state, args, baseline, bandwidth, out)
-    _translucency(state, args, baseline, out)
-    _thresholds(state, out)
-    _low_rank(state, args, out)
-    del state
-    if not args.skip_transfer:
-        _transfer(args, baseline, out)
-    if not args.skip_sampling:
-        _sampling(out)
+    from tqdm.auto import tqdm
+
+    sections = 5 + (not args.skip_transfer) + (not args.skip_sampling)
+    with tqdm(total=sections, desc="bench radiosity", unit="section", leave=False,
+              file=sys.stderr, delay=PROGRESS_DELAY_SECONDS, disable=None) as bar:
+        state = _precomputation(scene, args, out)
+        bar.update()
+        for section in (_relighting, _translucency, _thresholds, _low_rank):
+            arguments = {_relighting: (state, args, baseline, bandwidth, out),
+                         _translucency: (state, args, baseline, out),
+                         _thresholds: (state, out), _low_rank: (state, args, out)}[section]
+            section(*arguments)
+            bar.update()
+        del state
+        if not args.skip_transfer:
+            _transfer(args, baseline, out)
+            bar.update()
+        if not args.skip_sampling:
+            _sampling(out)
+            bar.update()
     print("paper (GTX 590): 14 fps relighting, 4 fps translucency change, 4 + 3 min "
           "precomputation, 800 MB")
     path = args.json or "bench_radiosity.json"

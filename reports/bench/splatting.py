@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 
 import numpy as np
@@ -47,7 +48,7 @@ from ...atomic import atomic_write_text
 from ...fast import splatting
 from ...materials.subedit import BUILTIN_SUBEDIT
 from ...scenes import load_scene
-from . import with_size
+from . import PROGRESS_DELAY_SECONDS, with_size
 
 #: The ablation settings of the paper's Table 1.
 SETTINGS = {
@@ -184,6 +185,12 @@ def run(args) -> int:
                        max(1, round(args.validation_width * args.height / args.width)))
     common = {"irradiance_resolution": args.irradiance_resolution, "backend": args.backend}
     # ground truth on a regular subset of the timed frame's own pixels (same buffers)
+    from tqdm.auto import tqdm
+
+    rows = _rows(names, epsilons, pitches, level_counts, not args.no_published)
+    bar = tqdm(total=len(rows) + 2, desc="bench splatting", unit="step", leave=False,
+               file=sys.stderr, delay=PROGRESS_DELAY_SECONDS, disable=None)
+    bar.set_postfix_str("ground truth")
     started = time.perf_counter()
     camera_buffer, camera, views, material, _ = splatting.precompute(full, **common).buffers()
     validation = _strided(camera_buffer, args.validation_stride)
@@ -193,11 +200,12 @@ def run(args) -> int:
     small_common = {"irradiance_resolution": args.validation_irradiance,
                     "backend": args.backend}
     small_truth = splatting.precompute(small, **small_common).render_ground_truth().rgb
+    bar.update(2)
     results = {}
     warm = False
     load_before = os.getloadavg()
-    for name, knobs in _rows(names, epsilons, pitches, level_counts,
-                             not args.no_published).items():
+    for name, knobs in rows.items():
+        bar.set_postfix_str(name[:40])
         state = splatting.precompute(full, **common, **knobs)
         # Eq. 14's table depends on the material alone: the paper precomputes it
         splatting.rendering_radius_table(material, state.knobs["epsilon"])
@@ -220,6 +228,8 @@ def run(args) -> int:
             "knobs": knobs}
         print(f"{name:64s} {1 / wall:8.3f} fps  {cpu:7.2f} CPU s/frame  error "
               f"{results[name]['relative error']:.4f}", flush=True)
+        bar.update()
+    bar.close()
     load = {"before": list(load_before), "after": list(os.getloadavg())}
     _report(args, results, truth, truth_seconds, camera_buffer.valid.sum(), small, load)
     per_material = _materials(small, small_common, materials)
