@@ -67,19 +67,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..backend import mitsuba
+from .manifold_settings import COUNTERS, INTEGRATOR_NAME
 
 __all__ = ["INTEGRATOR_NAME", "COUNTERS", "register", "counts"]
-
-from .manifold_settings import (  # noqa: F401  (the settings are read from here too)
-    COUNTERS,
-    DIFFERENCE_STEP,
-    INTEGRATOR_NAME,
-    MAX_ITERATIONS,
-    MIN_STEP,
-    POSITION_PRECISION,
-    ROULETTE_TRANSMITTANCE,
-    TOLERANCE,
-)
 
 
 def register() -> None:

@@ -15,6 +15,7 @@ integrator. A file that uses them says so in its header comment; load it after
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import xml.etree.ElementTree as ElementTree
 from pathlib import Path
@@ -218,8 +219,13 @@ def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None) 
     if integrator is None and conversion.per_channel_recommended \
             and conversion.integrator == "volpath":
         # one RGB file cannot be rendered one channel at a time, as the references of such
-        # media are; Mitsuba's RGB volpath is biased for them (see RGB_VOLPATH_NOTE)
-        conversion = convert_scene(scene, spp=spp, integrator="volpathmis")
+        # media are; Mitsuba's RGB volpath is biased for them (see RGB_VOLPATH_NOTE). Only
+        # the integrator's type differs from a volpathmis conversion.
+        scene_dict = {**conversion.scene_dict,
+                      "integrator": {**conversion.scene_dict["integrator"],
+                                     "type": "volpathmis"}}
+        conversion = dataclasses.replace(conversion, scene_dict=scene_dict,
+                                         integrator="volpathmis")
         notes.append(RGB_VOLPATH_NOTE)
     make_output_folder(out, field="--out", value=str(out))
     staging = Path(tempfile.mkdtemp(prefix=".export-", dir=out))
