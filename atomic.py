@@ -107,6 +107,14 @@ def _unwritable(folder: Path) -> str | None:
     return None
 
 
+def _not_a_folder(path, field: str, *, file=None, what: str = "a file name") -> Path:
+    """Refuse an output file path that names a folder (the check the writers share)."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"is a folder; give {what}", file=file, field=field, value=str(path))
+    return path
+
+
 def check_output_file(path, field: str, *, file=None, what: str = "a file name") -> Path:
     """Refuse an output file path that is a folder or cannot be written, before any work.
 
@@ -125,9 +133,7 @@ def check_output_file(path, field: str, *, file=None, what: str = "a file name")
     -------
     Path
     """
-    path = Path(path)
-    if path.is_dir():
-        raise InputError(f"is a folder; give {what}", file=file, field=field, value=str(path))
+    path = _not_a_folder(path, field, file=file, what=what)
     problem = _unwritable(path.parent)
     if problem:
         raise InputError(problem, file=file, field=field, value=str(path))
@@ -181,7 +187,8 @@ def atomic_path(target, suffix: str | None = None):
         When ``target`` is a folder, or its folder cannot be created or written, before
         anything is written.
     """
-    target = check_output_file(target, "path", file=target)
+    # its own temporary file below is the test of writing there: no probe first
+    target = _not_a_folder(target, "path", file=target)
     make_output_folder(target.parent, field="path", value=str(target), file=target)
     sweep_orphans(target.parent)
     suffix = target.suffix if suffix is None else suffix
@@ -189,9 +196,8 @@ def atomic_path(target, suffix: str | None = None):
         fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{suffix}",
                                    dir=target.parent)
     except OSError as error:  # no permission, a read-only mount, /proc, no space, ...
-        raise InputError(f"cannot write in the folder {target.parent} "
-                         f"({error.strerror or error})", file=target, field="path",
-                         value=str(target)) from error
+        raise InputError(f"cannot write in {target.parent} ({error.strerror or error})",
+                         file=target, field="path", value=str(target)) from error
     os.close(fd)
     tmp = Path(tmp)
     # mkstemp creates 0600; give the result the permissions an ordinary file would have

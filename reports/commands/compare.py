@@ -84,6 +84,7 @@ def _table(rows) -> list[str]:
 
 def run(args) -> int:
     """Read both images, compute the metrics, write the maps, print the table."""
+    from ...atomic import check_output_folder
     from ...image import read_exr
     from ...noise import reference_noise_warning
     from ..error_maps import write_error_maps
@@ -91,6 +92,8 @@ def run(args) -> int:
     from .record import record
 
     definition, threshold = _threshold(args)
+    if args.maps and not args.no_maps:
+        check_output_folder(args.maps, "--maps")  # before the metrics are computed
     reference = read_exr(args.reference)
     test = read_exr(args.test)
     comparison = evaluate(reference, test)
