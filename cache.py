@@ -246,17 +246,24 @@ def cache_key_file() -> Path:
     return Path(base) / "translucent" / "cache-key"
 
 
-_PROCESS_KEY: bytes | None = None
-
-
 def cache_secret() -> bytes:
     """Return the key (32 bytes), created on first use with permissions 0600.
 
     Where it can be neither read nor created (an unwritable home), this process makes one
     of its own: its entries are then authentic to it alone and the next run misses them.
+    Read once per process and key file, not at every entry.
     """
-    global _PROCESS_KEY
     path = cache_key_file()
+    if str(path) not in _KEYS:
+        _KEYS[str(path)] = _read_or_make_key(path)
+    return _KEYS[str(path)]
+
+
+#: The keys read or made in this process, by key file.
+_KEYS: dict[str, bytes] = {}
+
+
+def _read_or_make_key(path: Path) -> bytes:
     try:
         key = path.read_bytes()
         if len(key) >= 32:
@@ -273,9 +280,7 @@ def cache_secret() -> bytes:
         os.unlink(tmp)
         return path.read_bytes()
     except OSError:
-        if _PROCESS_KEY is None:
-            _PROCESS_KEY = secrets.token_bytes(32)
-        return _PROCESS_KEY
+        return secrets.token_bytes(32)  # this process's own
 
 
 class _Signing:
