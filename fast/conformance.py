@@ -34,7 +34,6 @@ The checks, and why each matters to a user of the report:
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import replace
 
 import numpy as np
@@ -138,16 +137,10 @@ def conformance_scene(module, scenes=SCENES, width: int = WIDTH):
     raise NotChecked("applies to no catalogue scene (" + "; ".join(reasons) + ")")
 
 
-@contextlib.contextmanager
-def _empty_cache():
+def _precompute(module, scene, knobs):
     from ..cache import private_cache
 
     with private_cache():
-        yield
-
-
-def _precompute(module, scene, knobs):
-    with _empty_cache():
         return module.precompute(scene, **knobs)
 
 
@@ -318,13 +311,18 @@ def run_check(name: str, check: str, scene=None, knobs: dict | None = None) -> s
     NotChecked
         The check has nothing to test on this scene.
     """
+    return CHECKS[check](*_prepared(name, scene, knobs))
+
+
+def _prepared(name: str, scene, knobs):
+    """Return the method's module, the scene and the knobs the checks run with."""
     module = method(name)
     if scene is None:
         scene = conformance_scene(module)
     chosen = dict(getattr(module, "QUICK_KNOBS", {}) or {}) if knobs is None else dict(knobs)
     if "progress" in getattr(module, "DEFAULT_KNOBS", {}):
         chosen.setdefault("progress", False)
-    return CHECKS[check](module, scene, chosen)
+    return module, scene, chosen
 
 
 def check_method(name: str, scene=None, knobs: dict | None = None) -> dict[str, str]:
@@ -350,10 +348,14 @@ def check_method(name: str, scene=None, knobs: dict | None = None) -> dict[str, 
     ConformanceFailure
         Naming the check that failed and how.
     """
+    try:
+        prepared = _prepared(name, scene, knobs)  # once: the scene is loaded a single time
+    except NotChecked as why:
+        return {check: f"not checked: {why}" for check in CHECKS}
     found = {}
-    for check in CHECKS:
+    for check, run in CHECKS.items():
         try:
-            found[check] = run_check(name, check, scene, knobs)
+            found[check] = run(*prepared)
         except NotChecked as why:
             found[check] = f"not checked: {why}"
         except ConformanceFailure as failure:
