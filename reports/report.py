@@ -149,9 +149,9 @@ def ladder_knobs(module, name: str, points: int = REPORT_LADDER_POINTS) -> list[
     The first ``points`` settings of the method's first quality ladder that differ from its
     defaults; [] for a method with none.
     """
-    from .bench.tradeoff import LADDERS
+    from .bench.tradeoff import declared_ladders
 
-    ladders = getattr(module, "LADDERS", None) or LADDERS.get(name) or {}
+    ladders = declared_ladders(module, name) or {}
     defaults = getattr(module, "DEFAULT_KNOBS", {}) or {}
     for settings in ladders.values():
         chosen = [knobs for knobs in settings if knobs and set(knobs) <= set(defaults)
@@ -526,6 +526,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     for report in reports:
         report.runs.update(renderer_images(images, renderers, report.scene))
     run_cache = Cache("report")
+    method_sources: dict[str, str] = {}
     tasks: list[tuple] = []
     owners: list[tuple[SceneReport, str | None, str | None]] = []
     portables: dict[str, Any] = {}
@@ -575,10 +576,11 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 report.runs[name] = MethodRun(name, report.name, "not applicable",
                                               reason.sentence, reason_code=reason.code)
                 continue
+            if name not in method_sources:  # its own files, read once a run
+                method_sources[name] = fingerprint + method_fingerprint(name)
             # the method at its defaults, then the cheap end of its quality ladder
             for knobs in [{}] + ladder_knobs(module, name):
-                key = _run_key(name, report.scene, knobs, fingerprint + method_fingerprint(name),
-                               versions)
+                key = _run_key(name, report.scene, knobs, method_sources[name], versions)
                 owner = name if not knobs else (LADDER, name)
                 stored = run_cache.load_pickle(key)
                 if isinstance(stored, MethodRun) and stored.status == "ok":

@@ -46,7 +46,7 @@ from ...errors import InputError, check_count
 from ..speedup import equal_error_seconds, path_tracing_point
 from . import at_width
 
-__all__ = ["LADDERS", "DEFAULT_SCENES", "add_arguments", "run", "sweep",
+__all__ = ["LADDERS", "DEFAULT_SCENES", "add_arguments", "declared_ladders", "run", "sweep",
            "path_tracing_point", "equal_error_seconds"]
 
 #: The scenes swept by default: between them every fast method applies to one.
@@ -166,11 +166,16 @@ def _task(kind: str, scene, *arguments):
 # ====================================================================== ladders
 
 
+def declared_ladders(module, name: str) -> dict[str, list[dict]] | None:
+    """Return a method's own quality ladders (its ``LADDERS``), else this bench's, else None."""
+    return getattr(module, "LADDERS", None) or LADDERS.get(name)
+
+
 def _ladders(module, name: str) -> tuple[dict[str, list[dict]], list[str]]:
     """Return the ladders of a method, restricted to its knobs, and notes on what was dropped."""
     defaults = getattr(module, "DEFAULT_KNOBS", {}) or {}
     notes = []
-    ladders = getattr(module, "LADDERS", None) or LADDERS.get(name)
+    ladders = declared_ladders(module, name)
     if ladders is None:
         ladders = {}
         for knob, default in defaults.items():
