@@ -29,6 +29,10 @@ ORPHAN_AGE_SECONDS = 600.0
 ORPHAN_NAME = re.compile(r"^\..+\.[A-Za-z0-9_]{8}\.(part(\.[A-Za-z0-9]+)?|old)$")
 
 
+#: Folders this process has swept already.
+_SWEPT: set[str] = set()
+
+
 def sweep_orphans(folder, *, older_than: float = ORPHAN_AGE_SECONDS) -> list[Path]:
     """Remove the temporaries that interrupted writes left in ``folder``; return them.
 
@@ -190,7 +194,9 @@ def atomic_path(target, suffix: str | None = None):
     # its own temporary file below is the test of writing there: no probe first
     target = _not_a_folder(target, "path", file=target)
     make_output_folder(target.parent, field="path", value=str(target), file=target)
-    sweep_orphans(target.parent)
+    if str(target.parent) not in _SWEPT:  # once a folder and process: orphans are old
+        _SWEPT.add(str(target.parent))
+        sweep_orphans(target.parent)
     suffix = target.suffix if suffix is None else suffix
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{suffix}",
