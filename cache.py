@@ -192,11 +192,13 @@ class Cache:
         if not path.is_file():
             return None
         try:
-            with open(path, "rb") as handle:
-                if not _authentic(handle):
+            with open(path, "rb") as handle, _byte_progress(
+                    f"reading the {self.folder.name} cache", 2 * path.stat().st_size) as bar:
+                counted = _Counted(handle, bar)
+                if not _authentic(counted):
                     _report_rejected(path)
                     return None
-                return pickle.load(handle)
+                return pickle.load(counted)
         except Exception:  # a stale entry of an older layout is a miss, not a crash
             return None
 
@@ -223,9 +225,10 @@ class Cache:
             return None
         path = self.path(key, ".pkl")
         try:
-            with atomic_path(path) as tmp, open(tmp, "w+b") as handle:
+            with atomic_path(path) as tmp, open(tmp, "w+b") as handle, _byte_progress(
+                    f"writing the {self.folder.name} cache", nbytes) as bar:
                 handle.write(PICKLE_MAGIC + bytes(hashlib.sha256().digest_size))
-                signer = _Signing(handle)
+                signer = _Signing(_Counted(handle, bar))
                 pickle.dump(value, signer, protocol=pickle.HIGHEST_PROTOCOL)
                 handle.seek(len(PICKLE_MAGIC))
                 handle.write(signer.mac.digest())
@@ -281,6 +284,44 @@ def _read_or_make_key(path: Path) -> bytes:
         return path.read_bytes()
     except OSError:
         return secrets.token_bytes(32)  # this process's own
+
+
+def _byte_progress(description: str, total: int | None):
+    """Return a progress bar over bytes, shown only once the transfer has taken a second."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=description, unit="B", unit_scale=True, leave=False,
+                delay=1.0, disable=None)
+
+
+class _Counted:
+    """A file wrapper that advances a byte progress bar as it is read or written."""
+
+    def __init__(self, handle, bar):
+        self.handle = handle
+        self.bar = bar
+
+    def read(self, size=-1):
+        data = self.handle.read(size)
+        self.bar.update(len(data))
+        return data
+
+    def readline(self, size=-1):
+        data = self.handle.readline(size)
+        self.bar.update(len(data))
+        return data
+
+    def readinto(self, buffer):
+        count = self.handle.readinto(buffer)
+        self.bar.update(count or 0)
+        return count
+
+    def write(self, data) -> int:
+        self.bar.update(memoryview(data).nbytes)  # pickle also writes PickleBuffers
+        return self.handle.write(data)
+
+    def seek(self, *args):
+        return self.handle.seek(*args)
 
 
 class _Signing:

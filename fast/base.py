@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+import weakref
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -42,7 +43,7 @@ from ..errors import InputError
 from ..image import Image
 from .registry import METHODS, method
 
-__all__ = ["METHODS", "PrecomputedState", "Refusal", "method", "refusal_of",
+__all__ = ["METHODS", "PrecomputedState", "Refusal", "applicability", "method", "refusal_of",
            "refuse_inapplicable", "StageLog", "StageProgress", "scored_object_names",
            "with_defaults"]
 
@@ -76,6 +77,49 @@ def refusal_of(reason) -> Refusal | None:
     if reason is None or isinstance(reason, Refusal):
         return reason
     return Refusal("other", str(reason))
+
+
+#: scene -> {applies_to function: its Refusal or None}; a scene is frozen, so its answer
+#: holds for as long as the scene object lives
+_APPLICABILITY: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_UNKNOWN = object()
+
+
+def applicability(applies_to, scene, known=_UNKNOWN) -> Refusal | None:
+    """Return ``applies_to(scene)`` as a :class:`Refusal` or None, evaluated once per scene.
+
+    The command line, the report and a method's own ``precompute`` all ask; the first
+    answer for a scene object is kept (scenes are immutable) and given to the others.
+
+    Parameters
+    ----------
+    applies_to : callable
+        A method's ``applies_to``.
+    scene : Scene
+    known : Refusal or None, optional
+        An answer already obtained for this scene elsewhere (the report plans in one
+        process and runs in another): kept instead of asking again.
+
+    Examples
+    --------
+    >>> calls = []
+    >>> def applies_to(scene):
+    ...     calls.append(scene)
+    ...     return None
+    >>> from translucent.scenes import load_scene
+    >>> scene = load_scene("sphere")
+    >>> applicability(applies_to, scene), applicability(applies_to, scene), len(calls)
+    (None, None, 1)
+    """
+    try:
+        answers = _APPLICABILITY.setdefault(scene, {})
+    except TypeError:  # an object that cannot be weakly referenced: ask every time
+        return refusal_of(applies_to(scene) if known is _UNKNOWN else known)
+    if known is not _UNKNOWN:
+        answers[applies_to] = refusal_of(known)
+    elif applies_to not in answers:
+        answers[applies_to] = refusal_of(applies_to(scene))
+    return answers[applies_to]
 
 
 class PrecomputedState(Protocol):
@@ -174,14 +218,15 @@ def with_defaults(knobs: dict, defaults: dict) -> dict:
     return {**defaults, **knobs}
 
 
-def refuse_inapplicable(scene, reason: str | None, sentence: str) -> None:
+def refuse_inapplicable(scene, reason: Refusal | str | None, sentence: str) -> None:
     """Refuse a scene for which a method's ``applies_to`` gave a reason; None returns.
 
     Parameters
     ----------
     scene : Scene
-    reason : str or None
-        What the method's ``applies_to(scene)`` returned.
+    reason : Refusal, str or None
+        What the method's ``applies_to(scene)`` returned (best through
+        :func:`applicability`, which asks once per scene).
     sentence : str
         The start of the message, naming the method ("the prt method cannot render this
         scene"); the reason follows it after a colon.

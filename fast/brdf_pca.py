@@ -84,7 +84,7 @@ from ..materials.brdfs import (
     uses_half_angle,
 )
 from ..materials.homogeneous import Lambertian
-from .base import refuse_inapplicable, with_defaults
+from .base import applicability, refuse_inapplicable
 from .brdf_pca_lighting import (
     check_lights,
     direct_samples,
@@ -100,9 +100,12 @@ from .brdf_pca_transfer import (
     sparse_to_scipy,
     truncate_rows,
 )
+from .knobs import Knob, KnobSpec
 
 __all__ = [
     "DEFAULT_KNOBS",
+    "KNOBS",
+    "LADDERS",
     "BRDFPCAState",
     "Precomputation",
     "add_approx_arguments",
@@ -116,38 +119,66 @@ __all__ = [
 #: Bumped when the stored precomputation changes meaning (cache key).
 FORMAT_VERSION = 3
 
-#: The knobs of :func:`precompute` and their defaults.
-DEFAULT_KNOBS = {
-    # gather samples: 16k in the paper's Cornell box, 64k elsewhere (Sect. 7.2); a power
-    # of 4 (they fill the square of the quadtree layout)
-    "gather_samples": 16384,
-    # one glossy gather sample to six diffuse ones (Sect. 5.1)
-    "glossy_ratio": 1.0 / 6.0,
-    # e of Eq. 16, "usually set to 200"
-    "glossy_exponent": 200.0,
-    # K, basis BRDFs besides the mean (6 in every scene of Table 5)
-    "n_basis": 6,
-    # n of Eq. 17: bounces among gather samples ("two-bounce diffuse" in Figs. 6, 7)
-    "bounces": 2,
-    # sub-area sampling (Sects. 3.2, 5.1): on/off, most points per disk, convergence
-    "subarea": True,
-    "subarea_max": 64,
-    "subarea_tolerance": 0.02,
-    # uniform surface samples per gather sample for the areas |A_g|
-    "area_samples_per_gather": 8,
+def _power_of_four(value: int) -> int:
+    if value & (value - 1) or int(round(math.log2(value))) % 2:
+        raise InputError("must be a power of 4 (the gather samples fill the square of the "
+                         "quadtree layout of Hasan et al. 2006): 256, 1024, 4096, 16384, "
+                         "65536, ...", field="gather_samples", value=value)
+    return value
+
+
+#: The knobs of :func:`precompute` (Nguyen et al. 2010): validation, cache key,
+#: ``translucent approx brdf_pca`` flags and the quality ladder all come from here.
+KNOBS = KnobSpec([
+    Knob("gather_samples", 16384, "gather samples: 16k in the paper's Cornell box, 64k "
+         "elsewhere (Sect. 7.2); a power of 4", kind="int", low=16, high=1 << 22,
+         check=_power_of_four),
+    Knob("glossy_ratio", 1.0 / 6.0, "glossy gather samples per diffuse one (Sect. 5.1)",
+         kind="float", low=0.0, high=1.0),
+    Knob("glossy_exponent", 200.0, "e of Eq. 16, 'usually set to 200'", kind="float",
+         low=1.0, high=1e5),
+    Knob("n_basis", 6, "K, basis BRDFs besides the mean (6 in every scene of Table 5)",
+         kind="int", low=1, high=32, flags=("--basis",)),
+    Knob("bounces", 2, "n of Eq. 17: bounces among gather samples", kind="int", low=0,
+         high=64),
+    Knob("subarea", True, "sub-area sampling (Sects. 3.2, 5.1)", kind="bool"),
+    Knob("subarea_max", 64, "most points per sub-area disk", kind="int", low=1, high=4096),
+    Knob("subarea_tolerance", 0.02, "convergence of the sub-area estimate", kind="float",
+         low=0.0, high=1.0),
+    Knob("area_samples_per_gather", 8, "uniform surface samples per gather sample for the "
+         "areas |A_g|", kind="int", low=1, high=256),
     # Haar coefficients kept per view-sample row of T (over all K + 1 bases), of D, per
     # gather-sample row of M_s, and per row of a frozen c^T T^w
-    "transfer_coefficients": 512,
-    "diffuse_coefficients": 96,
-    "gather_coefficients": 96,
-    "frozen_coefficients": 192,
-    # samples per area light for direct lighting
-    "light_samples": 16,
-    # (view sample, gather sample) pairs per block of the transfer computation: each block
-    # starts a few threaded kernels, which costs ~25 ms on a loaded machine
-    "block_pairs": 1 << 22,
-    "seed": 0,
-}
+    Knob("transfer_coefficients", 512, "Haar coefficients per view-sample row of T",
+         kind="int", low=1, high=1 << 20),
+    Knob("diffuse_coefficients", 96, "Haar coefficients per row of D", kind="int", low=1,
+         high=1 << 20),
+    Knob("gather_coefficients", 96, "Haar coefficients per gather-sample row of M_s",
+         kind="int", low=1, high=1 << 20),
+    Knob("frozen_coefficients", 192, "Haar coefficients per row of a frozen c^T T^w",
+         kind="int", low=1, high=1 << 20),
+    Knob("light_samples", 16, "samples per area light for direct lighting", kind="int",
+         low=1, high=4096),
+    # each block starts a few threaded kernels, which costs ~25 ms on a loaded machine
+    Knob("block_pairs", 1 << 22, "(view sample, gather sample) pairs per block of the "
+         "transfer computation", kind="int", low=1 << 10, high=1 << 26),
+    Knob("seed", 0, "random seed of the samples", kind="int", low=0, high=2**31 - 1),
+], ladders={
+    # gather samples (Sect. 5.1), PCA basis BRDFs (Sect. 4) and Haar coefficients kept per
+    # transfer row (Sect. 3.4)
+    "gather samples, PCA and wavelet terms": [
+        {"gather_samples": 1024, "n_basis": 1, "transfer_coefficients": 64},
+        {"gather_samples": 4096, "n_basis": 2, "transfer_coefficients": 128},
+        {"gather_samples": 4096, "n_basis": 4, "transfer_coefficients": 256},
+        {},
+    ],
+})
+
+#: The knobs of :func:`precompute` and their defaults.
+DEFAULT_KNOBS = KNOBS.defaults
+
+#: Quality ladders of ``bench tradeoff`` and the report.
+LADDERS = KNOBS.ladders
 
 #: Cheap knobs for smoke runs and the conformance checks (fast.conformance).
 QUICK_KNOBS = dict(gather_samples=256, bounces=1, transfer_coefficients=96,
@@ -180,42 +211,8 @@ def applies_to(scene) -> str | None:
     return None
 
 
-#: Integer knobs and their accepted ranges.
-_INTEGER_KNOBS = {"gather_samples": (16, 1 << 22), "n_basis": (1, 32), "bounces": (0, 64),
-                  "subarea_max": (1, 4096), "area_samples_per_gather": (1, 256),
-                  "transfer_coefficients": (1, 1 << 20), "diffuse_coefficients": (1, 1 << 20),
-                  "gather_coefficients": (1, 1 << 20), "frozen_coefficients": (1, 1 << 20),
-                  "light_samples": (1, 4096), "block_pairs": (1 << 10, 1 << 26),
-                  "seed": (0, 2**31 - 1)}
-
-#: Real knobs and their accepted ranges.
-_REAL_KNOBS = {"glossy_ratio": (0.0, 1.0), "glossy_exponent": (1.0, 1e5),
-               "subarea_tolerance": (0.0, 1.0)}
-
-
 def _resolve_knobs(knobs: dict) -> dict:
-    resolved = with_defaults(knobs, DEFAULT_KNOBS)
-    for name, (low, high) in _INTEGER_KNOBS.items():
-        value = resolved[name]
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer, float)) \
-                or int(value) != value or not low <= int(value) <= high:
-            raise InputError(f"must be an integer in [{low}, {high}]", field=name, value=value)
-        resolved[name] = int(value)
-    gathers = resolved["gather_samples"]
-    if gathers & (gathers - 1) or int(round(math.log2(gathers))) % 2:
-        raise InputError("must be a power of 4 (the gather samples fill the square of the "
-                         "quadtree layout of Hasan et al. 2006): 256, 1024, 4096, 16384, "
-                         "65536, ...", field="gather_samples", value=gathers)
-    for name, (low, high) in _REAL_KNOBS.items():
-        value = float(resolved[name])
-        if not (math.isfinite(value) and low <= value <= high):
-            raise InputError(f"must be in [{low:g}, {high:g}]", field=name,
-                             value=resolved[name])
-        resolved[name] = value
-    if not isinstance(resolved["subarea"], (bool, np.bool_)):
-        raise InputError("must be true or false", field="subarea", value=resolved["subarea"])
-    resolved["subarea"] = bool(resolved["subarea"])
-    return resolved
+    return KNOBS.resolve(knobs)
 
 
 def _structure_key(scene) -> list:
@@ -259,7 +256,8 @@ def precompute(scene, **knobs) -> BRDFPCAState:
     """
     from ..cache import Cache, content_hash
 
-    refuse_inapplicable(scene, applies_to(scene), "the BRDF-editing method does not apply")
+    refuse_inapplicable(scene, applicability(applies_to, scene),
+                        "the BRDF-editing method does not apply")
     resolved = _resolve_knobs(knobs)
     key = content_hash("brdf_pca", FORMAT_VERSION, scene.geometry_key(),
                        scene.camera.cache_key(), resolved, _structure_key(scene))
@@ -569,12 +567,7 @@ def add_approx_arguments(parser) -> None:
                         help="object whose gamma to set (default: the only glossy object)")
     parser.add_argument("--gamma", type=float, default=None,
                         help="editing parameter of --object, in its model's range")
-    parser.add_argument("--gather-samples", type=int, default=DEFAULT_KNOBS["gather_samples"])
-    parser.add_argument("--bounces", type=int, default=DEFAULT_KNOBS["bounces"],
-                        help="n of Eq. 17: bounces among gather samples")
-    parser.add_argument("--basis", type=int, default=DEFAULT_KNOBS["n_basis"],
-                        help="K, basis BRDFs besides the mean")
-    parser.add_argument("--no-subarea", action="store_true", help="switch sub-area sampling off")
+    KNOBS.add_arguments(parser)
 
 
 def approx(scene, args) -> Image:
@@ -595,8 +588,7 @@ def approx(scene, args) -> Image:
             raise InputError(f"not an object with an analytic BRDF; editable: "
                              f"{', '.join(glossy)}", field="object", value=name)
         scene.object(name).material.with_gamma(args.gamma)  # range-checked
-    state = precompute(scene, gather_samples=args.gather_samples, bounces=args.bounces,
-                       n_basis=args.basis, subarea=not args.no_subarea)
+    state = precompute(scene, **KNOBS.from_arguments(args))
     image = state.edit(name, args.gamma) if name is not None else state.render()
     for sentence in state.log.skipped:
         print(f"skipped: {sentence}")

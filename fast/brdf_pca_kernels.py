@@ -13,8 +13,9 @@ import numba
 import numpy as np
 
 from ..materials.brdfs import (
-    COSINE_FLOOR,
-    MODELS,
+    MODEL_CODES,
+    fixed_term_scalar,
+    pca_variable_scalar,
 )
 
 #: Sub-area samples are drawn in rounds of this many; convergence is judged between rounds.
@@ -24,9 +25,7 @@ SUBAREA_ROUND = 8
 #: resolve its peak; pairs whose disk subtends less than 1/16 of a lobe keep one point.
 SUBAREA_DENSITY = 16.0
 
-#: Model codes of the compiled kernels, in the order of :data:`MODELS`.
-MODEL_CODES = {name: code for code, name in enumerate(MODELS)}
-_BP, _W, _WD, _LA, _CT, _AS = range(6)
+_LA = MODEL_CODES["lafortune"]
 
 #: Roberts' R2 sequence (powers of the plastic number): a 2D low-discrepancy sequence whose
 #: every prefix is well spread, so sub-area points can be added until convergence. Each
@@ -41,37 +40,9 @@ _SQRT_HALF = math.sqrt(0.5)
 # compiled BRDF terms (the formulas of translucent.materials.brdfs, per pair)
 
 
-@numba.njit(cache=True, nogil=True)
-def _fixed_scalar(model, cos_l, cos_v, l_dot_v, f0):  # pragma: no cover - compiled
-    """:func:`translucent.materials.brdfs.fixed_term` for one pair (Table 4)."""
-    if model == _BP or model == _LA:
-        return 1.0
-    nl = max(cos_l, COSINE_FLOOR)
-    nv = max(cos_v, COSINE_FLOOR)
-    if model == _W:
-        return 1.0 / math.sqrt(nl * nv)
-    if model == _WD:
-        return 1.0 / (nl * nv)
-    length = math.sqrt(max(2.0 + 2.0 * l_dot_v, COSINE_FLOOR * COSINE_FLOOR))
-    v_dot_h = max(0.5 * length, COSINE_FLOOR)
-    one_minus = 1.0 - min(max(v_dot_h, 0.0), 1.0)
-    fresnel = f0 + (1.0 - f0) * (one_minus * one_minus) * (one_minus * one_minus) * one_minus
-    if model == _AS:
-        return fresnel / (v_dot_h * max(nl, nv))
-    n_dot_h = max((nl + nv) / length, COSINE_FLOOR)
-    shadowing = min(1.0, min(2.0 * n_dot_h * nv / v_dot_h, 2.0 * n_dot_h * nl / v_dot_h))
-    cos4 = (n_dot_h * n_dot_h) * (n_dot_h * n_dot_h)
-    return shadowing * fresnel / ((nl * nv) * cos4)
-
-
-@numba.njit(cache=True, nogil=True)
-def _variable_scalar(model, cos_l, cos_v, l_dot_v, c_xy, c_z):  # pragma: no cover
-    """:func:`translucent.materials.brdfs.pca_variable` for one pair."""
-    if model == _LA:
-        product = cos_l * cos_v
-        return (c_xy * (l_dot_v - product) + c_z * product) / max(abs(c_xy), abs(c_z))
-    length = math.sqrt(max(2.0 + 2.0 * l_dot_v, COSINE_FLOOR * COSINE_FLOOR))
-    return min(max((cos_l + cos_v) / length, 0.0), 1.0)
+#: The per-pair terms, compiled from the very functions of materials.brdfs.
+_fixed_scalar = numba.njit(cache=True, nogil=True)(fixed_term_scalar)
+_variable_scalar = numba.njit(cache=True, nogil=True)(pca_variable_scalar)
 
 
 @numba.njit(cache=True, nogil=True)

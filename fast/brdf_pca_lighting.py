@@ -11,15 +11,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ..scenes.scene import (
-    ConstantEnvironment,
-    DirectionalLight,
-    ImageEnvironment,
-    PointLight,
-    RectangularAreaLight,
-    SphereAreaLight,
-    SpotLight,
-)
+from ..scenes.lighting import ENVIRONMENT_LIGHTS, SAMPLED_LIGHTS, light_samples, tangent_frames
 from .brdf_pca_kernels import (
     front_counts,
     front_rays,
@@ -33,14 +25,6 @@ def oriented_normals(normals, towards):
     """Flip unit normals to the side of the unit vectors ``towards``."""
     side = np.where(np.einsum("...d,...d->...", normals, towards) < 0, -1.0, 1.0)
     return normals * side[..., None]
-
-
-def tangent_frames(normals):
-    """Return two unit tangents orthogonal to each normal and to each other."""
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    first = np.cross(normals, helper)
-    first /= np.linalg.norm(first, axis=1, keepdims=True)
-    return first, np.cross(normals, first)
 
 
 def hemisphere_directions(normals, rng, exponent=None, axes=None):
@@ -96,36 +80,13 @@ def pair_visibility(engine, offset, x, n_x, positions, normals):
 def check_lights(lights) -> None:
     """Refuse the lights the method does not take (environments), naming each."""
     for index, light in enumerate(lights):
-        if isinstance(light, (ConstantEnvironment, ImageEnvironment)):
+        if isinstance(light, ENVIRONMENT_LIGHTS):
             raise InputError("environment lights are not supported by the BRDF-editing method "
                              "(point, spot, directional, rect and sphere lights are)",
                              field=f"lights[{index}]", value=type(light).__name__)
-        if not isinstance(light, (PointLight, SpotLight, DirectionalLight,
-                                  RectangularAreaLight, SphereAreaLight)):
+        if not isinstance(light, SAMPLED_LIGHTS):
             raise InputError("unknown light type", field=f"lights[{index}]",
                              value=type(light).__name__)
-
-
-def _emitter_points(light, count: int, rng):
-    """Return fixed sample points of a light: positions, RGB weights, emitter normals."""
-    if isinstance(light, (PointLight, SpotLight)):
-        return light.position[None], light.intensity[None], None
-    if isinstance(light, RectangularAreaLight):
-        side = int(math.ceil(math.sqrt(count)))
-        cells = np.arange(side * side)[:count]
-        u = (cells % side + rng.random(count)) / side * 2.0 - 1.0
-        v = (cells // side + rng.random(count)) / side * 2.0 - 1.0
-        positions = light.center + u[:, None] * light.u_axis + v[:, None] * light.v_axis
-        weights = np.broadcast_to(light.radiance * light.area / count, (count, 3))
-        return positions, weights, np.broadcast_to(light.normal, (count, 3))
-    # sphere: stratified uniform points on the surface, each 1/count of its area
-    z = 1.0 - 2.0 * (np.arange(count) + rng.random(count)) / count
-    phi = 2.0 * math.pi * rng.random(count)
-    radial = np.sqrt(np.clip(1.0 - z**2, 0.0, None))
-    outward = np.stack([radial * np.cos(phi), radial * np.sin(phi), z], axis=1)
-    weights = np.broadcast_to(light.radiance * 4.0 * math.pi * light.radius**2 / count,
-                              (count, 3))
-    return light.center + light.radius * outward, weights, outward
 
 
 def _shadowed(engine, offset, points, normals, wi, reach, lit) -> np.ndarray:
@@ -133,10 +94,9 @@ def _shadowed(engine, offset, points, normals, wi, reach, lit) -> np.ndarray:
     origins = (points[rows] + offset * normals[rows]).T.astype(np.float32)
     blocked = np.zeros(len(points), dtype=bool)
     if len(rows):
-        limit = np.maximum(reach[rows] - offset, 0.0) if np.ndim(reach) else \
-            np.full(len(rows), np.float32(np.finfo(np.float32).max))
+        limit = np.minimum(np.maximum(reach[rows] - offset, 0.0), np.finfo(np.float32).max)
         blocked[rows] = occluded_rays(engine, origins, wi[rows].T.astype(np.float32),
-                                  limit.astype(np.float32))
+                                      limit.astype(np.float32))
     return blocked
 
 
@@ -145,33 +105,21 @@ def direct_samples(scene, lights, points, normals, samples: int, seed: int):
 
     Returns ``(wi, irradiance)`` of shapes (N, S, 3): the reflected radiance towards
     :math:`\omega_o` is :math:`\sum_s f(\omega_{i,s}, \omega_o) E_s`, shadows included.
-    Point, spot (Mitsuba's linear falloff) and directional lights are exact; rectangles
-    and spheres use ``samples`` fixed stratified points each.
+    The samples are :func:`translucent.scenes.lighting.light_samples`'s: point, spot and
+    directional lights exact, rectangles and spheres ``samples`` stratified samples each.
     """
     engine, offset = scene_ray_engine(scene)
     rng = np.random.default_rng(seed)
     directions, irradiance = [], []
     for light in lights:
-        if isinstance(light, DirectionalLight):
-            wi = np.ascontiguousarray(np.broadcast_to(-light.direction, points.shape))
-            strength = np.clip(normals @ -light.direction, 0.0, None)
-            strength[_shadowed(engine, offset, points, normals, wi, np.inf, strength > 0)] = 0
+        for sample in light_samples(light, points, count=samples, rng=rng, normals=normals):
+            wi = np.ascontiguousarray(sample.direction)
+            strength = np.clip(np.einsum("ij,ij->i", normals, wi), 0.0, None)
+            brought = strength[:, None] * sample.irradiance
+            lit = brought.max(axis=1) > 0
+            brought[_shadowed(engine, offset, points, normals, wi, sample.distance, lit)] = 0
             directions.append(wi[:, None])
-            irradiance.append((strength[:, None] * light.irradiance)[:, None])
-            continue
-        positions, weights, emitter_normals = _emitter_points(light, samples, rng)
-        for k, position in enumerate(positions):
-            to_light = position - points
-            distance = np.sqrt(np.maximum(np.einsum("ij,ij->i", to_light, to_light), 1e-300))
-            wi = to_light / distance[:, None]
-            strength = np.clip(np.einsum("ij,ij->i", normals, wi), 0.0, None) / distance**2
-            if emitter_normals is not None:
-                strength = strength * np.clip(-(wi @ emitter_normals[k]), 0.0, None)
-            if isinstance(light, SpotLight):
-                strength = strength * light.falloff(-wi)
-            strength[_shadowed(engine, offset, points, normals, wi, distance, strength > 0)] = 0
-            directions.append(wi[:, None])
-            irradiance.append((strength[:, None] * weights[k])[:, None])
+            irradiance.append(brought[:, None])
     if not directions:
         empty = np.zeros((len(points), 0, 3))
         return empty, empty

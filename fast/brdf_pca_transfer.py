@@ -17,14 +17,15 @@ from ..errors import InputError
 from ..materials.brdf_pca import PCABasis, build_pca_basis
 from ..materials.brdfs import (
     GAMMA_RANGES,
+    MODEL_CODES,
     AnalyticBRDF,
     edited_term,
     uses_half_angle,
 )
 from ..materials.homogeneous import Lambertian
+from ..scenes.lighting import tangent_frames
 from .base import StageLog, StageProgress
 from .brdf_pca_kernels import (
-    MODEL_CODES,
     disk_estimate,
     transfer_rows,
 )
@@ -34,7 +35,6 @@ from .brdf_pca_lighting import (
     oriented_normals,
     pair_visibility,
     scene_ray_engine,
-    tangent_frames,
 )
 from .sparse_transport import QuantisedRows, SparseRows, nonlinear_approximation, product_rgb
 from .wavelets import haar2d_forward, haar2d_support_weights, quadtree_layout

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..image import Image
-from .base import refusal_of, scored_object_names
+from .base import applicability, scored_object_names
 from .registry import contract_problems, method
 
 __all__ = ["CHECKS", "ConformanceFailure", "IMAGE_RTOL", "NotChecked", "TINY_SPHERE",
@@ -128,7 +128,7 @@ def conformance_scene(module, scenes=SCENES, width: int = WIDTH):
     reasons = []
     for name in scenes:
         scene = loads_scene(TINY_SPHERE) if name == "conformance_sphere" else load_scene(name)
-        reason = refusal_of(module.applies_to(scene))
+        reason = applicability(module.applies_to, scene)
         if reason is None:
             camera = scene.camera
             height = max(1, round(width * camera.height / camera.width))
@@ -275,8 +275,9 @@ def check_editing(module, scene, knobs) -> str:
     state = None
     for chosen, material, argument in _edit_candidates(module, scene):
         edited_scene = scene.with_material(chosen, material)
-        if refusal_of(module.applies_to(edited_scene)) is not None:
-            refused.append(f"{chosen}: {refusal_of(module.applies_to(edited_scene))}")
+        reason = applicability(module.applies_to, edited_scene)
+        if reason is not None:
+            refused.append(f"{chosen}: {reason}")
             continue
         state = state or _precompute(module, scene, knobs)
         _pixels(state.render(), scene, "render()")

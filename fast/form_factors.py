@@ -24,6 +24,7 @@ import numpy as np
 from scipy import sparse
 
 from ..errors import InputError
+from ..scenes.lighting import stratified_cosine_directions
 from .optical_distance import is_convex
 
 __all__ = [
@@ -351,30 +352,6 @@ def needs_form_factors(scene) -> str | None:
             return (f"no form factors: the scene is one convex object ('{scene.objects[0].name}')"
                     ", no patch sees another (F = 0, B = SE)")
     return None
-
-
-def stratified_cosine_directions(normals, count: int, rng) -> np.ndarray:
-    """``count`` cosine-distributed unit directions about each normal, stratified.
-
-    Malley's method on a jittered ``sqrt(count)`` x ``sqrt(count)`` grid of the unit disc
-    (rounded up), so that the estimate of the form factors converges faster than with
-    independent rays. Shape (len(normals), count, 3).
-    """
-    normals = np.asarray(normals, dtype=np.float64)
-    side = int(np.ceil(np.sqrt(count)))
-    cells = np.arange(side * side)[:count]
-    u = (cells % side + rng.random((len(normals), count))) / side
-    v = (cells // side + rng.random((len(normals), count))) / side
-    radius = np.sqrt(u)
-    phi = 2.0 * np.pi * v
-    local = np.stack([radius * np.cos(phi), radius * np.sin(phi),
-                      np.sqrt(np.clip(1.0 - u, 0.0, 1.0))], axis=-1)
-    helper = np.where(np.abs(normals[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
-    tangent = np.cross(helper, normals)
-    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
-    bitangent = np.cross(normals, tangent)
-    return (local[..., :1] * tangent[:, None] + local[..., 1:2] * bitangent[:, None]
-            + local[..., 2:] * normals[:, None])
 
 
 def form_factors(scene, patches: Patches, *, rays_per_patch: int = 256,

@@ -61,6 +61,8 @@ REQUIRED = {"applies_to": "a function applies_to(scene) returning None or a reas
 OPTIONAL = {"scored_objects": "a function scored_objects(scene) -> list of object names",
             "QUICK_KNOBS": "a dict of cheap knobs for smoke runs and the conformance checks",
             "LADDERS": "a dict of ladder name -> list of knob dicts for `bench tradeoff`",
+            "KNOBS": "a translucent.fast.knobs.KnobSpec declaring the knobs (validation, "
+                     "flags, cache key, ladders)",
             "approx": "a function approx(scene, args) -> Image for `translucent approx`",
             "add_approx_arguments": "a function add_approx_arguments(parser)"}
 
@@ -92,6 +94,15 @@ def contract_problems(target) -> list[str]:
             problems.append(f"{name}: not a dict with str keys ({(REQUIRED | OPTIONAL)[name]})")
     quick = getattr(target, "QUICK_KNOBS", {})
     defaults = getattr(target, "DEFAULT_KNOBS", {})
+    if hasattr(target, "KNOBS"):
+        from .knobs import KnobSpec
+
+        spec = target.KNOBS
+        if not isinstance(spec, KnobSpec):
+            problems.append(f"KNOBS: not a KnobSpec ({OPTIONAL['KNOBS']})")
+        elif isinstance(defaults, dict) and spec.defaults != defaults:
+            problems.append("KNOBS: its defaults differ from DEFAULT_KNOBS (derive one from "
+                            "the other: DEFAULT_KNOBS = KNOBS.defaults)")
     if isinstance(quick, dict) and isinstance(defaults, dict):
         unknown = sorted(set(quick) - set(defaults))
         if unknown:

@@ -72,6 +72,7 @@ from .homogeneous import rgb_field
 __all__ = [
     "MODELS",
     "MODEL_ALIASES",
+    "MODEL_CODES",
     "GAMMA_RANGES",
     "COSINE_FLOOR",
     "NUMPY_OPS",
@@ -80,8 +81,10 @@ __all__ = [
     "check_gamma",
     "edited_term",
     "fixed_term",
+    "fixed_term_scalar",
     "lobe_terms",
     "pca_variable",
+    "pca_variable_scalar",
     "pca_variable_range",
     "schlick_fresnel",
     "uses_half_angle",
@@ -305,6 +308,51 @@ def pca_variable(model: str, cos_l, cos_v, l_dot_v, ops=NUMPY_OPS, *, lafortune_
         return (c_xy * (l_dot_v - product) + c_z * product) / scale
     length = ops.sqrt(ops.maximum(2.0 + 2.0 * l_dot_v, COSINE_FLOOR * COSINE_FLOOR))
     return ops.minimum(ops.maximum((cos_l + cos_v) / length, 0.0), 1.0)
+
+
+#: Model codes of compiled kernels, in the order of :data:`MODELS`.
+MODEL_CODES = {name: code for code, name in enumerate(MODELS)}
+_BP, _W, _WD, _LA, _CT, _AS = range(6)
+
+
+def fixed_term_scalar(code: int, cos_l: float, cos_v: float, l_dot_v: float,
+                      f0: float) -> float:
+    """:func:`fixed_term` for one direction pair, in plain arithmetic (Table 4).
+
+    ``code`` is the model's :data:`MODEL_CODES` entry. Written so that compiled kernels
+    take this very function (``numba.njit(fixed_term_scalar)`` in
+    :mod:`translucent.fast.brdf_pca_kernels`) instead of a copy of the formulas; tested
+    equal to the array version.
+    """
+    if code == _BP or code == _LA:
+        return 1.0
+    nl = max(cos_l, COSINE_FLOOR)
+    nv = max(cos_v, COSINE_FLOOR)
+    if code == _W:
+        return 1.0 / math.sqrt(nl * nv)
+    if code == _WD:
+        return 1.0 / (nl * nv)
+    length = math.sqrt(max(2.0 + 2.0 * l_dot_v, COSINE_FLOOR * COSINE_FLOOR))
+    v_dot_h = max(0.5 * length, COSINE_FLOOR)
+    one_minus = 1.0 - min(max(v_dot_h, 0.0), 1.0)
+    squared = one_minus * one_minus
+    fresnel = f0 + (1.0 - f0) * (squared * squared * one_minus)  # schlick_fresnel's order
+    if code == _AS:
+        return fresnel / (v_dot_h * max(nl, nv))
+    n_dot_h = max((nl + nv) / length, COSINE_FLOOR)
+    shadowing = min(1.0, min(2.0 * n_dot_h * nv / v_dot_h, 2.0 * n_dot_h * nl / v_dot_h))
+    cos4 = (n_dot_h * n_dot_h) * (n_dot_h * n_dot_h)
+    return shadowing * fresnel / ((nl * nv) * cos4)
+
+
+def pca_variable_scalar(code: int, cos_l: float, cos_v: float, l_dot_v: float, c_xy: float,
+                        c_z: float) -> float:
+    """:func:`pca_variable` for one direction pair, in plain arithmetic (compiled as above)."""
+    if code == _LA:
+        product = cos_l * cos_v
+        return (c_xy * (l_dot_v - product) + c_z * product) / max(abs(c_xy), abs(c_z))
+    length = math.sqrt(max(2.0 + 2.0 * l_dot_v, COSINE_FLOOR * COSINE_FLOOR))
+    return min(max((cos_l + cos_v) / length, 0.0), 1.0)
 
 
 def lobe_terms(model: str, gamma, cos_l, cos_v, l_dot_v, ops=NUMPY_OPS, *, f0=1.0,

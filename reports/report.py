@@ -134,8 +134,9 @@ RUN_FORMAT = 2
 REPORT_RELIGHT_FRAMES = 3
 
 #: Points of each method's quality ladder the report runs besides its defaults: the
-#: cheapest settings of its first ladder (``LADDERS`` of the method, else of ``bench
-#: tradeoff``), so that the plot shows which way, and how fast, the error falls with cost.
+#: cheapest settings of its first ladder (the method's ``LADDERS`` or knob spec:
+#: :func:`~translucent.reports.bench.tradeoff.declared_ladders`), so that the plot shows
+#: which way, and how fast, the error falls with cost.
 #: One point keeps a fresh report within 5 minutes on the 2-core machine (docs/report.md).
 REPORT_LADDER_POINTS = 1
 
@@ -482,8 +483,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     from tqdm.auto import tqdm
 
     from ..cache import Cache, content_hash, limited_entries
+    from ..fast.base import applicability
     from ..fast.base import method as method_module
-    from ..fast.base import refusal_of
     from ..fast.registry import MethodContractError, method_fingerprint
     from ..scenes import Scene, load_scene
     from .distributed import run_tasks
@@ -567,7 +568,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 report.runs[name] = MethodRun(name, report.name, "not built", error.reason)
                 continue
             try:
-                reason = refusal_of(module.applies_to(report.scene))
+                reason = applicability(module.applies_to, report.scene)
             except Exception as error:  # the method's own check failed: show it
                 report.runs[name] = MethodRun(name, report.name, "failed",
                                               f"applies_to: {type(error).__name__}: {error}")

@@ -134,7 +134,7 @@ def _quiet_knobs(module, knobs: dict) -> dict:
 
 
 def run_method(method_name: str, scene, knobs: dict | None = None, *,
-               cold: bool = False, relight_frames: int = 0) -> MethodRun:
+               cold: bool = False, relight_frames: int = 0, applies: bool = False) -> MethodRun:
     """Precompute and render ``scene`` with a fast method, timing both; never raises.
 
     Parameters
@@ -155,6 +155,10 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
         ``frame_seconds`` is then their median and ``first_frame_seconds`` the first
         frame's, which can include first-call costs (compiled kernels loading). 0:
         ``frame_seconds`` is the first frame. The image kept is the first frame's.
+    applies : bool
+        The caller has asked the method's ``applies_to`` already (in this process or
+        another) and it applies: the answer is passed on, not asked again
+        (:func:`translucent.fast.base.applicability`).
 
     Returns
     -------
@@ -162,7 +166,7 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
         Status "ok" with the image, "not built", "not applicable" (with the method's
         reason) or "failed" (with the error and its traceback).
     """
-    from ..fast.base import method, refusal_of
+    from ..fast.base import applicability, method
     from ..fast.registry import MethodContractError
 
     knobs = dict(knobs or {})
@@ -175,7 +179,7 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
     except InputError as error:
         return MethodRun(status="not built", reason=error.reason, **base)
     try:
-        reason = refusal_of(module.applies_to(scene))
+        reason = applicability(module.applies_to, scene, *([None] if applies else []))
         if reason is not None:
             return MethodRun(status="not applicable", reason=reason.sentence,
                              reason_code=reason.code, **base)
@@ -284,8 +288,9 @@ def report_task(kind: str, scene, *arguments):
         from .speedup import path_tracing_ladder
 
         return path_tracing_ladder(scene, *arguments)
-    name, knobs, *relight = arguments
-    return run_method(name, scene, knobs, relight_frames=relight[0] if relight else 0)
+    name, knobs, relight_frames = arguments
+    # the report asked applies_to when it planned the task
+    return run_method(name, scene, knobs, relight_frames=relight_frames, applies=True)
 
 
 def portable_scene(scene, scene_hash: str, local_workers: bool):

@@ -128,3 +128,19 @@ def test_the_import_graph_has_no_cycle():
         if node not in state:
             visit(node, [node])
     assert not cycles, cycles[:5]
+
+
+#: A file longer than this holds two concepts: split it (tests too).
+MOST_LINES = 900
+
+
+def test_no_file_holds_two_concepts():
+    long = {}
+    for path in ROOT.rglob("*.py"):
+        parts = path.relative_to(ROOT).parts
+        if "build" in parts or any(p.startswith(".") for p in parts):
+            continue
+        lines = len(path.read_text(encoding="utf-8").splitlines())
+        if lines > MOST_LINES:
+            long[str(path.relative_to(ROOT))] = lines
+    assert not long, f"over {MOST_LINES} lines: {long}"

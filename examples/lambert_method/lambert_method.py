@@ -15,13 +15,16 @@ from __future__ import annotations
 
 import numpy as np
 from translucent.errors import InputError
-from translucent.fast.base import Refusal, StageLog, with_defaults
+from translucent.fast.base import Refusal, StageLog, applicability
+from translucent.fast.knobs import Knob, KnobSpec
 from translucent.image import Image
 from translucent.materials import Dipole, Lambertian
 from translucent.scenes import PointLight, gbuffer, visible
 
-#: The knobs: whether shadow rays are cast.
-DEFAULT_KNOBS = {"shadows": True}
+#: The knobs, declared once: checks, `translucent approx lambert` flags and cache keys
+#: all follow from it.
+KNOBS = KnobSpec([Knob("shadows", True, "cast shadow rays to the lights", kind="bool")])
+DEFAULT_KNOBS = KNOBS.defaults
 
 #: Cheap knobs for smoke runs: the defaults are already cheap.
 QUICK_KNOBS = {"shadows": True}
@@ -99,10 +102,8 @@ class LambertState:
 
 def precompute(scene, **knobs) -> LambertState:
     """Cast the camera's rays once (the only step that does not change with lights)."""
-    resolved = with_defaults(knobs, DEFAULT_KNOBS)
-    if not isinstance(resolved["shadows"], bool):
-        raise InputError("must be true or false", field="shadows", value=resolved["shadows"])
-    reason = applies_to(scene)
+    resolved = KNOBS.resolve(knobs)
+    reason = applicability(applies_to, scene)  # asked once per scene, however many ask
     if reason is not None:
         raise InputError(f"the lambert method does not apply: {reason}", field="scene",
                          value=scene.name)

@@ -58,6 +58,8 @@ from .knobs import (
     ENERGY_BLEND_END,
     ENERGY_BLEND_START,
     FRESNEL_RANK,
+    KNOBS,
+    LADDERS,
     LOCAL_BLEND_END,
     LOCAL_BLEND_START,
     LOCAL_KERNEL_WIDTH,
@@ -82,6 +84,8 @@ from .transfer import IlluminationSamples, ObjectTransfer, illumination_samples
 
 __all__ = [
     "DEFAULT_KNOBS",
+    "KNOBS",
+    "LADDERS",
     "QUICK_KNOBS",
     "applies_to",
     "scored_objects",

@@ -4,70 +4,97 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from ...errors import InputError
 from ...materials.dipole_pca import (
     PARAMETERISATIONS,
     DipolePCABasis,
     dipole_pca_basis,
 )
-from ..base import with_defaults
-from ..sparse_transport import (
-    check_approximation,
-)
+from ..knobs import Knob, KnobSpec
+
+
+def _quadtree(knobs: dict) -> None:
+    quadtree_level(knobs["samples"], knobs["parts"])
+
+
+def _power_of_two(value: int) -> int:
+    if value & (value - 1):
+        raise InputError("must be a power of two", field="environment_resolution", value=value)
+    return value
+
+
+#: The knobs of :func:`precompute` (Wang et al. 2008): validation, cache key,
+#: ``translucent approx prt`` flags and the quality ladder all come from here.
+KNOBS = KnobSpec([
+    Knob("samples", 16384, "illumination samples per translucent object: parts x 4^n",
+         kind="int", low=1, high=1 << 18),
+    Knob("parts", 4, "quadtree parts m of the illumination samples", kind="int", low=1,
+         high=4096),
+    Knob("basis", "area_normalised", "R_d basis parameterisation (materials.dipole_pca)",
+         kind="choice", choices=tuple(PARAMETERISATIONS)),
+    Knob("basis_terms", 12, "K, PCA terms of R_d", kind="int", low=1, high=32),
+    Knob("basis_eta", 1.3, "the eta the basis samples", kind="float", low=1.0, high=3.0),
+    # pass 1: Haar coefficients kept per transfer row
+    Knob("energy", 0.9999, "energy fraction kept per transfer row", kind="float",
+         positive=True, high=1.0),
+    Knob("terms", 256, "Haar terms kept per transfer row", kind="int", low=1, high=1 << 18),
+    Knob("selection", "magnitude", "rank the basis rows' coefficients by magnitude (the "
+         "paper) or by magnitude x sqrt(support)", kind="choice",
+         choices=("magnitude", "support")),
+    Knob("layout", "shared", "first pass storage: the K + 1 rows of a vertex share their "
+         "columns, or each row its own (the paper's)", kind="choice",
+         choices=("shared", "rows")),
+    # pass 2: CDF 9/7 spatial compression
+    Knob("spatial", "auto", "CDF 9/7 spatial compression: auto (geometry images above "
+         "spatial_min_vertices), on or off", kind="choice", choices=("auto", "on", "off")),
+    Knob("spatial_min_vertices", 20000, "vertices above which auto compresses", kind="int",
+         low=0, high=10**9),
+    Knob("spatial_first_terms", 1024, "terms per row kept for the spatial pass", kind="int",
+         low=1, high=1 << 18),
+    Knob("spatial_energy", 0.999, "energy fraction kept by the spatial pass", kind="float",
+         positive=True, high=1.0),
+    Knob("spatial_terms", 256, "terms per row after the spatial pass", kind="int", low=1,
+         high=1 << 18),
+    # environment lighting
+    Knob("environment_resolution", 16, "visibility directions res x 2 res (a power of two)",
+         kind="int", low=2, high=256, check=_power_of_two),
+    Knob("environment_terms", 64, "environment terms kept per sample", kind="int", low=1,
+         high=1 << 17),
+    Knob("area_light_samples", 16, "samples per area light (shadow rays per sample)",
+         kind="int", low=1, high=4096),
+    Knob("seed", 0, "random seed of the samples", kind="int", low=0, high=2**32 - 1),
+    # rendering only: profiles the illumination samples cannot resolve go to the local
+    # vector (SAMPLING_BLEND_START); False: Eq. 5-7 as the paper sums them
+    Knob("sampling_blend", True, "blend profiles the samples cannot resolve into the local "
+         "vector", kind="bool", keyed=False),
+    # how, not what
+    Knob("workers", 2, "threads of the transfer computation", kind="int", low=1, high=256,
+         keyed=False),
+    Knob("progress", True, "a progress bar on a terminal", check=bool, keyed=False),
+], checks=[_quadtree], ladders={
+    # illumination samples (parts x 4^n), PCA terms of the profile basis (Eq. 4) and Haar
+    # terms kept per transfer row (Eq. 8)
+    "samples, PCA and wavelet terms": [
+        {"samples": 1024, "basis_terms": 4, "terms": 32},
+        {"samples": 4096, "basis_terms": 8, "terms": 64},
+        {"samples": 16384, "basis_terms": 8, "terms": 128},
+        {},
+    ],
+})
 
 #: Knobs of :func:`precompute` and their defaults.
-DEFAULT_KNOBS: dict = {
-    # illumination samples per translucent object: parts x 4^n
-    "samples": 16384,
-    "parts": 4,
-    # the R_d basis (materials.dipole_pca): parameterisation, K, and the eta it samples
-    "basis": "area_normalised",
-    "basis_terms": 12,
-    "basis_eta": 1.3,
-    # pass 1: Haar coefficients kept per transfer row (energy fraction, term budget)
-    "energy": 0.9999,
-    "terms": 256,
-    # rank the coefficients of the basis rows by magnitude (the paper) or by magnitude x
-    # sqrt(support) (the local kernel row is always ranked by support)
-    "selection": "magnitude",
-    # storage of the first pass: "shared" (the K + 1 rows of a vertex keep the union of
-    # their kept columns, so a relighting product gathers each column once) or "rows" (each
-    # row its own columns, the paper's layout; always so after the spatial pass)
-    "layout": "shared",
-    # pass 2: CDF 9/7 spatial compression: "auto" (geometry images above
-    # spatial_min_vertices), "on" (any geometry image) or "off"
-    "spatial": "auto",
-    "spatial_min_vertices": 20000,
-    "spatial_first_terms": 1024,
-    "spatial_energy": 0.999,
-    "spatial_terms": 256,
-    # environment lighting: visibility directions (res x 2 res) and terms kept per sample
-    "environment_resolution": 16,
-    "environment_terms": 64,
-    # shadow rays per area light and sample
-    "area_light_samples": 16,
-    "seed": 0,
-    # blend profiles the illumination samples cannot resolve into the local vector
-    # (SAMPLING_BLEND_START; rendering only, not part of the cache key); False: Eq. 5-7 as
-    # the paper sums them, whatever the sample spacing
-    "sampling_blend": True,
-    # execution only (not part of the cache key)
-    "workers": 2,
-    "progress": True,
-}
+DEFAULT_KNOBS: dict = KNOBS.defaults
+
+#: Quality ladders of ``bench tradeoff`` and the report.
+LADDERS: dict = KNOBS.ladders
 
 #: Cheap knobs for smoke runs and the conformance checks (fast.conformance): 256
 #: illumination samples (4 parts x 8 x 8) on one core.
 QUICK_KNOBS: dict = {"samples": 256, "workers": 1}
 
-#: Knobs that change how, not what, is computed: left out of the cache key.
-EXECUTION_KNOBS = ("workers", "progress")
-
-#: Knobs read when rendering, not when precomputing: left out of the cache key too.
-RENDER_KNOBS = ("sampling_blend",)
-UNKEYED_KNOBS = EXECUTION_KNOBS + RENDER_KNOBS
+#: Knobs read when rendering, or that change how and not what is computed: left out of
+#: the cache key.
+UNKEYED_KNOBS = KNOBS.unkeyed
 
 #: Bump when the precomputed data change meaning, so that old cache entries miss.
 PRT_VERSION = 7
@@ -134,47 +161,7 @@ FRESNEL_RANK = 4
 
 def check_knobs(knobs: dict) -> dict:
     """Return ``knobs`` merged with :data:`DEFAULT_KNOBS`, each checked (InputError naming it)."""
-    merged = with_defaults(knobs, DEFAULT_KNOBS)
-    integers = {"samples": (1, 1 << 18), "parts": (1, 4096), "basis_terms": (1, 32),
-                "terms": (1, 1 << 18), "spatial_min_vertices": (0, 10**9),
-                "spatial_first_terms": (1, 1 << 18), "spatial_terms": (1, 1 << 18),
-                "environment_resolution": (2, 256), "environment_terms": (1, 1 << 17),
-                "area_light_samples": (1, 4096), "seed": (0, 2**32 - 1), "workers": (1, 256)}
-    for name, (low, high) in integers.items():
-        value = merged[name]
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
-                or not low <= value <= high:
-            raise InputError(f"must be an integer in [{low}, {high}]", field=name, value=value)
-        merged[name] = int(value)
-    quadtree_level(merged["samples"], merged["parts"])
-    resolution = merged["environment_resolution"]
-    if resolution & (resolution - 1):
-        raise InputError("must be a power of two", field="environment_resolution",
-                         value=resolution)
-    if merged["basis"] not in PARAMETERISATIONS:
-        raise InputError(f"unknown basis; valid: {', '.join(PARAMETERISATIONS)}",
-                         field="basis", value=merged["basis"])
-    if merged["layout"] not in ("shared", "rows"):
-        raise InputError("must be 'shared' or 'rows'", field="layout", value=merged["layout"])
-    if merged["selection"] not in ("magnitude", "support"):
-        raise InputError("must be 'magnitude' or 'support'", field="selection",
-                         value=merged["selection"])
-    if merged["spatial"] not in ("auto", "on", "off"):
-        raise InputError("must be 'auto', 'on' or 'off'", field="spatial",
-                         value=merged["spatial"])
-    merged["energy"], _ = check_approximation(merged["energy"], merged["terms"])
-    merged["spatial_energy"], _ = check_approximation(merged["spatial_energy"],
-                                                      merged["spatial_terms"])
-    eta = float(merged["basis_eta"])
-    if not 1.0 <= eta <= 3.0:
-        raise InputError("must be in [1, 3]", field="basis_eta", value=merged["basis_eta"])
-    merged["basis_eta"] = eta
-    merged["progress"] = bool(merged["progress"])
-    if not isinstance(merged["sampling_blend"], (bool, np.bool_)):
-        raise InputError("must be True or False", field="sampling_blend",
-                         value=merged["sampling_blend"])
-    merged["sampling_blend"] = bool(merged["sampling_blend"])
-    return merged
+    return KNOBS.resolve(knobs)
 
 
 def quadtree_level(count: int, parts: int) -> int:

@@ -13,15 +13,11 @@ import numpy as np
 
 from ...errors import InputError
 from ...materials.fresnel import fresnel_transmittance
-from ...scenes.lighting import environment_radiance
-from ...scenes.scene import (
-    ConstantEnvironment,
-    DirectionalLight,
-    ImageEnvironment,
-    PointLight,
-    RectangularAreaLight,
-    SphereAreaLight,
-    SpotLight,
+from ...scenes.lighting import (
+    ENVIRONMENT_LIGHTS,
+    SAMPLED_LIGHTS,
+    direct_irradiance,
+    environment_radiance,
 )
 from ..sparse_transport import (
     QuantisedRows,
@@ -48,91 +44,16 @@ def _far_distance(samples: IlluminationSamples) -> float:
     return 10.0 * max(1.0, float(np.ptp(samples.positions, axis=0).max()))
 
 
-def _point_irradiance(samples, position, eta, falloff=None):
-    offset = position - samples.positions
-    squared = np.maximum(np.einsum("nd,nd->n", offset, offset), 1e-300)
-    direction = offset / np.sqrt(squared)[:, None]
-    cosine = np.einsum("nd,nd->n", samples.normals, direction)
-    weight = _transmitted_cosine(eta, cosine) / squared
-    if falloff is not None:
-        weight = weight * falloff(-direction)
-    return weight, direction
-
-
-def _stratified_unit_square(count: int, seed: int) -> np.ndarray:
-    side = int(math.ceil(math.sqrt(count)))
-    rng = np.random.default_rng(seed)
-    cells = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
-    cells = cells.reshape(-1, 2)[:count]
-    return (cells + rng.random(cells.shape)) / side
-
-
-def _rectangle_points(light: RectangularAreaLight, count: int, seed: int):
-    """Stratified points on a rectangle emitter, its normal, and the area each stands for."""
-    uv = _stratified_unit_square(count, seed)
-    points = light.center + (2 * uv[:, :1] - 1) * light.u_axis + \
-        (2 * uv[:, 1:] - 1) * light.v_axis
-    return points, light.normal, light.area / len(points)
-
-
-def _sphere_light_directions(light: SphereAreaLight, samples: IlluminationSamples,
-                             count: int, seed: int):
-    r"""Stratified directions in the cone each sample sees the sphere in, and their hit points.
-
-    Solid-angle sampling of a sphere emitter: every direction stands for
-    :math:`2\pi(1 - \cos\alpha)/n` sr, where :math:`\sin\alpha = \rho / d`.
-    Yields ``(directions (N, 3), points (N, 3), solid angle (N,))`` per stratum; samples
-    inside the sphere get a zero solid angle.
-    """
-    uv = _stratified_unit_square(count, seed)
-    offset = light.center - samples.positions
-    distance = np.linalg.norm(offset, axis=1)
-    axis = offset / np.maximum(distance, 1e-300)[:, None]
-    outside = distance > light.radius
-    sin_alpha = np.where(outside, light.radius / np.maximum(distance, 1e-300), 1.0)
-    cos_alpha = np.sqrt(np.clip(1.0 - sin_alpha**2, 0.0, 1.0))
-    helper = np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    tangent = np.cross(axis, helper)
-    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
-    bitangent = np.cross(axis, tangent)
-    solid_angle = np.where(outside, 2.0 * np.pi * (1.0 - cos_alpha) / len(uv), 0.0)
-    for u, v in uv:
-        cos_theta = 1.0 - u * (1.0 - cos_alpha)
-        sin_theta = np.sqrt(np.clip(1.0 - cos_theta**2, 0.0, 1.0))
-        phi = 2.0 * np.pi * v
-        direction = (cos_theta[:, None] * axis + (sin_theta * np.cos(phi))[:, None] * tangent
-                     + (sin_theta * np.sin(phi))[:, None] * bitangent)
-        along = distance * cos_theta
-        reach = along - np.sqrt(np.clip(light.radius**2 - (distance * sin_theta) ** 2, 0.0,
-                                        None))
-        yield direction, samples.positions + reach[:, None] * direction, solid_angle
-
-
-def _shadow(scene, samples: IlluminationSamples, weight, targets, target_normal) -> None:
-    """Zero ``weight`` where a sample with ``weight > 0`` does not see its target point."""
-    from ...scenes.raycast import visible
-
-    lit = np.flatnonzero(weight > 0)
-    if not len(lit):
-        return
-    targets = np.asarray(targets, dtype=np.float64)
-    ends = targets[lit] if targets.ndim == 2 else targets
-    seen = visible(scene, samples.positions[lit], ends, normals_a=samples.normals[lit],
-                   normals_b=target_normal)
-    weight[lit[~seen]] = 0.0
-
-
 def sample_irradiance(scene, samples: IlluminationSamples, lights, eta: float, *,
                       area_light_samples: int = 16, environment=None,
                       seed: int = 0) -> np.ndarray:
     r"""Irradiance :math:`E(x_i)` at the illumination samples (Eq. 6 of Wang et al. 2008).
 
     :math:`E = \int L\,F_t(\eta, \omega_i)\,(n \cdot \omega_i)\,d\omega_i` with shadows from
-    ``scenes`` ray queries: point and spot lights (Mitsuba's linear-in-angle spot profile),
-    directional lights, rectangle emitters (``area_light_samples`` stratified points on the
-    rectangle) and sphere emitters (as many stratified directions in the cone each sample
-    sees the sphere in), and environment lights through ``environment`` (an
-    :class:`EnvironmentTransfer`).
+    ``scenes`` ray queries. Point, spot, directional, rectangle and sphere lights are
+    sampled by :func:`translucent.scenes.lighting.light_samples` (``area_light_samples``
+    per area light, drawn from one generator seeded with ``seed``); environment lights
+    go through ``environment`` (an :class:`EnvironmentTransfer`).
 
     Parameters
     ----------
@@ -148,39 +69,31 @@ def sample_irradiance(scene, samples: IlluminationSamples, lights, eta: float, *
     ndarray, (N, 3), float64
         W per scene unit squared (the lights' units).
     """
+    from ...scenes.raycast import visible
+
+    far = _far_distance(samples)
+
+    def occluded(rows, sample):
+        if sample.target is None:
+            ends = samples.positions[rows] + far * sample.direction[rows]
+        else:
+            ends = sample.target if np.ndim(sample.target) == 1 else sample.target[rows]
+        return ~visible(scene, samples.positions[rows], ends, normals_a=samples.normals[rows],
+                        normals_b=sample.target_normal)
+
+    rng = np.random.default_rng(seed)
     irradiance = np.zeros((len(samples), 3))
     for light_index, light in enumerate(lights):
-        if isinstance(light, (PointLight, SpotLight)):
-            falloff = light.falloff if isinstance(light, SpotLight) else None
-            weight, _ = _point_irradiance(samples, light.position, eta, falloff)
-            _shadow(scene, samples, weight, light.position, None)
-            irradiance += weight[:, None] * light.intensity
-        elif isinstance(light, DirectionalLight):
-            cosine = samples.normals @ -light.direction
-            weight = _transmitted_cosine(eta, cosine)
-            far = _far_distance(samples)
-            _shadow(scene, samples, weight, samples.positions - far * light.direction, None)
-            irradiance += weight[:, None] * light.irradiance
-        elif isinstance(light, RectangularAreaLight):
-            points, normal, patch = _rectangle_points(light, area_light_samples,
-                                                      seed + light_index)
-            for point in points:
-                weight, direction = _point_irradiance(samples, point, eta)
-                weight *= np.clip(-(direction @ normal), 0.0, None) * patch
-                _shadow(scene, samples, weight, point, normal)
-                irradiance += weight[:, None] * light.radiance
-        elif isinstance(light, SphereAreaLight):
-            for direction, points, solid_angle in _sphere_light_directions(
-                    light, samples, area_light_samples, seed + light_index):
-                cosine = np.einsum("nd,nd->n", samples.normals, direction)
-                weight = _transmitted_cosine(eta, cosine) * solid_angle
-                _shadow(scene, samples, weight, points, None)
-                irradiance += weight[:, None] * light.radiance
-        elif isinstance(light, (ConstantEnvironment, ImageEnvironment)):
+        if isinstance(light, ENVIRONMENT_LIGHTS):
             if environment is None:
                 raise InputError("environment lighting needs the precomputed visibility",
                                  field="environment", value=None)
             irradiance += environment.irradiance(light, eta)
+        elif isinstance(light, SAMPLED_LIGHTS):
+            irradiance += direct_irradiance(
+                [light], samples.positions, samples.normals, occluded=occluded,
+                count=area_light_samples, rng=rng,
+                response=lambda cosine: _transmitted_cosine(eta, cosine))
         else:
             raise InputError(f"unknown light type {type(light).__name__}",
                              field=f"lights[{light_index}]", value=type(light).__name__)

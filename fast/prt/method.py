@@ -9,11 +9,8 @@ import numpy as np
 from ...errors import InputError
 from ...image import Image
 from ...materials import Dipole, measured_medium
-from ...materials.dipole_pca import (
-    PARAMETERISATIONS,
-)
-from ..base import StageLog, refuse_inapplicable
-from .knobs import DEFAULT_KNOBS, check_knobs
+from ..base import StageLog, applicability, refuse_inapplicable
+from .knobs import KNOBS, check_knobs
 from .state import PRTState
 from .transfer import ObjectTransfer, precompute_object, spatial_decision, transfer_key
 
@@ -78,7 +75,8 @@ def precompute(scene, **knobs) -> PRTState:
     """
     from ...cache import Cache
 
-    refuse_inapplicable(scene, applies_to(scene), "the prt method cannot render this scene")
+    refuse_inapplicable(scene, applicability(applies_to, scene),
+                        "the prt method cannot render this scene")
     knobs = check_knobs(knobs)
     log = StageLog()
     cache = Cache("prt")
@@ -126,21 +124,8 @@ def add_approx_arguments(parser) -> None:
                         help="reduced scattering coefficient, mm^-1 (with --sigma-a)")
     parser.add_argument("--eta", type=float, default=None,
                         help="relative index of refraction (default 1.3, or the medium's)")
-    parser.add_argument("--samples", type=int, default=DEFAULT_KNOBS["samples"],
-                        help="illumination samples: parts x 4^n (default 16384)")
-    parser.add_argument("--parts", type=int, default=DEFAULT_KNOBS["parts"],
-                        help="quadtree parts m (default 4)")
-    parser.add_argument("--terms", type=int, default=DEFAULT_KNOBS["terms"],
-                        help="Haar terms kept per transfer row (default 256)")
-    parser.add_argument("--energy", type=float, default=DEFAULT_KNOBS["energy"],
-                        help="energy fraction kept per transfer row (default 0.9999)")
-    parser.add_argument("--basis", choices=sorted(PARAMETERISATIONS),
-                        default=DEFAULT_KNOBS["basis"], help="R_d basis parameterisation")
-    parser.add_argument("--basis-terms", type=int, default=DEFAULT_KNOBS["basis_terms"],
-                        help="K, PCA terms of R_d (default 12)")
-    parser.add_argument("--spatial", choices=("auto", "on", "off"),
-                        default=DEFAULT_KNOBS["spatial"], help="CDF 9/7 spatial compression")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    KNOBS.add_arguments(parser, [name for name in KNOBS.knobs if name != "progress"])
 
 
 def material_from_arguments(args) -> Dipole | None:
@@ -174,9 +159,7 @@ def material_from_arguments(args) -> Dipole | None:
 def approx(scene, args) -> Image:
     """Render ``scene`` with the options parsed by :func:`add_approx_arguments`."""
     material = material_from_arguments(args)
-    knobs = {"samples": args.samples, "parts": args.parts, "terms": args.terms,
-             "energy": args.energy, "basis": args.basis, "basis_terms": args.basis_terms,
-             "spatial": args.spatial, "progress": not args.no_progress}
+    knobs = KNOBS.from_arguments(args) | {"progress": not args.no_progress}
     state = precompute(scene, **knobs)
     image = state.render(material=material)
     for sentence in image.metadata.get("skipped", []):

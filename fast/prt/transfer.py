@@ -207,10 +207,10 @@ def _threads(workers: int):
         numba.set_num_threads(previous)
 
 
-def _progress(total: int, description: str, enabled: bool):
+def _progress(total: int, description: str, enabled: bool, unit: str = "vertex"):
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=description, unit="vertex", disable=not enabled or None,
+    return tqdm(total=total, desc=description, unit=unit, disable=not enabled or None,
                 leave=False)
 
 
@@ -282,7 +282,7 @@ def _dense_columns(indptr, indices, values, start, stop, out):  # pragma: no cov
 
 
 def _spatial_pass(matrix: SparseRows, wavelet: SpatialWavelet, energy: float,
-                  budget: int, workers: int) -> tuple[SparseRows, float]:
+                  budget: int, workers: int, bar=None) -> tuple[SparseRows, float]:
     """CDF 9/7 along the vertices of one T_k^w, keeping its largest coefficients (Eq. 9).
 
     Column blocks are transformed on ``workers`` threads; the selection streams: entries
@@ -306,6 +306,8 @@ def _spatial_pass(matrix: SparseRows, wavelet: SpatialWavelet, energy: float,
     held = 0
     with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
         for start, coefficients in pool.map(transform, starts):
+            if bar is not None:
+                bar.update(1)
             squared = coefficients.astype(np.float64) ** 2
             total_energy += float(squared.sum())
             row, column = np.nonzero(squared > threshold)
@@ -443,11 +445,14 @@ def precompute_object(scene_object, mm_per_unit: float, knobs: dict,
         wavelet = SpatialWavelet(mesh.grid_shape)
         budget = knobs["spatial_terms"] * len(mesh.vertices)
         compressed, kept = [], []
-        for matrix in matrices:
-            result, fraction = _spatial_pass(matrix, wavelet, knobs["spatial_energy"], budget,
-                                             knobs["workers"])
-            compressed.append(result)
-            kept.append(fraction)
+        blocks = sum(-(-matrix.columns // SPATIAL_COLUMNS_PER_BLOCK) for matrix in matrices)
+        with _progress(blocks, f"prt spatial pass {scene_object.name}", knobs["progress"],
+                       unit="block") as bar:
+            for matrix in matrices:
+                result, fraction = _spatial_pass(matrix, wavelet, knobs["spatial_energy"],
+                                                 budget, knobs["workers"], bar)
+                compressed.append(result)
+                kept.append(fraction)
         matrices = compressed
         spatial_shape = tuple(mesh.grid_shape)
         statistics.update(pass2_seconds=time.perf_counter() - start,

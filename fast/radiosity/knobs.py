@@ -2,39 +2,98 @@
 
 from __future__ import annotations
 
+from ...errors import InputError
+from ...scenes.raycast import RAY_ENGINES
+from ..knobs import Knob, KnobSpec
+
 FORMAT_VERSION = 5
 
-#: Knobs of :func:`precompute` and their defaults.
-DEFAULT_KNOBS: dict = {
+#: The iterative solvers.
+SOLVERS = ("jacobi", "gmres", "bicgstab")
+
+
+def _no_more_than_a_byte(value):
+    if value > 255:
+        raise InputError("must be <= 255 (points per segment are counted in a byte)",
+                         field="mix_points", value=value)
+    return value
+
+
+#: The knobs of :func:`precompute` (Sheng et al. 2014, Sect. 5): validation, cache key,
+#: ``translucent approx radiosity`` flags and the quality ladder all come from here.
+KNOBS = KnobSpec([
     # patches and form factors
-    "triangles_per_patch": 1,        # 1: triangles; n > 1: coplanar neighbours merged
-    "rays_per_patch": 256,           # form-factor rays from each patch
-    "form_factor_threshold": 0.0,    # F entries below this are dropped
+    Knob("triangles_per_patch", 1, "1: triangles; n > 1: coplanar neighbours merged",
+         kind="int", low=1),
+    Knob("rays_per_patch", 256, "form-factor rays from each patch", kind="int", low=1,
+         flags=("--rays",)),
+    Knob("form_factor_threshold", 0.0, "F entries below this are dropped", kind="float",
+         low=0.0),
     # scattering factors
-    "max_distance_mm": None,         # max_d; None: where every profile keeps 99.9 %
-    "profile_energy_cutoff": 1e-3,   # energy fraction beyond max_d when it is derived
-    "self_samples": 100,             # samples on a patch's nearest neighbours (m^2)
-    "sample_falloff": 2.0,           # m falls as exp(-distance / (this x patch radius))
-    "centroid_beyond": 8.0,          # centroid only beyond this many patch radii
-    "self_term": "polar",            # "polar" (exact profile integral) or "samples"
-    "voxels_per_axis": 48,           # voxel grid of a concave object, along its longest side
-    "profile_samples": 2048,         # radial grid nodes of the tabulated profiles
-    "mix_points": 8,                 # points along a path for heterogeneous fractions
-    "sheet_thickness_mm": None,      # thin (open) translucent sheets: slab thickness
-    "finite_object_energy": True,    # S columns carry the object's diffusion escape (gain)
-    "diffusion_voxels_per_axis": 32,  # its finite-volume grid, along the longest side
-    # solving and lighting
-    "solver": "jacobi",              # "jacobi", "gmres" or "bicgstab"
-    "tolerance": 5e-3,               # relative residual (the paper's 0.5 %)
-    "max_iterations": 2000,
-    "warm_start": True,              # start from the earlier frames' solutions
-    "transfer": "auto",              # "auto": T at the first relighting when it fits; "never"
-    "transfer_budget_mb": 512,       # T fits when 3 P^2 float32 do (P <= 6,688 at 512 MB)
-    "light_samples": 16,             # samples per area light / environment per point
-    "diffuse_light_samples": None,   # per diffuse patch (its E feeds only F B); None: as above
-    "shadow_ray_engine": "auto",     # relighting's shadow rays: "auto", "embree", "mitsuba"
-    "seed": 0,
-}
+    Knob("max_distance_mm", None, "scattering cut-off max_d (default: where every profile "
+         "keeps 1 - profile_energy_cutoff of its energy)", kind="float", positive=True,
+         unit="mm", optional=True, flags=("--max-distance",)),
+    Knob("profile_energy_cutoff", 1e-3, "energy fraction beyond max_d when it is derived",
+         kind="float", positive=True, high=1.0),
+    Knob("self_samples", 100, "samples on a patch's nearest neighbours (m^2)", kind="int",
+         low=1),
+    Knob("sample_falloff", 2.0, "m falls as exp(-distance / (this x patch radius))",
+         kind="float", positive=True),
+    Knob("centroid_beyond", 8.0, "centroid only beyond this many patch radii", kind="float",
+         positive=True),
+    Knob("self_term", "polar", "the self term: exact profile integral or samples",
+         kind="choice", choices=("polar", "samples")),
+    Knob("voxels_per_axis", 48, "voxel grid of a concave object, along its longest side",
+         kind="int", low=1),
+    Knob("profile_samples", 2048, "radial grid nodes of the tabulated profiles", kind="int",
+         low=1),
+    Knob("mix_points", 8, "points along a path for heterogeneous fractions", kind="int",
+         low=1, check=_no_more_than_a_byte),
+    Knob("sheet_thickness_mm", None, "thin (open) translucent sheets: slab thickness",
+         kind="float", positive=True, unit="mm", optional=True),
+    Knob("finite_object_energy", True, "S columns carry the object's diffusion escape "
+         "(gain); off: the dipole as the paper uses it", kind="bool"),
+    Knob("diffusion_voxels_per_axis", 32, "its finite-volume grid, along the longest side",
+         kind="int", low=4),
+    # solving and lighting: read every frame, not part of the cache key
+    Knob("solver", "jacobi", "the iterative solver", kind="choice", choices=SOLVERS,
+         keyed=False),
+    Knob("tolerance", 5e-3, "relative residual (the paper's 0.5 %)", kind="float",
+         positive=True, keyed=False),
+    Knob("max_iterations", 2000, "most iterations of a solve", kind="int", low=1,
+         keyed=False),
+    Knob("warm_start", True, "start from the earlier frames' solutions", kind="bool",
+         keyed=False),
+    Knob("transfer", "auto", "auto: T at the first relighting when it fits; never",
+         kind="choice", choices=("auto", "never"), keyed=False),
+    Knob("transfer_budget_mb", 512, "T fits when 3 P^2 float32 do (P <= 6,688 at 512 MB)",
+         kind="float", positive=True, unit="MB", keyed=False),
+    Knob("light_samples", 16, "samples per area light / environment per point", kind="int",
+         low=1, keyed=False),
+    Knob("diffuse_light_samples", None, "per diffuse patch (its E feeds only F B); None: as "
+         "light_samples", kind="int", low=1, optional=True, keyed=False),
+    Knob("shadow_ray_engine", "auto", "relighting's shadow rays", kind="choice",
+         choices=RAY_ENGINES, keyed=False),
+    Knob("seed", 0, "random seed of rays and samples", kind="int", low=0, high=2**32 - 1),
+], ladders={
+    # samples of the scattering integral, the profile cut-off, form-factor rays and the
+    # solver's relative residual (Sheng et al. 2014, Sect. 5.2-5.3)
+    "scattering samples, cut-off, rays, solver tolerance": [
+        {"self_samples": 4, "profile_energy_cutoff": 0.1, "rays_per_patch": 32,
+         "tolerance": 0.05},
+        {"self_samples": 16, "profile_energy_cutoff": 0.03, "rays_per_patch": 64,
+         "tolerance": 0.02},
+        {"self_samples": 36, "profile_energy_cutoff": 0.01, "rays_per_patch": 128,
+         "tolerance": 0.01},
+        {},
+    ],
+})
+
+#: Knobs of :func:`precompute` and their defaults.
+DEFAULT_KNOBS: dict = KNOBS.defaults
+
+#: Quality ladders of ``bench tradeoff`` and the report.
+LADDERS: dict = KNOBS.ladders
 
 #: Cheap knobs for smoke runs and the conformance checks (fast.conformance): few
 #: form-factor rays, and a tight solve, so that relighting through T and an iterative
@@ -42,12 +101,7 @@ DEFAULT_KNOBS: dict = {
 QUICK_KNOBS: dict = {"rays_per_patch": 16, "tolerance": 1e-7}
 
 #: Knobs that only steer solving and lighting: not part of the precomputation's cache key.
-RUNTIME_KNOBS = ("solver", "tolerance", "max_iterations", "warm_start", "transfer",
-                 "transfer_budget_mb", "light_samples", "diffuse_light_samples",
-                 "shadow_ray_engine")
-
-#: The iterative solvers.
-SOLVERS = ("jacobi", "gmres", "bicgstab")
+RUNTIME_KNOBS = KNOBS.unkeyed
 
 #: The bounce decomposition of Sheng et al. 2014, Fig. 6.
 COMPONENTS = ("direct", "interreflection", "subsurface", "both")

@@ -2,23 +2,28 @@
 
 from __future__ import annotations
 
-import math
 import time
 
-from ...errors import InputError, check_count
+from ...errors import InputError
 from ...image import Image
 from ...materials.profiles import (
     MixedProfiles,
     profile_for,
 )
-from ..base import Refusal, StageLog, StageProgress, refuse_inapplicable, with_defaults
+from ..base import (
+    Refusal,
+    StageLog,
+    StageProgress,
+    applicability,
+    refuse_inapplicable,
+)
 from ..form_factors import build_patches, form_factors, needs_form_factors
 from ..optical_distance import (
     closed_surface,
 )
 from ..solid_inputs import mixed_profiles_from_solid, surface_scene
 from .geometry import scattering_geometry
-from .knobs import COMPONENTS, DEFAULT_KNOBS, FORMAT_VERSION, RUNTIME_KNOBS, SOLVERS
+from .knobs import COMPONENTS, FORMAT_VERSION, KNOBS
 from .state import RadiosityState, materials_of
 
 #: The reason code of a scene with no translucent object: still solved (classical radiosity)
@@ -50,28 +55,8 @@ def applies_to(scene) -> Refusal | None:
 
 
 def _resolve_knobs(scene, knobs: dict) -> dict:
-    resolved = with_defaults(knobs, DEFAULT_KNOBS)
-    if resolved["self_term"] not in ("polar", "samples"):
-        raise InputError("must be 'polar' or 'samples'", field="self_term",
-                         value=resolved["self_term"])
-    if resolved["transfer"] not in ("auto", "never"):
-        raise InputError("must be 'auto' or 'never'", field="transfer", value=resolved["transfer"])
-    if resolved["solver"] not in SOLVERS:
-        raise InputError(f"unknown solver; valid: {', '.join(SOLVERS)}", field="solver",
-                         value=resolved["solver"])
-    for name in ("tolerance", "sample_falloff", "centroid_beyond", "transfer_budget_mb"):
-        if not float(resolved[name]) > 0:
-            raise InputError("must be > 0", field=name, value=resolved[name])
-    for name in ("rays_per_patch", "self_samples", "voxels_per_axis", "profile_samples",
-                 "max_iterations", "light_samples", "mix_points"):
-        check_count(resolved[name], name)
-    if resolved["mix_points"] > 255:
-        raise InputError("must be <= 255 (points per segment are counted in a byte)",
-                         field="mix_points", value=resolved["mix_points"])
-    check_count(resolved["diffusion_voxels_per_axis"], "diffusion_voxels_per_axis", minimum=4)
-    if not isinstance(resolved["finite_object_energy"], bool):
-        raise InputError("must be true or false", field="finite_object_energy",
-                         value=resolved["finite_object_energy"])
+    """Return the knobs checked (:data:`KNOBS`), the cut-off max_d derived where None."""
+    resolved = KNOBS.resolve(knobs)
     if resolved["max_distance_mm"] is None:
         radii = []
         for obj in scene.objects:
@@ -80,25 +65,6 @@ def _resolve_knobs(scene, knobs: dict) -> dict:
                 ((profile,) if profile is not None else ())
             radii += [p.support_radius(resolved["profile_energy_cutoff"]) for p in profiles]
         resolved["max_distance_mm"] = float(max(radii, default=1.0))
-    elif not float(resolved["max_distance_mm"]) > 0:
-        raise InputError("must be > 0 mm", field="max_distance_mm",
-                         value=resolved["max_distance_mm"])
-    elif not math.isfinite(float(resolved["max_distance_mm"])):
-        raise InputError("must be a finite distance > 0 mm (or None: from the profiles)",
-                         field="max_distance_mm", value=resolved["max_distance_mm"])
-    diffuse_samples = resolved["diffuse_light_samples"]
-    if diffuse_samples is not None and (int(diffuse_samples) != diffuse_samples
-                                        or diffuse_samples < 1):
-        raise InputError("must be None (as light_samples) or an integer >= 1",
-                         field="diffuse_light_samples", value=diffuse_samples)
-    from ...scenes.raycast import RAY_ENGINES
-
-    if resolved["shadow_ray_engine"] not in RAY_ENGINES:
-        raise InputError(f"unknown ray engine; valid: {', '.join(RAY_ENGINES)}",
-                         field="shadow_ray_engine", value=resolved["shadow_ray_engine"])
-    thickness = resolved["sheet_thickness_mm"]
-    if thickness is not None and not float(thickness) > 0:
-        raise InputError("must be > 0 mm", field="sheet_thickness_mm", value=thickness)
     return resolved
 
 
@@ -126,7 +92,7 @@ def precompute(scene, **knobs) -> RadiosityState:
     from ...cache import ENTRY_LIMIT_VARIABLE, Cache, content_hash, entry_limit
 
     scene, solid_notes = surface_scene(scene, mixed_profiles_from_solid)
-    reason = applies_to(scene)
+    reason = applicability(applies_to, scene)
     if reason is not None and reason.code != NO_TRANSLUCENT_OBJECT:
         refuse_inapplicable(scene, reason, "radiosity does not apply")
     resolved = _resolve_knobs(scene, knobs)
@@ -137,7 +103,7 @@ def precompute(scene, **knobs) -> RadiosityState:
               if not closed_surface(scene.objects[i].mesh.faces, scene.objects[i].mesh.vertices)]
     labels = {scene.objects[i].name: scene.objects[i].material.face_labels
               for i in translucent if isinstance(scene.objects[i].material, MixedProfiles)}
-    geometry_knobs = {k: v for k, v in resolved.items() if k not in RUNTIME_KNOBS}
+    geometry_knobs = KNOBS.keyed(resolved)
     key = content_hash("radiosity", FORMAT_VERSION, scene.geometry_key(), geometry_knobs,
                        [scene.objects[i].name for i in translucent], labels)
     cache = Cache("radiosity")
@@ -147,7 +113,7 @@ def precompute(scene, **knobs) -> RadiosityState:
         log.notes["cache"] = "hit"
         if solid_notes:
             log.notes["solid medium"] = solid_notes
-        return RadiosityState(scene, patches, F, geometry, resolved, log)
+        return _state(scene, patches, F, geometry, resolved, log)
     log = StageLog()
     reason = needs_form_factors(scene)
     F = None
@@ -184,7 +150,18 @@ def precompute(scene, **knobs) -> RadiosityState:
         log.skip(f"the precomputation ({size / 2**20:.0f} MiB) is not kept in the cache: "
                  f"over its entry limit of {entry_limit() / 2**20:.4g} MiB "
                  f"({ENTRY_LIMIT_VARIABLE}); the next run computes it again")
-    return RadiosityState(scene, patches, F, geometry, resolved, log)
+    return _state(scene, patches, F, geometry, resolved, log)
+
+
+def _state(scene, patches, F, geometry, resolved, log) -> RadiosityState:
+    """Build the state under a progress bar: it makes the scattering matrix S.
+
+    S depends on the materials, which are edited, so it is not cached; on large objects it
+    takes seconds.
+    """
+    with StageProgress(log, "radiosity materials", stages=1) as progress:
+        with progress.stage("scattering_matrix"):
+            return RadiosityState(scene, patches, F, geometry, resolved, log)
 
 
 def add_approx_arguments(parser) -> None:
@@ -196,16 +173,9 @@ def add_approx_arguments(parser) -> None:
                              "transmission columns)")
     parser.add_argument("--component", default="both", choices=COMPONENTS,
                         help="bounce component of Sheng et al. 2014, Fig. 6 (default: both)")
-    parser.add_argument("--solver", default=DEFAULT_KNOBS["solver"], choices=SOLVERS)
-    parser.add_argument("--rays", type=int, default=DEFAULT_KNOBS["rays_per_patch"],
-                        help="form-factor rays per patch")
-    parser.add_argument("--max-distance", type=float, default=None,
-                        help="scattering cut-off max_d in mm (default: from the profiles)")
-    parser.add_argument("--triangles-per-patch", type=int,
-                        default=DEFAULT_KNOBS["triangles_per_patch"])
     parser.add_argument("--semi-infinite", action="store_true",
-                        help="the dipole as the paper uses it, without the finite-object "
-                             "energy (knob finite_object_energy)")
+                        help="the dipole as the paper uses it: --no-finite-object-energy")
+    KNOBS.add_arguments(parser)
 
 
 def approx(scene, args) -> Image:
@@ -228,10 +198,10 @@ def approx(scene, args) -> Image:
                              field="material", value=args.material)
         for name in targets:
             scene = scene.with_material(name, material)
-    state = precompute(scene, solver=args.solver, rays_per_patch=args.rays,
-                       max_distance_mm=args.max_distance,
-                       triangles_per_patch=args.triangles_per_patch,
-                       finite_object_energy=not args.semi_infinite)
+    knobs = KNOBS.from_arguments(args)
+    if args.semi_infinite:
+        knobs["finite_object_energy"] = False
+    state = precompute(scene, **knobs)
     image = state.render(component=args.component)
     for sentence in state.log.skipped:
         print(f"skipped: {sentence}")

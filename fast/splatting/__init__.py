@@ -88,11 +88,10 @@ from .buffers import (
 )
 from .frame import LightView, gather_frame, light_view, rendering_radius_table, splat_frame
 from .ground_truth import brute_force_exitance
-from .knobs import BACKENDS, DEFAULT_KNOBS, QUICK_KNOBS
+from .knobs import BACKENDS, DEFAULT_KNOBS, KNOBS, LADDERS, QUICK_KNOBS, SAMPLING_RANGES
 from .method import add_approx_arguments, approx
 from .radius_table import MIN_LEVEL_RESOLUTION, RenderingRadiusTable, minimal_rendering_radius_table
 from .selection import (
-    SAMPLING_RANGES,
     IrradianceSamples,
     SampleSelector,
     level_sample_masks,
@@ -113,6 +112,8 @@ __all__ = [
     "BACKENDS",
     "CameraModel",
     "DEFAULT_KNOBS",
+    "KNOBS",
+    "LADDERS",
     "QUICK_KNOBS",
     "IrradianceLevel",
     "IrradianceSamples",

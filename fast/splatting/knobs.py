@@ -2,27 +2,8 @@
 
 from __future__ import annotations
 
-#: The knobs of the method and their defaults (Chen et al. 2012, Sect. 4 and 5).
-DEFAULT_KNOBS: dict = {
-    "irradiance_resolution": 512,   # irradiance buffer side, pixels (Sect. 4)
-    "levels": 3,                    # mipmap levels of both buffers (Sect. 5)
-    "multiresolution": True,        # splat distant contributions at coarser levels
-    "adaptive": True,               # adaptive irradiance sample selection
-    "z0": 0.03,                     # depth-discontinuity threshold, x bounding-sphere radius
-    "alpha": 15.0,                  # sampling-rate scale of Eq. 11
-    "epsilon": 0.001,               # error tolerance of Eq. 14
-    "lambda_z": 8.0,                # depth sharpness of Eq. 17
-    "lambda_m": 8.0,                # material sharpness of Eq. 17
-    "backend": "numba",             # splatting kernel, one of BACKENDS
-    "buffers": "raster",            # G-buffers: "raster" (z-buffer) or "mitsuba" (ray queries)
-    "sampling_range": "shortest",   # RGB reading of Eq. 11's range, one of SAMPLING_RANGES
-    "level_sampling": 0.0,          # > 0: coarser samples for coarse splatting levels (pixels)
-    "profile_upsampling": True,     # Eq. 17 on B / sqrt(P_o): see upsampling_profile_factors
-    "area_light_points": 4,         # point emitters an area light becomes (emitters.py)
-}
+from ..knobs import Knob, KnobSpec
 
-#: Cheap knobs for smoke runs and the conformance checks (fast.conformance).
-QUICK_KNOBS: dict = {"irradiance_resolution": 64}
 #: The splatting kernels: compiled loops (numba, the default: measured fastest on the CPU,
 #: see reports/bench/splatting.py), CUDA (numba.cuda, :mod:`.splatting_cuda`: the same tiles
 #: on a GPU), Dr.Jit (LLVM on the CPU, CUDA where a GPU is there) and plain numpy (the
@@ -31,6 +12,69 @@ BACKENDS = ("numba", "cuda", "drjit", "numpy")
 
 #: The most point emitters one area light may become (each is an irradiance buffer a frame).
 MAX_AREA_LIGHT_POINTS = 256
+
+#: The RGB reading of Eq. 11's :math:`R_{P_x}` (one range per point in the paper):
+#: "shortest" channel (every channel sampled at the rate alpha asks), the luminance-weighted
+#: mean of the channel ranges, or the "longest" (the range splats are truncated at). Measured
+#: on the heterogeneous scene at 800 x 600 (reports/bench/splatting.py): adaptive sampling
+#: alone adds no error with "shortest", about 5 % more relative error with "luminance"
+#: (35 % fewer samples) and 30 % more with "longest" (60 % fewer samples).
+SAMPLING_RANGES = ("shortest", "luminance", "longest")
+
+#: The knobs of the method (Chen et al. 2012, Sect. 4 and 5): validation, the
+#: ``translucent approx splatting`` flags and the quality ladders all come from here.
+#: Nothing is precomputed, so no knob is part of a cache key.
+KNOBS = KnobSpec([
+    Knob("irradiance_resolution", 512, "irradiance buffer side in pixels (Sect. 4)",
+         kind="int", low=1, high=8192, ladder=(64, 128, 256)),
+    Knob("levels", 3, "mipmap levels of both buffers (Sect. 5)", kind="int", low=1, high=12),
+    Knob("multiresolution", True, "splat distant contributions at coarser levels; off: "
+         "everything at full resolution (ablation)", kind="bool"),
+    Knob("adaptive", True, "adaptive irradiance sample selection; off: every sample of the "
+         "finest level (ablation)", kind="bool"),
+    Knob("z0", 0.03, "depth-discontinuity threshold, x bounding-sphere radius", kind="float",
+         low=0.0),
+    Knob("alpha", 15.0, "sampling-rate scale of Eq. 11", kind="float", low=0.0),
+    Knob("epsilon", 0.001, "error tolerance of Eq. 14, which sets where each coarser level "
+         "takes over (smaller: slower, closer to splatting everything at full resolution)",
+         kind="float", positive=True),
+    Knob("lambda_z", 8.0, "depth sharpness of Eq. 17", kind="float", low=0.0),
+    Knob("lambda_m", 8.0, "material sharpness of Eq. 17", kind="float", low=0.0),
+    Knob("backend", "numba", "splatting kernel", kind="choice", choices=BACKENDS),
+    Knob("buffers", "raster", "G-buffers: z-buffer raster or Mitsuba ray queries",
+         kind="choice", choices=("raster", "mitsuba")),
+    Knob("sampling_range", "shortest", "which RGB channel's scattering range sets Eq. 11's "
+         "sampling rate (shortest: every channel sampled as alpha asks)", kind="choice",
+         choices=SAMPLING_RANGES),
+    Knob("level_sampling", 0.0, "> 0: coarse splatting levels take irradiance samples as "
+         "sparse as this many of their pixels (0: the paper's one selection for every "
+         "level; docs/splatting.md)", kind="float", low=0.0),
+    Knob("profile_upsampling", True, "upsample coarse levels divided by each texel's "
+         "profile factor (off: Eq. 17 as published)", kind="bool"),
+    Knob("area_light_points", 4, "point emitters an area light becomes (emitters.py)",
+         kind="int", low=1, high=MAX_AREA_LIGHT_POINTS),
+], ladders={
+    "levels": [{"levels": 5}, {"levels": 4}, {}, {"levels": 2}],
+    # coarse levels splatted from irradiance samples as sparse as their pixels (the
+    # fastest settings at equal error on the heterogeneous scene: docs/splatting.md)
+    "levels and level sampling": [
+        {"levels": 5, "level_sampling": 2.0}, {"levels": 5, "level_sampling": 1.5},
+        {"levels": 5, "level_sampling": 1.0}, {},
+    ],
+})
+
+#: The knobs of the method and their defaults.
+DEFAULT_KNOBS: dict = KNOBS.defaults
+
+#: Quality ladders of ``bench tradeoff`` and the report (the irradiance resolution
+#: first: the report takes the cheap end of the first ladder).
+LADDERS: dict = {"irradiance resolution": KNOBS.ladders["irradiance_resolution"],
+                 **{name: points for name, points in KNOBS.ladders.items()
+                    if name != "irradiance_resolution"}}
+
+#: Cheap knobs for smoke runs and the conformance checks (fast.conformance).
+QUICK_KNOBS: dict = {"irradiance_resolution": 64}
+
 
 #: Pairs evaluated at once by the numpy splatting kernel (bounds its memory to ~1 GB).
 PAIR_CHUNK = 1 << 21

@@ -10,6 +10,7 @@ from ...errors import InputError
 from ...image import LUMINANCE_WEIGHTS
 from ...materials.subedit import SubEditProfiles
 from .buffers import CameraModel, IrradianceLevel
+from .knobs import SAMPLING_RANGES
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,15 +38,6 @@ class IrradianceSamples:
 
 def _upsample_mask(mask: np.ndarray, shape) -> np.ndarray:
     return np.repeat(np.repeat(mask, 2, axis=0), 2, axis=1)[: shape[0], : shape[1]]
-
-
-#: The RGB reading of Eq. 11's :math:`R_{P_x}` (one range per point in the paper):
-#: "shortest" channel (every channel sampled at the rate alpha asks), the luminance-weighted
-#: mean of the channel ranges, or the "longest" (the range splats are truncated at). Measured
-#: on the heterogeneous scene at 800 x 600 (reports/bench/splatting.py): adaptive sampling
-#: alone adds no error with "shortest", about 5 % more relative error with "luminance"
-#: (35 % fewer samples) and 30 % more with "longest" (60 % fewer samples).
-SAMPLING_RANGES = ("shortest", "luminance", "longest")
 
 
 def sampling_range(material: SubEditProfiles, sampling: str = "shortest") -> np.ndarray:

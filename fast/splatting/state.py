@@ -14,13 +14,12 @@ from ...materials.homogeneous import Dipole
 from ...materials.solid import SolidMedium
 from ...materials.subedit import SubEditProfiles
 from ...scenes.scene import DirectionalLight, PointLight, SpotLight
-from ..base import StageLog, refuse_inapplicable, with_defaults
+from ..base import StageLog, applicability, refuse_inapplicable
 from ..solid_inputs import subedit_from_solid
 from .buffers import CameraModel, SurfaceBuffer
 from .emitters import AREA_LIGHTS, PointEmitter, point_emitters
 from .frame import LightView, as_subedit, gather_frame, light_view, splat_frame
-from .knobs import BACKENDS, DEFAULT_KNOBS, MAX_AREA_LIGHT_POINTS
-from .selection import SAMPLING_RANGES
+from .knobs import KNOBS
 
 _LIGHTS = (PointLight, SpotLight, DirectionalLight, *AREA_LIGHTS)
 #: Widest irradiance-buffer cone for a point light (degrees): a light inside the object's
@@ -69,38 +68,7 @@ def scored_objects(scene) -> list[str]:
 
 
 def _check_knobs(knobs: dict) -> dict:
-    merged = with_defaults(knobs, DEFAULT_KNOBS)
-    for name in ("irradiance_resolution", "levels"):
-        value = merged[name]
-        if isinstance(value, bool) or not isinstance(value, int | float | np.number) \
-                or not np.isfinite(value) or int(value) != value or not 1 <= value <= 8192:
-            raise InputError("must be an integer in [1, 8192]", field=name, value=value)
-        merged[name] = int(value)
-    if merged["levels"] > 12:
-        raise InputError("must be <= 12", field="levels", value=merged["levels"])
-    for name in ("z0", "alpha", "epsilon", "lambda_z", "lambda_m", "level_sampling"):
-        value = merged[name]
-        value = float(value) if isinstance(value, int | float | np.number) \
-            and not isinstance(value, bool) else math.nan
-        if not np.isfinite(value) or value < 0 or (name == "epsilon" and value == 0):
-            raise InputError("must be a finite number >= 0 (epsilon > 0)", field=name,
-                             value=merged[name])
-        merged[name] = value
-    for name, choices in (("backend", BACKENDS), ("sampling_range", SAMPLING_RANGES),
-                          ("buffers", ("raster", "mitsuba"))):
-        if merged[name] not in choices:
-            raise InputError(f"must be one of {', '.join(map(repr, choices))}", field=name,
-                             value=merged[name])
-    merged["multiresolution"] = bool(merged["multiresolution"])
-    merged["profile_upsampling"] = bool(merged["profile_upsampling"])
-    merged["adaptive"] = bool(merged["adaptive"])
-    points = merged["area_light_points"]
-    if isinstance(points, bool) or not isinstance(points, int | np.integer) \
-            or not 1 <= points <= MAX_AREA_LIGHT_POINTS:
-        raise InputError(f"must be an integer in [1, {MAX_AREA_LIGHT_POINTS}]",
-                         field="area_light_points", value=points)
-    merged["area_light_points"] = int(points)
-    return merged
+    return KNOBS.resolve(knobs)
 
 
 def precompute(scene, **knobs) -> SplattingState:
@@ -112,7 +80,7 @@ def precompute(scene, **knobs) -> SplattingState:
     profile's energy of the profile upsampling) depend on the material alone and are built
     on first use.
     """
-    refuse_inapplicable(scene, applies_to(scene), _REFUSAL)
+    refuse_inapplicable(scene, applicability(applies_to, scene), _REFUSAL)
     return SplattingState(scene, _check_knobs(knobs))
 
 
@@ -252,7 +220,7 @@ class SplattingState:
         if material is not None:
             for index in _translucent_objects(scene):
                 scene = scene.with_material(scene.objects[index].name, material)
-        refuse_inapplicable(scene, applies_to(scene), _REFUSAL)
+        refuse_inapplicable(scene, applicability(applies_to, scene), _REFUSAL)
         log = StageLog()
         start = time.perf_counter()
         camera_view = self._camera_view(scene)

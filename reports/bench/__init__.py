@@ -5,6 +5,22 @@
 PROGRESS_DELAY_SECONDS = 1.0
 
 
+def steps_bar(description: str, total: int, unit: str = "step", enabled: bool = True):
+    """Return a bench's progress bar over its steps (tqdm, on standard error).
+
+    It appears once a step has lasted :data:`PROGRESS_DELAY_SECONDS`, stays hidden where
+    standard error is not a terminal and under ``--no-progress``; name each step with
+    ``bar.set_postfix_str(name)`` and count it with ``bar.update()``. ``enabled=False``
+    hides it too.
+    """
+    import sys
+
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=description, unit=unit, leave=False, file=sys.stderr,
+                delay=PROGRESS_DELAY_SECONDS, disable=None if enabled else True)
+
+
 def at_width(scene, width: int):
     """Return ``scene`` seen ``width`` pixels wide, the height following its aspect.
 

@@ -15,14 +15,13 @@ frame of the same scene, measured in the same run.
 from __future__ import annotations
 
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ...errors import InputError
-from . import PROGRESS_DELAY_SECONDS, count_list
+from . import count_list, steps_bar
 
 #: Scenes lit by area lights whose translucent objects splatting renders.
 DEFAULT_SCENES = ("bowl", "cornell_block")
@@ -41,13 +40,14 @@ def add_arguments(parser):
 def measure(scene_name: str, counts, frames: int) -> dict:
     """Render and score splatting at each count on one scene; return the figures."""
     from ...fast import splatting
+    from ...fast.base import applicability
     from ...reference.committed import committed_reference
     from ...scenes import load_scene
     from ..metrics import evaluate, noise_floor
     from ..scoring import scored_pixels
 
     scene = load_scene(scene_name)
-    reason = splatting.applies_to(scene)
+    reason = applicability(splatting.applies_to, scene)
     if reason is not None:
         raise InputError(f"splatting does not apply: {reason}", field="--scenes",
                          value=scene_name)
@@ -59,20 +59,20 @@ def measure(scene_name: str, counts, frames: int) -> dict:
     mask = scored_pixels(scene, splatting.scored_objects(scene))
     floor = noise_floor(reference, mask=mask)
     rows = []
-    from tqdm.auto import tqdm
-
-    for count in tqdm(counts, desc=f"area lights on {scene_name}", unit="count", leave=False,
-                      file=sys.stderr, delay=PROGRESS_DELAY_SECONDS, disable=None):
-        state = splatting.precompute(scene, area_light_points=count)
-        state.render()  # untimed: compiled kernels, first-call costs
-        timings = []
-        for _ in range(frames):
-            started = time.perf_counter()
-            image = state.render()
-            timings.append(time.perf_counter() - started)
-        metrics = evaluate(reference, image, mask=mask).metrics
-        rows.append({"points": count, "frame_seconds": float(np.median(timings)),
-                     "relative_mse": metrics.relative_mse, "hdr_flip": metrics.hdr_flip})
+    with steps_bar(f"area lights on {scene_name}", len(counts), unit="count") as bar:
+        for count in counts:
+            bar.set_postfix_str(f"{count} points")
+            state = splatting.precompute(scene, area_light_points=count)
+            state.render()  # untimed: compiled kernels, first-call costs
+            timings = []
+            for _ in range(frames):
+                started = time.perf_counter()
+                image = state.render()
+                timings.append(time.perf_counter() - started)
+            metrics = evaluate(reference, image, mask=mask).metrics
+            rows.append({"points": count, "frame_seconds": float(np.median(timings)),
+                         "relative_mse": metrics.relative_mse, "hdr_flip": metrics.hdr_flip})
+            bar.update()
     first = rows[0]["frame_seconds"]
     for row in rows:
         row["time_ratio"] = row["frame_seconds"] / first if first > 0 else None

@@ -38,7 +38,7 @@ from ...fast import brdf_pca
 from ...materials.brdf_pca import pca_analysis
 from ...materials.brdfs import GAMMA_RANGES, MODELS, AnalyticBRDF
 from ...scenes import PointLight, load_scene
-from . import with_size
+from . import steps_bar, with_size
 
 #: Targets of the task (frames per second on this machine).
 TARGET_EDIT_FPS = 20.0
@@ -325,11 +325,17 @@ def run(args) -> int:
     folder = Path(args.out)
     if args.analysis or args.validate:
         check_output_folder(folder, "--out")
-    out = {"performance": _performance(args)}
+    sections = {"performance": lambda: _performance(args)}
     if args.analysis:
-        out["analysis"] = _analysis(folder)
+        sections["analysis"] = lambda: _analysis(folder)
     if args.validate:
-        out["validation"] = _validate(args, folder)
+        sections["validation"] = lambda: _validate(args, folder)
+    out = {}
+    with steps_bar("bench brdf_pca", len(sections), unit="section") as bar:
+        for section, measure in sections.items():
+            bar.set_postfix_str(section)
+            out[section] = measure()
+            bar.update()
     path = args.json or "bench_brdf_pca.json"
     atomic_write_text(path, json.dumps(out, indent=2, default=str))
     print(f"wrote {path}")

@@ -33,6 +33,7 @@ import numpy as np
 
 from ...atomic import atomic_write_text, check_output_folder
 from ...errors import check_count
+from . import steps_bar
 
 #: Targets, seconds; the walk model's posterior at most this multiple of the dipole's.
 TARGET_DIPOLE_SECONDS = 60.0
@@ -154,6 +155,8 @@ def run(args) -> int:
     from ...materials import measured_medium
 
     material = measured_medium(args.material)
+    bar = steps_bar("bench fitting", 3 if args.skip_subedit else 4)
+    bar.set_postfix_str("capture and baseline")
     pixels, spec = dipole_capture(material, size=args.size,
                                   pixel_size_mm=default_pixel_size(material, args.size),
                                   camera=Camera(peak_signal=40000), seed=args.seed)
@@ -165,7 +168,9 @@ def run(args) -> int:
     print(f"baseline (least-squares point fit of the dipole): {baseline:.2f} s")
     figures = {"material": material.name, "size": args.size, "baseline_seconds": baseline}
     status = 0
-    dipole = fit_dipole(capture, seed=args.seed, profile=profile)
+    bar.update()
+    bar.set_postfix_str("dipole posterior")
+    dipole = fit_dipole(capture, seed=args.seed, profile=profile, progress=True)
     chain = dipole.chains[0]
     ok = dipole.converged and dipole.seconds <= TARGET_DIPOLE_SECONDS
     print(f"dipole posterior: {dipole.seconds:.1f} s = {dipole.seconds / baseline:.0f} x "
@@ -176,7 +181,9 @@ def run(args) -> int:
     status = max(status, 0 if ok else 1)
     # the same capture: the model-conditional posteriors compared (a model that misfits
     # it also samples a discrepancy posterior, counted apart)
-    walk = fit_dipole(capture, seed=args.seed, profile=profile, forward="walk")
+    bar.update()
+    bar.set_postfix_str("walk-table posterior")
+    walk = fit_dipole(capture, seed=args.seed, profile=profile, forward="walk", progress=True)
     conditional = walk.chains[0].seconds
     ratio = conditional / dipole.chains[0].seconds
     ok = walk.converged and ratio <= TARGET_WALK_RATIO
@@ -191,7 +198,10 @@ def run(args) -> int:
                        **walk.chains[0].summary()}
     status = max(status, 0 if ok else 1)
     if not args.skip_subedit:
-        subedit = fit_subedit(capture, segments=args.segments, seed=args.seed, profile=profile)
+        bar.update()
+        bar.set_postfix_str("SubEdit posterior")
+        subedit = fit_subedit(capture, segments=args.segments, seed=args.seed, profile=profile,
+                              progress=True)
         ok = subedit.converged and subedit.seconds <= TARGET_SUBEDIT_SECONDS
         print(f"SubEdit posterior ({args.segments} segments, 3 chains): {subedit.seconds:.1f} s"
               f" = {subedit.seconds / baseline:.0f} x baseline (target <= "
@@ -202,6 +212,8 @@ def run(args) -> int:
                               "ratio_to_baseline": subedit.seconds / baseline, "target_met": ok,
                               "chains": [chain.summary() for chain in subedit.chains]}
         status = max(status, 0 if ok else 1)
+    bar.update()
+    bar.close()
     out = args.json or "bench_fitting.json"
     atomic_write_text(out, json.dumps(figures, indent=2) + "\n")
     print(f"wrote {out}")

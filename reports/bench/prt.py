@@ -42,7 +42,7 @@ from ...errors import check_count
 from ...fast import prt
 from ...materials import Dipole, measured_medium
 from ...scenes import Camera, PointLight, Scene, SceneObject, geometry_image, icosphere
-from . import count_list
+from . import count_list, steps_bar
 
 #: Targets of the task on this 2-core machine.
 TARGET_EDIT_FPS = 500.0
@@ -331,7 +331,10 @@ def run(args) -> int:
     check_count(args.spatial_rows, "--spatial-rows", minimum=0, why=" (0: skip)")
     if args.png is not None:
         check_output_file(args.png, "--png", what="a file name for the figure")
+    bar = steps_bar("bench prt", 2 + len(counts) + bool(args.spatial_rows))
+    bar.set_postfix_str("memory bandwidth")
     bandwidth = memory_bandwidth()
+    bar.update()
     print(f"memory bandwidth: copy {bandwidth['copy_gb_per_s']:.1f} GB/s, read "
           f"{bandwidth['read_gb_per_s']:.1f} GB/s (CPU time: "
           f"{bandwidth['read_gb_per_s_cpu']:.1f}); load average "
@@ -339,19 +342,26 @@ def run(args) -> int:
     from ...scenes import mesh_with_vertices
 
     mesh = mesh_with_vertices("icosphere", args.vertices)
+    bar.set_postfix_str("shadow rays")
     rays = shadow_ray_timings(mesh)
+    bar.update()
     for row in rays:
         print(f"shadow rays: {row['engine']:<8} {row['rays']:>6} rays {row['ms']:8.1f} ms "
               f"(CPU {row['cpu_ms']:.1f} ms; first call {row['first_call_ms']:.1f} ms; load "
               f"average {row['load_average']:.1f})")
     results = []
     for samples in counts:
+        bar.set_postfix_str(f"{samples} samples")
         results.append(bench_configuration(mesh, samples, args, bandwidth,
                                            f"icosphere {len(mesh.vertices)}"))
+        bar.update()
     if args.spatial_rows:
+        bar.set_postfix_str("geometry image")
         image_mesh = geometry_image(args.spatial_rows)
         results.append(bench_configuration(image_mesh, counts[0], args, bandwidth,
                                            f"geometry image {args.spatial_rows}^2"))
+        bar.update()
+    bar.close()
     header = (f"{'mesh':<24}{'samples':>8}{'spatial':>8}{'pre s':>8}{'MB':>8}{'relight':>9}"
               f"{'product':>9}{'edit':>8}{'bw frac':>8}{'err Skin1':>10}{'err Marble':>11}")
     print(header)

@@ -39,7 +39,6 @@ import json
 import os
 import re
 import resource
-import sys
 import time
 
 import numpy as np
@@ -51,7 +50,7 @@ from ...materials import Dipole, measured_medium
 from ...scenes import RectangularAreaLight, SceneObject
 from ...scenes.raycast import embree_available, ray_engine
 from ...scenes.scene_file import builtin_scene_path, loads_scene
-from . import PROGRESS_DELAY_SECONDS, count_list
+from . import count_list, steps_bar
 
 #: The paper's Table 1, Cornell box (24,640 polygons, GTX 590).
 PAPER = {"relighting fps": 14.0, "translucency change fps": 4.0,
@@ -489,11 +488,8 @@ def run(args) -> int:
     out = {"baseline seconds": baseline, "bandwidth GB/s": bandwidth, "paper": PAPER}
     scene = _cornell(args.wall_subdivisions, args.block_subdivisions, args.mm_per_unit,
                      measured_medium(args.material))
-    from tqdm.auto import tqdm
-
     sections = 5 + (not args.skip_transfer) + (not args.skip_sampling)
-    with tqdm(total=sections, desc="bench radiosity", unit="section", leave=False,
-              file=sys.stderr, delay=PROGRESS_DELAY_SECONDS, disable=None) as bar:
+    with steps_bar("bench radiosity", sections, unit="section") as bar:
         state = _precomputation(scene, args, out)
         bar.update()
         for section in (_relighting, _translucency, _thresholds, _low_rank):

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ...atomic import atomic_write_text
-from . import at_width
+from . import at_width, steps_bar
 
 #: The overhead the suite may add to a plain Mitsuba render (issue 2).
 TARGET_OVERHEAD = 1.05
@@ -113,11 +113,16 @@ def _overhead(scene, args) -> dict:
         function()
         return time.perf_counter() - wall, time.process_time() - cpu
 
-    timed(suite), timed(plain)  # warm-up: compile the kernels of both
     suite_times, plain_times = [], []
-    for _ in range(args.repeats):
-        suite_times.append(timed(suite))
-        plain_times.append(timed(plain))
+    with steps_bar("bench reference", args.repeats + 1, unit="timing") as bar:
+        bar.set_postfix_str("warm-up")
+        timed(suite), timed(plain)  # warm-up: compile the kernels of both
+        bar.update()
+        for repeat in range(args.repeats):
+            bar.set_postfix_str(f"repeat {repeat + 1}")
+            suite_times.append(timed(suite))
+            plain_times.append(timed(plain))
+            bar.update()
     suite_seconds, suite_cpu = (list(column) for column in zip(*suite_times, strict=True))
     plain_seconds, plain_cpu = (list(column) for column in zip(*plain_times, strict=True))
     tick = 1e-9  # a clock's resolution: a plain call too short to measure is not a zero
@@ -184,7 +189,7 @@ def _integrators(scene, args) -> dict:
     rows = {}
     for name, options in ESTIMATORS.items():
         render(scene, spp=1, passes=2, cache=False, progress=False, **options)  # warm-up
-        image = render(scene, spp=args.spp, passes=args.passes, cache=False, progress=False,
+        image = render(scene, spp=args.spp, passes=args.passes, cache=False, progress=True,
                        **options)
         relative = image.variance[mask] / np.maximum(image.rgb[mask], 1e-6) ** 2
         per_channel = relative.mean(axis=0)
@@ -232,7 +237,7 @@ def _delta_lights(scene, args) -> dict:
     for name, options in DELTA_LIGHT_ESTIMATORS.items():
         render(scene, spp=1, passes=2, cache=False, progress=False, **options)  # warm-up
         cpu = time.process_time()
-        image = render(scene, spp=args.spp, passes=args.passes, cache=False, progress=False,
+        image = render(scene, spp=args.spp, passes=args.passes, cache=False, progress=True,
                        **options)
         cpu_seconds = time.process_time() - cpu
         summary = noise_summary(image.rgb, image.variance, mask, mask_name="object")

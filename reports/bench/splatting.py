@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 import time
 
 import numpy as np
@@ -48,7 +47,7 @@ from ...atomic import atomic_write_text
 from ...fast import splatting
 from ...materials.subedit import BUILTIN_SUBEDIT
 from ...scenes import load_scene
-from . import PROGRESS_DELAY_SECONDS, with_size
+from . import steps_bar, with_size
 
 #: The ablation settings of the paper's Table 1.
 SETTINGS = {
@@ -185,11 +184,8 @@ def run(args) -> int:
                        max(1, round(args.validation_width * args.height / args.width)))
     common = {"irradiance_resolution": args.irradiance_resolution, "backend": args.backend}
     # ground truth on a regular subset of the timed frame's own pixels (same buffers)
-    from tqdm.auto import tqdm
-
     rows = _rows(names, epsilons, pitches, level_counts, not args.no_published)
-    bar = tqdm(total=len(rows) + 2, desc="bench splatting", unit="step", leave=False,
-               file=sys.stderr, delay=PROGRESS_DELAY_SECONDS, disable=None)
+    bar = steps_bar("bench splatting", len(rows) + 3)
     bar.set_postfix_str("ground truth")
     started = time.perf_counter()
     camera_buffer, camera, views, material, _ = splatting.precompute(full, **common).buffers()
@@ -229,10 +225,12 @@ def run(args) -> int:
         print(f"{name:64s} {1 / wall:8.3f} fps  {cpu:7.2f} CPU s/frame  error "
               f"{results[name]['relative error']:.4f}", flush=True)
         bar.update()
-    bar.close()
     load = {"before": list(load_before), "after": list(os.getloadavg())}
     _report(args, results, truth, truth_seconds, camera_buffer.valid.sum(), small, load)
+    bar.set_postfix_str("heterogeneous materials")
     per_material = _materials(small, small_common, materials)
+    bar.update()
+    bar.close()
     out = args.json or "bench_splatting.json"
     atomic_write_text(out, json.dumps({
         "scene": base.name, "width": args.width, "height": args.height,

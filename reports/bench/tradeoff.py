@@ -6,7 +6,8 @@
 
 For each scene (default: ``sphere``, where PRT, translucent radiosity and splatting apply,
 and ``glossy``, where BRDF editing does), every built fast method that applies is run along
-its quality ladder (:data:`LADDERS`: a few knob settings from cheap to the method's
+its quality ladder (its knob spec's ladders, :func:`declared_ladders`: a few knob
+settings from cheap to the method's
 defaults: PCA terms, wavelet terms, solver tolerance, splatting levels and irradiance
 resolution, gather samples), each against an empty cache so that its precomputation is
 timed in full, then renders its first frame and :data:`RELIGHT_FRAMES` relit ones (the
@@ -44,65 +45,13 @@ import numpy as np
 from ...atomic import atomic_save_figure, atomic_write_text, check_output_file
 from ...errors import InputError, check_count
 from ..speedup import equal_error_seconds, path_tracing_point
-from . import at_width
+from . import at_width, steps_bar
 
-__all__ = ["LADDERS", "DEFAULT_SCENES", "add_arguments", "declared_ladders", "run", "sweep",
+__all__ = ["DEFAULT_SCENES", "add_arguments", "declared_ladders", "run", "sweep",
            "path_tracing_point", "equal_error_seconds"]
 
 #: The scenes swept by default: between them every fast method applies to one.
 DEFAULT_SCENES = ("sphere", "glossy")
-
-#: Per method, named ladders of knob settings from cheap to the method's defaults (``{}``).
-#: Knobs a method does not have (any more) are dropped and the JSON says so.
-LADDERS: dict[str, dict[str, list[dict]]] = {
-    "prt": {
-        # illumination samples (parts x 4^n), PCA terms of the profile basis (Eq. 4) and
-        # Haar terms kept per transfer row (Eq. 8)
-        "samples, PCA and wavelet terms": [
-            {"samples": 1024, "basis_terms": 4, "terms": 32},
-            {"samples": 4096, "basis_terms": 8, "terms": 64},
-            {"samples": 16384, "basis_terms": 8, "terms": 128},
-            {},
-        ],
-    },
-    "radiosity": {
-        # samples of the scattering integral, the profile cut-off, form-factor rays and the
-        # solver's relative residual (Sheng et al. 2014, Sect. 5.2-5.3)
-        "scattering samples, cut-off, rays, solver tolerance": [
-            {"self_samples": 4, "profile_energy_cutoff": 0.1, "rays_per_patch": 32,
-             "tolerance": 0.05},
-            {"self_samples": 16, "profile_energy_cutoff": 0.03, "rays_per_patch": 64,
-             "tolerance": 0.02},
-            {"self_samples": 36, "profile_energy_cutoff": 0.01, "rays_per_patch": 128,
-             "tolerance": 0.01},
-            {},
-        ],
-    },
-    "splatting": {
-        # irradiance buffer side (Chen et al. 2012, Sect. 4) and mipmap levels (Sect. 5)
-        "irradiance resolution": [
-            {"irradiance_resolution": 64}, {"irradiance_resolution": 128},
-            {"irradiance_resolution": 256}, {},
-        ],
-        "levels": [{"levels": 5}, {"levels": 4}, {}, {"levels": 2}],
-        # coarse levels splatted from irradiance samples as sparse as their pixels (the
-        # fastest settings at equal error on the heterogeneous scene: docs/splatting.md)
-        "levels and level sampling": [
-            {"levels": 5, "level_sampling": 2.0}, {"levels": 5, "level_sampling": 1.5},
-            {"levels": 5, "level_sampling": 1.0}, {},
-        ],
-    },
-    "brdf_pca": {
-        # gather samples (Sect. 5.1), PCA basis BRDFs (Sect. 4) and Haar coefficients kept
-        # per transfer row (Sect. 3.4)
-        "gather samples, PCA and wavelet terms": [
-            {"gather_samples": 1024, "n_basis": 1, "transfer_coefficients": 64},
-            {"gather_samples": 4096, "n_basis": 2, "transfer_coefficients": 128},
-            {"gather_samples": 8192, "n_basis": 4, "transfer_coefficients": 256},
-            {},
-        ],
-    },
-}
 
 #: Words in the name of an integer knob that sets quality, for a method without a ladder.
 QUALITY_WORDS = ("terms", "samples", "iterations", "levels", "resolution", "rays", "basis",
@@ -160,15 +109,25 @@ def _task(kind: str, scene, *arguments):
     if kind == "path tracing":
         return path_tracing_point(scene, *arguments)
     method_name, knobs = arguments
-    return run_method(method_name, scene, knobs, cold=True, relight_frames=RELIGHT_FRAMES)
+    # the sweep asked applies_to when it planned the point
+    return run_method(method_name, scene, knobs, cold=True, relight_frames=RELIGHT_FRAMES,
+                      applies=True)
 
 
 # ====================================================================== ladders
 
 
 def declared_ladders(module, name: str) -> dict[str, list[dict]] | None:
-    """Return a method's own quality ladders (its ``LADDERS``), else this bench's, else None."""
-    return getattr(module, "LADDERS", None) or LADDERS.get(name)
+    """Return a method's quality ladders: its ``LADDERS``, else its knob spec's, else None.
+
+    Each is named, from cheap settings to the method's defaults (``{}``); knobs a method
+    does not have (any more) are dropped by the sweep, and its JSON says so.
+    """
+    ladders = getattr(module, "LADDERS", None)
+    spec = getattr(module, "KNOBS", None)
+    if not ladders and spec is not None and hasattr(spec, "ladders"):
+        ladders = spec.ladders
+    return ladders or None
 
 
 def _ladders(module, name: str) -> tuple[dict[str, list[dict]], list[str]]:
@@ -256,7 +215,7 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
     dict
         ``{"scenes": {name: {...}}, ...}``; see the module docstring.
     """
-    from ...fast.base import METHODS, method, refusal_of
+    from ...fast.base import METHODS, applicability, method
     from ...fast.registry import MethodContractError
     from ...scenes import Scene, load_scene
     from ..distributed import run_tasks
@@ -299,7 +258,7 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
             except InputError as error:
                 entry["methods"][name] = {"status": "not built", "reason": error.reason}
                 continue
-            reason = refusal_of(module.applies_to(scene))
+            reason = applicability(module.applies_to, scene)
             if reason is not None:
                 entry["methods"][name] = {"status": "not applicable",
                                           "reason": reason.sentence, "code": reason.code}
@@ -317,7 +276,9 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
     for (scene_name, kind, _, _), answer in zip(owners, answers, strict=True):
         if kind == "reference":
             references[scene_name] = answer
+    scoring = steps_bar("scoring", len(answers), unit="image", enabled=progress)
     for (scene_name, kind, name, ladder), answer in zip(owners, answers, strict=True):
+        scoring.update()
         entry = results[scene_name]
         reference = references[scene_name]
         if kind == "reference":
@@ -343,6 +304,7 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
         else:
             point["reason"] = answer.reason
         entry["methods"][name]["ladders"][ladder].append(point)
+    scoring.close()
     for entry in results.values():
         _ratios_and_speedups(entry)
     return {"benchmark": "tradeoff",

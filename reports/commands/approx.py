@@ -3,8 +3,9 @@
 Each built-in method adds its own options (``--material``, ``--gamma``, ...) through
 ``add_approx_arguments(parser)`` in its module, and turns them into a rendered image with
 ``approx(scene, args) -> Image``. A registered method without them
-(:mod:`translucent.fast.registry`) gets ``--knob NAME=VALUE``, checked against its
-``DEFAULT_KNOBS``, and is rendered by ``precompute(scene, **knobs).render()``.
+(:mod:`translucent.fast.registry`) gets a flag per knob of its ``KNOBS`` spec
+(:class:`~translucent.fast.knobs.KnobSpec`), or without one ``--knob NAME=VALUE``,
+checked against its ``DEFAULT_KNOBS``; it is rendered by ``precompute(scene, **knobs).render()``.
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ def add_arguments(parser):
         if hasattr(module, "approx"):
             if hasattr(module, "add_approx_arguments"):
                 module.add_approx_arguments(command)
+        elif _knob_spec(module) is not None:  # a flag per declared knob
+            _knob_spec(module).add_arguments(command)
         else:
             knobs = ", ".join(f"{k} (default {v!r})" for k, v in module.DEFAULT_KNOBS.items())
             command.add_argument("--knob", action="append", default=[], metavar="NAME=VALUE",
@@ -80,8 +83,18 @@ def knob_value(text: str, defaults: dict) -> tuple[str, object]:
     return name, raw
 
 
+def _knob_spec(module):
+    """Return the method's :class:`~translucent.fast.knobs.KnobSpec`, or None."""
+    from ...fast.knobs import KnobSpec
+
+    spec = getattr(module, "KNOBS", None)
+    return spec if isinstance(spec, KnobSpec) else None
+
+
 def _render_with_knobs(module, scene, args):
-    knobs = dict(knob_value(text, module.DEFAULT_KNOBS) for text in args.knob)
+    spec = _knob_spec(module)
+    knobs = spec.from_arguments(args) if spec is not None else \
+        dict(knob_value(text, module.DEFAULT_KNOBS) for text in args.knob)
     started = time.perf_counter()
     image = module.precompute(scene, **knobs).render()
     image.metadata.setdefault("seconds", time.perf_counter() - started)

@@ -335,3 +335,31 @@ def test_an_outside_methods_own_files_key_the_report_cache(registered, tmp_path,
     source.write_text(source.read_text() + "# edited\n")
     importlib.invalidate_caches()
     assert method_fingerprint("keyed") != first
+
+
+@pytest.mark.parametrize("name", sorted(registry.BUILTIN_METHODS))
+def test_applies_to_is_asked_once_per_run_and_not_again_when_passed_on(name, monkeypatch):
+    """The report asks when it plans a run; the run and the precomputation do not ask again."""
+    from translucent.reports.runs import run_method
+
+    module = registry.method(name)
+    calls = []
+    original = module.applies_to
+
+    def counted(scene):
+        calls.append(scene)
+        return original(scene)
+
+    monkeypatch.setattr(module, "applies_to", counted)
+    monkeypatch.setattr(sys.modules[original.__module__], "applies_to", counted)
+    scene = conformance.conformance_scene(module)
+    calls.clear()
+    run = run_method(name, scene, getattr(module, "QUICK_KNOBS", {}))
+    assert run.status == "ok", run.reason
+    assert calls == [scene]
+    calls.clear()
+    fresh = conformance.conformance_scene(module)
+    calls.clear()
+    assert run_method(name, fresh, getattr(module, "QUICK_KNOBS", {}), applies=True).status \
+        == "ok"
+    assert calls == []

@@ -410,12 +410,12 @@ def test_approx_command_refuses_a_material_with_a_coefficient_it_would_ignore(tm
     ({"samples": 1000}, "samples.*parts x 4\\^n"),
     ({"parts": 0}, "parts.*integer"),
     ({"energy": 0.0}, "energy"),
-    ({"basis": "fourier"}, "basis.*valid: paper, area_normalised"),
-    ({"spatial": "yes"}, "spatial.*'auto', 'on' or 'off'"),
+    ({"basis": "fourier"}, "basis.*must be one of 'paper', 'area_normalised'"),
+    ({"spatial": "yes"}, "spatial.*must be one of 'auto', 'on', 'off'"),
     ({"selection": "random"}, "selection"),
-    ({"layout": "columns"}, "layout.*'shared' or 'rows'"),
+    ({"layout": "columns"}, "layout.*must be one of 'shared', 'rows'"),
     ({"environment_resolution": 12}, "power of two"),
-    ({"sampling_blend": "yes"}, "sampling_blend.*True or False"),
+    ({"sampling_blend": "yes"}, "sampling_blend.*must be true or false"),
     ({"colour": "red"}, "unknown knob"),
 ])
 def test_bad_knobs_are_rejected(knobs, message):

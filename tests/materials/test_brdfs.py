@@ -15,7 +15,9 @@ from translucent.materials.brdfs import (
     canonical_model,
     check_gamma,
     edited_term,
+    fixed_term,
     lobe_terms,
+    pca_variable,
     pca_variable_range,
     schlick_fresnel,
 )
@@ -283,3 +285,39 @@ def test_model_aliases_and_identity():
         a.rho_s[0] = 1.0
     assert pca_variable_range("la") == (1e-3, 1 - 1e-3)
     assert pca_variable_range("bp") == (0.0, math.pi / 2)
+
+
+# -- the scalar forms compiled kernels take -------------------------------------------------
+
+_PAIRS = st.tuples(st.floats(-0.2, 1.0), st.floats(-0.2, 1.0), st.floats(-1.0, 1.0),
+                   st.floats(0.0, 1.0))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.sampled_from(MODELS), _PAIRS)
+def test_the_scalar_terms_are_the_array_terms(model, pair):
+    """Bit for bit: the kernels of BRDF editing compile these very functions."""
+    from translucent.materials.brdfs import MODEL_CODES, fixed_term_scalar, pca_variable_scalar
+
+    cos_l, cos_v, l_dot_v, f0 = pair
+    arrays = [np.array([value]) for value in (cos_l, cos_v, l_dot_v)]
+    code = MODEL_CODES[model]
+    assert fixed_term_scalar(code, cos_l, cos_v, l_dot_v, f0) == \
+        fixed_term(model, *arrays, f0=f0)[0]
+    c = (-1.1, 0.9)
+    assert pca_variable_scalar(code, cos_l, cos_v, l_dot_v, *c) == \
+        pca_variable(model, *arrays, lafortune_c=c)[0]
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.sampled_from(MODELS), _PAIRS)
+def test_the_compiled_terms_are_the_scalar_terms(model, pair):
+    from translucent.fast import brdf_pca_kernels
+    from translucent.materials.brdfs import MODEL_CODES, fixed_term_scalar, pca_variable_scalar
+
+    code = MODEL_CODES[model]
+    cos_l, cos_v, l_dot_v, f0 = pair
+    assert brdf_pca_kernels._fixed_scalar(code, cos_l, cos_v, l_dot_v, f0) == \
+        pytest.approx(fixed_term_scalar(code, cos_l, cos_v, l_dot_v, f0), rel=1e-14)
+    assert brdf_pca_kernels._variable_scalar(code, cos_l, cos_v, l_dot_v, -1.1, 0.9) == \
+        pytest.approx(pca_variable_scalar(code, cos_l, cos_v, l_dot_v, -1.1, 0.9), rel=1e-14)

@@ -7,9 +7,11 @@ import types
 import numpy as np
 import pytest
 from translucent.errors import InputError
+from translucent.fast.base import METHODS
+from translucent.fast.base import method as method_module
 from translucent.materials import measured_medium
 from translucent.reports.bench import tradeoff
-from translucent.reports.bench.tradeoff import LADDERS, equal_error_seconds, sweep
+from translucent.reports.bench.tradeoff import equal_error_seconds, sweep
 from translucent.reports.cli import main
 from translucent.scenes import Camera, ConstantEnvironment, Scene, SceneObject, icosphere
 
@@ -51,14 +53,15 @@ def test_equal_error_ignores_unusable_points_and_says_when_it_cannot():
 
 
 def test_ladders_keep_only_existing_knobs_and_end_at_the_defaults():
-    module = types.SimpleNamespace(DEFAULT_KNOBS={"samples": 16384, "terms": 256})
+    module = types.SimpleNamespace(DEFAULT_KNOBS={"samples": 16384, "terms": 256},
+                                   LADDERS=method_module("prt").LADDERS)
     ladders, notes = tradeoff._ladders(module, "prt")
     for points in ladders.values():
         assert points[-1] == {}
         assert all(set(point) <= {"samples", "terms"} for point in points)
     assert any("basis_terms" in note for note in notes)
-    for method_ladders in LADDERS.values():
-        for points in method_ladders.values():
+    for name in METHODS:
+        for points in tradeoff.declared_ladders(method_module(name), name).values():
             assert {} in points, "every ladder includes the method's defaults"
 
 
@@ -93,7 +96,7 @@ def test_bad_sweep_arguments():
 
 def test_a_tiny_sweep(tmp_path, monkeypatch):
     # one cheap rung of radiosity's ladder, 1 and 2 spp of path tracing, a small reference
-    monkeypatch.setitem(LADDERS, "radiosity", {"tiny": [
+    monkeypatch.setattr(method_module("radiosity"), "LADDERS", {"tiny": [
         {"self_samples": 4, "profile_energy_cutoff": 0.1}, {}]})
     figures = sweep([_tiny_scene()], methods=["radiosity"], serial=True, size=0, max_spp=2,
                     reference_spp=TINY_REFERENCE_SPP, reference_passes=4, progress=False)
@@ -129,7 +132,7 @@ def test_a_tiny_sweep(tmp_path, monkeypatch):
 
 
 def test_the_command_writes_json_and_plot(tmp_path, monkeypatch):
-    monkeypatch.setitem(LADDERS, "radiosity", {"tiny": [{}]})
+    monkeypatch.setattr(method_module("radiosity"), "LADDERS", {"tiny": [{}]})
     monkeypatch.setattr(tradeoff, "at_width", lambda scene, size: _tiny_scene())
     out = tmp_path / "tradeoff.json"
     code = main(["bench", "tradeoff", "--scene", "sphere", "--methods", "radiosity",
