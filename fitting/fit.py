@@ -485,27 +485,41 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
         raise InputError(f"unknown option; valid: {', '.join(FIT_OPTIONS)}", field=unknown[0],
                          value=options[unknown[0]])
     seed = _checked_seed(seed)
-    capture = read_capture(path)
-    profile = measure_profile(capture, r_min_mm=options.pop("r_min_mm", 0.0) or 0.0)
-    if "subedit" in models:  # its options checked before any fit writes anything
-        SubEditModel(profile, capture.spec,
-                     **{k: options[k] for k in ("segments", "r_s_mm", "smoothness")
-                        if options.get(k) is not None})
-    if "walk" in models:  # a capture the table does not cover is refused before writing
-        WalkModel(profile, capture.spec, fit_eta=options.get("fit_eta"))
-    if out_dir is not None:  # before the chains run, not after; not for a refused capture
-        out_dir = output_folder(out_dir)
-    results = {}
-    for kind in models:
-        if kind in COEFFICIENT_MODELS:
-            keys = ("fit_eta", "walkers", "max_steps")
-            results[kind] = fit_dipole(capture, seed=seed, progress=progress, profile=profile,
-                                       forward=kind,
-                                       **{k: options[k] for k in keys if k in options})
-        else:
-            keys = ("segments", "r_s_mm", "smoothness", "walkers", "max_steps")
-            results[kind] = fit_subedit(capture, seed=seed, progress=progress, profile=profile,
-                                        **{k: options[k] for k in keys if k in options})
-        if out_dir is not None:
-            write_outputs(results[kind], out_dir)
+    from tqdm.auto import tqdm
+
+    # the steps around the chains (reading, checks, goodness of fit, plots) take seconds
+    bar = tqdm(total=1 + 2 * len(models), desc="fit", unit="step", leave=False,
+               delay=1.0, disable=None if progress else True)
+    try:
+        bar.set_postfix_str("reading the capture")
+        capture = read_capture(path)
+        profile = measure_profile(capture, r_min_mm=options.pop("r_min_mm", 0.0) or 0.0)
+        if "subedit" in models:  # its options checked before any fit writes anything
+            SubEditModel(profile, capture.spec,
+                         **{k: options[k] for k in ("segments", "r_s_mm", "smoothness")
+                            if options.get(k) is not None})
+        if "walk" in models:  # a capture the table does not cover is refused before writing
+            WalkModel(profile, capture.spec, fit_eta=options.get("fit_eta"))
+        if out_dir is not None:  # before the chains run, not after; not for a refused capture
+            out_dir = output_folder(out_dir)
+        results = {}
+        bar.update()
+        for kind in models:
+            bar.set_postfix_str(f"{kind} posterior")
+            if kind in COEFFICIENT_MODELS:
+                keys = ("fit_eta", "walkers", "max_steps")
+                results[kind] = fit_dipole(capture, seed=seed, progress=progress, profile=profile,
+                                           forward=kind,
+                                           **{k: options[k] for k in keys if k in options})
+            else:
+                keys = ("segments", "r_s_mm", "smoothness", "walkers", "max_steps")
+                results[kind] = fit_subedit(capture, seed=seed, progress=progress, profile=profile,
+                                            **{k: options[k] for k in keys if k in options})
+            bar.update()
+            bar.set_postfix_str(f"{kind} outputs")
+            if out_dir is not None:
+                write_outputs(results[kind], out_dir)
+            bar.update()
+    finally:
+        bar.close()
     return results
