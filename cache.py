@@ -182,6 +182,81 @@ class Cache:
         """Where the entry for ``key`` lives (it may not exist)."""
         return self.folder / key[:2] / f"{key}{suffix}"
 
+    @contextlib.contextmanager
+    def locked(self, key: str, what: str = "this entry"):
+        """Hold the entry's lock for the block: one process makes an entry, the others wait.
+
+        Use it around "look the entry up, else compute and store it", looking up again
+        inside: a process that waited then finds what the other one stored instead of
+        computing it a second time. The lock is ``fcntl.flock`` on ``KEY.lock`` beside the
+        entry, released when the block ends or the process dies (``kill -9`` included).
+        Where locks cannot be taken (no ``fcntl``, a cache folder that cannot be written),
+        the block runs unlocked.
+
+        Parameters
+        ----------
+        key : str
+        what : str
+            Named in the one line said on standard error while waiting.
+        """
+        try:
+            import fcntl
+        except ImportError:  # not POSIX
+            yield
+            return
+        path = self.path(key, ".lock")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            handle = open(path, "a+b")  # noqa: SIM115 - held for the block
+        except OSError:
+            yield
+            return
+        try:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                print(f"translucent: waiting for another process making {what} "
+                      f"({path})", file=sys.stderr, flush=True)
+                fcntl.flock(handle, fcntl.LOCK_EX)
+            except OSError:  # a file system without locks
+                pass
+            yield
+        finally:
+            handle.close()  # releases the lock
+
+    def load_or_make(self, key: str, make, *, valid=None, what: str = "this entry",
+                     nbytes=None):
+        """Return ``(value, made)``: the entry under ``key``, or ``make()`` stored there.
+
+        Under the entry's lock (:meth:`locked`), looked up again once the lock is held: of
+        several processes asking at once, one makes it and the others read it.
+
+        Parameters
+        ----------
+        key : str
+        make : callable
+            ``make() -> value``, called only on a miss.
+        valid : callable, optional
+            ``valid(value) -> bool``: a stored value it refuses is a miss (another layout).
+        what : str
+            Named while a process waits.
+        nbytes : callable, optional
+            ``nbytes(value) -> int`` for :meth:`store_pickle`'s entry limit.
+        """
+        def usable(value):
+            return value is not None and (valid is None or valid(value))
+
+        value = self.load_pickle(key)
+        if usable(value):
+            return value, False
+        with self.locked(key, what):
+            value = self.load_pickle(key)
+            if usable(value):
+                return value, False
+            value = make()
+            self.store_pickle(key, value, nbytes=None if nbytes is None else nbytes(value))
+            return value, True
+
     def load_pickle(self, key: str):
         """Return the pickled object stored under ``key``, or None when absent or unusable.
 

@@ -262,15 +262,19 @@ def precompute(scene, **knobs) -> BRDFPCAState:
     key = content_hash("brdf_pca", FORMAT_VERSION, scene.geometry_key(),
                        scene.camera.cache_key(), resolved, _structure_key(scene))
     cache = Cache("brdf_pca")
-    stored = cache.load_pickle(key)
-    if isinstance(stored, Precomputation):
-        stored.log.notes["cache"] = "hit"
-        return BRDFPCAState(scene, stored)
-    started = time.perf_counter()
-    data = compute_precomputation(scene, resolved)
-    data.log.seconds["total"] = time.perf_counter() - started
-    data.log.notes["cache"] = "miss"
-    cache.store_pickle(key, data)
+
+    def make():
+        started = time.perf_counter()
+        data = compute_precomputation(scene, resolved)
+        data.log.seconds["total"] = time.perf_counter() - started
+        data.log.notes["cache"] = "miss"
+        return data
+
+    data, made = cache.load_or_make(key, make,
+                                    valid=lambda value: isinstance(value, Precomputation),
+                                    what="the BRDF-editing precomputation")
+    if not made:
+        data.log.notes["cache"] = "hit"
     return BRDFPCAState(scene, data)
 
 

@@ -11,6 +11,7 @@ the EXR is written atomically, so an interrupted render leaves nothing behind.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 import time
@@ -242,7 +243,29 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
     cached = _cached(store, key, scene, passes)
     if cached is not None:
         return cached
+    # two processes asking for one reference: the second waits, then reads the first's
+    with _entry_lock(store, key, scene):
+        cached = _cached(store, key, scene, passes)
+        if cached is not None:
+            return cached
+        return _render_passes(scene, store, key, settings, spp=spp, passes=passes, seed=seed,
+                              progress=progress, per_channel=per_channel,
+                              integrator=integrator, max_depth=max_depth, rr_depth=rr_depth,
+                              substitute_delta_lights=substitute_delta_lights,
+                              delta_light_size=delta_light_size)
 
+
+def _entry_lock(store, key, scene):
+    """Return the cache entry's lock (:meth:`Cache.locked`); no lock without a cache."""
+    if store is None:
+        return contextlib.nullcontext()
+    return store.locked(key, f"the reference of {scene.name!r}")
+
+
+def _render_passes(scene, store, key, settings, *, spp, passes, seed, progress, per_channel,
+                   integrator, max_depth, rr_depth, substitute_delta_lights,
+                   delta_light_size) -> Image:
+    """Render ``passes`` independent passes, write the image into the cache, return it."""
     start = time.perf_counter()
     channels, conversions, mitsuba_scenes = load_scenes(
         scene, spp=spp, per_channel=per_channel, integrator=integrator, max_depth=max_depth,
@@ -521,85 +544,90 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
     if cached is not None:
         return cached
 
-    accumulator = PassAccumulator((*shape, 3))
-    seconds_before = 0.0
-    manifold_before = None
-    partial = store.path(partial_key, ".partial.npz") if store is not None else None
-    if partial is not None and partial.is_file():
+    # two processes on one reference: the second waits for the first's passes
+    with _entry_lock(store, partial_key, scene):
+        cached = _cached(store, key, scene, 2)
+        if cached is not None:
+            return cached
+        accumulator = PassAccumulator((*shape, 3))
+        seconds_before = 0.0
+        manifold_before = None
+        partial = store.path(partial_key, ".partial.npz") if store is not None else None
+        if partial is not None and partial.is_file():
+            try:
+                with np.load(partial) as saved:
+                    if saved["mean"].shape == (*shape, 3):
+                        accumulator = PassAccumulator.from_state(saved)
+                        seconds_before = float(saved["seconds"])
+                        if "manifold_nee" in saved:
+                            manifold_before = json.loads(str(saved["manifold_nee"]))
+            except Exception:  # an unreadable partial state is started again
+                accumulator, seconds_before = PassAccumulator((*shape, 3)), 0.0
+                manifold_before = None
+
+        start = time.perf_counter()
+        channels, conversions, mitsuba_scenes = load_scenes(
+            scene, spp=spp, per_channel=per_channel, integrator=integrator, max_depth=max_depth,
+            rr_depth=rr_depth, substitute_delta_lights=substitute_delta_lights,
+            delta_light_size=delta_light_size)
+
+        def summary():
+            if accumulator.count < 2:
+                return None
+            return noise_summary(accumulator.mean, accumulator.variance(), mask,
+                                 mask_name=mask_name)
+
+        def elapsed():
+            return seconds_before + time.perf_counter() - start
+
+        from tqdm.auto import tqdm
+
+        bar = tqdm(delay=PROGRESS_DELAY_SECONDS, disable=not progress,
+                   desc=f"reference {scene.name}", unit="pass", leave=False, file=sys.stderr)
+        stopped = "max passes"
         try:
-            with np.load(partial) as saved:
-                if saved["mean"].shape == (*shape, 3):
-                    accumulator = PassAccumulator.from_state(saved)
-                    seconds_before = float(saved["seconds"])
-                    if "manifold_nee" in saved:
-                        manifold_before = json.loads(str(saved["manifold_nee"]))
-        except Exception:  # an unreadable partial state is started again
-            accumulator, seconds_before = PassAccumulator((*shape, 3)), 0.0
-            manifold_before = None
-
-    start = time.perf_counter()
-    channels, conversions, mitsuba_scenes = load_scenes(
-        scene, spp=spp, per_channel=per_channel, integrator=integrator, max_depth=max_depth,
-        rr_depth=rr_depth, substitute_delta_lights=substitute_delta_lights,
-        delta_light_size=delta_light_size)
-
-    def summary():
-        if accumulator.count < 2:
-            return None
-        return noise_summary(accumulator.mean, accumulator.variance(), mask,
-                             mask_name=mask_name)
-
-    def elapsed():
-        return seconds_before + time.perf_counter() - start
-
-    from tqdm.auto import tqdm
-
-    bar = tqdm(delay=PROGRESS_DELAY_SECONDS, disable=not progress,
-               desc=f"reference {scene.name}", unit="pass", leave=False, file=sys.stderr)
-    stopped = "max passes"
-    try:
-        while accumulator.count < max_passes:
-            reached = summary()
-            if accumulator.count >= min_passes and reached is not None and \
-                    reached.meets(target_rse, target_p99_rse):
-                stopped = "target reached"
-                break
-            if budget_seconds is not None and accumulator.count >= 2:
-                per_pass = elapsed() / accumulator.count
-                if elapsed() + per_pass > budget_seconds:
-                    stopped = "budget spent"
+            while accumulator.count < max_passes:
+                reached = summary()
+                if accumulator.count >= min_passes and reached is not None and \
+                        reached.meets(target_rse, target_p99_rse):
+                    stopped = "target reached"
                     break
-            accumulator.add(render_sample(
-                channels, mitsuba_scenes, spp,
-                PROGRESSIVE_SEED_OFFSET + seed * PROGRESSIVE_SEED_STRIDE + accumulator.count))
-            if partial is not None:
-                _save_partial(partial, accumulator, elapsed(),
-                              _manifold_counts(mitsuba_scenes, manifold_before))
-            reached = summary()
-            bar.update()
-            if reached is not None:
-                bar.set_postfix_str(f"median RSE {100 * reached.median:.3g} %")
-            if on_pass is not None:
-                on_pass(accumulator.count, elapsed(), reached)
-        else:
-            reached = summary()
-            if reached is not None and reached.meets(target_rse, target_p99_rse):
-                stopped = "target reached"
-    finally:
-        bar.close()
-    reached = summary()
-    _check_finite_render(scene, accumulator.mean)
-    image = Image(accumulator.mean, accumulator.variance(),
-                  _metadata(scene, key, settings, conversions, channels, mitsuba_scenes,
-                            manifold_before, spp=spp, passes=accumulator.count, seed=seed,
-                            seconds=elapsed(),
-                            seed_offset=PROGRESSIVE_SEED_OFFSET,
-                            noise=reached.as_dict(), target_rse=target_rse,
-                            target_p99_rse=target_p99_rse, budget_seconds=budget_seconds,
-                            stopped=stopped))
-    if store is not None:
-        image.write(store.path(key, ".exr"))
-    return image
+                if budget_seconds is not None and accumulator.count >= 2:
+                    per_pass = elapsed() / accumulator.count
+                    if elapsed() + per_pass > budget_seconds:
+                        stopped = "budget spent"
+                        break
+                accumulator.add(render_sample(
+                    channels, mitsuba_scenes, spp,
+                    PROGRESSIVE_SEED_OFFSET + seed * PROGRESSIVE_SEED_STRIDE + accumulator.count))
+                if partial is not None:
+                    _save_partial(partial, accumulator, elapsed(),
+                                  _manifold_counts(mitsuba_scenes, manifold_before))
+                reached = summary()
+                bar.update()
+                if reached is not None:
+                    bar.set_postfix_str(f"median RSE {100 * reached.median:.3g} %")
+                if on_pass is not None:
+                    on_pass(accumulator.count, elapsed(), reached)
+            else:
+                reached = summary()
+                if reached is not None and reached.meets(target_rse, target_p99_rse):
+                    stopped = "target reached"
+        finally:
+            bar.close()
+        reached = summary()
+        _check_finite_render(scene, accumulator.mean)
+        image = Image(accumulator.mean, accumulator.variance(),
+                      _metadata(scene, key, settings, conversions, channels, mitsuba_scenes,
+                                manifold_before, spp=spp, passes=accumulator.count, seed=seed,
+                                seconds=elapsed(),
+                                seed_offset=PROGRESSIVE_SEED_OFFSET,
+                                noise=reached.as_dict(), target_rse=target_rse,
+                                target_p99_rse=target_p99_rse, budget_seconds=budget_seconds,
+                                stopped=stopped))
+        if store is not None:
+            image.write(store.path(key, ".exr"))
+        return image
 
 
 def _save_partial(path, accumulator: PassAccumulator, seconds: float,

@@ -156,3 +156,33 @@ def test_an_unusable_key_file_keeps_entries_for_the_process_and_doctor_says_so(
     assert cache.load_pickle("c" * 64) == "kept"
     main(["doctor"])
     assert "/proc/no_key_can_be_made_here (CANNOT BE MADE" in capsys.readouterr().out
+
+
+def test_load_or_make_makes_an_entry_once_for_concurrent_callers(tmp_path):
+    import threading
+    import time
+
+    made = []
+
+    def make():
+        made.append(threading.get_ident())
+        time.sleep(0.5)
+        return {"value": 42}
+
+    answers = []
+
+    def ask():
+        answers.append(Cache("test", root=tmp_path).load_or_make("cd" * 32, make))
+
+    threads = [threading.Thread(target=ask) for _ in range(3)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(timeout=60)
+    assert len(made) == 1
+    assert sorted(flag for _, flag in answers) == [False, False, True]
+    assert all(value == {"value": 42} for value, _ in answers)
+    # a stored value the caller refuses is a miss: made again
+    value, again = Cache("test", root=tmp_path).load_or_make(
+        "cd" * 32, lambda: {"value": 7}, valid=lambda stored: stored["value"] == 7)
+    assert again and value == {"value": 7}

@@ -92,14 +92,15 @@ def precompute(scene, **knobs) -> PRTState:
     for index in _translucent_objects(scene):
         item = scene.objects[index]
         key = transfer_key(item, scene.mm_per_unit, knobs)
-        transfer = cache.load_pickle(key)
-        if isinstance(transfer, ObjectTransfer):
+        transfer, made = cache.load_or_make(
+            key, lambda item=item: precompute_object(item, scene.mm_per_unit, knobs, log),
+            valid=lambda value: isinstance(value, ObjectTransfer),
+            what=f"the PRT transfer of {item.name!r}")
+        if made:
+            log.notes.setdefault("cache", {})[item.name] = "computed and stored"
+        else:
             log.notes.setdefault("cache", {})[item.name] = "loaded from the cache"
             spatial_decision(item, knobs, log)
-        else:
-            transfer = precompute_object(item, scene.mm_per_unit, knobs, log)
-            cache.store_pickle(key, transfer)
-            log.notes.setdefault("cache", {})[item.name] = "computed and stored"
         transfers.append(transfer)
     others = [o.name for o in scene.objects if not isinstance(o.material, Dipole)]
     if others:

@@ -107,49 +107,57 @@ def precompute(scene, **knobs) -> RadiosityState:
     key = content_hash("radiosity", FORMAT_VERSION, scene.geometry_key(), geometry_knobs,
                        [scene.objects[i].name for i in translucent], labels)
     cache = Cache("radiosity")
-    stored = cache.load_pickle(key)
-    if stored is not None:
-        patches, F, geometry, log = stored
-        log.notes["cache"] = "hit"
+
+    def compute():
+        log = StageLog()
+        reason = needs_form_factors(scene)
+        F = None
+        with StageProgress(log, "radiosity precomputation",
+                           stages=2 if reason else 3) as progress:
+            with progress.stage("patches"):
+                patches = build_patches(scene,
+                                        triangles_per_patch=resolved["triangles_per_patch"],
+                                        two_sided=sheets)
+            for index in sheets:
+                log.notes.setdefault("thin sheets", []).append(scene.objects[index].name)
+            log.notes["patches"] = len(patches)
+            if reason is not None:
+                log.skip(reason)
+            else:
+                with progress.stage("form_factors"):
+                    F, facts = form_factors(scene, patches,
+                                            rays_per_patch=resolved["rays_per_patch"],
+                                            threshold=resolved["form_factor_threshold"],
+                                            seed=resolved["seed"])
+                log.notes["form_factors"] = facts
+            with progress.stage("scattering"):
+                geometry = scattering_geometry(
+                    scene, patches, translucent, max_distance_mm=resolved["max_distance_mm"],
+                    knobs=resolved, log=log, sheet_thickness_mm=resolved["sheet_thickness_mm"])
+        log.notes["scattering_bytes"] = geometry.bytes
+        log.notes["max_distance_mm"] = resolved["max_distance_mm"]
+        log.notes["cache"] = "miss"
         if solid_notes:
             log.notes["solid medium"] = solid_notes
-        return _state(scene, patches, F, geometry, resolved, log)
-    log = StageLog()
-    reason = needs_form_factors(scene)
-    F = None
-    with StageProgress(log, "radiosity precomputation",
-                       stages=2 if reason else 3) as progress:
-        with progress.stage("patches"):
-            patches = build_patches(scene, triangles_per_patch=resolved["triangles_per_patch"],
-                                    two_sided=sheets)
-        for index in sheets:
-            log.notes.setdefault("thin sheets", []).append(scene.objects[index].name)
-        log.notes["patches"] = len(patches)
-        if reason is not None:
-            log.skip(reason)
-        else:
-            with progress.stage("form_factors"):
-                F, facts = form_factors(scene, patches,
-                                        rays_per_patch=resolved["rays_per_patch"],
-                                        threshold=resolved["form_factor_threshold"],
-                                        seed=resolved["seed"])
-            log.notes["form_factors"] = facts
-        with progress.stage("scattering"):
-            geometry = scattering_geometry(scene, patches, translucent,
-                                           max_distance_mm=resolved["max_distance_mm"],
-                                           knobs=resolved, log=log,
-                                           sheet_thickness_mm=resolved["sheet_thickness_mm"])
-    log.notes["scattering_bytes"] = geometry.bytes
-    log.notes["max_distance_mm"] = resolved["max_distance_mm"]
-    log.notes["cache"] = "miss"
+        size = geometry.bytes + (0 if F is None else F.data.nbytes + F.indices.nbytes
+                                 + F.indptr.nbytes)
+        if cache.store_pickle(key, (patches, F, geometry, log), nbytes=size) is None:
+            log.skip(f"the precomputation ({size / 2**20:.0f} MiB) is not kept in the cache: "
+                     f"over its entry limit of {entry_limit() / 2**20:.4g} MiB "
+                     f"({ENTRY_LIMIT_VARIABLE}); the next run computes it again")
+        return patches, F, geometry, log
+
+    stored = cache.load_pickle(key)
+    if stored is None:  # one process computes it, another asking at once waits and reads
+        with cache.locked(key, "the radiosity precomputation"):
+            stored = cache.load_pickle(key)
+            if stored is None:
+                patches, F, geometry, log = compute()
+                return _state(scene, patches, F, geometry, resolved, log)
+    patches, F, geometry, log = stored
+    log.notes["cache"] = "hit"
     if solid_notes:
         log.notes["solid medium"] = solid_notes
-    size = geometry.bytes + (0 if F is None else F.data.nbytes + F.indices.nbytes
-                             + F.indptr.nbytes)
-    if cache.store_pickle(key, (patches, F, geometry, log), nbytes=size) is None:
-        log.skip(f"the precomputation ({size / 2**20:.0f} MiB) is not kept in the cache: "
-                 f"over its entry limit of {entry_limit() / 2**20:.4g} MiB "
-                 f"({ENTRY_LIMIT_VARIABLE}); the next run computes it again")
     return _state(scene, patches, F, geometry, resolved, log)
 
 
