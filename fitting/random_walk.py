@@ -269,6 +269,10 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
     if photons < batches or batches < 2:
         raise InputError(f"need photons >= batches >= 2 (batches = {batches})", field="photons",
                          value=photons)
+    from ..resources import WALK_BYTES_PER_PHOTON, check_memory
+
+    check_memory(photons * WALK_BYTES_PER_PHOTON, what=f"a walk of {photons:,} photons at once",
+                 field="photons", value=photons)
     if thickness_mm is not None and not (np.isfinite(thickness_mm) and thickness_mm > 0):
         raise InputError("must be > 0 or None", field="thickness_mm", value=thickness_mm)
     if int(rotations) < 1:
@@ -301,7 +305,9 @@ def photon_random_walk(material: Dipole, *, photons: int = 100_000,
         from .walk_kernel import drjit_available
 
         backend = "drjit" if drjit_available() else "numpy"
-    sizes = np.bincount(np.arange(photons) % batches, minlength=batches).astype(np.float64)
+    # photon i is in batch i mod batches: the first photons % batches batches have one more
+    sizes = np.full(batches, photons // batches, dtype=np.float64)
+    sizes[:photons % batches] += 1
     bar = None
     if progress:
         from tqdm.auto import tqdm

@@ -145,15 +145,23 @@ MAX_SAMPLES_PER_RENDER = 2**32 - 1
 
 
 def check_samples_per_render(scene: Scene, spp: int, field: str = "spp") -> None:
-    """Refuse a pass of more samples than Mitsuba can number, before any work.
+    """Refuse, before any work, a render the machine cannot hold or Mitsuba cannot number.
 
     Raises
     ------
     InputError
-        Naming ``field``, the samples a pass would take, and the most spp a pass may have
-        at the scene's size (more passes of fewer samples give the same image).
+        A camera whose film needs more memory than is available (the estimate and what
+        is there named, :mod:`translucent.resources`); or naming ``field``, the samples a
+        pass would take, and the most spp a pass may have at the scene's size (more passes
+        of fewer samples give the same image).
     """
     pixels = scene.camera.width * scene.camera.height
+    from ..resources import RENDER_BYTES_PER_PIXEL, check_memory
+
+    check_memory(pixels * RENDER_BYTES_PER_PIXEL,
+                 what=f"a {scene.camera.width} x {scene.camera.height} render",
+                 file=scene.source, field="camera", value=f"{scene.camera.width} x "
+                 f"{scene.camera.height}")
     if pixels * spp > MAX_SAMPLES_PER_RENDER:
         raise InputError(f"{scene.camera.width} x {scene.camera.height} pixels x {spp} spp = "
                          f"{pixels * spp:,} samples in one pass; Mitsuba numbers a render's "

@@ -122,6 +122,14 @@ def run(args) -> int:
     if not math.isfinite(args.photons):
         raise InputError("must be a finite number of photons per channel", field="--photons",
                          value=args.photons)
+    from ...resources import CAPTURE_BYTES_PER_PIXEL, WALK_BYTES_PER_PHOTON, check_memory
+
+    check_memory(args.size**2 * CAPTURE_BYTES_PER_PIXEL,
+                 what=f"a {args.size} x {args.size} capture", field="--size", value=args.size)
+    if args.generator == "walk":
+        check_memory(args.photons * WALK_BYTES_PER_PHOTON,
+                     what=f"a walk of {args.photons:.3g} photons at once", field="--photons",
+                     value=args.photons)
     pixel = args.pixel_size if args.pixel_size is not None else \
         default_pixel_size(material, args.size)
     if not pixel > 0:
