@@ -139,15 +139,18 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         return [function(*args) for args in tqdm(arguments, disable=not progress, leave=False)]
     from dask.distributed import as_completed
 
-    with dask_client(scheduler, workers=workers) as client:
+    # the bar starts with the cluster, whose workers take seconds to start
+    with tqdm(total=len(arguments), disable=not progress, leave=False) as bar, \
+            dask_client(scheduler, workers=workers) as client:
+        bar.set_postfix_str("starting the workers")
         # each worker process imports Mitsuba and sets its variant once, before any task:
         # a worker's threads must not race through the first import
         client.run(prepare_worker)
+        bar.set_postfix_str("")
         futures = [client.submit(function, *args, pure=False) for args in arguments]
         index = {future.key: position for position, future in enumerate(futures)}
         results: list[Any] = [None] * len(futures)
-        with tqdm(total=len(futures), disable=not progress, leave=False) as bar:
-            for future in as_completed(futures):
-                results[index[future.key]] = future.result()
-                bar.update()
+        for future in as_completed(futures):
+            results[index[future.key]] = future.result()
+            bar.update()
     return results
