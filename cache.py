@@ -7,22 +7,19 @@ Entries are written atomically (temporary name, then rename).
 The folder is ``TRANSLUCENT_CACHE`` if set, else ``$XDG_CACHE_HOME/translucent`` or
 ``~/.cache/translucent``.
 
-Pickled entries are authenticated: each file starts with an HMAC-SHA256 of its bytes under
-a secret key kept outside the cache (:func:`cache_key_file`), checked before anything is
-unpickled. A file placed in the cache by someone without the key (a crafted pickle that
-would run code, a truncated or altered entry, another version's layout) is a miss, said
-once on standard error, never loaded.
+No pickle is ever loaded from it. Objects (precomputations, method runs) are stored as
+``.npz`` entries of arrays and JSON (:mod:`translucent.entries`), read with
+``allow_pickle=False`` and rebuilt without running code the file names; each records its
+key and the SHA-256 of its arrays. An entry of another key, an altered or truncated one,
+or a file of another layout is a miss, said once on standard error, and computed again.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
-import hmac
 import json
 import os
-import pickle
-import secrets
 import shutil
 import sys
 import tempfile
@@ -34,22 +31,13 @@ import numpy as np
 from .atomic import atomic_path
 from .errors import InputError
 
-__all__ = ["cache_dir", "cache_key_file", "cache_secret", "content_hash", "private_cache",
-           "limited_entries", "entry_limit", "environment_variable", "ENTRY_LIMIT_VARIABLE",
-           "KEY_FILE_VARIABLE", "Cache"]
+__all__ = ["cache_dir", "content_hash", "private_cache", "limited_entries", "entry_limit",
+           "environment_variable", "ENTRY_LIMIT_VARIABLE", "ENTRY_SUFFIX", "Cache"]
 
-#: The file of the secret key that authenticates pickled entries; default
-#: ``$XDG_CONFIG_HOME/translucent/cache-key`` (``~/.config/...``). Machines that share one
-#: cache (Dask workers on a shared disk) share this file too.
-KEY_FILE_VARIABLE = "TRANSLUCENT_CACHE_KEY_FILE"
+#: The file suffix of an object entry.
+ENTRY_SUFFIX = ".entry.npz"
 
-#: First bytes of an authenticated pickle entry; the HMAC-SHA256 of the rest follows.
-PICKLE_MAGIC = b"TLPKL001"
-
-#: Bytes read at a time when an entry is authenticated.
-_CHUNK = 1 << 22
-
-#: The largest entry, in bytes, that :meth:`Cache.store_pickle` keeps when told its size;
+#: The largest entry, in bytes, that :meth:`Cache.store_object` keeps when told its size;
 #: unset or empty: no limit. Set by :func:`limited_entries`, inherited by worker processes.
 ENTRY_LIMIT_VARIABLE = "TRANSLUCENT_CACHE_MAX_ENTRY_BYTES"
 
@@ -189,7 +177,9 @@ class Cache:
         Use it around "look the entry up, else compute and store it", looking up again
         inside: a process that waited then finds what the other one stored instead of
         computing it a second time. The lock is ``fcntl.flock`` on ``KEY.lock`` beside the
-        entry, released when the block ends or the process dies (``kill -9`` included).
+        entry, released when the block ends or the process dies (``kill -9`` included; the
+        file is removed when the block ends, and one a killed process left is only ever
+        locked again, never trusted as an entry).
         Where locks cannot be taken (no ``fcntl``, a cache folder that cannot be written),
         the block runs unlocked.
 
@@ -205,23 +195,39 @@ class Cache:
             yield
             return
         path = self.path(key, ".lock")
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            handle = open(path, "a+b")  # noqa: SIM115 - held for the block
-        except OSError:
-            yield
-            return
-        try:
+        waited = False
+        while True:
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                handle = open(path, "a+b")  # noqa: SIM115 - held for the block
+            except OSError:
+                yield
+                return
             try:
                 fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
-                print(f"translucent: waiting for another process making {what} "
-                      f"({path})", file=sys.stderr, flush=True)
+                if not waited:
+                    print(f"translucent: waiting for another process making {what} "
+                          f"({path})", file=sys.stderr, flush=True)
+                    waited = True
                 fcntl.flock(handle, fcntl.LOCK_EX)
             except OSError:  # a file system without locks
-                pass
+                break
+            # the holder before us removed the file it locked: lock the one on disk now
+            try:
+                current = os.fstat(handle.fileno()).st_ino == os.stat(path).st_ino
+            except OSError:
+                current = False
+            if current:
+                break
+            handle.close()
+        try:
             yield
         finally:
+            # removed while still held, so that no lock file is left in the cache; a waiter
+            # on this file finds it gone and locks a new one
+            with contextlib.suppress(OSError):
+                path.unlink()
             handle.close()  # releases the lock
 
     def load_or_make(self, key: str, make, *, valid=None, what: str = "this entry",
@@ -241,53 +247,63 @@ class Cache:
         what : str
             Named while a process waits.
         nbytes : callable, optional
-            ``nbytes(value) -> int`` for :meth:`store_pickle`'s entry limit.
+            ``nbytes(value) -> int`` for :meth:`store_object`'s entry limit.
         """
         def usable(value):
             return value is not None and (valid is None or valid(value))
 
-        value = self.load_pickle(key)
+        value = self.load_object(key)
         if usable(value):
             return value, False
         with self.locked(key, what):
-            value = self.load_pickle(key)
+            value = self.load_object(key)
             if usable(value):
                 return value, False
             value = make()
-            self.store_pickle(key, value, nbytes=None if nbytes is None else nbytes(value))
+            self.store_object(key, value, nbytes=None if nbytes is None else nbytes(value))
             return value, True
 
-    def load_pickle(self, key: str):
-        """Return the pickled object stored under ``key``, or None when absent or unusable.
+    def load_object(self, key: str):
+        """Return the object stored under ``key``, or None when absent or untrusted.
 
-        The entry's HMAC is checked before anything is unpickled: an entry that fails it is
-        a miss and is said once on standard error.
+        The entry is read without pickle (:func:`translucent.entries.read_entry`); one of
+        another key or layout, or whose arrays changed, is a miss and is said once on
+        standard error.
         """
-        path = self.path(key, ".pkl")
+        from .entries import EntryError, read_entry
+
+        path = self.path(key, ENTRY_SUFFIX)
         if not path.is_file():
             return None
         try:
-            with open(path, "rb") as handle, _byte_progress(
-                    f"reading the {self.folder.name} cache", 2 * path.stat().st_size) as bar:
-                counted = _Counted(handle, bar)
-                if not _authentic(counted):
-                    _report_rejected(path)
-                    return None
-                return pickle.load(counted)
-        except Exception:  # a stale entry of an older layout is a miss, not a crash
+            with _byte_progress(f"reading the {self.folder.name} cache",
+                                path.stat().st_size) as bar:
+                value = read_entry(path, key)
+                bar.update(path.stat().st_size)
+            return value
+        except EntryError as error:
+            _report_rejected(path, str(error))
+            return None
+        except OSError:
             return None
 
-    def store_pickle(self, key: str, value, *, nbytes: int | None = None) -> Path | None:
+    def store_object(self, key: str, value, *, nbytes: int | None = None) -> Path | None:
         """Store ``value`` under ``key`` atomically and return the path.
 
         Parameters
         ----------
         key : str
         value : object
-            Anything picklable.
+            What :mod:`translucent.entries` stores: arrays, numbers, strings, containers
+            and the package's own objects made of them.
         nbytes : int, optional
             The size of ``value``'s arrays. Above :func:`entry_limit` nothing is written and
             None is returned: the caller recomputes next time (and may say so).
+
+        Returns
+        -------
+        Path or None
+            None where nothing was kept (over the limit, or a value that cannot be stored).
 
         Raises
         ------
@@ -295,70 +311,23 @@ class Cache:
             When the cache folder cannot be written; the message names
             ``TRANSLUCENT_CACHE``, the setting that moves it.
         """
+        from .entries import EntryError, write_entry
+
         limit = entry_limit()
         if nbytes is not None and limit is not None and nbytes > limit:
             return None
-        path = self.path(key, ".pkl")
+        path = self.path(key, ENTRY_SUFFIX)
         try:
-            with atomic_path(path) as tmp, open(tmp, "w+b") as handle, _byte_progress(
-                    f"writing the {self.folder.name} cache", nbytes) as bar:
-                handle.write(PICKLE_MAGIC + bytes(hashlib.sha256().digest_size))
-                signer = _Signing(_Counted(handle, bar))
-                pickle.dump(value, signer, protocol=pickle.HIGHEST_PROTOCOL)
-                handle.seek(len(PICKLE_MAGIC))
-                handle.write(signer.mac.digest())
+            with atomic_path(path, suffix=".npz") as tmp, open(tmp, "w+b") as handle, \
+                    _byte_progress(f"writing the {self.folder.name} cache", nbytes) as bar:
+                bar.update(write_entry(handle, key, value))
+        except EntryError:
+            return None  # kept in memory only; the atomic write left nothing behind
         except InputError as error:
             raise InputError(f"the cache cannot be written ({error.reason}); point "
                              "TRANSLUCENT_CACHE at a writable folder", field="TRANSLUCENT_CACHE",
                              value=str(self.root)) from error
         return path
-
-
-def cache_key_file() -> Path:
-    """Return where the secret key of the cache's pickled entries is kept."""
-    given = os.environ.get(KEY_FILE_VARIABLE)
-    if given:
-        return Path(given).expanduser()
-    base = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"),
-                                                             ".config")
-    return Path(base) / "translucent" / "cache-key"
-
-
-def cache_secret() -> bytes:
-    """Return the key (32 bytes), created on first use with permissions 0600.
-
-    Where it can be neither read nor created (an unwritable home), this process makes one
-    of its own: its entries are then authentic to it alone and the next run misses them.
-    Read once per process and key file, not at every entry.
-    """
-    path = cache_key_file()
-    if str(path) not in _KEYS:
-        _KEYS[str(path)] = _read_or_make_key(path)
-    return _KEYS[str(path)]
-
-
-#: The keys read or made in this process, by key file.
-_KEYS: dict[str, bytes] = {}
-
-
-def _read_or_make_key(path: Path) -> bytes:
-    try:
-        key = path.read_bytes()
-        if len(key) >= 32:
-            return key
-    except OSError:
-        pass
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".cache-key.", dir=path.parent)  # 0600
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(secrets.token_bytes(32))
-        with contextlib.suppress(FileExistsError):
-            os.link(tmp, path)  # never replaces a key another process made meanwhile
-        os.unlink(tmp)
-        return path.read_bytes()
-    except OSError:
-        return secrets.token_bytes(32)  # this process's own
 
 
 def _byte_progress(description: str, total: int | None):
@@ -369,70 +338,12 @@ def _byte_progress(description: str, total: int | None):
                 delay=1.0, disable=None)
 
 
-class _Counted:
-    """A file wrapper that advances a byte progress bar as it is read or written."""
-
-    def __init__(self, handle, bar):
-        self.handle = handle
-        self.bar = bar
-
-    def read(self, size=-1):
-        data = self.handle.read(size)
-        self.bar.update(len(data))
-        return data
-
-    def readline(self, size=-1):
-        data = self.handle.readline(size)
-        self.bar.update(len(data))
-        return data
-
-    def readinto(self, buffer):
-        count = self.handle.readinto(buffer)
-        self.bar.update(count or 0)
-        return count
-
-    def write(self, data) -> int:
-        self.bar.update(memoryview(data).nbytes)  # pickle also writes PickleBuffers
-        return self.handle.write(data)
-
-    def seek(self, *args):
-        return self.handle.seek(*args)
-
-
-class _Signing:
-    """A file wrapper that feeds what is written to an HMAC."""
-
-    def __init__(self, handle):
-        self.handle = handle
-        self.mac = hmac.new(cache_secret(), digestmod=hashlib.sha256)
-
-    def write(self, data) -> int:
-        self.mac.update(data)
-        return self.handle.write(data)
-
-
-def _authentic(handle) -> bool:
-    """Check an entry's magic and HMAC, then leave ``handle`` at the start of the pickle."""
-    size = hashlib.sha256().digest_size
-    head = handle.read(len(PICKLE_MAGIC) + size)
-    if len(head) != len(PICKLE_MAGIC) + size or not head.startswith(PICKLE_MAGIC):
-        return False
-    mac = hmac.new(cache_secret(), digestmod=hashlib.sha256)
-    for chunk in iter(lambda: handle.read(_CHUNK), b""):
-        mac.update(chunk)
-    if not hmac.compare_digest(mac.digest(), head[len(PICKLE_MAGIC):]):
-        return False
-    handle.seek(len(head))
-    return True
-
-
 _REPORTED: set[str] = set()
 
 
-def _report_rejected(path: Path) -> None:
+def _report_rejected(path: Path, reason: str) -> None:
     if str(path) not in _REPORTED:
         _REPORTED.add(str(path))
-        print(f"translucent: note: the cache entry {path} is not one this installation "
-              "wrote (its authentication failed); it is ignored and computed again",
-              file=sys.stderr)
+        print(f"translucent: note: the cache entry {path} is not trusted ({reason}); it is "
+              "ignored and computed again", file=sys.stderr)
 

@@ -190,7 +190,7 @@ def diffuse_albedo(material) -> np.ndarray:
 
 @dataclass
 class Precomputation:
-    r"""What :func:`precompute` stores (pickled in the ``brdf_pca`` cache).
+    r"""What :func:`precompute` stores (kept in the ``brdf_pca`` cache: :mod:`translucent.entries`).
 
     Attributes
     ----------

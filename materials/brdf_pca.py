@@ -218,7 +218,7 @@ def _decomposition(model, gamma_range, gamma_samples, delta_samples):
 
     key = content_hash("pca_basis", 1, model, list(gamma_range), gamma_samples, delta_samples)
     cache = Cache("brdf_pca_basis")
-    stored = cache.load_pickle(key)
+    stored = cache.load_object(key)
     if stored is not None:
         return stored
     delta, columns = _sample_matrix(model, gamma_range, gamma_samples, delta_samples)
@@ -226,7 +226,7 @@ def _decomposition(model, gamma_range, gamma_samples, delta_samples):
     with threadpool_limits(limits=1, user_api="blas"):
         left, singular, _ = np.linalg.svd(columns - mean[:, None], full_matrices=False)
     result = (delta, mean, np.ascontiguousarray(left[:, :STORED_COMPONENTS]), singular)
-    cache.store_pickle(key, result)
+    cache.store_object(key, result)
     return result
 
 

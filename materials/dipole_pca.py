@@ -539,10 +539,10 @@ def _cached_decomposition(sampling: ProfileSampling, eta: float):
     else:
         cache = Cache("dipole_pca")
         key = _decomposition_key(sampling, eta)
-        stored = cache.load_pickle(key)
+        stored = cache.load_object(key)
         if stored is None:
             stored = _decompose(sampling, eta)
-            cache.store_pickle(key, stored)
+            cache.store_object(key, stored)
     for array in stored:
         array.flags.writeable = False
     return stored

@@ -116,8 +116,9 @@ def fresnel_transmittance_scalar(eta: float, cosine: float) -> float:
     0.982987
     """
     cos_i = 0.0 if cosine < 0.0 else (1.0 if cosine > 1.0 else cosine)
-    # (1 - cos)(1 + cos) keeps its digits near normal incidence, where 1 - cos^2 cancels
-    sin2_t = (1.0 - cos_i) * (1.0 + cos_i) / eta**2
+    # (1 - cos)(1 + cos) keeps its digits near normal incidence, where 1 - cos^2 cancels;
+    # x * x, not x**2: numpy squares by multiplying, Python's pow() can differ by an ulp
+    sin2_t = (1.0 - cos_i) * (1.0 + cos_i) / (eta * eta)
     if sin2_t >= 1.0:
         return 0.0
     under = 1.0 - sin2_t
@@ -128,7 +129,7 @@ def fresnel_transmittance_scalar(eta: float, cosine: float) -> float:
         return 0.0
     r_s = (cos_i - eta * cos_t) / divisor_s
     r_p = (eta * cos_i - cos_t) / divisor_p
-    reflectance = 0.5 * (r_s**2 + r_p**2)
+    reflectance = 0.5 * (r_s * r_s + r_p * r_p)
     if not math.isfinite(reflectance):
         return 0.0
     return 1.0 - (0.0 if reflectance < 0.0 else (1.0 if reflectance > 1.0 else reflectance))

@@ -156,18 +156,18 @@ def check_samples_per_render(scene: Scene, spp: int, field: str = "spp") -> None
         of fewer samples give the same image).
     """
     pixels = scene.camera.width * scene.camera.height
-    from ..resources import RENDER_BYTES_PER_PIXEL, check_memory
-
-    check_memory(pixels * RENDER_BYTES_PER_PIXEL,
-                 what=f"a {scene.camera.width} x {scene.camera.height} render",
-                 file=scene.source, field="camera", value=f"{scene.camera.width} x "
-                 f"{scene.camera.height}")
     if pixels * spp > MAX_SAMPLES_PER_RENDER:
         raise InputError(f"{scene.camera.width} x {scene.camera.height} pixels x {spp} spp = "
                          f"{pixels * spp:,} samples in one pass; Mitsuba numbers a render's "
                          f"samples in 32 bits (at most {MAX_SAMPLES_PER_RENDER:,}): give at "
                          f"most {MAX_SAMPLES_PER_RENDER // pixels} spp a pass and more passes",
                          file=scene.source, field=field, value=spp)
+    from ..resources import RENDER_BYTES_PER_PIXEL, check_memory
+
+    check_memory(pixels * RENDER_BYTES_PER_PIXEL,
+                 what=f"a {scene.camera.width} x {scene.camera.height} render",
+                 file=scene.source, field="camera", value=f"{scene.camera.width} x "
+                 f"{scene.camera.height}")
 
 
 def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,

@@ -256,9 +256,12 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
         The converged reference.
     reference_variance : Image, array_like or path, optional
         The reference's per-sample variance (radiance squared), not the variance of its
-        mean. Default: from ``reference_mean`` itself, a reference written by the suite
-        (``translucent render``, a committed reference): its stored variance of the mean
-        times its samples per pixel (``spp x passes`` of its metadata).
+        mean; the reference is then taken as converged (Mitsuba's test). Default: from
+        ``reference_mean`` itself, a reference written by the suite (``translucent
+        render``, a committed reference): its stored variance of the mean times its
+        samples per pixel (``spp x passes`` of its metadata), and its own noise counts
+        too (Student's t over its passes: :func:`translucent.reports.statistics.z_test`),
+        so that an honest render is not failed for the reference's noise.
     spp : int, optional
         Samples per pixel of ``test``; default ``test.metadata["spp"]``.
     significance, required_fraction : float, optional
@@ -293,6 +296,10 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
     options = {key: value for key, value in (("significance", significance),
                                              ("required_fraction", required_fraction))
                if value is not None}
+    if reference_variance is None:  # the reference's own noise, from its passes, counts
+        passes = reference_image.metadata["passes"]
+        options.update(reference_samples=reference_image.metadata["spp"] * passes,
+                       reference_passes=passes)
     result = z_test(test_image.rgb, reference_image.rgb, per_sample, spp, **options)
     if result.passed:
         return result

@@ -583,7 +583,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
             for knobs in [{}] + ladder_knobs(module, name):
                 key = _run_key(name, report.scene, knobs, method_sources[name], versions)
                 owner = name if not knobs else (LADDER, name)
-                stored = run_cache.load_pickle(key)
+                stored = run_cache.load_object(key)
                 if isinstance(stored, MethodRun) and stored.status == "ok":
                     stored.cached = True
                     _keep_run(report, owner, stored)
@@ -596,7 +596,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 for n in chosen + renderers):
             key = content_hash("path tracing", report.scene_hash, PATH_TRACING_SPP, versions,
                                fingerprint)
-            report.path_tracing = run_cache.load_pickle(key)
+            report.path_tracing = run_cache.load_object(key)
             if report.path_tracing is None:
                 tasks.append(("path tracing", portable(report), list(PATH_TRACING_SPP)))
                 owners.append((report, PATH_TRACING, key))
@@ -617,7 +617,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         if name == PATH_TRACING:
             report.path_tracing = result
             if isinstance(result, list) and not any("error" in p for p in result):
-                run_cache.store_pickle(key, result)
+                run_cache.store_object(key, result)
             continue
         if name is None:
             if isinstance(result, Image):
@@ -627,7 +627,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
             continue
         _keep_run(report, name, result)
         if result.status == "ok":
-            run_cache.store_pickle(key, result)
+            run_cache.store_object(key, result)
 
     chosen = chosen + renderers
     for report in reports:

@@ -411,7 +411,10 @@ def equal_error_seconds(errors, seconds, error: float) -> tuple[float, bool]:
     order = np.argsort(log_e)
     log_e, log_t = log_e[order], log_t[order]
     target = math.log(error)
-    if log_e[0] <= target <= log_e[-1]:
+    # an error equal to a ladder point's, up to the rounding of the logarithms, is inside
+    reach = 1e-12 * max(1.0, abs(log_e[0]), abs(log_e[-1]))
+    if log_e[0] - reach <= target <= log_e[-1] + reach:
+        target = min(max(target, log_e[0]), log_e[-1])
         return float(np.exp(np.interp(target, log_e, log_t))), False
     slope, intercept = np.polyfit(log_e, log_t, 1)
     return float(np.exp(intercept + slope * target)), True

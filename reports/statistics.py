@@ -176,7 +176,8 @@ def _result(z: np.ndarray, significance: float, required_fraction: float,
 
 def z_test(test_mean, reference_mean, reference_variance, spp: int, *,
            significance: float = SIGNIFICANCE, required_fraction: float = REQUIRED_FRACTION,
-           variance_floor: float = VARIANCE_FLOOR) -> ZTestResult:
+           variance_floor: float = VARIANCE_FLOOR, reference_samples: int | None = None,
+           reference_passes: int | None = None) -> ZTestResult:
     r"""Run Mitsuba 3's per-pixel z-test of a render against a reference mean and variance.
 
     :math:`z = |\bar{x} - \mu| \sqrt{n / \max(\sigma^2, 10^{-4})}`,
@@ -202,6 +203,14 @@ def z_test(test_mean, reference_mean, reference_variance, spp: int, *,
         Fraction of pixel channels that must be accepted (0.9975).
     variance_floor : float
         Lower clamp of ``reference_variance`` (1e-4, radiance squared).
+    reference_samples, reference_passes : int, optional
+        The reference is not converged: a mean of ``reference_samples`` samples per pixel
+        in ``reference_passes`` independent passes, its per-sample variance estimated
+        from those passes. Its own noise then enters the difference,
+        :math:`z = |\bar{x} - \mu| / \sqrt{\sigma^2 (1/n + 1/N_\mathrm{ref})}`, and z
+        follows Student's t with ``reference_passes - 1`` degrees of freedom. Without
+        them (Mitsuba's test) the reference is taken as exact, which a reference of a few
+        passes is not: honest renders then fail (docs/references.md measures how often).
 
     Returns
     -------
@@ -211,7 +220,8 @@ def z_test(test_mean, reference_mean, reference_variance, spp: int, *,
     Raises
     ------
     InputError
-        Different shapes (all listed), a negative or NaN variance, ``spp`` < 1.
+        Different shapes (all listed), a negative or NaN variance, ``spp`` < 1, a
+        reference pass count below 2 or sample count below its passes.
     """
     if not (isinstance(spp, (int, np.integer)) and spp >= 1):
         raise InputError("must be an integer >= 1 (samples per pixel of the test image)",
@@ -222,8 +232,20 @@ def z_test(test_mean, reference_mean, reference_variance, spp: int, *,
     _same_shape(arrays)
     _check_variance(arrays["reference_variance"], "reference_variance")
     variance = np.maximum(arrays["reference_variance"], variance_floor)
-    z = np.abs(arrays["test_mean"] - arrays["reference_mean"]) * np.sqrt(spp / variance)
-    return _result(z, significance, required_fraction)
+    if reference_samples is None and reference_passes is None:
+        z = np.abs(arrays["test_mean"] - arrays["reference_mean"]) * np.sqrt(spp / variance)
+        return _result(z, significance, required_fraction)
+    if not (isinstance(reference_passes, (int, np.integer)) and reference_passes >= 2):
+        raise InputError("an estimated variance needs an integer count of passes >= 2",
+                         field="reference_passes", value=reference_passes)
+    if not (isinstance(reference_samples, (int, np.integer))
+            and reference_samples >= reference_passes):
+        raise InputError("must be an integer >= the reference's passes (its samples per "
+                         "pixel over all passes)", field="reference_samples",
+                         value=reference_samples)
+    spread = variance * (1.0 / spp + 1.0 / reference_samples)
+    z = np.abs(arrays["test_mean"] - arrays["reference_mean"]) / np.sqrt(spread)
+    return _result(z, significance, required_fraction, reference_passes - 1)
 
 
 def z_test_known_variance(first: Image, second: Image, *, passes=None,

@@ -20,11 +20,6 @@ def pytest_configure(config):
 
             base = tempfile.mkdtemp(prefix="translucent-test-")
         os.environ["TRANSLUCENT_CACHE"] = os.path.join(str(base), "cache")
-    if not os.environ.get("TRANSLUCENT_CACHE_KEY_FILE"):
-        # the key that authenticates pickled cache entries: beside the tests' cache, not
-        # in the user's home
-        os.environ["TRANSLUCENT_CACHE_KEY_FILE"] = os.path.join(
-            os.path.dirname(os.environ["TRANSLUCENT_CACHE"]), "cache-key")
 
 
 @pytest.fixture

@@ -1,5 +1,5 @@
 import numpy as np
-from translucent.cache import Cache, cache_dir, content_hash
+from translucent.cache import ENTRY_SUFFIX, Cache, cache_dir, content_hash
 from translucent.materials import Dipole, measured_medium
 
 
@@ -20,15 +20,15 @@ def test_cache_dir_follows_environment(tmp_path, monkeypatch):
     assert cache_dir() == tmp_path / "c"
 
 
-def test_pickle_round_trip_and_miss(tmp_path):
+def test_object_round_trip_and_miss(tmp_path):
     cache = Cache("unit", root=tmp_path)
     key = content_hash("x")
-    assert cache.load_pickle(key) is None
-    cache.store_pickle(key, {"a": np.arange(3)})
-    assert np.array_equal(cache.load_pickle(key)["a"], np.arange(3))
+    assert cache.load_object(key) is None
+    cache.store_object(key, {"a": np.arange(3)})
+    assert np.array_equal(cache.load_object(key)["a"], np.arange(3))
     # a corrupt entry is a miss, not a crash
-    cache.path(key, ".pkl").write_bytes(b"garbage")
-    assert cache.load_pickle(key) is None
+    cache.path(key, ENTRY_SUFFIX).write_bytes(b"garbage")
+    assert cache.load_object(key) is None
 
 
 def test_private_cache_is_empty_then_removed_and_restores_the_setting(tmp_path, monkeypatch):
@@ -52,7 +52,7 @@ def test_a_cache_that_cannot_be_written_names_translucent_cache(tmp_path, monkey
     monkeypatch.setenv("TRANSLUCENT_CACHE", str(a_file))
     with pytest.raises(InputError, match=r"TRANSLUCENT_CACHE = '.*a_file': the cache cannot "
                                          r"be written"):
-        Cache("unit").store_pickle(content_hash("x"), 1)
+        Cache("unit").store_object(content_hash("x"), 1)
     assert a_file.read_text() == "keep me"
 
 
@@ -65,17 +65,17 @@ def test_entries_over_the_limit_are_not_written_and_the_setting_is_restored(tmp_
     small, large = content_hash("small"), content_hash("large")
     with limited_entries(1000):
         assert entry_limit() == 1000
-        assert cache.store_pickle(small, np.zeros(10), nbytes=80) is not None
-        assert cache.store_pickle(large, np.zeros(200), nbytes=1600) is None
-        assert cache.store_pickle(content_hash("unsized"), np.zeros(200)) is not None
+        assert cache.store_object(small, np.zeros(10), nbytes=80) is not None
+        assert cache.store_object(large, np.zeros(200), nbytes=1600) is None
+        assert cache.store_object(content_hash("unsized"), np.zeros(200)) is not None
         with limited_entries(None):
             assert entry_limit() is None
         assert entry_limit() == 1000
     assert entry_limit() is None
-    assert cache.load_pickle(small) is not None
-    assert cache.load_pickle(large) is None
+    assert cache.load_object(small) is not None
+    assert cache.load_object(large) is None
     assert not cache.path(large, ".pkl").exists()
-    assert cache.store_pickle(large, np.zeros(200), nbytes=1600) is not None
+    assert cache.store_object(large, np.zeros(200), nbytes=1600) is not None
 
 
 def test_a_bad_entry_limit_names_the_variable(monkeypatch):
@@ -102,60 +102,70 @@ class _RunsCode:
         return (open, (self.marker, "w"))
 
 
-def test_a_crafted_pickle_in_the_cache_is_never_loaded(tmp_path, capsys):
+def test_no_pickle_is_ever_loaded_from_the_cache(tmp_path, capsys):
+    import io
     import pickle
 
     cache = Cache("radiosity", root=tmp_path)
     marker = tmp_path / "the_code_ran"
-    path = cache.path("k" * 64, ".pkl")
+    path = cache.path("k" * 64, ENTRY_SUFFIX)
     path.parent.mkdir(parents=True)
-    path.write_bytes(pickle.dumps(_RunsCode(marker)))  # a plain pickle: no authentication
-    assert cache.load_pickle("k" * 64) is None
+    # a crafted pickle under the entry's name, and an npz whose member is a pickled object
+    path.write_bytes(pickle.dumps(_RunsCode(marker)))
+    assert cache.load_object("k" * 64) is None
+    buffer = io.BytesIO()
+    np.savez(buffer, __entry__=np.array([_RunsCode(marker)], dtype=object), a0=np.zeros(2))
+    path.write_bytes(buffer.getvalue())
+    assert cache.load_object("k" * 64) is None
     assert not marker.exists()
-    assert "its authentication failed" in capsys.readouterr().err
+    assert "is not trusted" in capsys.readouterr().err
     # the check can fail: unpickled as such, the same bytes run the code
-    pickle.loads(path.read_bytes()).close()
+    pickle.loads(pickle.dumps(_RunsCode(marker))).close()
     assert marker.exists()
+
+
+def test_an_entry_naming_a_class_outside_the_package_is_a_miss(tmp_path, capsys):
+    import json
+
+    cache = Cache("prt", root=tmp_path)
+    path = cache.store_object("d" * 64, {"x": 1})
+    with np.load(path, allow_pickle=False) as archive:
+        meta = json.loads(bytes(archive["__entry__"]).decode())
+    meta["value"] = {"@object": "subprocess.Popen", "state": {"args": "touch x"}}
+    np.savez(path, __entry__=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8))
+    assert cache.load_object("d" * 64) is None
+    assert "subprocess.Popen" in capsys.readouterr().err
 
 
 def test_an_altered_or_truncated_entry_is_a_miss(tmp_path, capsys):
     cache = Cache("prt", root=tmp_path)
-    path = cache.store_pickle("a" * 64, {"pixels": np.arange(1000.0)})
-    assert cache.load_pickle("a" * 64)["pixels"].sum() == np.arange(1000.0).sum()
+    path = cache.store_object("a" * 64, {"pixels": np.arange(1000.0)})
+    assert cache.load_object("a" * 64)["pixels"].sum() == np.arange(1000.0).sum()
     data = bytearray(path.read_bytes())
-    data[-20] ^= 0xFF  # one byte of the array changed
+    offset = data.find(np.arange(1000.0).tobytes()[800:808])
+    data[offset] ^= 0xFF  # one byte of the array changed
     path.write_bytes(bytes(data))
-    assert cache.load_pickle("a" * 64) is None
+    assert cache.load_object("a" * 64) is None
     path.write_bytes(bytes(data[:40]))
-    assert cache.load_pickle("a" * 64) is None
-    assert capsys.readouterr().err.count("its authentication failed") == 1  # said once
+    assert cache.load_object("a" * 64) is None
+    assert capsys.readouterr().err.count("is not trusted") == 1  # said once
 
 
-def test_another_key_does_not_authenticate_an_entry(tmp_path, monkeypatch):
-    import stat
-
-    from translucent.cache import cache_key_file
-
-    cache = Cache("prt", root=tmp_path / "cache")
-    monkeypatch.setenv("TRANSLUCENT_CACHE_KEY_FILE", str(tmp_path / "keys" / "first"))
-    cache.store_pickle("b" * 64, [1, 2, 3])
-    assert cache.load_pickle("b" * 64) == [1, 2, 3]
-    key = cache_key_file()
-    assert stat.S_IMODE(key.stat().st_mode) == 0o600 and len(key.read_bytes()) == 32
-    monkeypatch.setenv("TRANSLUCENT_CACHE_KEY_FILE", str(tmp_path / "keys" / "second"))
-    assert cache.load_pickle("b" * 64) is None
-
-
-def test_an_unusable_key_file_keeps_entries_for_the_process_and_doctor_says_so(
-        tmp_path, monkeypatch, capsys):
-    from translucent.reports.cli import main
-
-    monkeypatch.setenv("TRANSLUCENT_CACHE_KEY_FILE", "/proc/no_key_can_be_made_here")
+def test_an_entry_under_another_key_is_a_miss(tmp_path):
     cache = Cache("prt", root=tmp_path)
-    cache.store_pickle("c" * 64, "kept")
-    assert cache.load_pickle("c" * 64) == "kept"
-    main(["doctor"])
-    assert "/proc/no_key_can_be_made_here (CANNOT BE MADE" in capsys.readouterr().out
+    path = cache.store_object("b" * 64, [1, 2, 3])
+    other = cache.path("e" * 64, ENTRY_SUFFIX)
+    other.parent.mkdir(parents=True, exist_ok=True)
+    other.write_bytes(path.read_bytes())
+    assert cache.load_object("b" * 64) == [1, 2, 3]
+    assert cache.load_object("e" * 64) is None
+
+
+def test_a_value_that_cannot_be_stored_is_kept_out(tmp_path):
+    cache = Cache("prt", root=tmp_path)
+    assert cache.store_object("f" * 64, {"call": print}) is None
+    assert cache.load_object("f" * 64) is None
+    assert not any(p.is_file() for p in tmp_path.rglob("*"))
 
 
 def test_load_or_make_makes_an_entry_once_for_concurrent_callers(tmp_path):

@@ -243,12 +243,12 @@ class PRTState:
                                transfer.name, resolution, terms,
                                {k: v for k, v in self.knobs.items() if k not in UNKEYED_KNOBS})
             cache = Cache("prt")
-            environment = cache.load_pickle(key)
+            environment = cache.load_object(key)
             if not isinstance(environment, EnvironmentTransfer):
                 start = time.perf_counter()
                 environment = precompute_environment(self.scene, transfer.samples, resolution,
                                                      terms)
-                cache.store_pickle(key, environment)
+                cache.store_object(key, environment)
                 self.log.seconds["environment visibility"] = time.perf_counter() - start
             self._environment[transfer.name] = environment
         return self._environment[transfer.name]

@@ -141,16 +141,16 @@ def precompute(scene, **knobs) -> RadiosityState:
             log.notes["solid medium"] = solid_notes
         size = geometry.bytes + (0 if F is None else F.data.nbytes + F.indices.nbytes
                                  + F.indptr.nbytes)
-        if cache.store_pickle(key, (patches, F, geometry, log), nbytes=size) is None:
+        if cache.store_object(key, (patches, F, geometry, log), nbytes=size) is None:
             log.skip(f"the precomputation ({size / 2**20:.0f} MiB) is not kept in the cache: "
                      f"over its entry limit of {entry_limit() / 2**20:.4g} MiB "
                      f"({ENTRY_LIMIT_VARIABLE}); the next run computes it again")
         return patches, F, geometry, log
 
-    stored = cache.load_pickle(key)
+    stored = cache.load_object(key)
     if stored is None:  # one process computes it, another asking at once waits and reads
         with cache.locked(key, "the radiosity precomputation"):
-            stored = cache.load_pickle(key)
+            stored = cache.load_object(key)
             if stored is None:
                 patches, F, geometry, log = compute()
                 return _state(scene, patches, F, geometry, resolved, log)

@@ -31,18 +31,6 @@ def _cache_state() -> tuple[str, bool]:
     return str(folder), True
 
 
-def _cache_key_state() -> str:
-    """Return where the key of the cache's pickled entries is, and whether it is usable."""
-    from ...cache import KEY_FILE_VARIABLE, cache_key_file, cache_secret
-
-    path = cache_key_file()
-    cache_secret()  # made on first use
-    if path.is_file():
-        return str(path)
-    return (f"{path} (CANNOT BE MADE: precomputations are kept for this process only; set "
-            f"{KEY_FILE_VARIABLE} to a writable place)")
-
-
 def run(args) -> int:
     """Print one ``key: value`` line per fact; 1 when a setting cannot be honoured."""
     import sys
@@ -60,7 +48,6 @@ def run(args) -> int:
         status = 1
     facts["numba.cuda"] = "usable" if available() else "not usable"
     facts["cache"], writable = _cache_state()
-    facts["cache key"] = _cache_key_state()
     status = max(status, 0 if writable else 1)
     width = max(len(key) for key in facts)
     for key, value in facts.items():

@@ -44,8 +44,7 @@ CALLS = {
 
 
 def _environment(tmp_path):
-    return {**os.environ, "TRANSLUCENT_CACHE": str(tmp_path / "cache"),
-            "TRANSLUCENT_CACHE_KEY_FILE": str(tmp_path / "key")}
+    return {**os.environ, "TRANSLUCENT_CACHE": str(tmp_path / "cache")}
 
 
 @pytest.mark.parametrize("call", sorted(CALLS))

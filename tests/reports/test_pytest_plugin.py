@@ -254,3 +254,46 @@ def test_a_reference_passed_as_its_own_variance_is_refused(rng, tmp_path):
             assert_render_consistent(test, reference, variance)
     with pytest.raises(InputError, match="give reference_variance"):
         assert_render_consistent(test, Image(reference.rgb))  # no stored variance
+
+
+#: Honest renders checked against independent references; the stated family-wise
+#: significance is 1 %, so more than 3 failures of 40 (probability 6e-5 at 1 %) is a fault.
+HONEST_TRIALS, MOST_FALSE_FAILURES = 40, 3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("reference_spp, reference_passes", [(4, 4), (16, 8)])
+def test_honest_renders_fail_at_most_at_the_stated_rate(tmp_path, reference_spp,
+                                                        reference_passes):
+    """Against references of few passes, whose own noise the check now counts."""
+    from translucent.fast.conformance import tiny_sphere_text
+    from translucent.reference import render
+    from translucent.scenes import loads_scene
+
+    scene = loads_scene(tiny_sphere_text(size=32))
+    failures = 0
+    for trial in range(HONEST_TRIALS):
+        reference = render(scene, spp=reference_spp, passes=reference_passes,
+                           seed=1000 + trial, cache=False, progress=False)
+        test = render(scene, spp=16, passes=1, seed=50000 + trial, cache=False, progress=False)
+        try:
+            assert_render_consistent(test, reference, spp=16, artifacts=tmp_path)
+        except AssertionError:
+            failures += 1
+    assert failures <= MOST_FALSE_FAILURES, f"{failures} of {HONEST_TRIALS} honest renders"
+
+
+def test_a_biased_render_still_fails_against_a_noisy_reference(tmp_path):
+    """Counting the reference's noise does not blind the check: 30 % too bright fails."""
+    from translucent.fast.conformance import tiny_sphere_text
+    from translucent.image import Image
+    from translucent.reference import render
+    from translucent.scenes import loads_scene
+
+    scene = loads_scene(tiny_sphere_text(size=16))
+    reference = render(scene, spp=16, passes=8, seed=3, cache=False, progress=False)
+    test = render(scene, spp=16, passes=1, seed=9, cache=False, progress=False)
+    assert_render_consistent(test, reference, spp=16, artifacts=tmp_path)
+    brighter = Image(test.rgb * 1.3, metadata=test.metadata)
+    with pytest.raises(AssertionError, match="accepted"):
+        assert_render_consistent(brighter, reference, spp=16, artifacts=tmp_path)

@@ -257,3 +257,43 @@ def test_block_means_average_pixels_and_their_variances():
         block_means(Image(rgb), 2)
     with pytest.raises(InputError, match="size"):
         block_means(Image(rgb, variance), 9)
+
+
+# -- a reference that is itself noisy ------------------------------------------------------
+
+
+def _noisy_pair(rng, passes, spp_ref, spp_test, shape=(200, 250, 3), sigma=1.0):
+    """A reference of ``passes`` passes and an independent test, Gaussian samples of mean 1."""
+    pass_means = 1.0 + rng.normal(0.0, sigma / np.sqrt(spp_ref), (passes,) + shape)
+    reference = pass_means.mean(axis=0)
+    mean_variance = pass_means.var(axis=0, ddof=1) / passes
+    per_sample = mean_variance * spp_ref * passes
+    test = 1.0 + rng.normal(0.0, sigma / np.sqrt(spp_test), shape)
+    return test, reference, per_sample
+
+
+@pytest.mark.parametrize("passes, spp_ref, spp_test", [(4, 4, 16), (8, 16, 16), (32, 64, 4)])
+def test_a_noisy_reference_gives_calibrated_p_values(rng, passes, spp_ref, spp_test):
+    """With the reference's samples and passes, p-values are uniform: 5 % fall below 0.05."""
+    test, reference, per_sample = _noisy_pair(rng, passes, spp_ref, spp_test)
+    result = z_test(test, reference, per_sample, spp_test, variance_floor=0.0,
+                    reference_samples=spp_ref * passes, reference_passes=passes)
+    below = np.mean(result.p_values < 0.05)
+    count = result.p_values.size
+    assert abs(below - 0.05) < 5 * np.sqrt(0.05 * 0.95 / count)
+
+
+def test_taking_a_noisy_reference_as_exact_rejects_honest_renders(rng):
+    """The check can fail: Mitsuba's form on a 4-pass reference is far from calibrated."""
+    test, reference, per_sample = _noisy_pair(rng, 4, 4, 16)
+    exact = z_test(test, reference, per_sample, 16, variance_floor=0.0)
+    assert np.mean(exact.p_values < 0.05) > 0.2
+    assert not exact.passed
+
+
+def test_a_reference_pass_count_is_checked(rng):
+    test, reference, per_sample = _noisy_pair(rng, 4, 4, 16, shape=(4, 4, 3))
+    with pytest.raises(InputError, match="reference_passes = 1"):
+        z_test(test, reference, per_sample, 16, reference_samples=4, reference_passes=1)
+    with pytest.raises(InputError, match="reference_samples = 2"):
+        z_test(test, reference, per_sample, 16, reference_samples=2, reference_passes=4)
