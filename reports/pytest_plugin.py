@@ -47,6 +47,13 @@ __all__ = ["assert_image_close", "assert_render_consistent", "ImageChecks",
 class ReferenceNoiseWarning(UserWarning):
     """A check's bound is tighter than what the reference's own noise resolves."""
 
+#: Passes a reference for assert_render_consistent should have: with fewer, the Student's
+#: t of its estimated variance lets only large differences fail (at the Sidak alpha of a
+#: 32 x 32 image: 61 standard errors at 4 passes, 11 at 8, 6.5 at 16; 4.4 with a known
+#: variance).
+RECOMMENDED_REFERENCE_PASSES = 16
+
+
 #: The configs of the pytest runs in progress, innermost last (pytester nests runs).
 _CONFIGS: list = []
 
@@ -300,6 +307,18 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
         passes = reference_image.metadata["passes"]
         options.update(reference_samples=reference_image.metadata["spp"] * passes,
                        reference_passes=passes)
+        if passes < RECOMMENDED_REFERENCE_PASSES:
+            from scipy.stats import t
+
+            from .statistics import sidak_alpha
+
+            pixels = reference_image.shape[0] * reference_image.shape[1]
+            bound = t.isf(sidak_alpha(pixels) / 2, passes - 1)
+            warnings.warn(ReferenceNoiseWarning(
+                f"a reference of {passes} passes: its variance is known so roughly that "
+                f"only differences beyond {bound:.3g} standard errors can fail the test; "
+                f"render it with at least {RECOMMENDED_REFERENCE_PASSES} passes"),
+                stacklevel=2)
     result = z_test(test_image.rgb, reference_image.rgb, per_sample, spp, **options)
     if result.passed:
         return result

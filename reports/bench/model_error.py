@@ -362,9 +362,9 @@ def _context(scene, mask, size, spp, passes, methods, eta, media) -> dict:
 
     boundary = ("index-matched (eta = 1): the boundary neither refracts nor reflects, in the "
                 "reference and in the dipole" if eta == 1.0 else
-                f"dielectric boundary of eta = {eta:g} in the reference and the dipole; a "
-                "point light behind it is replaced by a small emitter in the reference, "
-                "which converges slowly")
+                f"dielectric boundary of eta = {eta:g} in the reference and the dipole; the "
+                "reference reaches the point light through it by manifold next-event "
+                "estimation (volpath_mnee)")
     return {"benchmark": "model error", "format": FORMAT, "scene": scene.name,
             "description": "the built-in sphere (radius 10 mm) under one point light, its "
                            "medium replaced in each row", "size": [size, size],

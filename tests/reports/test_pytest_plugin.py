@@ -297,3 +297,19 @@ def test_a_biased_render_still_fails_against_a_noisy_reference(tmp_path):
     brighter = Image(test.rgb * 1.3, metadata=test.metadata)
     with pytest.raises(AssertionError, match="accepted"):
         assert_render_consistent(brighter, reference, spp=16, artifacts=tmp_path)
+
+
+def test_a_reference_of_few_passes_is_warned_about():
+    from translucent.image import Image
+    from translucent.reports.pytest_plugin import ReferenceNoiseWarning
+
+    rgb = np.full((8, 8, 3), 0.5, dtype=np.float32)
+    few = Image(rgb, np.full_like(rgb, 1e-4), metadata={"spp": 16, "passes": 4})
+    with pytest.warns(ReferenceNoiseWarning, match="reference of 4 passes.*at least 16"):
+        assert_render_consistent(Image(rgb, metadata={"spp": 16}), few)
+    enough = Image(rgb, np.full_like(rgb, 1e-4), metadata={"spp": 16, "passes": 16})
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ReferenceNoiseWarning)
+        assert_render_consistent(Image(rgb, metadata={"spp": 16}), enough)
