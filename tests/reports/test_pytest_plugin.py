@@ -262,7 +262,7 @@ HONEST_TRIALS, MOST_FALSE_FAILURES = 40, 3
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("reference_spp, reference_passes", [(4, 4), (16, 8)])
+@pytest.mark.parametrize("reference_spp, reference_passes", [(4, 4), (64, 8)])
 def test_honest_renders_fail_at_most_at_the_stated_rate(tmp_path, reference_spp,
                                                         reference_passes):
     """Against references of few passes, whose own noise the check now counts."""
