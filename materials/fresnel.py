@@ -107,7 +107,7 @@ def fresnel_transmittance_scalar(eta: float, cosine: float) -> float:
     The operations of :func:`fresnel_transmittance` on one number (the same bits for
     ``eta`` > 0 and any ``cosine``, clipped to [0, 1]), written so that compiled kernels
     take this very function (``numba.njit(fresnel_transmittance_scalar)`` in
-    :mod:`translucent.fast.splatting_buffer_kernels`) instead of a copy of the formula.
+    :mod:`translucent.fast.splatting.buffer_kernels`) instead of a copy of the formula.
     0 at total internal reflection and at grazing incidence.
 
     Examples

@@ -54,7 +54,7 @@ Departures from the paper, each a knob or documented where it is made:
   material). On the heterogeneous scene it takes the error against brute force from 1.11x
   to 0.995x that of splatting without acceleration, at the same cost.
 
-The loops run compiled (:mod:`translucent.fast.splatting_kernels`, numba): each level is
+The loops run compiled (:mod:`translucent.fast.splatting.backend_numba`, numba): each level is
 cut into tiles of 8 x 8 pixels, each sample is binned to the tiles its range can reach
 (the disc bounding its projection, less tiles whose bounding box lies out of range), and
 each tile evaluates Eq. 8-9 in float32 for its samples, tiles in parallel.
@@ -73,9 +73,9 @@ The package, one concept a module: :mod:`.knobs`, :mod:`.buffers` (surface buffe
 irradiance mipmap, the camera model), :mod:`.selection` (Eq. 10-11), :mod:`.radius_table`
 (Eq. 14), :mod:`.splats` (Eq. 12-15 and the numpy and Dr.Jit kernels), :mod:`.accumulation`
 (Eq. 17), :mod:`.ground_truth` (brute force), :mod:`.frame`, :mod:`.state` and
-:mod:`.method`; the compiled CPU loops are :mod:`translucent.fast.splatting_kernels` (the
-splat) and :mod:`translucent.fast.splatting_buffer_kernels` (the buffers), the CUDA ones
-:mod:`translucent.fast.splatting_cuda`.
+:mod:`.method`; the compiled CPU loops are :mod:`translucent.fast.splatting.backend_numba` (the
+splat) and :mod:`translucent.fast.splatting.buffer_kernels` (the buffers), the CUDA ones
+:mod:`translucent.fast.splatting.backend_cuda`.
 """
 
 from .accumulation import bilateral_upsample, upsampling_profile_factors

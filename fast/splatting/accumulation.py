@@ -32,7 +32,7 @@ def bilateral_upsample(coarse: np.ndarray, coarse_level: SurfaceBuffer,
     scene_diameter : float
         :math:`R_w`, scene units.
     """
-    from ..splatting_buffer_kernels import bilateral_upsample_level
+    from .buffer_kernels import bilateral_upsample_level
 
     return bilateral_upsample_level(
         np.ascontiguousarray(coarse, dtype=np.float64),

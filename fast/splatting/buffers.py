@@ -82,7 +82,7 @@ def irradiance_mipmap(buffer: SurfaceBuffer, flux: np.ndarray, cosine: np.ndarra
     levels : int
         Number of levels, >= 1.
     """
-    from ..splatting_buffer_kernels import irradiance_level
+    from .buffer_kernels import irradiance_level
 
     valid = buffer.valid
     level = IrradianceLevel(buffer.position, buffer.normal, buffer.uv, cosine,
@@ -106,7 +106,7 @@ def median_depth_mipmap(buffer: SurfaceBuffer, levels: int) -> list[SurfaceBuffe
     features. Among the valid children the lower median of the depths is taken; a block
     with no valid child is invalid. ``footprint`` doubles per level.
     """
-    from ..splatting_buffer_kernels import median_depth_level
+    from .buffer_kernels import median_depth_level
 
     pyramid = [buffer]
     for _ in range(1, levels):

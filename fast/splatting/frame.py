@@ -48,7 +48,7 @@ def light_view(buffer: SurfaceBuffer, to_light: np.ndarray, normal_irradiance: n
     point light). The cosines cancel, so grazing pixels carry finite flux that
     :math:`F_t \to 0` removes.
 
-    Computed per pixel by :func:`.splatting_buffer_kernels.light_flux` (rows in parallel;
+    Computed per pixel by :func:`.buffer_kernels.light_flux` (rows in parallel;
     NaN cosines and footprints read as 0, infinite ones as the largest float64, as
     ``numpy.nan_to_num`` did here before), equal to the numpy formula to float64
     round-off (the dot product summed in index order).
@@ -64,7 +64,7 @@ def light_view(buffer: SurfaceBuffer, to_light: np.ndarray, normal_irradiance: n
     eta : float
         Relative index of refraction.
     """
-    from ..splatting_buffer_kernels import light_flux
+    from .buffer_kernels import light_flux
 
     shape = buffer.valid.shape + (3,)
     # broadcast views: the kernel reads them per pixel, nothing is copied
@@ -194,7 +194,7 @@ def splat_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list[
         if factors is None:
             accumulated = exitance[k] + upsampled
         else:
-            from ..splatting_buffer_kernels import add_scaled_by_texel
+            from .buffer_kernels import add_scaled_by_texel
 
             accumulated = add_scaled_by_texel(exitance[k], upsampled, factors, texels[k])
     lap("accumulation")
@@ -230,10 +230,10 @@ def _exitant_radiance(exitance, buffer: SurfaceBuffer, camera: CameraModel, eta:
     r"""Eq. 7 of Chen et al. 2012: :math:`L = F_t(\omega_o) B / \pi` at valid pixels.
 
     One compiled pass over the pixels
-    (:func:`.splatting_buffer_kernels.exitant_radiance`), no whole-image temporaries
+    (:func:`.buffer_kernels.exitant_radiance`), no whole-image temporaries
     (docs/splatting.md gives its time against numpy's).
     """
-    from ..splatting_buffer_kernels import exitant_radiance
+    from .buffer_kernels import exitant_radiance
 
     return exitant_radiance(np.asarray(exitance, np.float64), buffer.position, buffer.normal,
                             buffer.valid, np.asarray(camera.origin, np.float64), float(eta))

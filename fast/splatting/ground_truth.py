@@ -33,9 +33,9 @@ def brute_force_exitance(samples: IrradianceSamples, buffer: SurfaceBuffer,
     texel_out = material.texel_index(buffer.uv.reshape(-1, 2)[pixels])
     if backend in ("numba", "cuda"):
         if backend == "cuda":
-            from ..splatting_cuda import gather_samples
+            from .backend_cuda import gather_samples
         else:
-            from ..splatting_kernels import gather_samples
+            from .backend_numba import gather_samples
 
         gathered = np.zeros((len(pixels), 3))
         gather_samples(gathered, np.ascontiguousarray(position.T, dtype=np.float32),

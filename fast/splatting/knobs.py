@@ -5,7 +5,7 @@ from __future__ import annotations
 from ..knobs import Knob, KnobSpec
 
 #: The splatting kernels: compiled loops (numba, the default: measured fastest on the CPU,
-#: see reports/bench/splatting.py), CUDA (numba.cuda, :mod:`.splatting_cuda`: the same tiles
+#: see reports/bench/splatting.py), CUDA (numba.cuda, :mod:`.backend_cuda`: the same tiles
 #: on a GPU), Dr.Jit (LLVM on the CPU, CUDA where a GPU is there) and plain numpy (the
 #: reference the others are tested against).
 BACKENDS = ("numba", "cuda", "drjit", "numpy")

@@ -120,7 +120,7 @@ class RasterView:
 
     def surface(self, scene, object_index: int) -> SurfaceBuffer:
         """Return one object's :class:`SurfaceBuffer` (invalid where another is in front)."""
-        from ..splatting_buffer_kernels import interpolate_surface
+        from .buffer_kernels import interpolate_surface
 
         mesh = scene.objects[object_index].mesh
         uv = mesh.uv if mesh.uv is not None else np.zeros((0, 2))
@@ -136,18 +136,18 @@ def rasterize_view(scene, *, camera=None, direction=None, size=None, centre=None
     """Render the G-buffer of a perspective ``camera`` or an orthographic light view.
 
     Buffer generation of Chen et al. 2012 (Sect. 4) by rasterisation, as the paper does:
-    :func:`.splatting_buffer_kernels.rasterize` tests each pixel's own ray against the triangles
+    :func:`.buffer_kernels.rasterize` tests each pixel's own ray against the triangles
     of its projected bounding box, so the buffers are those of the ray queries of
     :func:`translucent.scenes.gbuffer.gbuffer` (perspective) and
     :func:`~translucent.scenes.gbuffer.gbuffer_orthographic` (``direction``, a square of
     ``size`` pixels and half-width ``extent`` around ``centre``, scene units) up to
     rounding, in milliseconds instead of seconds. The perspective footprint is
-    :func:`.splatting_buffer_kernels.perspective_footprint`, computed at hit pixels only.
+    :func:`.buffer_kernels.perspective_footprint`, computed at hit pixels only.
     """
     # the ray-cast G-buffers' own image frames, so that both kinds of buffer agree
     from ...scenes.gbuffer import camera_frame, default_up
     from ...scenes.raycast import NEAR_CLIP
-    from ..splatting_buffer_kernels import perspective_footprint, rasterize
+    from .buffer_kernels import perspective_footprint, rasterize
 
     meshes = [item.mesh for item in scene.objects]
     vertex_offsets = np.cumsum([0] + [len(m.vertices) for m in meshes])
@@ -329,7 +329,7 @@ class SplattingState:
             else:
                 view = gbuffer_from_point(scene, light.position, towards, fov, size)
                 buffer = _surface_buffer(view, index, uv, _perspective_footprint(view))
-            from ..splatting_buffer_kernels import light_flux
+            from .buffer_kernels import light_flux
 
             flux, cosine = light_flux(
                 buffer.position, buffer.normal, buffer.valid, buffer.footprint,

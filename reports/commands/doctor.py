@@ -37,7 +37,7 @@ def run(args) -> int:
 
     from ...backend import backend_facts
     from ...errors import InputError
-    from ...fast.splatting_cuda import available
+    from ...fast.splatting.backend_cuda import available
     from .record import record
 
     status = 0

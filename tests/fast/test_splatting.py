@@ -9,13 +9,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from translucent.errors import InputError
 from translucent.fast import splatting
-from translucent.fast import splatting_buffer_kernels as buffer_kernels
-from translucent.fast import splatting_kernels as kernels
 from translucent.fast.base import StageLog
 from translucent.fast.splatting import (
     CameraModel,
     SurfaceBuffer,
     bilateral_upsample,
+    buffer_kernels,
     gather_frame,
     irradiance_mipmap,
     light_view,
@@ -24,7 +23,8 @@ from translucent.fast.splatting import (
     select_irradiance_samples,
     splat_frame,
 )
-from translucent.fast.splatting_kernels import exp32
+from translucent.fast.splatting import backend_numba as kernels
+from translucent.fast.splatting.backend_numba import exp32
 from translucent.materials import measured_medium
 from translucent.materials.subedit import SubEditProfiles, builtin_subedit, subedit_from_dipole
 from translucent.scenes import Camera, DirectionalLight, PointLight, load_scene

@@ -7,13 +7,13 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from translucent.fast import splatting
-from translucent.fast import splatting_buffer_kernels as buffer_kernels
-from translucent.fast import splatting_kernels as kernels
 from translucent.fast.splatting import (
     CameraModel,
     SurfaceBuffer,
+    buffer_kernels,
     light_view,
 )
+from translucent.fast.splatting import backend_numba as kernels
 
 # ------------------------------------------------------------------ buffer-stage kernels
 #: Float64 round-off between a compiled kernel and the numpy formula it replaces: the

@@ -12,7 +12,8 @@ import textwrap
 import numpy as np
 import pytest
 from translucent.errors import InputError
-from translucent.fast import splatting, splatting_cuda
+from translucent.fast import splatting
+from translucent.fast.splatting import backend_cuda as splatting_cuda
 from translucent.scenes import load_scene
 
 #: The CUDA kernels evaluate the CPU kernel's float32 terms and differ by the exponential

@@ -11,7 +11,7 @@ r"""Compiled kernels that make the splatting method's buffers (Chen et al. 2012,
 * :func:`light_flux` Eq. 5-6 and :func:`exitant_radiance` Eq. 7 per pixel, fused (no
   whole-image numpy temporaries), rows in parallel.
 
-The splat itself is :mod:`translucent.fast.splatting_kernels`.
+The splat itself is :mod:`translucent.fast.splatting.backend_numba`.
 
 References
 ----------
@@ -27,8 +27,8 @@ import math
 import numba
 import numpy as np
 
-from ..materials.fresnel import fresnel_transmittance_scalar
-from .splatting_kernels import prefix_sum
+from ...materials.fresnel import fresnel_transmittance_scalar
+from .backend_numba import prefix_sum
 
 __all__ = [
     "median_depth_level",

@@ -9,7 +9,7 @@ The frame loop of :mod:`translucent.fast.splatting` spends its time here:
   ground truth the method is measured against.
 
 The buffers these read (G-buffers, their mipmaps, the per-pixel light) are made by
-:mod:`translucent.fast.splatting_buffer_kernels`.
+:mod:`translucent.fast.splatting.buffer_kernels`.
 
 The profile evaluation of Eq. 8-9 is written in float32 as
 :math:`\sqrt{P_i(d)P_o(d)} = \exp(\tfrac12(\hat P_i^k + \hat P_o^k) +

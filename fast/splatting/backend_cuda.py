@@ -1,11 +1,11 @@
 r"""CUDA kernels of the multiresolution splatting method (Chen et al. 2012), via numba.cuda.
 
-The GPU counterpart of :func:`translucent.fast.splatting_kernels.bin_samples` and
-:func:`~translucent.fast.splatting_kernels.splat_tiles` (Eq. 12, backend ``"cuda"`` of
+The GPU counterpart of :func:`translucent.fast.splatting.backend_numba.bin_samples` and
+:func:`~translucent.fast.splatting.backend_numba.splat_tiles` (Eq. 12, backend ``"cuda"`` of
 :func:`translucent.fast.splatting.splat_level`). Binning: one thread per sample walks the
 tiles of its window, culls them against each tile's box with the CPU kernel's own
 functions compiled for the device, and counts, then fills, each tile's list. Splatting:
-one thread block per tile of :data:`~translucent.fast.splatting_kernels.TILE` x ``TILE``
+one thread block per tile of :data:`~translucent.fast.splatting.backend_numba.TILE` x ``TILE``
 pixels, one thread per pixel; the block walks its tile's samples in chunks staged in
 shared memory, each thread tests its pixel's distance against the sample's
 :math:`[R^k_{min}, R^k_{max})` and adds :math:`\sqrt{P_{x_o}(d)P_{x_i}(d)}\,\Phi_s`
@@ -38,8 +38,8 @@ import math
 import numpy as np
 from numba import cuda, float32, float64, int32
 
-from ..errors import InputError
-from . import splatting_kernels as _cpu
+from ...errors import InputError
+from . import backend_numba as _cpu
 
 __all__ = ["available", "bin_and_splat_tiles", "gather_samples", "SAMPLES_PER_CHUNK"]
 
@@ -246,10 +246,10 @@ def bin_and_splat_tiles(out, position, texel, tile_bounds, tiles_x, table, step_
                         centre_y, radius):
     r"""Bin samples to tiles and splat them (Eq. 12 of Chen et al. 2012), all on the GPU.
 
-    The binning is :func:`translucent.fast.splatting_kernels.bin_samples`' (the same disc
+    The binning is :func:`translucent.fast.splatting.backend_numba.bin_samples`' (the same disc
     of tiles, the same culling against each tile's box: its functions compiled for the
     device), counted per tile, then filled, by one thread per sample; the splat is
-    :func:`translucent.fast.splatting_kernels.splat_tiles`'. The fill orders a tile's
+    :func:`translucent.fast.splatting.backend_numba.splat_tiles`'. The fill orders a tile's
     samples as the threads arrive, so each pixel sums its terms in float64 (the float32
     result then hardly depends on that order: it changes in the last bit only where the sum
     lies within about 1e-12 of a rounding boundary).
@@ -259,12 +259,12 @@ def bin_and_splat_tiles(out, position, texel, tile_bounds, tiles_x, table, step_
     out : ndarray (tiles, 3, TILE * TILE) float32
         Written.
     position, texel, tile_bounds, tiles_x
-        :func:`~translucent.fast.splatting_kernels.tile_layout`.
+        :func:`~translucent.fast.splatting.backend_numba.tile_layout`.
     table, step_inverse, sample_position, sample_texel, sample_flux, low2, high2
-        As :func:`~translucent.fast.splatting_kernels.splat_tiles` (``table`` is uploaded
+        As :func:`~translucent.fast.splatting.backend_numba.splat_tiles` (``table`` is uploaded
         once and kept on the device).
     centre_x, centre_y, radius : ndarray (N,) float32
-        Each sample's window, as :func:`~translucent.fast.splatting_kernels.bin_samples`.
+        Each sample's window, as :func:`~translucent.fast.splatting.backend_numba.bin_samples`.
 
     Returns
     -------
@@ -318,7 +318,7 @@ def bin_and_splat_tiles(out, position, texel, tile_bounds, tiles_x, table, step_
 
 def gather_samples(out, pixel_position, pixel_texel, table, step_inverse, sample_position,
                    sample_texel, sample_flux):
-    r"""Eq. 5 by brute force on the GPU, as :func:`.splatting_kernels.gather_samples`.
+    r"""Eq. 5 by brute force on the GPU, as :func:`.backend_numba.gather_samples`.
 
     ``out`` (pixels, 3) receives the sums (float64, each term float32); ``sample_flux``
     is (3, N).
