@@ -278,8 +278,7 @@ class Cache:
         try:
             with _byte_progress(f"reading the {self.folder.name} cache",
                                 path.stat().st_size) as bar:
-                value = read_entry(path, key)
-                bar.update(path.stat().st_size)
+                value = read_entry(path, key, progress=bar.update)
             return value
         except EntryError as error:
             _report_rejected(path, str(error))
@@ -320,7 +319,7 @@ class Cache:
         try:
             with atomic_path(path, suffix=".npz") as tmp, open(tmp, "w+b") as handle, \
                     _byte_progress(f"writing the {self.folder.name} cache", nbytes) as bar:
-                bar.update(write_entry(handle, key, value))
+                write_entry(handle, key, value, progress=bar.update)
         except EntryError:
             return None  # kept in memory only; the atomic write left nothing behind
         except InputError as error:

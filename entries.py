@@ -35,6 +35,7 @@ import hashlib
 import importlib
 import json
 import pathlib
+import zipfile
 from typing import Any
 
 import numpy as np
@@ -191,11 +192,12 @@ def _digest(key: str, arrays) -> str:
     return digest.hexdigest()
 
 
-def write_entry(handle, key: str, value: Any) -> int:
+def write_entry(handle, key: str, value: Any, progress=None) -> int:
     """Write ``value`` as an entry of ``key`` into the binary file ``handle``.
 
-    Returns the bytes of its arrays. Raises :class:`EntryError` for a value that cannot
-    be stored (nothing is written then).
+    Returns the bytes of its arrays; ``progress(nbytes)``, where given, is called after
+    each array is written. Raises :class:`EntryError` for a value that cannot be stored
+    (nothing is written then).
     """
     encoder = _Encoder()
     description = encoder(value)
@@ -204,12 +206,21 @@ def write_entry(handle, key: str, value: Any) -> int:
                        "sha256": _digest(key, encoder.arrays)}, allow_nan=False)
     members = {f"a{index}": array for index, array in enumerate(encoder.arrays)}
     members[_META] = np.frombuffer(meta.encode("utf-8"), dtype=np.uint8)
-    np.savez(handle, **members)
+    # what np.savez writes (an uncompressed zip of .npy members), one member at a time
+    with zipfile.ZipFile(handle, mode="w", compression=zipfile.ZIP_STORED,
+                         allowZip64=True) as archive:
+        for name, array in members.items():
+            with archive.open(f"{name}.npy", mode="w", force_zip64=True) as member:
+                np.lib.format.write_array(member, array, allow_pickle=False)
+            if progress is not None:
+                progress(array.nbytes)
     return int(sum(array.nbytes for array in encoder.arrays))
 
 
-def read_entry(handle, key: str):
+def read_entry(handle, key: str, progress=None):
     """Return the value of the entry of ``key`` in ``handle``.
+
+    ``progress(nbytes)``, where given, is called after each array is read.
 
     Raises
     ------
@@ -224,7 +235,11 @@ def read_entry(handle, key: str):
                 raise EntryError(f"an entry of layout {meta.get('format')!r}")
             if meta.get("key") != key:
                 raise EntryError("an entry of another key")
-            arrays = [archive[f"a{index}"] for index in range(int(meta["arrays"]))]
+            arrays = []
+            for index in range(int(meta["arrays"])):
+                arrays.append(archive[f"a{index}"])
+                if progress is not None:
+                    progress(arrays[-1].nbytes)
     except EntryError:
         raise
     except Exception as error:  # not an npz, pickled members, a truncated file, bad JSON

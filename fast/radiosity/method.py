@@ -139,25 +139,26 @@ def precompute(scene, **knobs) -> RadiosityState:
         log.notes["cache"] = "miss"
         if solid_notes:
             log.notes["solid medium"] = solid_notes
-        size = geometry.bytes + (0 if F is None else F.data.nbytes + F.indices.nbytes
-                                 + F.indptr.nbytes)
-        if cache.store_object(key, (patches, F, geometry, log), nbytes=size) is None:
-            log.skip(f"the precomputation ({size / 2**20:.0f} MiB) is not kept in the cache: "
-                     f"over its entry limit of {entry_limit() / 2**20:.4g} MiB "
-                     f"({ENTRY_LIMIT_VARIABLE}); the next run computes it again")
         return patches, F, geometry, log
 
-    stored = cache.load_object(key)
-    if stored is None:  # one process computes it, another asking at once waits and reads
-        with cache.locked(key, "the radiosity precomputation"):
-            stored = cache.load_object(key)
-            if stored is None:
-                patches, F, geometry, log = compute()
-                return _state(scene, patches, F, geometry, resolved, log)
-    patches, F, geometry, log = stored
-    log.notes["cache"] = "hit"
-    if solid_notes:
-        log.notes["solid medium"] = solid_notes
+    def size(stored):
+        _, F, geometry, _ = stored
+        return geometry.bytes + (0 if F is None else F.data.nbytes + F.indices.nbytes
+                                 + F.indptr.nbytes)
+
+    # one process computes it, another asking at once waits and reads
+    (patches, F, geometry, log), made = cache.load_or_make(
+        key, compute, valid=lambda stored: isinstance(stored, tuple) and len(stored) == 4,
+        what="the radiosity precomputation", nbytes=size)
+    if not made:
+        log.notes["cache"] = "hit"
+        if solid_notes:
+            log.notes["solid medium"] = solid_notes
+    elif entry_limit() is not None and size((patches, F, geometry, log)) > entry_limit():
+        nbytes = size((patches, F, geometry, log))
+        log.skip(f"the precomputation ({nbytes / 2**20:.0f} MiB) is not kept in the cache: "
+                 f"over its entry limit of {entry_limit() / 2**20:.4g} MiB "
+                 f"({ENTRY_LIMIT_VARIABLE}); the next run computes it again")
     return _state(scene, patches, F, geometry, resolved, log)
 
 

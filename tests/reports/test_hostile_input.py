@@ -20,16 +20,11 @@ from translucent.scenes import load_scene
 LEAST_KINDS = 50
 
 
-def _sphere_text(**changes) -> str:
-    """The built-in sphere's scene file with lines replaced (``old -> new``)."""
+def _sphere_text() -> str:
+    """The built-in sphere's scene file."""
     from pathlib import Path
 
-    text = Path(load_scene("sphere").source).read_text(encoding="utf-8")
-    for old, new in changes.items():
-        assert old.replace("_", " ") in text or old in text, old
-        text = text.replace(old.replace("_", " ") if old.replace("_", " ") in text else old,
-                            new)
-    return text
+    return Path(load_scene("sphere").source).read_text(encoding="utf-8")
 
 
 def _exr(size=(8, 8), value=0.5, variance=None, nan=False) -> bytes:
