@@ -282,13 +282,14 @@ def direct_irradiance(lights, points, normals, *, occluded: Callable, count: int
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    total = np.zeros((len(points), 3))
-    if not len(points):
-        return total
-    for index, light in enumerate(lights):
+    for index, light in enumerate(lights):  # all checked before any is sampled
         if not isinstance(light, SAMPLED_LIGHTS):
             raise InputError("unknown light type", field=f"lights[{index}]",
                              value=type(light).__name__)
+    total = np.zeros((len(points), 3))
+    if not len(points):
+        return total
+    for light in lights:
         for sample in light_samples(light, points, count=count, rng=rng, normals=normals):
             cosine = np.einsum("nd,nd->n", normals, sample.direction)
             weight = np.clip(cosine, 0.0, None) if response is None else response(cosine)

@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...errors import InputError
 from ...scenes.lighting import (
     ENVIRONMENT_LIGHTS,
-    SAMPLED_LIGHTS,
     environment_radiance,
     rectangle_light_points,
 )
@@ -49,10 +47,6 @@ def direct_irradiance(scene, points, normals, *, lights=None, samples: int = 16,
         visible = visible or raycast.visible
         trace = trace or raycast.trace
     lights = scene.lights if lights is None else tuple(lights)
-    for light in lights:
-        if not isinstance(light, SAMPLED_LIGHTS):
-            raise InputError("translucent radiosity cannot light with this light type",
-                             field="lights", value=type(light).__name__)
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
 
