@@ -1,10 +1,11 @@
 """Memory estimated before work: a job the machine cannot hold is refused, not started.
 
-A render, a capture or a photon walk too large for the machine used to end in a
-``MemoryError`` traceback after minutes of work, or in the kernel's OOM killer.
-:func:`check_memory` compares an estimate (bytes per pixel or per photon, measured: see
-the constants and docs/references.md) with the memory the machine has available and
-refuses, naming the option, the estimate and what is there.
+A render, a capture, a photon walk or a precomputation (translucent radiosity's scattering
+samples, PRT's transfer) too large for the machine used to end in a ``MemoryError``
+traceback after minutes of work, or in the kernel's OOM killer. :func:`check_memory`
+compares an estimate (bytes per pixel, photon or patch pair, measured: see the constants
+and docs/references.md; PRT's is a bound on its coefficients) with the memory the machine
+has available and refuses, naming the option, the estimate and what is there.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ import os
 from .errors import InputError
 
 __all__ = ["RENDER_BYTES_PER_PIXEL", "CAPTURE_BYTES_PER_PIXEL", "WALK_BYTES_PER_PHOTON",
-           "MEMORY_SHARE", "available_memory", "check_memory", "format_bytes"]
+           "RADIOSITY_BYTES_PER_PAIR", "MEMORY_SHARE", "available_memory", "check_memory",
+           "format_bytes"]
 
 #: A reference render holds per pixel Mitsuba's film and the float64 mean and spread of its
 #: passes, for each channel render: 203 bytes a pixel measured (peak RSS, Skin1 sphere,
@@ -28,6 +30,12 @@ CAPTURE_BYTES_PER_PIXEL = 192
 #: All photons of a channel walk together: 910 bytes a photon measured with the Dr.Jit
 #: backend, 270 with numpy (2e4 against 2e5 photons); 1024 covers both.
 WALK_BYTES_PER_PHOTON = 1024
+
+#: Translucent radiosity's precomputation holds, per stored entry of its scattering matrix
+#: (a patch pair within the cut-off max_d), the sample operators it keeps and their
+#: intermediates: peak RSS above the interpreter's measured 191 bytes a pair on the sphere
+#: (26.2 million pairs, all of them), 272 on the concave bowl (5.2 million); 320 leaves room.
+RADIOSITY_BYTES_PER_PAIR = 320
 
 #: The share of the available memory a job may plan to take.
 MEMORY_SHARE = 0.8

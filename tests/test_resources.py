@@ -72,3 +72,36 @@ def test_what_fits_is_not_refused(eight_gib):
 def test_available_memory_is_a_positive_count():
     available = resources.available_memory()
     assert available is None or available > 0
+
+
+def test_a_radiosity_precomputation_too_large_is_refused_before_its_samples(eight_gib,
+                                                                           capsys):
+    # the sphere keeps all 5120^2 patch pairs: about 7.8 GiB at 320 bytes a pair
+    assert main(["approx", "radiosity", "sphere", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "max_distance_mm = 28.67" in err and "26,219,520 scattering pairs" in err
+    assert "needs about 7.8 GiB" in err and "Traceback" not in err
+
+
+def test_the_radiosity_pair_count_bounds_the_stored_entries():
+    from translucent.fast.conformance import tiny_sphere_text
+    from translucent.fast.form_factors import build_patches
+    from translucent.fast.radiosity.method import precompute, scattering_pairs
+    from translucent.scenes import loads_scene
+
+    scene = loads_scene(tiny_sphere_text(size=16))
+    state = precompute(scene, max_distance_mm=6.0)
+    patches = build_patches(scene, triangles_per_patch=1, two_sided=[])
+    pairs = scattering_pairs(patches, [0], [], 6.0)
+    # the candidates by centroid: at least what is kept, and not much more (17320, 16040)
+    assert state.geometry.nnz <= pairs <= 1.1 * state.geometry.nnz
+
+
+def test_a_prt_transfer_too_large_is_refused_before_its_first_pass(eight_gib):
+    from translucent.fast.prt.method import precompute
+    from translucent.scenes import load_scene
+
+    with pytest.raises(InputError, match=r"terms = 262144: the PRT transfer of 'sphere' "
+                                         r"\(2562 vertices x 13 rows x 262144 coefficients "
+                                         r"at most\) needs about 65.1 GiB"):
+        precompute(load_scene("sphere"), terms=1 << 18, samples=1 << 18)

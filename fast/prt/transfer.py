@@ -403,6 +403,26 @@ def _spatial_reason(mesh, knobs: dict) -> tuple[bool, str]:
                   f"{mesh.grid_shape[1]} geometry image")
 
 
+def check_transfer_memory(scene_object, samples: int, rows_per_vertex: int, terms: int,
+                          shared: bool) -> int:
+    """Refuse, before the first pass, a transfer whose coefficients the machine cannot hold.
+
+    The bound: every vertex keeps at most ``terms`` coefficients per row (with ``shared``,
+    the union of its rows' columns, at most ``rows_per_vertex * terms``), never more than
+    the samples, each an int32 column and a float32 value before quantisation. Returns the
+    bytes.
+    """
+    from ...resources import check_memory
+
+    columns = min(terms * (rows_per_vertex if shared else 1), samples)
+    estimate = len(scene_object.mesh.vertices) * rows_per_vertex * columns * 8
+    check_memory(estimate, what=f"the PRT transfer of {scene_object.name!r} "
+                                f"({len(scene_object.mesh.vertices)} vertices x "
+                                f"{rows_per_vertex} rows x {columns} coefficients at most)",
+                 field="terms", value=terms)
+    return estimate
+
+
 def transfer_key(scene_object, mm_per_unit: float, knobs: dict) -> str:
     """Return the cache key of an object's transfer: its geometry, scale and keyed knobs."""
     from ...cache import content_hash
@@ -427,6 +447,7 @@ def precompute_object(scene_object, mm_per_unit: float, knobs: dict,
     # the spatial pass transforms each T_k along the vertices on its own, so its rows cannot
     # share columns: the shared layout is for the first pass alone
     shared = knobs["layout"] == "shared" and not spatial
+    check_transfer_memory(scene_object, len(samples), basis.terms + 1, first_terms, shared)
     if knobs["layout"] == "shared" and spatial:
         log.notes.setdefault("layout", {})[scene_object.name] = (
             "rows layout: the spatial pass keeps each T_k's own coefficients")

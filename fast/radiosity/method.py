@@ -10,6 +10,7 @@ from ...materials.profiles import (
     MixedProfiles,
     profile_for,
 )
+from ...resources import RADIOSITY_BYTES_PER_PAIR, check_memory
 from ..base import (
     Refusal,
     StageLog,
@@ -68,6 +69,46 @@ def _resolve_knobs(scene, knobs: dict) -> dict:
     return resolved
 
 
+def scattering_pairs(patches, translucent, sheets, max_distance_mm: float) -> int:
+    """Return an upper bound on the stored entries of S: patch pairs closer than max_d.
+
+    Counted as :func:`~translucent.fast.radiosity.geometry.scattering_geometry` finds its
+    candidates: front patches of each translucent object whose centroids lie within max_d
+    plus the largest patch radius (a pair is kept when a sample on it lies within max_d;
+    a concave object's distance inside is longer, so it keeps fewer), four blocks for a
+    two-sided sheet, plus every patch's own entry.
+    """
+    from scipy.spatial import cKDTree
+
+    pairs = len(patches)
+    for index in translucent:
+        members = patches.of_object(index)
+        members = members[~patches.is_back[members]]
+        if not len(members):
+            continue
+        centroids = patches.centroid[members] * patches.mm_per_unit
+        reach = max_distance_mm + float(patches.radius[members].max()) * patches.mm_per_unit
+        close = int(cKDTree(centroids).query_ball_point(centroids, reach,
+                                                        return_length=True).sum())
+        pairs += close * (4 if index in sheets else 1)
+    return pairs
+
+
+def check_precompute_memory(scene, patches, translucent, sheets, resolved) -> int:
+    """Refuse, before the scattering samples are built, a precomputation too large to hold.
+
+    Returns the estimated bytes (:data:`~translucent.resources.RADIOSITY_BYTES_PER_PAIR` a
+    pair of :func:`scattering_pairs`).
+    """
+    max_d = resolved["max_distance_mm"]
+    pairs = scattering_pairs(patches, translucent, sheets, max_d)
+    estimate = pairs * RADIOSITY_BYTES_PER_PAIR
+    check_memory(estimate, what=f"the radiosity precomputation ({len(patches)} patches, "
+                                f"{pairs:,} scattering pairs within max_d = {max_d:g} mm)",
+                 field="max_distance_mm", value=max_d, file=scene.source)
+    return estimate
+
+
 def precompute(scene, **knobs) -> RadiosityState:
     """Patches, form factors, optical distances and scattering samples; cached on disk.
 
@@ -121,6 +162,8 @@ def precompute(scene, **knobs) -> RadiosityState:
             for index in sheets:
                 log.notes.setdefault("thin sheets", []).append(scene.objects[index].name)
             log.notes["patches"] = len(patches)
+            log.notes["memory_estimate_bytes"] = check_precompute_memory(
+                scene, patches, translucent, sheets, resolved)
             if reason is not None:
                 log.skip(reason)
             else:
