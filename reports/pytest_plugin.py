@@ -267,8 +267,11 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
         ``reference_mean`` itself, a reference written by the suite (``translucent
         render``, a committed reference): its stored variance of the mean times its
         samples per pixel (``spp x passes`` of its metadata), and its own noise counts
-        too (Student's t over its passes: :func:`translucent.reports.statistics.z_test`),
-        so that an honest render is not failed for the reference's noise.
+        too (Student's t over its passes: :func:`translucent.reports.statistics.z_test`,
+        each pixel's variance pooled over its 3 x 3 neighbourhood), so that an honest
+        render is not failed for the reference's noise; and the image's 8 x 8 pixel
+        block means must agree as well (:func:`~translucent.reports.statistics.z_test_blocks`),
+        which a render too bright or too dark as a whole cannot pass.
     spp : int, optional
         Samples per pixel of ``test``; default ``test.metadata["spp"]``.
     significance, required_fraction : float, optional
@@ -286,11 +289,12 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
     Raises
     ------
     AssertionError
-        When fewer pixel channels than required are accepted; the message gives the
-        fraction, alpha and the folder holding the p-value image.
+        When fewer pixel channels than required are accepted, or a block mean is
+        rejected; the message gives the fraction, alpha and the folder holding the
+        p-value image.
     """
     __tracebackhide__ = True
-    from .statistics import z_test
+    from .statistics import TEST_BLOCK, z_test, z_test_blocks
 
     test_image = _as_image(test, "test")
     if spp is None:
@@ -320,14 +324,23 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
                 f"render it with at least {RECOMMENDED_REFERENCE_PASSES} passes"),
                 stacklevel=2)
     result = z_test(test_image.rgb, reference_image.rgb, per_sample, spp, **options)
-    if result.passed:
+    blocks = None
+    if reference_variance is None:
+        blocks = z_test_blocks(test_image.rgb, reference_image.rgb, per_sample, spp,
+                               reference_samples=options["reference_samples"],
+                               reference_passes=options["reference_passes"],
+                               **({"significance": significance} if significance else {}))
+    if result.passed and (blocks is None or blocks.passed):
         return result
     from .error_maps import write_z_test_maps
 
     parent = Path(artifacts) if artifacts is not None else artifacts_root() / _current_test()
     folder = _new_folder(parent, name or "z-test")
     write_z_test_maps(result, folder, test=test_image, reference=reference_image)
-    raise AssertionError(f"{result.summary()}; p-value image and maps in {folder}")
+    summary = result.summary()
+    if blocks is not None:
+        summary += f"; {TEST_BLOCK} x {TEST_BLOCK} pixel blocks: {blocks.summary()}"
+    raise AssertionError(f"{summary}; p-value image and maps in {folder}")
 
 
 def _per_sample_variance(reference, reference_variance) -> np.ndarray:

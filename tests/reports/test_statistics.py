@@ -274,13 +274,21 @@ def _noisy_pair(rng, passes, spp_ref, spp_test, shape=(200, 250, 3), sigma=1.0):
 
 @pytest.mark.parametrize("passes, spp_ref, spp_test", [(4, 4, 16), (8, 16, 16), (32, 64, 4)])
 def test_a_noisy_reference_gives_calibrated_p_values(rng, passes, spp_ref, spp_test):
-    """With the reference's samples and passes, p-values are uniform: 5 % fall below 0.05."""
+    """With the reference's samples and passes, p-values are uniform: 5 % fall below 0.05.
+
+    Each pixel's own variance (the t model itself); pooled over its neighbours (the
+    default) the test is conservative for normal pixels: fewer fall below.
+    """
     test, reference, per_sample = _noisy_pair(rng, passes, spp_ref, spp_test)
-    result = z_test(test, reference, per_sample, spp_test, variance_floor=0.0,
-                    reference_samples=spp_ref * passes, reference_passes=passes)
+    options = {"variance_floor": 0.0, "reference_samples": spp_ref * passes,
+               "reference_passes": passes}
+    result = z_test(test, reference, per_sample, spp_test, variance_neighbourhood=0,
+                    **options)
     below = np.mean(result.p_values < 0.05)
     count = result.p_values.size
     assert abs(below - 0.05) < 5 * np.sqrt(0.05 * 0.95 / count)
+    pooled = z_test(test, reference, per_sample, spp_test, **options)
+    assert np.mean(pooled.p_values < 0.05) < 0.05
 
 
 def test_taking_a_noisy_reference_as_exact_rejects_honest_renders(rng):
@@ -297,3 +305,63 @@ def test_a_reference_pass_count_is_checked(rng):
         z_test(test, reference, per_sample, 16, reference_samples=4, reference_passes=1)
     with pytest.raises(InputError, match="reference_samples = 2"):
         z_test(test, reference, per_sample, 16, reference_samples=2, reference_passes=4)
+
+
+def _rare_path_render(rng, samples, shape=(32, 32, 3)):
+    """A mean of ``samples`` samples per pixel: 0.1 plus, rarely, a path of radiance 1.
+
+    The rare path's probability grows from 0.4 % to 3.4 % across the image, as light that
+    a long random walk reaches seldom: few passes of a reference miss it in many pixels.
+    """
+    columns = np.arange(shape[1]) / shape[1]
+    probability = np.broadcast_to((0.004 + 0.03 * columns)[None, :, None], shape)
+    return 0.1 + rng.binomial(samples, probability) / samples
+
+
+def test_pooling_the_variance_keeps_rare_paths_from_failing_honest_renders():
+    from translucent.reports.statistics import z_test
+
+    rng = np.random.default_rng(0)
+    rejected = {"own": 0, "pooled": 0}
+    for _ in range(20):
+        passes = np.stack([_rare_path_render(rng, 16) for _ in range(8)])
+        per_sample = 16 * passes.var(axis=0, ddof=1)
+        test = _rare_path_render(rng, 16)
+        for kind, radius in (("own", 0), ("pooled", 1)):
+            result = z_test(test, passes.mean(axis=0), per_sample, 16, reference_samples=128,
+                            reference_passes=8, variance_neighbourhood=radius)
+            rejected[kind] += int((~result.accepted).sum())
+    # 20 x 3072 channels: each pixel's own estimate is 0 wherever the passes missed the
+    # path, and a test that caught it is then rejected
+    assert rejected["own"] > 1000
+    assert rejected["pooled"] <= 20, rejected
+
+
+def test_block_means_catch_a_render_a_fifth_too_bright_and_pass_honest_ones():
+    from translucent.reports.statistics import z_test, z_test_blocks
+
+    rng = np.random.default_rng(1)
+    honest_failures = bright_failures = bright_pixel_failures = 0
+    for _ in range(20):
+        passes = np.stack([_rare_path_render(rng, 16) for _ in range(8)])
+        reference, per_sample = passes.mean(axis=0), 16 * passes.var(axis=0, ddof=1)
+        test = _rare_path_render(rng, 16)
+        options = {"reference_samples": 128, "reference_passes": 8}
+        honest_failures += not z_test_blocks(test, reference, per_sample, 16, **options).passed
+        bright = 1.2 * test
+        bright_failures += not z_test_blocks(bright, reference, per_sample, 16, **options)
+        bright_pixel_failures += not z_test(bright, reference, per_sample, 16, **options)
+    assert honest_failures <= 1
+    assert bright_failures == 20
+    assert bright_pixel_failures < 20  # what the per-pixel test alone lets through
+
+
+def test_block_means_need_two_blocks_and_check_their_input():
+    from translucent.reports.statistics import z_test_blocks
+
+    small = np.ones((8, 12, 3))
+    assert z_test_blocks(small, small, small, 4, reference_samples=8,
+                         reference_passes=2) is None
+    with pytest.raises(InputError, match="reference_variance"):
+        z_test_blocks(np.ones((16, 16, 3)), np.ones((16, 16, 3)), -np.ones((16, 16, 3)), 4,
+                      reference_samples=8, reference_passes=2)
