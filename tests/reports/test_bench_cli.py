@@ -114,11 +114,15 @@ def test_bench_reference_delta_lights_measures_both_estimators(tmp_path, capsys)
     result = json.loads(out.read_text())
     assert result["scene"] == "sphere_dielectric"
     rows = result["estimators"]
-    assert set(rows) == {"volpath_mnee", "volpath + stand-in emitters"}
+    assert set(rows) == {"volpath_mnee", "volpath_mnee, RGB", "volpath + stand-in emitters"}
     assert rows["volpath_mnee"]["median_rse"] is not None  # the connection lights the sphere
     assert any("sphere emitter" in note
                for note in rows["volpath + stand-in emitters"]["substitutions"])
-    assert "RSE at 1 CPU min" in capsys.readouterr().out
+    target = result["target"]
+    assert target["reached"] == rows["volpath_mnee"]["median_rse_at_target_minutes"]
+    assert target["met"] == (target["reached"] <= 0.02)
+    out_text = capsys.readouterr().out
+    assert "RSE at 1 CPU min" in out_text and "volpath_mnee at 10 CPU minutes" in out_text
 
 
 def test_bench_area_lights_measures_each_count_against_the_reference(tmp_path, capsys):
