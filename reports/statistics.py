@@ -108,6 +108,9 @@ class ZTestResult:
         The fraction needed to pass.
     significance : float
         The family-wise significance ``alpha`` was derived from.
+    unit : str
+        What each entry is, for :meth:`summary`: ``"pixel"``, or ``"block"`` for
+        :func:`z_test_blocks`.
     """
 
     p_values: np.ndarray
@@ -116,6 +119,7 @@ class ZTestResult:
     fraction_accepted: float
     required_fraction: float
     significance: float
+    unit: str = "pixel"
 
     @property
     def passed(self) -> bool:
@@ -136,7 +140,7 @@ class ZTestResult:
         smallest = float(np.nanmin(self.p_values)) if np.isfinite(self.p_values).any() \
             else math.nan
         return (f"z-test {verdict}: {100 * self.fraction_accepted:.3f} % of "
-                f"{self.p_values.size} pixel channels accepted (need "
+                f"{self.p_values.size} {self.unit} channels accepted (need "
                 f"{100 * self.required_fraction:.2f} %), Sidak alpha = {self.alpha:.3g}, "
                 f"min p = {smallest:.3g}")
 
@@ -168,7 +172,7 @@ def _check_variance(variance: np.ndarray, name: str) -> None:
 
 
 def _result(z: np.ndarray, significance: float, required_fraction: float,
-            degrees_of_freedom=None) -> ZTestResult:
+            degrees_of_freedom=None, unit: str = "pixel") -> ZTestResult:
     """Two-sided p-values of ``z`` (normal, or Student's t), Šidák alpha and the verdict."""
     from scipy.stats import norm, t
 
@@ -180,7 +184,7 @@ def _result(z: np.ndarray, significance: float, required_fraction: float,
                       t.sf(z, degrees_of_freedom))
     alpha = sidak_alpha(z.shape[0] * z.shape[1], significance)
     fraction = float(np.count_nonzero(p_values > alpha) / p_values.size)
-    return ZTestResult(p_values, z, alpha, fraction, required_fraction, significance)
+    return ZTestResult(p_values, z, alpha, fraction, required_fraction, significance, unit)
 
 
 def z_test(test_mean, reference_mean, reference_variance, spp: int, *,
@@ -340,7 +344,7 @@ def z_test_blocks(test_mean, reference_mean, reference_variance, spp: int, *,
     spread = np.maximum(modelled, observed / BLOCK_SPREAD_EXCESS)
     floor = VARIANCE_FLOOR / size**2 * (1.0 / spp + 1.0 / reference_samples)
     z = np.abs(difference) / np.sqrt(np.maximum(spread, floor))
-    return _result(z, significance, 1.0, reference_passes - 1)
+    return _result(z, significance, 1.0, reference_passes - 1, unit="block")
 
 
 def z_test_known_variance(first: Image, second: Image, *, passes=None,
