@@ -83,6 +83,8 @@ PLANS: dict[str, ReferencePlan] = {
     # chromatic) gave red a variance a sample 41x that of a red-only render, the fireflies
     # of its 99th percentile; one channel at a time costs 2.7x (docs/references.md)
     "sphere_dielectric": ReferencePlan(spp=64, budget_seconds=6600.0, per_channel=True),
+    # the same estimator on a convex pebble on a floor, under a point and a spot light
+    "dielectric_on_floor": ReferencePlan(spp=64, budget_seconds=3600.0, per_channel=True),
 }
 
 

@@ -41,7 +41,8 @@ NAMES = list(PLANS)
 
 #: Samples per pixel of each of the 8 passes of the fresh render, per scene: a few seconds.
 FRESH_SPP = {"glossy": 16, "bowl": 16, "sphere": 4, "cornell_block": 2, "solid_checker": 16,
-             "solid_veins": 8, "solid_gradient": 16, "sphere_dielectric": 4}
+             "solid_veins": 8, "solid_gradient": 16, "sphere_dielectric": 4,
+             "dielectric_on_floor": 4}
 
 #: The drift the consistency check must detect in every scene. sphere_dielectric's RGB
 #: render at 4 spp x 8 showed 5 % only at z = 2.9 (its red channel); one channel at a time
