@@ -49,9 +49,6 @@ class ReferencePlan:
     integrator : str, optional
         The Mitsuba integrator (default: the reference's own choice, ``volpath`` with
         media).
-    per_channel : bool, optional
-        Render one channel at a time (default: the reference's own choice,
-        ``MitsubaConversion.per_channel_recommended``).
     """
 
     spp: int
@@ -60,7 +57,6 @@ class ReferencePlan:
     target_p99_rse: float = 0.05
     min_passes: int = 16
     integrator: str | None = None
-    per_channel: bool | None = None
 
 
 #: The built-in scenes with a committed reference and how each is rendered. The spp of a
@@ -81,10 +77,11 @@ PLANS: dict[str, ReferencePlan] = {
     # manifold next-event estimation costs 15-20x volpath's time per sample, and makes a
     # connection at every medium vertex: RGB's ratios of transmittances (Skin1 is
     # chromatic) gave red a variance a sample 41x that of a red-only render, the fireflies
-    # of its 99th percentile; one channel at a time costs 2.7x (docs/references.md)
-    "sphere_dielectric": ReferencePlan(spp=64, budget_seconds=6600.0, per_channel=True),
+    # of its 99th percentile; one channel at a time (the conversion's own choice for
+    # volpath_mnee and a chromatic medium) costs 2.7x (docs/references.md)
+    "sphere_dielectric": ReferencePlan(spp=64, budget_seconds=6600.0),
     # the same estimator on a convex pebble on a floor, under a point and a spot light
-    "dielectric_on_floor": ReferencePlan(spp=64, budget_seconds=3600.0, per_channel=True),
+    "dielectric_on_floor": ReferencePlan(spp=64, budget_seconds=3600.0),
 }
 
 
@@ -224,8 +221,7 @@ def render_committed(name: str, *, budget_seconds: float | None = None,
     image = render_to_target(load_scene(name), target_rse=plan.target_rse,
                              target_p99_rse=plan.target_p99_rse, budget_seconds=budget,
                              spp=plan.spp, min_passes=plan.min_passes, progress=progress,
-                             integrator=plan.integrator, per_channel=plan.per_channel,
-                             on_pass=on_pass)
+                             integrator=plan.integrator, on_pass=on_pass)
     image = image.with_metadata(committed=True)
     REFERENCE_FOLDER.mkdir(parents=True, exist_ok=True)
     image.write(committed_path(name))

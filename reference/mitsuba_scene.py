@@ -446,7 +446,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     has_media = False
     blocks_delta = False
     max_albedo = 0.0
-    long_chromatic_walks = False
+    per_channel_recommended = False
     chromatic_media = False
     media: dict[str, str] = {}
     blocking: list[int] = []
@@ -459,8 +459,9 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         if parts.blocks_delta_lights:
             blocking.append(index)
         max_albedo = max(max_albedo, parts.max_albedo)
-        long_chromatic_walks |= parts.chromatic and (parts.max_albedo > RR_ALBEDO_THRESHOLD
-                                                     or parts.prefers_per_channel)
+        # a chromatic medium's long walks (or one that prefers it) converge much faster
+        per_channel_recommended |= parts.chromatic and (
+            parts.max_albedo > RR_ALBEDO_THRESHOLD or parts.prefers_per_channel)
         chromatic_media |= parts.chromatic
         if parts.description:
             media[obj.name] = parts.description
@@ -497,7 +498,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         # other channels carry ratios of transmittances (distances are sampled with one
         # channel's extinction): Skin1 at eta 1.3, red's variance a sample is 41x that of a
         # red-only render, at 2.7x the time for all three (docs/references.md)
-        long_chromatic_walks |= chromatic_media
+        per_channel_recommended |= chromatic_media
         check_closed_boundaries(scene, blocking)
         register()
     environment = delta_lights.EnvironmentParts()
@@ -519,7 +520,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         **emitters,
     }
     return MitsubaConversion(scene_dict, integrator, int(max_depth), int(rr_depth), has_media,
-                             long_chromatic_walks, notes, media, shape_props)
+                             per_channel_recommended, notes, media, shape_props)
 
 
 def to_mitsuba_dict(scene: Scene, *, integrator: str | None = None,

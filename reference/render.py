@@ -31,8 +31,9 @@ __all__ = ["render", "render_to_target", "reference_settings", "reference_key", 
            "render_sample", "REFERENCE_FORMAT", "PROGRESSIVE_SEED_OFFSET"]
 
 #: Bumped whenever the scene conversion or the estimator changes what a reference holds,
-#: so that older cache entries miss.
-REFERENCE_FORMAT = 2
+#: so that older cache entries miss (3: ``volpath_mnee`` with a chromatic medium renders
+#: one channel at a time where ``per_channel`` is left to the conversion).
+REFERENCE_FORMAT = 3
 
 #: Show a progress bar only for renders that last longer than this (seconds).
 PROGRESS_DELAY_SECONDS = 1.0
