@@ -15,7 +15,7 @@ from typing import Any
 
 from ..errors import InputError
 
-__all__ = ["run_tasks", "dask_client", "prepare_worker", "worker_environment"]
+__all__ = ["run_tasks", "dask_client", "prepare_worker", "timed_call", "worker_environment"]
 
 
 @contextlib.contextmanager
@@ -111,9 +111,22 @@ def worker_environment(threads: int) -> dict[str, str]:
                                      "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")}
 
 
+def timed_call(function: Callable[..., Any], *args) -> tuple[Any, float, int]:
+    """Run ``function(*args)``; return its result, its wall time in seconds and the process.
+
+    The time is taken where the task runs (a worker), so it leaves out the scheduling and
+    the transfer of the result.
+    """
+    import time
+
+    started = time.perf_counter()
+    result = function(*args)
+    return result, time.perf_counter() - started, os.getpid()
+
+
 def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], *,
               scheduler: str | None = None, local: bool = False, progress: bool = True,
-              workers: int = 2) -> list[Any]:
+              workers: int = 2, timed: bool = False) -> list[Any]:
     """Run ``function(*args)`` for each ``args`` in ``arguments``; results in the same order.
 
     Parameters
@@ -131,10 +144,15 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         A progress bar over finished tasks.
     workers : int
         Local cluster size.
+    timed : bool
+        Return, for each task, ``(result, seconds, process id)`` of :func:`timed_call`.
     """
     from tqdm.auto import tqdm
 
     arguments = [tuple(args) for args in arguments]
+    if timed:
+        arguments = [(function, *args) for args in arguments]
+        function = timed_call
     if local or (scheduler is None and len(arguments) <= 1):
         return [function(*args) for args in tqdm(arguments, disable=not progress, leave=False)]
     from dask.distributed import as_completed

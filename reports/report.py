@@ -608,9 +608,18 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
               f"{sum(1 for t in tasks if t[0] == 'path tracing')} path-tracing ladder(s)",
               file=stream,
               flush=True)
+    timing: dict[str, Any] = {"planning": time.perf_counter() - started, "tasks": 0.0}
+    task_times: list[dict] = []
+    if tasks:
+        tasks_started = time.perf_counter()
         with limited_entries(None if keep_precomputations else REPORT_CACHE_ENTRY_LIMIT):
-            results = run_tasks(report_task, tasks, scheduler=scheduler, local=serial,
-                                progress=progress)
+            timed = run_tasks(report_task, tasks, scheduler=scheduler, local=serial,
+                              progress=progress, timed=True)
+        timing["tasks"] = time.perf_counter() - tasks_started
+        results = [result for result, _, _ in timed]
+        task_times = [_task_time(task, owner, seconds, worker)
+                      for task, owner, (_, seconds, worker) in zip(tasks, owners, timed,
+                                                                    strict=True)]
     else:
         results = []
     for (report, name, key), result in zip(owners, results, strict=True):
@@ -638,9 +647,11 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     staging = None
     try:
         staging = _staging_folder(out)
+        scoring_started = time.perf_counter()
         for report in tqdm(reports, desc="metrics and error maps", disable=not progress,
                            leave=False, file=sys.stderr):
             score_scene(report, staging)
+        timing["scoring"] = time.perf_counter() - scoring_started
         regressions = []
         for report in reports:
             reference = _made_with(report)
@@ -665,6 +676,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         }
         summary = _summary(reports, chosen)
         context["seconds"] = time.perf_counter() - started
+        context["timing"] = {**{f"{phase}_seconds": value for phase, value in timing.items()},
+                             "task_seconds": task_times}
         atomic_write_text(staging / "metrics.json",
                           json.dumps(_metrics_json(reports, chosen, context), indent=2,
                                      sort_keys=False, allow_nan=False))
@@ -684,7 +697,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         new = updated_baseline(stored_baseline, results_for_baseline, versions)
         atomic_write_text(baseline_path, json.dumps(new, indent=2, allow_nan=False) + "\n")
     seconds = time.perf_counter() - started
-    _print_summary(summary, regressions, out, seconds, update_baseline, baseline_path, stream)
+    _print_summary(summary, regressions, out, seconds, update_baseline, baseline_path, stream,
+                   timing, task_times)
     for report in reports:
         if report.noise_warning:
             print(f"warning: {report.name}: {report.noise_warning}", file=sys.stderr)
@@ -857,7 +871,32 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
     return {"format": 1, **json_safe(context), "tolerances": tolerances, "scenes": scenes}
 
 
-def _print_summary(summary, regressions, out, seconds, updated, baseline_path, stream):
+def _task_time(task: tuple, owner: tuple, seconds: float, worker: int) -> dict:
+    """One task's entry in ``metrics.json``'s timing: what it ran, where and how long."""
+    kind, report = task[0], owner[0]
+    entry = {"scene": report.name, "kind": kind, "seconds": seconds, "worker": worker}
+    if kind == "method":
+        entry["method"], entry["knobs"] = task[2], json_safe(task[3])
+    return entry
+
+
+def _time_line(timing: dict, task_times: list[dict]) -> str:
+    """Where the report's time went: its phases, and its longest task."""
+    line = f"time: planning {timing['planning']:.1f} s, tasks {timing['tasks']:.1f} s"
+    if task_times:
+        busy = sum(t["seconds"] for t in task_times)
+        longest = max(task_times, key=lambda t: t["seconds"])
+        what = longest.get("method", longest["kind"])
+        if longest.get("knobs"):
+            what += " " + ", ".join(f"{k}={v}" for k, v in longest["knobs"].items())
+        workers = len({t["worker"] for t in task_times})
+        line += (f" ({len(task_times)} tasks, {busy:.1f} s of task time on {workers} "
+                 f"process(es); longest {longest['scene']} {what} {longest['seconds']:.1f} s)")
+    return line + f", metrics and error maps {timing.get('scoring', 0.0):.1f} s"
+
+
+def _print_summary(summary, regressions, out, seconds, updated, baseline_path, stream,
+                   timing=None, task_times=()):
     width = max((len(r["scene"]) for r in summary), default=5)
     print(f"{'scene':<{width}}  {'method':<10} {'HDR-FLIP':>8} {'(noise)':>7} {'relMSE':>9} "
           f"{'(noise)':>9} {'dE2000':>7} {'SSIM':>6} {'precomp':>8} {'frame':>8} "
@@ -886,6 +925,8 @@ def _print_summary(summary, regressions, out, seconds, updated, baseline_path, s
         print(f"REGRESSION {line}", file=stream)
     if updated:
         print(f"baseline written: {baseline_path}", file=stream)
+    if timing is not None:
+        print(_time_line(timing, list(task_times)), file=stream)
     print(f"wrote {out / 'index.html'} in {seconds:.1f} s", file=stream, flush=True)
 
 

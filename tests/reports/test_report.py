@@ -178,6 +178,20 @@ def test_times_are_also_given_in_path_traced_renders_of_the_same_run(tiny):
     assert "1-spp path-traced renders" in (tiny["out"] / "index.html").read_text()
 
 
+
+def test_the_report_says_where_its_time_went(tiny):
+    timing = json.loads((tiny["out"] / "metrics.json").read_text())["timing"]
+    tasks = timing["task_seconds"]
+    # the reference, flat and failing at defaults and at the ladder's cheap end, the ladder
+    kinds = sorted(t["kind"] for t in tasks)
+    assert kinds.count("reference") == 1 and kinds.count("path tracing") == 1
+    assert {t.get("method") for t in tasks if t["kind"] == "method"} == {"flat", "failing"}
+    assert all(t["seconds"] > 0 and t["scene"] == "tiny_sphere" for t in tasks)
+    # serial: every task ran in this process, one after the other, inside the tasks phase
+    assert {t["worker"] for t in tasks} == {os.getpid()}
+    assert sum(t["seconds"] for t in tasks) <= timing["tasks_seconds"]
+    assert timing["planning_seconds"] > 0 and timing["scoring_seconds"] > 0
+
 def test_ladder_knobs_take_the_cheap_end_of_the_first_ladder():
     from types import SimpleNamespace
 
