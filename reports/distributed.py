@@ -124,9 +124,20 @@ def timed_call(function: Callable[..., Any], *args) -> tuple[Any, float, int]:
     return result, time.perf_counter() - started, os.getpid()
 
 
+def _finished(result: Any) -> None:
+    """Return None once ``result`` exists: a marker that moves no data between workers."""
+    return None
+
+
+def _after(function: Callable[..., Any], marker: None, *args) -> Any:
+    """Run ``function(*args)``; ``marker`` only orders the task after another one."""
+    return function(*args)
+
+
 def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], *,
               scheduler: str | None = None, local: bool = False, progress: bool = True,
-              workers: int = 2, timed: bool = False) -> list[Any]:
+              workers: int = 2, timed: bool = False,
+              groups: Sequence[Any] | None = None) -> list[Any]:
     """Run ``function(*args)`` for each ``args`` in ``arguments``; results in the same order.
 
     Parameters
@@ -146,6 +157,12 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         Local cluster size.
     timed : bool
         Return, for each task, ``(result, seconds, process id)`` of :func:`timed_call`.
+    groups : sequence, optional
+        A key per task (None: no group). The first task of each group runs before the rest
+        of its group, which wait for it to finish; the first tasks of all groups go first.
+        For tasks that compile the same numba kernels: the first compiles them into the
+        on-disk cache and the others, on any local worker, load them (two workers that
+        start one method at once each compile it, docs/references.md).
     """
     from tqdm.auto import tqdm
 
@@ -165,10 +182,37 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         # a worker's threads must not race through the first import
         client.run(prepare_worker)
         bar.set_postfix_str("")
-        futures = [client.submit(function, *args, pure=False) for args in arguments]
+        futures = _submit(client, function, arguments, groups)
         index = {future.key: position for position, future in enumerate(futures)}
         results: list[Any] = [None] * len(futures)
         for future in as_completed(futures):
             results[index[future.key]] = future.result()
             bar.update()
     return results
+
+
+def _submit(client, function, arguments: list[tuple], groups) -> list:
+    """Submit the tasks, each group's first one ahead of everything and the rest after it."""
+    if groups is None:
+        return [client.submit(function, *args, pure=False) for args in arguments]
+    groups = list(groups)
+    if len(groups) != len(arguments):
+        raise ValueError(f"{len(groups)} groups for {len(arguments)} tasks")
+    firsts: dict[Any, int] = {}
+    for position, group in enumerate(groups):
+        if group is not None:
+            firsts.setdefault(group, position)
+    futures: list[Any] = [None] * len(arguments)
+    markers = {}
+    for group, position in firsts.items():
+        futures[position] = client.submit(function, *arguments[position], pure=False)
+        markers[group] = client.submit(_finished, futures[position], pure=False)
+    for position, (args, group) in enumerate(zip(arguments, groups, strict=True)):
+        if futures[position] is not None:
+            continue
+        if group is None:
+            futures[position] = client.submit(function, *args, pure=False)
+        else:
+            futures[position] = client.submit(_after, function, markers[group], *args,
+                                              pure=False)
+    return futures

@@ -613,8 +613,12 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     if tasks:
         tasks_started = time.perf_counter()
         with limited_entries(None if keep_precomputations else REPORT_CACHE_ENTRY_LIMIT):
+            # on local workers one method's runs wait for its first, which compiles its
+            # kernels into numba's on-disk cache for the others
+            groups = [task[2] if task[0] == "method" else None for task in tasks]
             timed = run_tasks(report_task, tasks, scheduler=scheduler, local=serial,
-                              progress=progress, timed=True)
+                              progress=progress, timed=True,
+                              groups=groups if scheduler is None else None)
         timing["tasks"] = time.perf_counter() - tasks_started
         results = [result for result, _, _ in timed]
         task_times = [_task_time(task, owner, seconds, worker)

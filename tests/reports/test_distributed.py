@@ -75,3 +75,30 @@ def test_the_variant_is_chosen_once_under_concurrent_first_calls():
                             timeout=300)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() in ("llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")
+
+
+def test_a_groups_first_task_finishes_before_the_rest_of_its_group_starts():
+    import time
+
+    # two workers, two one-second tasks of one group and one of none: the group's second
+    # task waits for its first, so the three take two seconds, not one
+    arguments = [(1.0,), (1.0,), (0.1,)]
+    with dask_client(workers=2) as client:
+        address = client.scheduler.address
+        started = time.perf_counter()
+        timed = run_tasks(time.sleep, arguments, scheduler=address, progress=False,
+                          timed=True, groups=["a", "a", None])
+        grouped = time.perf_counter() - started
+        started = time.perf_counter()
+        run_tasks(time.sleep, arguments[:2], scheduler=address, progress=False)
+        together = time.perf_counter() - started
+    assert grouped >= 2.0 > together
+    assert [result for result, _, _ in timed] == [None] * 3
+    # each task's own time, taken on its worker: at least what it slept
+    assert all(seconds >= asked for (_, seconds, _), (asked,) in zip(timed, arguments, strict=True))
+
+
+def test_groups_must_match_the_tasks():
+    with dask_client(workers=1) as client, pytest.raises(ValueError, match="2 groups for 3"):
+        run_tasks(_sweep_point, ARGUMENTS[:3], scheduler=client.scheduler.address,
+                  progress=False, groups=["a", "a"])
