@@ -63,7 +63,8 @@ from .regression import (
     updated_baseline,
 )
 from .renderer_images import renderer_images, renderers_in
-from .report_page import format_seconds, format_speedup, format_value, html_page
+from .report_page import html_page
+from .report_summary import print_summary, speedup_fields, summary_rows, task_time
 from .runs import (
     MethodRun,
     backend_versions,
@@ -76,7 +77,7 @@ from .runs import (
     timestamp,
 )
 from .scoring import score_scene
-from .speedup import PATH_TRACING_SPP, same_run_ratios
+from .speedup import PATH_TRACING_SPP
 
 __all__ = [
     "METRIC_LABELS",
@@ -378,7 +379,6 @@ def _check_out(out) -> Path:
     return out
 
 
-
 def _methods(methods) -> list[str]:
     from ..fast.base import METHODS
 
@@ -621,7 +621,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                               groups=groups if scheduler is None else None)
         timing["tasks"] = time.perf_counter() - tasks_started
         results = [result for result, _, _ in timed]
-        task_times = [_task_time(task, owner, seconds, worker)
+        task_times = [task_time(task, owner, seconds, worker)
                       for task, owner, (_, seconds, worker) in zip(tasks, owners, timed,
                                                                     strict=True)]
     else:
@@ -678,7 +678,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
             "exit_code": exit_code, "fingerprint": fingerprint,
             "scheduler": "this process" if serial else (scheduler or "local processes"),
         }
-        summary = _summary(reports, chosen)
+        summary = summary_rows(reports, chosen)
         context["seconds"] = time.perf_counter() - started
         context["timing"] = {**{f"{phase}_seconds": value for phase, value in timing.items()},
                              "task_seconds": task_times}
@@ -701,7 +701,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         new = updated_baseline(stored_baseline, results_for_baseline, versions)
         atomic_write_text(baseline_path, json.dumps(new, indent=2, allow_nan=False) + "\n")
     seconds = time.perf_counter() - started
-    _print_summary(summary, regressions, out, seconds, update_baseline, baseline_path, stream,
+    print_summary(summary, regressions, out, seconds, update_baseline, baseline_path, stream,
                    timing, task_times)
     for report in reports:
         if report.noise_warning:
@@ -769,33 +769,6 @@ def _replace_folder(staging: Path, out: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
-def _summary(reports: list[SceneReport], chosen: list[str]) -> list[dict]:
-    rows = []
-    for report in reports:
-        for name in chosen:
-            run = report.runs.get(name)
-            metrics = report.metrics.get(name, {})
-            check = report.checks.get(name)
-            rows.append({
-                "scene": report.name, "method": name,
-                "status": run.status if run else "not run",
-                "reason": (report.metric_errors.get(name) or (run.reason if run else "")),
-                "hdr_flip": metrics.get("hdr_flip"), "relative_mse": metrics.get("relative_mse"),
-                "ciede2000": metrics.get("ciede2000"), "ssim": metrics.get("ssim"),
-                "noise_floor": {key: (report.floor_of(name) or {}).get(key)
-                                for key in ("hdr_flip", "relative_mse", "ciede2000", "ssim")},
-                "within_noise": [key for key, verdict in report.verdicts.get(name, {}).items()
-                                 if verdict == "within reference noise"],
-                "precompute_seconds": run.precompute_seconds if run else None,
-                "frame_seconds": run.frame_seconds if run else None,
-                "first_frame_seconds": run.first_frame_seconds if run else None,
-                **_speedup_fields(report, name),
-                "cached": bool(run and run.cached),
-                "baseline": check.status if check else "",
-            })
-    return rows
-
-
 def _overview(reports: list[SceneReport], folder: Path) -> str | None:
     """Draw every scored method on every scene in one plot; return its path in the report."""
     from .speedup import overview_plot
@@ -805,21 +778,6 @@ def _overview(reports: list[SceneReport], folder: Path) -> str | None:
                report.verdicts.get(name, {}).get("relative_mse") == "within reference noise")
               for report in reports for name, metrics in report.metrics.items()]
     return "overview.png" if overview_plot(folder / "overview.png", points) else None
-
-
-def _speedup_fields(report: SceneReport, name: str) -> dict:
-    """Return a method's speed-up over path tracing and why it is missing, for the JSON."""
-    found = report.speedups.get(name)
-    if found is None:
-        reason = ("the method was not scored" if name not in report.metrics else
-                  "no path-tracing ladder on this scene")
-        return {"speedup_vs_path_tracing": None, "speedup_reason": reason,
-                "path_tracing_seconds_at_equal_error": None, "speedup_extrapolated": False}
-    return {"speedup_vs_path_tracing": json_safe(found["speedup_vs_path_tracing"]),
-            "speedup_reason": found["reason"],
-            "path_tracing_seconds_at_equal_error": json_safe(found["path_tracing_seconds"]),
-            "speedup_extrapolated": found["extrapolated"],
-            **same_run_ratios(report.curve, report.runs.get(name))}
 
 
 def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) -> dict:
@@ -858,7 +816,7 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
             entry["ladder"] = json_safe(report.ladder_points.get(name, []))
             entry["files"] = report.files.get(name, {})
             entry["baseline"] = check.as_dict() if check else None
-            entry.update(_speedup_fields(report, name))
+            entry.update(speedup_fields(report, name))
             methods[name] = entry
         scenes[report.name] = {"source": str(report.scene.source or ""),
                                "description": report.scene.description,
@@ -873,64 +831,5 @@ def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) 
     tolerances = {name: {"absolute": t.absolute, "relative": t.relative,
                          "lower_is_better": t.lower_is_better} for name, t in TOLERANCES.items()}
     return {"format": 1, **json_safe(context), "tolerances": tolerances, "scenes": scenes}
-
-
-def _task_time(task: tuple, owner: tuple, seconds: float, worker: int) -> dict:
-    """One task's entry in ``metrics.json``'s timing: what it ran, where and how long."""
-    kind, report = task[0], owner[0]
-    entry = {"scene": report.name, "kind": kind, "seconds": seconds, "worker": worker}
-    if kind == "method":
-        entry["method"], entry["knobs"] = task[2], json_safe(task[3])
-    return entry
-
-
-def _time_line(timing: dict, task_times: list[dict]) -> str:
-    """Where the report's time went: its phases, and its longest task."""
-    line = f"time: planning {timing['planning']:.1f} s, tasks {timing['tasks']:.1f} s"
-    if task_times:
-        busy = sum(t["seconds"] for t in task_times)
-        longest = max(task_times, key=lambda t: t["seconds"])
-        what = longest.get("method", longest["kind"])
-        if longest.get("knobs"):
-            what += " " + ", ".join(f"{k}={v}" for k, v in longest["knobs"].items())
-        workers = len({t["worker"] for t in task_times})
-        line += (f" ({len(task_times)} tasks, {busy:.1f} s of task time on {workers} "
-                 f"process(es); longest {longest['scene']} {what} {longest['seconds']:.1f} s)")
-    return line + f", metrics and error maps {timing.get('scoring', 0.0):.1f} s"
-
-
-def _print_summary(summary, regressions, out, seconds, updated, baseline_path, stream,
-                   timing=None, task_times=()):
-    width = max((len(r["scene"]) for r in summary), default=5)
-    print(f"{'scene':<{width}}  {'method':<10} {'HDR-FLIP':>8} {'(noise)':>7} {'relMSE':>9} "
-          f"{'(noise)':>9} {'dE2000':>7} {'SSIM':>6} {'precomp':>8} {'frame':>8} "
-          f"{'vs PT':>7}  verdict",
-          file=stream)
-    for row in summary:
-        if row["status"] != "ok":
-            print(f"{row['scene']:<{width}}  {row['method']:<10} {row['status']}: "
-                  f"{row['reason'][:90]}", file=stream)
-            continue
-        cached = " (cached)" if row["cached"] else ""
-        floor = row["noise_floor"]
-        noisy = (f"; within reference noise: {', '.join(row['within_noise'])}"
-                 if row["within_noise"] else "")
-        print(f"{row['scene']:<{width}}  {row['method']:<10} "
-              f"{format_value(row['hdr_flip'], 3):>8} {format_value(floor['hdr_flip'], 2):>7} "
-              f"{format_value(row['relative_mse'], 3):>9} "
-              f"{format_value(floor['relative_mse'], 2):>9} "
-              f"{format_value(row['ciede2000'], 3):>7} "
-              f"{format_value(row['ssim'], 3):>6} {format_seconds(row['precompute_seconds']):>8} "
-              f"{format_seconds(row['frame_seconds']):>8} "
-              f"{format_speedup(row['speedup_vs_path_tracing'], row['speedup_extrapolated']):>7}  "
-              f"{row['baseline']}{cached}{noisy}",
-              file=stream)
-    for line in regressions:
-        print(f"REGRESSION {line}", file=stream)
-    if updated:
-        print(f"baseline written: {baseline_path}", file=stream)
-    if timing is not None:
-        print(_time_line(timing, list(task_times)), file=stream)
-    print(f"wrote {out / 'index.html'} in {seconds:.1f} s", file=stream, flush=True)
 
 
