@@ -167,6 +167,8 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
     from tqdm.auto import tqdm
 
     arguments = [tuple(args) for args in arguments]
+    if groups is not None and len(groups) != len(arguments):
+        raise ValueError(f"{len(groups)} groups for {len(arguments)} tasks")
     if timed:
         arguments = [(function, *args) for args in arguments]
         function = timed_call
@@ -195,9 +197,6 @@ def _submit(client, function, arguments: list[tuple], groups) -> list:
     """Submit the tasks, each group's first one ahead of everything and the rest after it."""
     if groups is None:
         return [client.submit(function, *args, pure=False) for args in arguments]
-    groups = list(groups)
-    if len(groups) != len(arguments):
-        raise ValueError(f"{len(groups)} groups for {len(arguments)} tasks")
     firsts: dict[Any, int] = {}
     for position, group in enumerate(groups):
         if group is not None:

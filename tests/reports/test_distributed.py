@@ -102,3 +102,5 @@ def test_groups_must_match_the_tasks():
     with dask_client(workers=1) as client, pytest.raises(ValueError, match="2 groups for 3"):
         run_tasks(_sweep_point, ARGUMENTS[:3], scheduler=client.scheduler.address,
                   progress=False, groups=["a", "a"])
+    with pytest.raises(ValueError, match="2 groups for 3"):  # serial runs check them too
+        run_tasks(_sweep_point, ARGUMENTS[:3], local=True, progress=False, groups=["a", "a"])

@@ -178,7 +178,6 @@ def test_times_are_also_given_in_path_traced_renders_of_the_same_run(tiny):
     assert "1-spp path-traced renders" in (tiny["out"] / "index.html").read_text()
 
 
-
 def test_the_report_says_where_its_time_went(tiny):
     timing = json.loads((tiny["out"] / "metrics.json").read_text())["timing"]
     tasks = timing["task_seconds"]
@@ -191,6 +190,7 @@ def test_the_report_says_where_its_time_went(tiny):
     assert {t["worker"] for t in tasks} == {os.getpid()}
     assert sum(t["seconds"] for t in tasks) <= timing["tasks_seconds"]
     assert timing["planning_seconds"] > 0 and timing["scoring_seconds"] > 0
+
 
 def test_ladder_knobs_take_the_cheap_end_of_the_first_ladder():
     from types import SimpleNamespace
