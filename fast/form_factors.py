@@ -25,7 +25,7 @@ from scipy import sparse
 
 from ..errors import InputError
 from ..scenes.lighting import stratified_cosine_directions
-from .optical_distance import is_convex
+from ..scenes.mesh_shape import is_convex
 
 __all__ = [
     "Patches",

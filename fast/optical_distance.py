@@ -16,7 +16,8 @@ graph joins each occupied voxel to its 26 neighbours with Euclidean edge lengths
 segment whose every voxel is occupied is inside the object: its Euclidean length is the
 distance (this also covers the paper's same-voxel rule); otherwise the graph distance is
 used, never less than the Euclidean one. For a convex closed object the straight segment
-is always inside, so no grid is built at all (:func:`is_convex`).
+is always inside, so no grid is built at all
+(:func:`~translucent.scenes.mesh_shape.is_convex`).
 
 All lengths in this module are in mm.
 """
@@ -29,29 +30,17 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, sparse
 from scipy.sparse.csgraph import dijkstra
-from scipy.spatial import ConvexHull, cKDTree
+from scipy.spatial import cKDTree
 
 from ..errors import InputError
 
 __all__ = [
     "VoxelGrid",
-    "closed_surface",
-    "is_convex",
-    "mesh_volume",
     "optical_distances",
     "subdivision_barycentrics",
     "surface_voxels",
     "voxelize",
-    "welded_faces",
 ]
-
-#: A closed mesh is convex when its volume is within this fraction of its convex hull's:
-#: flat-faced meshes reach 1e-12; a dent of one face in a 1000-face sphere changes the
-#: volume by about 1e-4.
-CONVEX_VOLUME_TOLERANCE = 1e-6
-
-#: Vertices closer than this fraction of the mesh size are the same vertex (seams).
-WELD_TOLERANCE = 1e-9
 
 #: Surface points per voxel edge when the surface is voxelised: spacing a third of a voxel
 #: leaves no 6-connected gap for the fill to leak through.
@@ -85,57 +74,6 @@ def subdivision_barycentrics(m: int) -> np.ndarray:
     first = np.concatenate([(a[up] + 1 / 3) / m, (a[down] + 2 / 3) / m])
     second = np.concatenate([(b[up] + 1 / 3) / m, (b[down] + 2 / 3) / m])
     return np.stack([1.0 - first - second, first, second], axis=1)
-
-
-def welded_faces(vertices, faces) -> np.ndarray:
-    """Re-index faces so that vertices at the same position share one index.
-
-    Positions agree to :data:`WELD_TOLERANCE` of the mesh size; meshes built from separate
-    grids (a box's six sides) duplicate the vertices along their seams.
-    """
-    vertices = np.asarray(vertices, dtype=np.float64)
-    scale = max(float(np.ptp(vertices, axis=0).max()), 1e-300)
-    keys = np.round(vertices / (scale * WELD_TOLERANCE)).astype(np.int64)
-    _, inverse = np.unique(keys, axis=0, return_inverse=True)
-    return inverse.ravel()[np.asarray(faces)]
-
-
-def closed_surface(faces, vertices=None) -> bool:
-    """Return True when every edge of the triangle mesh is shared by exactly two faces.
-
-    With ``vertices``, coincident vertices are welded first (:func:`welded_faces`).
-    """
-    faces = np.asarray(faces) if vertices is None else welded_faces(vertices, faces)
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
-                    axis=1)
-    _, counts = np.unique(edges, axis=0, return_counts=True)
-    return bool((counts == 2).all())
-
-
-def mesh_volume(vertices, faces) -> float:
-    """Signed volume enclosed by a closed, outward-wound triangle mesh (divergence theorem)."""
-    v = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
-    return float(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0)
-
-
-def is_convex(vertices, faces) -> bool:
-    """Return True for a closed mesh whose volume equals its convex hull's.
-
-    Then every straight segment between two surface points lies inside, the shortest
-    optical path is the Euclidean distance (Sheng et al. 2014, Sect. 4: "for a convex
-    object, this path is simply the euclidean distance"), and nothing outside sees the
-    object twice.
-    """
-    if not closed_surface(faces, vertices):
-        return False
-    volume = mesh_volume(vertices, faces)
-    if volume <= 0:
-        return False
-    try:
-        hull = ConvexHull(np.asarray(vertices, dtype=np.float64)).volume
-    except Exception:  # flat or degenerate point sets have no hull volume
-        return False
-    return abs(hull - volume) <= CONVEX_VOLUME_TOLERANCE * hull
 
 
 @dataclass(frozen=True, eq=False)

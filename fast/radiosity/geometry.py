@@ -19,6 +19,7 @@ from ...materials.profiles import (
     MixedProfiles,
     RadialGrid,
 )
+from ...scenes.mesh_shape import closed_surface, is_convex
 from ..base import StageLog
 from ..diffusion_escape import (
     DiffusionGrid,
@@ -26,12 +27,7 @@ from ..diffusion_escape import (
     voxel_size_for,
 )
 from ..form_factors import Patches
-from ..optical_distance import (
-    closed_surface,
-    is_convex,
-    optical_distances,
-    voxelize,
-)
+from ..optical_distance import optical_distances, voxelize
 from .kernels import (
     csr_order,
     directed_pairs,

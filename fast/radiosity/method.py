@@ -11,6 +11,7 @@ from ...materials.profiles import (
     profile_for,
 )
 from ...resources import RADIOSITY_BYTES_PER_PAIR, check_memory
+from ...scenes.mesh_shape import closed_surface
 from ..base import (
     Refusal,
     StageLog,
@@ -19,9 +20,6 @@ from ..base import (
     refuse_inapplicable,
 )
 from ..form_factors import build_patches, form_factors, needs_form_factors
-from ..optical_distance import (
-    closed_surface,
-)
 from ..solid_inputs import mixed_profiles_from_solid, surface_scene
 from .geometry import scattering_geometry
 from .knobs import COMPONENTS, FORMAT_VERSION, KNOBS

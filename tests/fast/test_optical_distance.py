@@ -4,15 +4,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from translucent.errors import InputError
 from translucent.fast.optical_distance import (
-    closed_surface,
-    is_convex,
-    mesh_volume,
     optical_distances,
     subdivision_barycentrics,
     voxelize,
-    welded_faces,
 )
 from translucent.scenes import bowl, box, icosphere, plane, torus
+from translucent.scenes.mesh_shape import closed_surface, is_convex, mesh_volume, welded_faces
 
 #: The 26-neighbour voxel graph over-estimates a straight distance by at most 8 % (the
 #: worst direction between its edge directions) plus one voxel diagonal at each end.
