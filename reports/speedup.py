@@ -1,12 +1,12 @@
 """How much faster than path tracing, at equal error: the report's path-tracing ladder.
 
 For each scene with a reference, Mitsuba renders the scene at :data:`PATH_TRACING_SPP`
-samples per pixel (one timed render each, after an untimed one that compiles the kernels:
-:func:`~translucent.reports.bench.tradeoff.path_tracing_point`, the estimator the
-reference itself uses), and each render is scored against the reference on the pixels the
-methods are scored on: relative MSE, the reference's noise discounted. A method's speed-up
-is the path tracer's time at the method's relative MSE (interpolated on the log-log curve,
-or extrapolated along its power law beyond the swept spp and flagged so:
+samples per pixel (one timed render each, after one untimed render that compiles the
+kernels: :func:`path_tracing_points`, the estimator the reference itself uses), and each
+render is scored against the reference on the pixels the methods are scored on: relative
+MSE, the reference's noise discounted. A method's speed-up is the path tracer's time at the
+method's relative MSE (interpolated on the log-log curve, or extrapolated along its power
+law beyond the swept spp and flagged so:
 :func:`~translucent.reports.bench.tradeoff.equal_error_seconds`) over the method's warm
 frame time. Where the method's error does not clear the reference's noise, the speed-up is
 not given: the error it would be matched at is not known.
@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["PATH_TRACING_REPEATS", "PATH_TRACING_SPP", "equal_error_seconds",
-           "path_tracing_point", "PathTracingCurve", "overview_plot", "path_tracing_ladder",
+           "path_tracing_point", "path_tracing_points", "PathTracingCurve", "overview_plot",
+           "path_tracing_ladder",
            "same_run_ratios", "scored_curve", "scored_relative_mse", "speedup",
            "tradeoff_plot"]
 
@@ -39,7 +40,7 @@ def path_tracing_ladder(scene, spp_values=PATH_TRACING_SPP) -> list[dict]:
     list of dict
         Per spp: ``spp``, ``seconds`` and ``images`` (one), or ``error`` (a string).
     """
-    return [path_tracing_point(scene, int(spp), repeats=1) for spp in spp_values]
+    return path_tracing_points(scene, spp_values, repeats=1)
 
 
 @dataclass
@@ -335,21 +336,7 @@ PATH_TRACING_REPEATS = 3
 def path_tracing_point(scene, spp: int, seed: int = 1, repeats: int = PATH_TRACING_REPEATS):
     """Render ``scene`` with Mitsuba at ``spp`` and time it (a sweep task).
 
-    The estimator is the reference's (:func:`translucent.reference.render`): one RGB render,
-    or one render per channel where the conversion recommends it (chromatic media of high
-    albedo), so the path tracer is timed as the suite itself would run it. The scene is
-    converted and loaded first and rendered once untimed (which compiles the kernels), then
-    ``repeats`` times with the seeds ``seed, seed + 1, ...``, each timed.
-
-    Parameters
-    ----------
-    scene : Scene
-    spp : int
-        Samples per pixel (>= 1), per channel where rendered per channel.
-    seed : int
-        Seed of the first timed render (the untimed one uses ``seed + repeats``).
-    repeats : int
-        Timed renders.
+    :func:`path_tracing_points` with one spp.
 
     Returns
     -------
@@ -358,25 +345,65 @@ def path_tracing_point(scene, spp: int, seed: int = 1, repeats: int = PATH_TRACI
         ``images`` (one :class:`~translucent.image.Image` per timed render), or ``error`` (a
         string) when Mitsuba failed.
     """
+    return path_tracing_points(scene, [spp], seed, repeats)[0]
+
+
+def path_tracing_points(scene, spp_values, seed: int = 1,
+                        repeats: int = PATH_TRACING_REPEATS) -> list[dict]:
+    """Render ``scene`` with Mitsuba at each of ``spp_values`` and time each.
+
+    The estimator is the reference's (:func:`translucent.reference.render`): one RGB render,
+    or one render per channel where the conversion recommends it (chromatic media of high
+    albedo), so the path tracer is timed as the suite itself would run it. The scene is
+    converted and loaded once and rendered once untimed at the first spp, which compiles
+    the kernels; the other spp values use the same kernels (the sample count of a render
+    is not part of them, the sample count a scene is loaded with is: loading once per spp
+    compiled every kernel again). Then ``repeats`` renders per spp with the seeds ``seed,
+    seed + 1, ...``, each timed.
+
+    Parameters
+    ----------
+    scene : Scene
+    spp_values : sequence of int
+        Samples per pixel (>= 1), per channel where rendered per channel.
+    seed : int
+        Seed of the first timed render (the untimed one uses ``seed + repeats``).
+    repeats : int
+        Timed renders per spp.
+
+    Returns
+    -------
+    list of dict
+        Per spp as :func:`path_tracing_point`.
+    """
     from ..image import Image
     from ..reference.render import load_scenes, render_sample
 
+    spp_values = [int(spp) for spp in spp_values]
     try:
-        channels, conversions, loaded = load_scenes(scene, spp=spp)
+        channels, conversions, loaded = load_scenes(scene, spp=spp_values[0])
         per_channel = channels != (None,)
-        render_sample(channels, loaded, spp, seed + repeats)
-        timings, images = [], []
-        for k in range(repeats):
-            started = time.perf_counter()
-            rgb = render_sample(channels, loaded, spp, seed + k)
-            timings.append(time.perf_counter() - started)
-            images.append(Image(rgb, metadata={"producer": "path tracing", "spp": spp,
-                                               "seed": seed + k, "per_channel": per_channel,
-                                               "integrator": conversions[0].integrator}))
+        render_sample(channels, loaded, spp_values[0], seed + repeats)
     except Exception as error:  # reported in the JSON; the sweep goes on
-        return {"spp": spp, "error": f"{type(error).__name__}: {error}"}
-    return {"spp": spp, "seconds": float(np.median(timings)), "per_channel": per_channel,
-            "images": images}
+        return [{"spp": spp, "error": f"{type(error).__name__}: {error}"}
+                for spp in spp_values]
+    points = []
+    for spp in spp_values:
+        try:
+            timings, images = [], []
+            for k in range(repeats):
+                started = time.perf_counter()
+                rgb = render_sample(channels, loaded, spp, seed + k)
+                timings.append(time.perf_counter() - started)
+                images.append(Image(rgb, metadata={
+                    "producer": "path tracing", "spp": spp, "seed": seed + k,
+                    "per_channel": per_channel, "integrator": conversions[0].integrator}))
+        except Exception as error:  # reported in the JSON; the sweep goes on
+            points.append({"spp": spp, "error": f"{type(error).__name__}: {error}"})
+            continue
+        points.append({"spp": spp, "seconds": float(np.median(timings)),
+                       "per_channel": per_channel, "images": images})
+    return points
 
 
 def equal_error_seconds(errors, seconds, error: float) -> tuple[float, bool]:

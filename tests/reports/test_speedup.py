@@ -107,3 +107,35 @@ def test_relit_frames_move_every_light_a_little():
     assert np.linalg.norm(moved[2].direction) == pytest.approx(1.0)
     assert np.degrees(np.arccos(moved[2].direction @ lights[2].direction)) < 0.1
     assert moved[5] is lights[5]
+
+
+def test_the_ladder_loads_and_compiles_once_and_times_every_spp(monkeypatch):
+    """One load and one untimed render for the whole ladder: loading a scene once per spp
+    compiled every kernel again (the loaded sample count is part of them)."""
+    import importlib
+
+    from translucent.reports.speedup import path_tracing_ladder
+    from translucent.scenes import load_scene
+
+    render_module = importlib.import_module("translucent.reference.render")
+    loads, renders = [], []
+
+    def load_scenes(scene, *, spp, **options):
+        loads.append(spp)
+        return (None,), [type("Conversion", (), {"integrator": "volpath"})()], ["loaded"]
+
+    def render_sample(channels, loaded, spp, seed, on_render=None):
+        renders.append((spp, seed))
+        if spp == 8:
+            raise RuntimeError("out of memory")
+        return np.full((2, 2, 3), float(spp))
+
+    monkeypatch.setattr(render_module, "load_scenes", load_scenes)
+    monkeypatch.setattr(render_module, "render_sample", render_sample)
+    points = path_tracing_ladder(load_scene("sphere"), (1, 4, 8, 16))
+    assert loads == [1]
+    assert renders == [(1, 2), (1, 1), (4, 1), (8, 1), (16, 1)]  # untimed first
+    assert [p["spp"] for p in points] == [1, 4, 8, 16]
+    assert "out of memory" in points[2]["error"]
+    assert all(p["seconds"] >= 0 and p["images"][0].rgb[0, 0, 0] == p["spp"]
+               for p in points if "error" not in p)
