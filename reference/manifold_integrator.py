@@ -19,9 +19,11 @@ from .manifold_settings import (  # noqa: E402
     DIFFERENCE_STEP,
     INTEGRATOR_NAME,
     MAX_ITERATIONS,
+    MAX_TRIALS,
     MIN_STEP,
     POSITION_PRECISION,
     ROULETTE_TRANSMITTANCE,
+    SAME_POINT,
     TOLERANCE,
 )
 
@@ -64,6 +66,8 @@ class ManifoldVolpath(ADIntegrator):
         super().__init__(props)
         self.counters = [0] * len(COUNTERS)
         self.prepared_for = None
+        # specular manifold sampling of the refraction points the straight start misses
+        self.seeded_solutions = bool(props.get("seeded_solutions", False))
 
     # ------------------------------------------------------------------ set-up
     def prepare_scene(self, scene):
@@ -274,15 +278,110 @@ class ManifoldVolpath(ADIntegrator):
                       & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null) & (bs.pdf > 0))
         return dr.select(dielectric, dr.rcp(bs.eta), 0.0)
 
-    @dr.syntax
-    def connect(self, scene, sampler, mei, medium, channel, active):
-        r"""Make the manifold next-event estimate at the medium vertices ``mei``.
+    def refracts(self, si, v, light, directional):
+        """Whether the converged point ``si`` joins ``v`` and the light by a refraction."""
+        wo = dr.select(directional, light, dr.normalize(light - si.p))
+        wi = dr.normalize(v - si.p)
+        normal = si.sh_frame.n
+        return (dr.dot(wo, normal) > 0.0) & (dr.dot(wi, normal) < 0.0) \
+            & (dr.dot(wo, si.n) > 0.0) & (dr.dot(wi, si.n) < 0.0)
 
-        Returns the irradiance :math:`E_\perp` (times the emitter-selection weight)
-        and the unit direction from the vertex to its refraction point.
+    def same_point(self, v, a, b):
+        """Whether two solves from ``v`` ended at the same boundary point (:data:`SAME_POINT`)."""
+        return dr.norm(a - b) < SAME_POINT * (dr.norm(v - a) + self.scene_size)
+
+    @dr.syntax
+    def through(self, scene, sampler, mei, medium, channel, phase, phase_ctx, emitter, si,
+                light, directional, area, ps, sample, eta, active):
+        r"""Return ``phase * E_perp`` at ``mei`` from the light through refraction point ``si``."""
+        result = mi.Spectrum(0.0)
+        wo = dr.select(directional, light, dr.normalize(light - si.p))
+        cos_o = dr.dot(wo, si.sh_frame.n)
+        fresnel, _, _, _ = mi.fresnel(cos_o, eta)
+        g = self.geometry(si, mei.p, light, directional, eta)
+        # intensity towards y: delta lights from their own sampling at y
+        it_y = dr.zeros(mi.Interaction3f)
+        it_y.p = si.p + si.n * (mi.math.RayEpsilon * (1.0 + dr.max(dr.abs(si.p))))
+        it_y.time = mei.time
+        ds_y, weight_y = emitter.sample_direction(it_y, sample, active & ~area)
+        intensity = dr.select(directional, weight_y, weight_y * dr.square(ds_y.dist))
+        # area lights: radiance at the sampled point times its cosine over the area pdf
+        si_l = mi.SurfaceInteraction3f(ps, dr.zeros(mi.Color0f))
+        to_y = dr.normalize(si.p - ps.p)
+        si_l.wi = si_l.to_local(to_y)
+        radiance = emitter.eval(si_l, active & area)
+        cos_l = dr.maximum(dr.dot(ps.n, to_y), 0.0)
+        intensity[area] = radiance * cos_l * dr.select(ps.pdf > 0, dr.rcp(ps.pdf), 0.0)
+        # the segment v -> y is clear by construction (y is the first hit from v): closed
+        # form in a homogeneous medium, ratio tracking in others
+        homogeneous = medium.is_homogeneous()
+        inside = dr.exp(-mei.sigma_t * dr.norm(si.p - mei.p))
+        tracked = active & ~homogeneous
+        inside[tracked] = self.transmittance(scene, sampler, mi.Interaction3f(mei), si.p,
+                                             mi.Bool(False), medium, channel, tracked)
+        # outside: one shadow ray; the tracking loop only where it meets something
+        outer_medium = si.target_medium(wo)
+        shadow = mi.Ray3f(it_y.p, wo, dr.select(directional, dr.inf, dr.norm(light - it_y.p)
+                                                * (1.0 - mi.math.ShadowEpsilon)))
+        clear = ~scene.ray_test(shadow, active) & (outer_medium == None)  # noqa: E711
+        outside = mi.Spectrum(1.0)
+        tracked = active & ~clear
+        outside[tracked] = self.transmittance(scene, sampler, mi.Interaction3f(it_y), light,
+                                              directional, outer_medium, channel, tracked)
+        value, _ = phase.eval_pdf(phase_ctx, mei, dr.normalize(si.p - mei.p), active)
+        result[active] = value * intensity * (1.0 - fresnel) * g * inside * outside
+        return result
+
+    def seed(self, scene, sampler, v, eta, active):
+        """Return the boundary point hit from ``v`` along a uniform random direction (same eta)."""
+        d = mi.warp.square_to_uniform_sphere(sampler.next_2d(active))
+        start = scene.ray_intersect(mi.Ray3f(v, d), mi.RayFlags.All | mi.RayFlags.dNSdUV,
+                                    False, active)
+        usable = active & start.is_valid() & (dr.dot(d, start.n) > 0.0)
+        usable &= dr.abs(self.boundary_eta(start, usable) - eta) < 1e-6 * eta
+        return start, usable
+
+    @dr.syntax
+    def other_solution(self, scene, sampler, v, known, known_valid, light, directional, eta,
+                       active):
+        r"""Specular manifold sampling of the refraction points the straight start misses.
+
+        A solve from a random seed (:meth:`seed`, a uniform direction from ``v``) reaches
+        refraction point :math:`y` with probability :math:`p(y)` (its basin's solid angle
+        over :math:`4\pi`); weighting by :math:`1/p(y)`, and by zero where :math:`y` is the
+        point ``known`` the straight start found, gives the sum over every other point
+        (Zeltner, Georgiev and Jakob 2020, Eq. 10). :math:`1/p(y)` is estimated without
+        bias by the number of further seeds until one reaches :math:`y` again (their
+        Sect. 4.3), at most :data:`MAX_TRIALS`.
+
+        Returns the point, whether one was found, the weight (the count of trials) and
+        whether that count was cut.
         """
         active = mi.Bool(active)
-        result = mi.Spectrum(0.0)
+        start, usable = self.seed(scene, sampler, v, eta, active)
+        si, converged = self.solve(scene, v, start, light, directional, eta, usable)
+        found = usable & converged & self.refracts(si, v, light, directional)
+        found &= ~(known_valid & self.same_point(v, si.p, known.p))
+        trials = mi.UInt32(0)
+        matched = mi.Bool(False)
+        searching = mi.Bool(found)
+        while searching:
+            trials += 1
+            again, usable = self.seed(scene, sampler, v, eta, searching)
+            reached, hit = self.solve(scene, v, again, light, directional, eta, usable)
+            matched |= usable & hit & self.same_point(v, reached.p, si.p)
+            searching &= ~matched & (trials < MAX_TRIALS)
+        capped = found & ~matched
+        return si, found, mi.Float(trials), capped
+
+    @dr.syntax
+    def connect(self, scene, sampler, mei, medium, channel, phase, phase_ctx, active):
+        r"""Make the manifold next-event estimate at the medium vertices ``mei``.
+
+        Returns ``phase * E_perp`` (times the emitter-selection weight) and the counts of
+        what happened (:data:`COUNTERS`).
+        """
+        active = mi.Bool(active)
         choices = self.n_connectable
         index = dr.minimum(mi.UInt32(sampler.next_1d(active) * choices), choices - 1)
         emitter = dr.gather(mi.EmitterPtr, self.connectable, index, active)
@@ -308,49 +407,23 @@ class ManifoldVolpath(ADIntegrator):
         attempted = mi.Bool(active)
         si, converged = self.solve(scene, mei.p, first, light, directional, eta, active)
         not_converged = active & ~converged
-        active &= converged
-        wo = dr.select(directional, light, dr.normalize(light - si.p))
-        wi = dr.normalize(mei.p - si.p)
-        normal = si.sh_frame.n
-        cos_o = dr.dot(wo, normal)
-        valid = (cos_o > 0.0) & (dr.dot(wi, normal) < 0.0) & (dr.dot(wo, si.n) > 0.0) \
-            & (dr.dot(wi, si.n) < 0.0)
-        not_refraction = active & ~valid
-        active &= valid
-        fresnel, _, _, _ = mi.fresnel(cos_o, eta)
-        g = self.geometry(si, mei.p, light, directional, eta)
-        # intensity towards y: delta lights from their own sampling at y
-        it_y = dr.zeros(mi.Interaction3f)
-        it_y.p = si.p + si.n * (mi.math.RayEpsilon * (1.0 + dr.max(dr.abs(si.p))))
-        it_y.time = mei.time
-        ds_y, weight_y = emitter.sample_direction(it_y, sample, active & ~area)
-        intensity = dr.select(directional, weight_y, weight_y * dr.square(ds_y.dist))
-        # area lights: radiance at the sampled point times its cosine over the area pdf
-        si_l = mi.SurfaceInteraction3f(ps, dr.zeros(mi.Color0f))
-        to_y = dr.normalize(si.p - ps.p)
-        si_l.wi = si_l.to_local(to_y)
-        radiance = emitter.eval(si_l, active & area)
-        cos_l = dr.maximum(dr.dot(ps.n, to_y), 0.0)
-        intensity[area] = radiance * cos_l * dr.select(ps.pdf > 0, dr.rcp(ps.pdf), 0.0)
-        # the segment v -> y is clear by construction (y is the first hit from v): closed
-        # form in a homogeneous medium, ratio tracking in others
-        homogeneous = medium.is_homogeneous()
-        inside = dr.exp(-mei.sigma_t * dr.norm(si.p - mei.p))
-        tracked = active & ~homogeneous
-        inside[tracked] = self.transmittance(scene, sampler, it, si.p, mi.Bool(False),
-                                             medium, channel, tracked)
-        # outside: one shadow ray; the tracking loop only where it meets something
-        outer_medium = si.target_medium(wo)
-        shadow = mi.Ray3f(it_y.p, wo, dr.select(directional, dr.inf, dr.norm(light - it_y.p)
-                                                * (1.0 - mi.math.ShadowEpsilon)))
-        clear = ~scene.ray_test(shadow, active) & (outer_medium == None)  # noqa: E711
-        outside = mi.Spectrum(1.0)
-        tracked = active & ~clear
-        outside[tracked] = self.transmittance(scene, sampler, mi.Interaction3f(it_y), light,
-                                              directional, outer_medium, channel, tracked)
-        result[active] = intensity * (1.0 - fresnel) * g * inside * outside * (choices / keep)
-        tally = (attempted, active, not_converged, not_refraction)
-        return result, dr.normalize(si.p - mei.p), tally
+        valid = active & converged & self.refracts(si, mei.p, light, directional)
+        not_refraction = active & converged & ~valid
+        result = self.through(scene, sampler, mei, medium, channel, phase, phase_ctx,
+                              emitter, si, light, directional, area, ps, sample, eta, valid)
+        seeded = mi.Bool(False)
+        capped = mi.Bool(False)
+        if dr.hint(self.seeded_solutions, mode="scalar"):
+            # area lights keep the partition with unidirectional hits (``covered``)
+            other, seeded, trials, capped = self.other_solution(
+                scene, sampler, mei.p, si, valid, light, directional, eta, attempted & ~area)
+            result += trials * self.through(scene, sampler, mei, medium, channel, phase,
+                                            phase_ctx, emitter, other, light, directional,
+                                            area, ps, sample, eta, seeded)
+        # only where a connection was made: elsewhere keep may be 0
+        result = dr.select(attempted, result * (choices / keep), 0.0)
+        tally = (attempted, valid, not_converged, not_refraction, seeded, capped)
+        return result, tally
 
     def covered(self, scene, v, y, light, active):
         """Whether the solver, from the straight line ``v``-``light``, reaches ``y``."""
@@ -362,8 +435,7 @@ class ManifoldVolpath(ADIntegrator):
         eta = self.boundary_eta(first, active)
         active &= eta > 0.0
         si, converged = self.solve(scene, v, first, light, mi.Bool(False), eta, active)
-        tolerance = 1e-3 * (dr.norm(v - y) + self.scene_size)
-        return active & converged & (dr.norm(si.p - y) < tolerance)
+        return active & converged & self.same_point(v, y, si.p)
 
     # ------------------------------------------------------------- the path
     @dr.syntax
@@ -395,6 +467,7 @@ class ManifoldVolpath(ADIntegrator):
         # per path, summed after the loop (one variable each: loop state is found by name)
         n_connections, n_solved = mi.UInt32(0), mi.UInt32(0)
         n_not_converged, n_not_refraction, n_kept = mi.UInt32(0), mi.UInt32(0), mi.UInt32(0)
+        n_seeded, n_capped = mi.UInt32(0), mi.UInt32(0)
         medium_vertex = mi.Point3f(0.0)
 
         while active:
@@ -506,15 +579,15 @@ class ManifoldVolpath(ADIntegrator):
 
             if dr.hint(self.connectable is not None, mode="scalar"):
                 # manifold next-event estimation through the boundary
-                irradiance, to_boundary, events = self.connect(scene, sampler, mei, medium,
-                                                               channel, active_e_medium)
+                radiance, events = self.connect(scene, sampler, mei, medium, channel, phase,
+                                                phase_ctx, active_e_medium)
                 n_connections += dr.select(events[0], 1, 0)
                 n_solved += dr.select(events[1], 1, 0)
                 n_not_converged += dr.select(events[2], 1, 0)
                 n_not_refraction += dr.select(events[3], 1, 0)
-                manifold_phase, _ = phase.eval_pdf(phase_ctx, mei, to_boundary,
-                                                   active_e_medium)
-                L[active_e_medium] += throughput * manifold_phase * irradiance
+                n_seeded += dr.select(events[4], 1, 0)
+                n_capped += dr.select(events[5], 1, 0)
+                L[active_e_medium] += throughput * radiance
             after_medium |= act_medium_scatter
             medium_vertex[act_medium_scatter] = mei.p
             delta_events[act_medium_scatter] = 0
@@ -556,11 +629,13 @@ class ManifoldVolpath(ADIntegrator):
             medium[has_medium_trans] = si.target_medium(ray.d)
             active &= active_surface | active_medium
 
-        tally = (n_connections, n_solved, n_not_converged, n_not_refraction, n_kept)
+        tally = (n_connections, n_solved, n_not_converged, n_not_refraction, n_kept,
+                 n_seeded, n_capped)
         for k, count in enumerate(tally):
             self.counters[k] += int(dr.sum(count, mode="evaluated")[0])
         return L, valid_ray, [], L
 
     def to_string(self):
         """Describe the integrator as Mitsuba prints it."""
-        return f"ManifoldVolpath[max_depth = {self.max_depth}, rr_depth = {self.rr_depth}]"
+        return (f"ManifoldVolpath[max_depth = {self.max_depth}, rr_depth = {self.rr_depth}, "
+                f"seeded_solutions = {self.seeded_solutions}]")

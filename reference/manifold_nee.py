@@ -58,8 +58,20 @@ second object) stay at zero probability, as in ``volpath``. Where the solve does
 converge, or converges to a configuration that is not a refraction (total internal
 reflection, the light behind the tangent plane), the connection gives zero: each such case
 is counted (:data:`COUNTERS`) and written into the image header, never dropped silently.
-A concave boundary can refract one light into one point along several paths; only the one
-the solver reaches from its start is found (the header says which scenes are concave).
+
+**Several refraction paths.** A concave boundary often refracts one light into one point
+along several paths, and a convex one does past a lens caustic; the solve from the straight
+line finds at most one of them. With ``seeded_solutions`` (set by the conversion where a
+dielectric boundary is concave) the others are added by specular manifold sampling (Zeltner,
+Georgiev and Jakob 2020, unbiased form): one more solve starts from the boundary point hit
+along a uniformly random direction from :math:`v`; a refraction point :math:`y` it reaches
+that is not the straight start's is weighted by :math:`1/p(y)`, the inverse probability that
+a random start reaches it, estimated without bias by the count of further random starts
+until one reaches :math:`y` again (at most :data:`MAX_TRIALS`; a cut count is counted).
+The expectation is the sum over every refraction point but the straight start's. Area
+lights keep the exact partition above instead. Convex boundaries are left without it: past
+the caustic of a sphere at eta 1.3 the missed paths hold about 1 % of the light of an
+optically thin sphere, at 2.4x the cost (docs/references.md).
 """
 
 from __future__ import annotations
@@ -67,9 +79,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..backend import mitsuba
-from .manifold_settings import COUNTERS, INTEGRATOR_NAME
+from .manifold_settings import COUNTERS, INTEGRATOR_NAME, MAX_TRIALS
 
-__all__ = ["INTEGRATOR_NAME", "COUNTERS", "register", "counts"]
+__all__ = ["INTEGRATOR_NAME", "COUNTERS", "MAX_TRIALS", "register", "counts"]
 
 
 def register() -> None:

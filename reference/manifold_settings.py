@@ -6,8 +6,9 @@ Shared by the module that registers the integrator and its Dr.Jit code
 
 from __future__ import annotations
 
-__all__ = ["COUNTERS", "DIFFERENCE_STEP", "INTEGRATOR_NAME", "MAX_ITERATIONS", "MIN_STEP",
-           "POSITION_PRECISION", "ROULETTE_TRANSMITTANCE", "TOLERANCE"]
+__all__ = ["COUNTERS", "DIFFERENCE_STEP", "INTEGRATOR_NAME", "MAX_ITERATIONS", "MAX_TRIALS",
+           "MIN_STEP", "POSITION_PRECISION", "ROULETTE_TRANSMITTANCE", "SAME_POINT",
+           "TOLERANCE"]
 
 #: The name under which the integrator is registered with Mitsuba.
 INTEGRATOR_NAME = "volpath_mnee"
@@ -19,6 +20,8 @@ COUNTERS = (
     "not_converged",      # the solve ran out of iterations or step length
     "not_refraction",     # converged to total internal reflection or a back-facing light
     "area_hits_kept",     # refracted hits of an area light the solver would not have found
+    "seeded_found",       # other refraction points found from a random seed (concave)
+    "trials_capped",      # ... whose inverse probability ran out of trials (MAX_TRIALS)
 )
 
 #: Newton iterations before a solve is given up.
@@ -45,3 +48,13 @@ ROULETTE_TRANSMITTANCE = 0.05
 
 #: A proposed Newton step shorter than this fraction of a full step ends the solve.
 MIN_STEP = 1.0 / 1024.0
+
+#: Seeded solves (specular manifold sampling) spent on estimating the inverse probability
+#: of a refraction point found from a random seed: the count of trials until a seed
+#: reaches it again is unbiased for that inverse (Zeltner et al. 2020, Sect. 4.3); a count
+#: cut here loses the fraction (1 - p)^MAX_TRIALS of the point's light, and is counted.
+MAX_TRIALS = 256
+
+#: Two solves reached the same refraction point when they end closer than this fraction of
+#: the vertex's distance to it plus the scene's size.
+SAME_POINT = 1e-3

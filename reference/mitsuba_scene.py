@@ -37,7 +37,8 @@ boundary in ``volpath``: the shadow ray from a scattering point stops at the bou
 BSDF-sampled path never hits a light of zero size, so the medium renders black. When a
 scene holds such a boundary and such a light, the default integrator is ``volpath_mnee``,
 which connects the medium to the light through the boundary by manifold next-event
-estimation (:mod:`translucent.reference.manifold_nee`); the choice is stated in
+estimation (:mod:`translucent.reference.manifold_nee`), with specular manifold sampling
+of the further refraction paths where the boundary is concave; the choice is stated in
 :attr:`MitsubaConversion.substitutions`. With ``integrator="volpath"`` forced, those lights
 are replaced by emitters of finite size and the same power instead
 (:mod:`translucent.reference.delta_lights`), listed there and in the image metadata.
@@ -65,6 +66,7 @@ from ..scenes import (
     SphereAreaLight,
     SpotLight,
 )
+from ..scenes.mesh_shape import is_convex
 from ..scenes.raycast import perspective_sensor_dict, to_mitsuba_mesh
 from . import delta_lights
 
@@ -491,6 +493,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         substitute = blocks_delta and integrator != "volpath_mnee"
     else:
         substitute = bool(substitute_delta_lights)
+    seeded_solutions = False
     if integrator == "volpath_mnee":
         from .manifold_nee import check_closed_boundaries, register
 
@@ -501,6 +504,17 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         per_channel_recommended |= chromatic_media
         check_closed_boundaries(scene, blocking)
         register()
+        # a concave boundary often refracts one light into one point along several paths,
+        # of which the solve from the straight line finds one: the others by specular
+        # manifold sampling (convex ones have them only past a lens caustic; off there,
+        # docs/references.md gives what that leaves out)
+        concave = [scene.objects[i].name for i in blocking
+                   if not is_convex(scene.objects[i].mesh.vertices, scene.objects[i].mesh.faces)]
+        if concave:
+            seeded_solutions = True
+            notes.append("the refraction paths the solve from the straight line misses on "
+                         f"the concave boundary of {', '.join(repr(n) for n in concave)} "
+                         "are found by specular manifold sampling (seeded_solutions)")
     environment = delta_lights.EnvironmentParts()
     emitters: dict[str, Any] = {}
     for index, light in enumerate(scene.lights):
@@ -513,7 +527,8 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     scene_dict = {
         "type": "scene",
         "integrator": {"type": integrator, "max_depth": int(max_depth),
-                       "rr_depth": int(rr_depth)},
+                       "rr_depth": int(rr_depth),
+                       **({"seeded_solutions": True} if seeded_solutions else {})},
         # the sensor of the G-buffers in translucent.scenes.raycast: same pixels
         "sensor": perspective_sensor_dict(scene.camera, spp=spp),
         **shapes,
