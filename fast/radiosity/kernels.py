@@ -108,50 +108,60 @@ def compiled_energy_correction():
 
 @functools.lru_cache(maxsize=1)
 def compiled_mixed_profile():
-    """Compile Eq. 16 per sample, visiting only the materials a path crosses.
+    """Compile Eq. 16 summed over each pair's samples, visiting only the materials it crosses.
 
     A path of ``mix_points`` points crosses at most that many of the M materials, so
     the other terms (each a factor 1) are never evaluated; the segment lookup is
-    :meth:`~translucent.materials.profiles.RadialGrid.locate`'s, inlined.
+    :meth:`~translucent.materials.profiles.RadialGrid.locate`'s, inlined. The samples are
+    grouped by pair (``starts``: pair p owns samples ``starts[p]:starts[p + 1]``), so each
+    pair's sum is made in one thread, in sample order, with no per-sample array.
     """
     import numba
 
     @numba.njit(parallel=True, fastmath=False, cache=True)
-    def mixed(distance, counts, pair, points, weight, zero, tables, max_radius,
+    def mixed(distance, counts, starts, points, weight, zero, tables, max_radius,
               out):  # pragma: no cover - compiled
         samples_k = tables.shape[1]
         materials = tables.shape[0]
-        for i in numba.prange(len(distance)):
-            row = pair[i]
+        for row in numba.prange(len(starts) - 1):
+            if starts[row] == starts[row + 1]:
+                continue
             mean0 = mean1 = mean2 = 0.0
-            ratio0 = ratio1 = ratio2 = 1.0
             for m in range(materials):
-                count = counts[row, m]
-                if count == 0:
-                    continue
-                fraction = count / points
+                fraction = counts[row, m] / points
                 mean0 += zero[m, 0] * fraction
                 mean1 += zero[m, 1] * fraction
                 mean2 += zero[m, 2] * fraction
-                # RadialGrid.locate: nodes r_k = max_radius (k / (K - 1))^2
-                r = min(max(fraction * distance[i], 0.0), max_radius)
-                position = math.sqrt(r / max_radius) * (samples_k - 1)
-                k = min(int(math.floor(position)), samples_k - 2)
-                left = max_radius * (k / (samples_k - 1)) ** 2
-                right = max_radius * ((k + 1) / (samples_k - 1)) ** 2
-                f = min(max((r - left) / (right - left), 0.0), 1.0)
-                for c in range(3):
-                    value = tables[m, k, c] * (1.0 - f) + tables[m, k + 1, c] * f
-                    ratio = value / zero[m, c] if zero[m, c] > 0 else 0.0
-                    if c == 0:
-                        ratio0 *= ratio
-                    elif c == 1:
-                        ratio1 *= ratio
-                    else:
-                        ratio2 *= ratio
-            out[i, 0] = mean0 * ratio0 * weight[i]
-            out[i, 1] = mean1 * ratio1 * weight[i]
-            out[i, 2] = mean2 * ratio2 * weight[i]
+            sum0 = sum1 = sum2 = 0.0
+            for i in range(starts[row], starts[row + 1]):
+                ratio0 = ratio1 = ratio2 = 1.0
+                for m in range(materials):
+                    count = counts[row, m]
+                    if count == 0:
+                        continue
+                    fraction = count / points
+                    # RadialGrid.locate: nodes r_k = max_radius (k / (K - 1))^2
+                    r = min(max(fraction * distance[i], 0.0), max_radius)
+                    position = math.sqrt(r / max_radius) * (samples_k - 1)
+                    k = min(int(math.floor(position)), samples_k - 2)
+                    left = max_radius * (k / (samples_k - 1)) ** 2
+                    right = max_radius * ((k + 1) / (samples_k - 1)) ** 2
+                    f = min(max((r - left) / (right - left), 0.0), 1.0)
+                    for c in range(3):
+                        value = tables[m, k, c] * (1.0 - f) + tables[m, k + 1, c] * f
+                        ratio = value / zero[m, c] if zero[m, c] > 0 else 0.0
+                        if c == 0:
+                            ratio0 *= ratio
+                        elif c == 1:
+                            ratio1 *= ratio
+                        else:
+                            ratio2 *= ratio
+                sum0 += mean0 * ratio0 * weight[i]
+                sum1 += mean1 * ratio1 * weight[i]
+                sum2 += mean2 * ratio2 * weight[i]
+            out[row, 0] = sum0
+            out[row, 1] = sum1
+            out[row, 2] = sum2
 
     return mixed
 

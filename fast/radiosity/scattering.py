@@ -229,13 +229,6 @@ def _sheet_profile(profile, index: int, geometry: ScatteringGeometry, name: str)
                        entry_fresnel=profile.entry_fresnel)
 
 
-#: Samples of Eq. 16 evaluated at once: the (samples x 3) values of a chunk stay near
-#: 100 MB whatever the object (all pairs of a 4608-patch sphere: 23 M samples).
-MIXED_CHUNK_VALUES = 4_000_000
-
-
-
-
 def mixed_values(item: ObjectScattering, profile: MixedProfiles, grid: RadialGrid,
                   kind: str = "reflection"):
     """Eq. 16 summed per patch pair over the pair's samples, shape (pairs, 3).
@@ -248,21 +241,15 @@ def mixed_values(item: ObjectScattering, profile: MixedProfiles, grid: RadialGri
                                   dtype=np.float64)
     zero = np.ascontiguousarray(tables[:, 0])
     pairs = item.sample_operator.shape[0]  # kept for heterogeneous objects
+    pair, distance, weight = samples["pair"], samples["distance"], samples["weight"]
+    if len(pair) > 1 and (np.diff(pair) < 0).any():  # scattering_geometry's are in pair order
+        order = np.argsort(pair, kind="stable")
+        pair, distance, weight = pair[order], distance[order], weight[order]
+    starts = np.searchsorted(pair, np.arange(pairs + 1)).astype(np.int64)
     out = np.zeros((pairs, 3))
-    counts = np.ascontiguousarray(samples["fractions"])
-    mixed = compiled_mixed_profile()
-    values = np.empty((min(MIXED_CHUNK_VALUES, len(samples["distance"])), 3))
-    for start in range(0, len(samples["distance"]), MIXED_CHUNK_VALUES):
-        pair = np.ascontiguousarray(samples["pair"][start:start + MIXED_CHUNK_VALUES])
-        chunk = values[:len(pair)]
-        mixed(np.ascontiguousarray(samples["distance"][start:start + MIXED_CHUNK_VALUES],
-                                   dtype=np.float64),
-              counts, pair, float(samples["mix_points"]),
-              np.ascontiguousarray(samples["weight"][start:start + MIXED_CHUNK_VALUES],
-                                   dtype=np.float64),
-              zero, tables, float(grid.max_radius), chunk)
-        for c in range(3):
-            out[:, c] += np.bincount(pair, chunk[:, c], minlength=pairs)
+    compiled_mixed_profile()(np.ascontiguousarray(distance), np.ascontiguousarray(
+        samples["fractions"]), starts, float(samples["mix_points"]),
+        np.ascontiguousarray(weight), zero, tables, float(grid.max_radius), out)
     return out
 
 
