@@ -24,6 +24,7 @@ from .manifold_settings import (  # noqa: E402
     POSITION_PRECISION,
     ROULETTE_TRANSMITTANCE,
     SAME_POINT,
+    SEEDED_FRACTION,
     TOLERANCE,
 )
 
@@ -414,12 +415,15 @@ class ManifoldVolpath(ADIntegrator):
         seeded = mi.Bool(False)
         capped = mi.Bool(False)
         if dr.hint(self.seeded_solutions, mode="scalar"):
-            # area lights keep the partition with unidirectional hits (``covered``)
+            # area lights keep the partition with unidirectional hits (``covered``); a
+            # fraction of the connections search, weighted by its inverse (unbiased)
+            searches = attempted & ~area & (sampler.next_1d(attempted) < SEEDED_FRACTION)
             other, seeded, trials, capped = self.other_solution(
-                scene, sampler, mei.p, si, valid, light, directional, eta, attempted & ~area)
-            result += trials * self.through(scene, sampler, mei, medium, channel, phase,
-                                            phase_ctx, emitter, other, light, directional,
-                                            area, ps, sample, eta, seeded)
+                scene, sampler, mei.p, si, valid, light, directional, eta, searches)
+            found = self.through(scene, sampler, mei, medium, channel, phase, phase_ctx,
+                                 emitter, other, light, directional, area, ps, sample, eta,
+                                 seeded)
+            result += (trials / SEEDED_FRACTION) * found
         # only where a connection was made: elsewhere keep may be 0
         result = dr.select(attempted, result * (choices / keep), 0.0)
         tally = (attempted, valid, not_converged, not_refraction, seeded, capped)

@@ -142,6 +142,10 @@ def _render_and_write(args, scene, out: Path, progressive: bool) -> int:
               f"{counted['solved']}, not converged {counted['not_converged']} "
               f"({100 * lost:.2g} %: no refraction path, or the solve failed), not a "
               f"refraction {counted['not_refraction']}")
+        if counted.get("seeded_found") or counted.get("trials_capped"):
+            print(f"  seeded solves (specular manifold sampling): "
+                  f"{counted.get('seeded_found', 0)} further refraction points, "
+                  f"{counted.get('trials_capped', 0)} of them with the trial count cut")
     warning = reference_noise_warning(image.rgb, image.variance)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
