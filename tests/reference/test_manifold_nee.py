@@ -41,17 +41,23 @@ def mi():
     return module
 
 
-def _medium():
-    return {"type": "homogeneous", "sigma_t": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
+def _medium(sigma_t=(1.0, 1.0, 1.0)):
+    return {"type": "homogeneous", "sigma_t": {"type": "rgb", "value": list(sigma_t)},
             "albedo": {"type": "rgb", "value": [0.9, 0.8, 0.7]}, "scale": 3.0}
 
 
-def _sphere_scene(mi, integrator, boundary, light, size, **integrator_props):
+#: An extinction that differs by channel (times the scale, 3): the free flights' spectral MIS
+#: weights differ from one channel's pdf alone only here.
+CHROMATIC = (0.2, 0.4, 0.8)
+
+
+def _sphere_scene(mi, integrator, boundary, light, size, sigma_t=(1.0, 1.0, 1.0),
+                  **integrator_props):
     from translucent.scenes.meshes import icosphere
     from translucent.scenes.raycast import to_mitsuba_mesh
 
     shape = to_mitsuba_mesh(icosphere(4, 1.0), "sphere",
-                            props={"bsdf": boundary, "interior": _medium()})
+                            props={"bsdf": boundary, "interior": _medium(sigma_t)})
     camera = mi.ScalarTransform4f().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0])
     return mi.load_dict({
         "type": "scene",
@@ -112,23 +118,28 @@ def _light(mi, kind):
     return DIRECTIONAL
 
 
-def _eta_one(mi, size, spp, passes, kind="point"):
+def _eta_one(mi, size, spp, passes, kind="point", sigma_t=(1.0, 1.0, 1.0)):
     light = _light(mi, kind)
     manifold = _sphere_scene(mi, "volpath_mnee", {"type": "dielectric", "int_ior": 1.0},
-                             light, size)
-    plain = _sphere_scene(mi, "volpath", {"type": "null"}, light, size)
+                             light, size, sigma_t)
+    plain = _sphere_scene(mi, "volpath", {"type": "null"}, light, size, sigma_t)
     first = _passes(mi, manifold, spp, passes)
     counted = manifold_nee.counts(manifold)
     assert counted["connections"] > 0
     assert counted["not_converged"] <= 1e-3 * counted["connections"], counted
     # at eta 1 every point sees the light; only grazing rays where the shading normal and
-    # the triangle's disagree on the side are not refractions
-    assert counted["not_refraction"] <= 1e-5 * counted["connections"], counted
+    # the triangle's disagree on the side are not refractions (one such ray is allowed in a
+    # render of under 100000 connections)
+    assert counted["not_refraction"] <= max(1.0, 1e-5 * counted["connections"]), counted
     _agree(first, _passes(mi, plain, spp, passes, seed=100), passes)
 
 
 def test_at_eta_one_the_connection_is_next_event_estimation(mi):
     _eta_one(mi, 16, 64, 8)
+
+
+def test_on_a_chromatic_medium_its_spectral_mis_gives_what_volpath_gives(mi):
+    _eta_one(mi, 16, 64, 8, sigma_t=CHROMATIC)
 
 
 @pytest.mark.slow
