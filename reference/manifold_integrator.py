@@ -30,6 +30,12 @@ from .manifold_settings import (  # noqa: E402
 
 __all__ = ["ManifoldVolpath"]
 
+def index_spectrum(spec, idx):
+    m = spec[0]
+    m[idx == 1] = spec[1]
+    m[idx == 2] = spec[2]
+    return m
+
 def tangent_frame(si):
     """Orthonormal basis (s, t) of the triangle's plane and the normal derivatives in it."""
     ng = si.n
@@ -480,12 +486,6 @@ class ManifoldVolpath(ADIntegrator):
             active_surface = active & ~active_medium
 
             # ----------------------------------------------- medium sampling
-            # spectral MIS (one-sample, balance heuristic): each free flight is sampled with
-            # a channel drawn afresh and weighted by the mean of every channel's pdf, so a
-            # chromatic medium's throughput stays bounded (volpath keeps one channel a path
-            # and weights by its pdf alone: red's variance a sample 41x a red-only render's)
-            channel[active_medium] = mi.UInt32(dr.minimum(
-                n_channels * sampler.next_1d(active_medium), n_channels - 1))
             u = sampler.next_1d(active_medium)
             mei = medium.sample_interaction(ray, u, channel, active_medium)
             ray.maxt[active_medium & medium.is_homogeneous() & mei.is_valid()] = mei.t
@@ -494,7 +494,7 @@ class ManifoldVolpath(ADIntegrator):
             needs_intersection &= ~active_medium
             mei.t[active_medium & (si.t < mei.t)] = dr.inf
             tr, free_flight_pdf = medium.transmittance_eval_pdf(mei, si, active_medium)
-            tr_pdf = dr.mean(free_flight_pdf)
+            tr_pdf = index_spectrum(free_flight_pdf, channel)
             weight = mi.Spectrum(1.0)
             weight[active_medium] *= dr.select(tr_pdf > 0.0, tr / tr_pdf, 0.0)
             escaped_medium = active_medium & ~mei.is_valid()

@@ -46,8 +46,8 @@ def _medium(sigma_t=(1.0, 1.0, 1.0)):
             "albedo": {"type": "rgb", "value": [0.9, 0.8, 0.7]}, "scale": 3.0}
 
 
-#: An extinction that differs by channel (times the scale, 3): the free flights' spectral MIS
-#: weights differ from one channel's pdf alone only here.
+#: An extinction that differs by channel (times the scale, 3): distances sampled with one
+#: channel's extinction give the others ratios of transmittances, as in volpath.
 CHROMATIC = (0.2, 0.4, 0.8)
 
 
@@ -138,7 +138,7 @@ def test_at_eta_one_the_connection_is_next_event_estimation(mi):
     _eta_one(mi, 16, 64, 8)
 
 
-def test_on_a_chromatic_medium_its_spectral_mis_gives_what_volpath_gives(mi):
+def test_on_a_chromatic_medium_it_gives_what_volpath_gives(mi):
     _eta_one(mi, 16, 64, 8, sigma_t=CHROMATIC)
 
 
