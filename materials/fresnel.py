@@ -69,13 +69,15 @@ def fresnel_reflectance(eta, cos_theta_i):
     eta = np.asarray(eta, dtype=dtype)
     cos_i = np.clip(np.asarray(cos_theta_i, dtype=dtype), 0.0, 1.0)
     # (1 - cos)(1 + cos) keeps its digits near normal incidence, where 1 - cos^2 cancels
-    sin2_t = (1.0 - cos_i) * (1.0 + cos_i) / eta**2
+    # x * x, not x**2: a 0-d array's power can differ from the product by an ulp, and
+    # fresnel_transmittance_scalar (compiled kernels) multiplies
+    sin2_t = (1.0 - cos_i) * (1.0 + cos_i) / (eta * eta)
     total = sin2_t >= 1.0
     cos_t = np.sqrt(np.clip(1.0 - sin2_t, 0.0, 1.0))
     with np.errstate(invalid="ignore", divide="ignore"):
         r_s = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
         r_p = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
-        reflectance = 0.5 * (r_s**2 + r_p**2)
+        reflectance = 0.5 * (r_s * r_s + r_p * r_p)
     # cos_i = 0 and no TIR: grazing incidence reflects everything
     reflectance = np.where(np.isfinite(reflectance), reflectance, 1.0)
     return np.where(total, 1.0, np.clip(reflectance, 0.0, 1.0)).astype(dtype)
