@@ -333,12 +333,19 @@ class ManifoldVolpath(ADIntegrator):
         result[active] = value * intensity * (1.0 - fresnel) * g * inside * outside
         return result
 
+    def exit_point(self, scene, v, d, active):
+        """Return the first surface hit from ``v`` along ``d`` and whether the ray leaves there.
+
+        The start of a solve: the straight line to the light, or a random seed direction.
+        """
+        start = scene.ray_intersect(mi.Ray3f(v, d), mi.RayFlags.All | mi.RayFlags.dNSdUV,
+                                    False, active)
+        return start, active & start.is_valid() & (dr.dot(d, start.n) > 0.0)
+
     def seed(self, scene, sampler, v, eta, active):
         """Return the boundary point hit from ``v`` along a uniform random direction (same eta)."""
         d = mi.warp.square_to_uniform_sphere(sampler.next_2d(active))
-        start = scene.ray_intersect(mi.Ray3f(v, d), mi.RayFlags.All | mi.RayFlags.dNSdUV,
-                                    False, active)
-        usable = active & start.is_valid() & (dr.dot(d, start.n) > 0.0)
+        start, usable = self.exit_point(scene, v, d, active)
         usable &= dr.abs(self.boundary_eta(start, usable) - eta) < 1e-6 * eta
         return start, usable
 
@@ -395,9 +402,7 @@ class ManifoldVolpath(ADIntegrator):
         ps, _ = emitter.sample_position(mei.time, sample, active & area)
         light = dr.select(directional, ds.d, dr.select(area, ps.p, ds.p))
         toward = dr.select(directional, light, dr.normalize(light - mei.p))
-        first = scene.ray_intersect(mi.Ray3f(mei.p, toward),
-                                    mi.RayFlags.All | mi.RayFlags.dNSdUV, False, active)
-        active &= first.is_valid() & (dr.dot(toward, first.n) > 0.0)
+        first, active = self.exit_point(scene, mei.p, toward, active)
         # Russian roulette on the straight segment's transmittance (its clearest channel):
         # deep vertices, whose light is all but extinguished, rarely pay for a solve
         clearest = dr.exp(-dr.min(mei.sigma_t) * first.t)
@@ -431,11 +436,7 @@ class ManifoldVolpath(ADIntegrator):
 
     def covered(self, scene, v, y, light, active):
         """Whether the solver, from the straight line ``v``-``light``, reaches ``y``."""
-        toward = dr.normalize(light - v)
-        ray = mi.Ray3f(v, toward)
-        first = scene.ray_intersect(ray, mi.RayFlags.All | mi.RayFlags.dNSdUV, False,
-                                    active)
-        active = active & first.is_valid() & (dr.dot(toward, first.n) > 0.0)
+        first, active = self.exit_point(scene, v, dr.normalize(light - v), active)
         eta = self.boundary_eta(first, active)
         active &= eta > 0.0
         si, converged = self.solve(scene, v, first, light, mi.Bool(False), eta, active)

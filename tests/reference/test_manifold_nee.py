@@ -457,7 +457,6 @@ def _ball_lens(mi, eta):
 
 def _all_refraction_points(mi, scene, integrator, v, starts=20000):
     """Every refraction point from ``v`` to the light: solves from a Fibonacci sphere of starts."""
-    import drjit as dr
 
     k = np.arange(starts) + 0.5
     phi = math.pi * (3.0 - math.sqrt(5.0)) * k
@@ -466,9 +465,7 @@ def _all_refraction_points(mi, scene, integrator, v, starts=20000):
     d = mi.Vector3f(r * np.cos(phi), r * np.sin(phi), z)
     vertex = mi.Point3f(*[np.full(starts, c) for c in v])
     light = mi.Point3f(0.0, 0.0, 4.0) + 0.0 * vertex
-    start = scene.ray_intersect(mi.Ray3f(vertex, d), mi.RayFlags.All | mi.RayFlags.dNSdUV,
-                                False, True)
-    usable = start.is_valid() & (dr.dot(d, start.n) > 0.0)
+    start, usable = integrator.exit_point(scene, vertex, d, mi.Bool(True))
     eta = integrator.boundary_eta(start, usable)
     si, converged = integrator.solve(scene, vertex, start, light, mi.Bool(False), eta,
                                      usable & (eta > 0.0))
@@ -500,9 +497,8 @@ def test_seeded_solves_add_every_refraction_point_the_straight_start_misses(mi, 
     lanes = 100_000
     v = mi.Point3f(*[dr.full(mi.Float, c, lanes) for c in vertex])
     light = mi.Point3f(0.0, 0.0, 4.0) + 0.0 * v
-    first = scene.ray_intersect(mi.Ray3f(v, dr.normalize(light - v)),
-                                mi.RayFlags.All | mi.RayFlags.dNSdUV, False, True)
-    eta = integrator.boundary_eta(first, first.is_valid())
+    first, leaves = integrator.exit_point(scene, v, dr.normalize(light - v), mi.Bool(True))
+    eta = integrator.boundary_eta(first, leaves)
     known, converged = integrator.solve(scene, v, first, light, mi.Bool(False), eta, eta > 0.0)
     valid = converged & integrator.refracts(known, v, light, mi.Bool(False))
     assert np.array(valid).all()
