@@ -29,10 +29,10 @@ from ..diffusion_escape import (
 from ..form_factors import Patches
 from ..optical_distance import optical_distances, voxelize
 from .kernels import (
-    csr_order,
+    csr_pattern,
     directed_pairs,
-    move_rows,
     sample_operator,
+    samples_per_edge,
     scattering_samples,
 )
 from .knobs import POLAR_NODES
@@ -55,15 +55,13 @@ class ObjectScattering:
         al. 2014, Sect. 6.1).
     sample_operator : scipy.sparse.csr_matrix, shape (pairs, K)
         Interpolation weights (mm^2) of every sample onto the profile grid: the S entries
-        of the pairs are ``sample_operator @ table``.
+        of the pairs are ``sample_operator @ table``, added at each block's
+        ``pair_position`` in one compiled pass
+        (:func:`~translucent.fast.radiosity.kernels.scatter_product`).
     self_cumulative, self_segment : scipy.sparse.csr_matrix, shape (patches, K)
         The polar self term: ``self_cumulative @ C + self_segment @ table`` with C the
-        cumulative radial integral of the table (None when ``self_term="samples"``).
-        These three are kept for heterogeneous objects only (None otherwise).
-    operators : list of (str, csr_matrix, csr_matrix or None, csr_matrix or None)
-        Per block, ``(kind, samples, cumulative, segment)`` with their rows moved to the
-        positions of the entries in the data of S (shape nnz x K): a translucency change
-        is ``data += samples @ table + cumulative @ C + segment @ table``, no scatter.
+        cumulative radial integral of the table (None when ``self_term="samples"``),
+        added at each block's ``self_position``.
     samples : dict or None
         Heterogeneous objects only: ``pair``, ``weight`` (mm^2), ``distance`` (mm), and
         ``fractions`` (pairs x materials), ``patch_label``.
@@ -82,7 +80,6 @@ class ObjectScattering:
     self_segment: sparse.csr_matrix | None
     samples: dict | None
     facts: dict = field(default_factory=dict)
-    operators: list = field(default_factory=list)
     diffusion: DiffusionGrid | None = None
 
 
@@ -126,7 +123,6 @@ class ScatteringGeometry:
         total = self.indptr.nbytes + self.indices.nbytes + self.diagonal_position.nbytes
         for item in self.objects.values():
             matrices = [item.sample_operator, item.self_cumulative, item.self_segment]
-            matrices += [m for _, *ops in item.operators for m in ops]
             for matrix in matrices:
                 if matrix is not None:
                     total += matrix.data.nbytes + matrix.indices.nbytes + matrix.indptr.nbytes
@@ -137,11 +133,14 @@ class ScatteringGeometry:
 
 
 def _samples_per_edge(distance, radius, knobs) -> np.ndarray:
-    """M (samples = m^2) for each pair: Sheng et al. 2014, Sect. 5.2, decreasing with distance."""
+    r"""M (samples = m^2) for each pair: Sheng et al. 2014, Sect. 5.2, decreasing with distance.
+
+    :math:`m = \mathrm{clip}(\mathrm{rint}(m_0 e^{-d / (f r)}), 1, m_0)`, 1 beyond
+    ``centroid_beyond`` radii; compiled (one pass, no temporaries of the pairs' size).
+    """
     most = max(1, int(round(math.sqrt(knobs["self_samples"]))))
-    m = np.rint(most * np.exp(-distance / (knobs["sample_falloff"] * radius)))
-    m = np.clip(m, 1, most).astype(np.int64)
-    return np.where(distance > knobs["centroid_beyond"] * radius, 1, m)
+    return samples_per_edge(distance, radius, most, knobs["sample_falloff"],
+                            knobs["centroid_beyond"])
 
 
 def _polar_self_nodes(patches: Patches, members: np.ndarray):
@@ -207,15 +206,6 @@ def _self_operators(grid: RadialGrid, count: int, rows, rho, weight):
                                  (np.concatenate([rows, rows]), np.concatenate([k, k + 1]))),
                                 shape=shape).tocsr()
     return cumulative, segment
-
-
-def _at_positions(operator: sparse.csr_matrix, positions, size: int) -> sparse.csr_matrix:
-    """Move the rows of ``operator`` to ``positions`` of a (size x K) operator."""
-    # a row permutation with empty rows between: a COO round trip would sort every
-    # entry again
-    indptr, indices, data = move_rows(operator.indptr, operator.indices, operator.data,
-                                      positions, size)
-    return sparse.csr_matrix((data, indices, indptr), shape=(size, operator.shape[1]))
 
 
 def pair_fractions(centroids_mm, face_centroids_mm, face_labels, exit_local, incident_local,
@@ -411,14 +401,11 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
                            self_segment, samples, facts, diffusion))
         log.seconds[f"scattering '{obj.name}'"] = facts["seconds"]
         log.notes.setdefault("scattering", {})[obj.name] = facts
-    rows = np.concatenate(rows_all)
-    cols = np.concatenate(cols_all)
-    order = csr_order(rows, cols, len(patches))
-    position = np.empty(len(order), dtype=np.int64)
-    position[order] = np.arange(len(order))
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=len(patches)))])
+    indptr, indices, position = csr_pattern(np.concatenate(rows_all),
+                                            np.concatenate(cols_all), len(patches))
+    rows_all.clear()
+    cols_all.clear()
     diagonal = position[:len(patches)]
-    geometry_size = len(order)
     objects = {}
     for index, members, _, operator, self_c, self_s, samples, facts, diffusion in per_object:
         blocks = []
@@ -430,15 +417,9 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
             else:
                 own_position = position[own[0]:own[1]]
             blocks.append((kind, position[lo:hi], own_position))
-        operators = [(kind, _at_positions(operator, pairs, geometry_size),
-                      None if self_c is None else _at_positions(self_c, own, geometry_size),
-                      None if self_s is None else _at_positions(self_s, own, geometry_size))
-                     for kind, pairs, own in blocks]
-        if samples is None:  # the local operators serve the heterogeneous mixing only
-            operator = self_c = self_s = None
         objects[index] = ObjectScattering(index, members, blocks, operator, self_c, self_s,
-                                          samples, facts, operators, diffusion)
-    return ScatteringGeometry(indptr.astype(np.int64), cols[order].astype(np.int32), diagonal,
-                              grid, objects, tuple(sheets), sheet_thickness_mm)
+                                          samples, facts, diffusion)
+    return ScatteringGeometry(indptr, indices, diagonal, grid, objects, tuple(sheets),
+                              sheet_thickness_mm)
 
 

@@ -44,22 +44,61 @@ def compiled_rgb_product():
     return product
 
 
+@functools.lru_cache(maxsize=1)
+def compiled_scatter_product():
+    """Compile ``out[positions[r]] += (A @ table)[r]`` for a CSR A and a (K, 3) table.
+
+    A translucency change fills S from an object's cached sample operator (pairs x K) in
+    one pass: the (pairs, 3) product is never stored, and the pair rows need not be moved
+    to their places in S's data beforehand. ``positions`` must be distinct (rows run in
+    parallel). Each entry is summed in the order of scipy's ``A @ table``.
+    """
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def scatter(indptr, indices, data, table, positions, out):  # pragma: no cover
+        for row in numba.prange(len(indptr) - 1):
+            red = green = blue = 0.0
+            for k in range(indptr[row], indptr[row + 1]):
+                column = indices[k]
+                value = data[k]
+                red += value * table[column, 0]
+                green += value * table[column, 1]
+                blue += value * table[column, 2]
+            target = positions[row]
+            out[target, 0] += red
+            out[target, 1] += green
+            out[target, 2] += blue
+
+    return scatter
+
+
+def scatter_product(operator, table, positions, out) -> None:
+    """Add ``operator @ table`` (rows, 3) to the rows ``positions`` of ``out`` (nnz, 3).
+
+    Parameters
+    ----------
+    operator : scipy.sparse.csr_matrix, shape (rows, K)
+    table : ndarray, shape (K, 3)
+    positions : ndarray of int, shape (rows,)
+        Distinct rows of ``out``.
+    out : ndarray of float64, shape (nnz, 3)
+        Written in place.
+    """
+    if operator.shape[0] != len(positions):
+        raise ValueError(f"{operator.shape[0]} operator rows for {len(positions)} positions")
+    # one compiled specialisation: the operators' own index arrays are int64 / int32
+    compiled_scatter_product()(np.ascontiguousarray(operator.indptr, dtype=np.int64),
+                               np.ascontiguousarray(operator.indices, dtype=np.int32),
+                               np.ascontiguousarray(operator.data, dtype=np.float64),
+                               np.ascontiguousarray(table, dtype=np.float64),
+                               np.ascontiguousarray(positions, dtype=np.int64), out)
+
+
 @functools.cache
 def compiled_energy_correction():
     """Compile the two passes of :func:`_carry_finite_object_energy` over S's entries."""
     import numba
-
-    @numba.njit(inline="always", fastmath=True)
-    def fluence(centroid, normal, row, column, z_r, sigma_tr):  # pragma: no cover
-        # the dipole's real source below the entry patch and its mirror image above it
-        real = image = 0.0
-        for d in range(3):
-            offset = centroid[row, d] - centroid[column, d]
-            real += (offset + z_r * normal[column, d]) ** 2
-            image += (offset - z_r * normal[column, d]) ** 2
-        real = max(math.sqrt(real), 1e-12)
-        image = max(math.sqrt(image), 1e-12)
-        return max(math.exp(-sigma_tr * real) / real - math.exp(-sigma_tr * image) / image, 0.0)
 
     @numba.njit(parallel=True, fastmath=True, cache=True)
     def correct(indptr, indices, data, in_object, area, centroid, normal, z_r, sigma_tr,
@@ -70,11 +109,24 @@ def compiled_energy_correction():
         for row in numba.prange(size):
             for k in range(indptr[row], indptr[row + 1]):
                 column = indices[k]
-                if in_object[column]:
-                    for c in range(3):
-                        if applied[c]:
-                            weight[k, c] = area[row] * fluence(centroid, normal, row, column,
-                                                               z_r[c], sigma_tr[c])
+                if not in_object[column]:
+                    continue
+                for c in range(3):
+                    if not applied[c]:
+                        continue
+                    # the fluence of the dipole's real source below the entry patch and of
+                    # its mirror image above it (written out: a jitted helper from this
+                    # closure would keep the kernel out of numba's on-disk cache)
+                    real = image = 0.0
+                    for d in range(3):
+                        offset = centroid[row, d] - centroid[column, d]
+                        real += (offset + z_r[c] * normal[column, d]) ** 2
+                        image += (offset - z_r[c] * normal[column, d]) ** 2
+                    real = max(math.sqrt(real), 1e-12)
+                    image = max(math.sqrt(image), 1e-12)
+                    weight[k, c] = area[row] * max(math.exp(-sigma_tr[c] * real) / real
+                                                   - math.exp(-sigma_tr[c] * image) / image,
+                                                   0.0)
         current = np.zeros((size, 3))
         norm = np.zeros((size, 3))
         for row in range(size):  # serial: columns gather from every row
@@ -234,24 +286,113 @@ def _compiled_csr_order():
     def sort_rows(indptr, order, cols):  # pragma: no cover - compiled
         for row in numba.prange(len(indptr) - 1):
             lo, hi = indptr[row], indptr[row + 1]
+            # the runs in which the row's columns arrive
+            cut = -1
+            runs = 1
+            for k in range(lo + 1, hi):
+                if cols[order[k]] < cols[order[k - 1]]:
+                    runs += 1
+                    cut = k
+            if runs == 1:
+                continue
             entries = order[lo:hi].copy()
-            order[lo:hi] = entries[np.argsort(cols[entries], kind="mergesort")]
+            if runs == 2:
+                # two sorted runs (S's diagonal, then an object's pairs in column order):
+                # one stable merge
+                left, right, out = 0, cut - lo, lo
+                while left < cut - lo and right < hi - lo:
+                    if cols[entries[right]] < cols[entries[left]]:
+                        order[out] = entries[right]
+                        right += 1
+                    else:
+                        order[out] = entries[left]
+                        left += 1
+                    out += 1
+                while left < cut - lo:
+                    order[out] = entries[left]
+                    left += 1
+                    out += 1
+                while right < hi - lo:
+                    order[out] = entries[right]
+                    right += 1
+                    out += 1
+            else:
+                order[lo:hi] = entries[np.argsort(cols[entries], kind="mergesort")]
 
-    return buckets, sort_rows
+    @numba.njit(parallel=True, cache=True)
+    def placed(order, cols):  # pragma: no cover - compiled
+        position = np.empty(len(order), np.int64)
+        sorted_cols = np.empty(len(order), np.int32)
+        for k in numba.prange(len(order)):
+            position[order[k]] = k
+            sorted_cols[k] = cols[order[k]]
+        return position, sorted_cols
+
+    return buckets, sort_rows, placed
 
 
 def csr_order(rows, cols, size: int) -> np.ndarray:
     """Return the stable (row, column) sort of entries: ``np.lexsort((cols, rows))``.
 
     A counting sort by row, then a stable sort of each row's columns, rows in parallel
-    (docs/radiosity.md gives what it saves).
+    (docs/radiosity.md gives what it saves): a row that arrives as one or two sorted runs
+    (S's diagonal, then an object's pairs in column order) is merged in one pass.
     """
     rows = np.ascontiguousarray(rows, dtype=np.int64)
     cols = np.ascontiguousarray(cols, dtype=np.int64)
-    buckets, sort_rows = _compiled_csr_order()
+    buckets, sort_rows, _ = _compiled_csr_order()
     indptr, order = buckets(rows, int(size))
     sort_rows(indptr, order, cols)
     return order
+
+
+def csr_pattern(rows, cols, size: int) -> tuple:
+    """Return the CSR pattern of entries (rows, cols), and where each entry lands in it.
+
+    Returns
+    -------
+    indptr : ndarray of int64, shape (size + 1,)
+    indices : ndarray of int32
+        The columns in (row, column) order (:func:`csr_order`, stable).
+    position : ndarray of int64
+        ``position[i]``: the place of entry i in ``indices``.
+    """
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    cols = np.ascontiguousarray(cols, dtype=np.int64)
+    buckets, sort_rows, placed = _compiled_csr_order()
+    indptr, order = buckets(rows, int(size))
+    sort_rows(indptr, order, cols)
+    position, indices = placed(order, cols)
+    return indptr, indices, position
+
+
+@functools.lru_cache(maxsize=1)
+def _compiled_samples_per_edge():
+    import numba
+
+    @numba.njit(cache=True)
+    def counts(distance, radius, most, falloff, beyond):  # pragma: no cover - compiled
+        m = np.empty(len(distance), np.int64)
+        for pair in range(len(distance)):
+            if distance[pair] > beyond * radius[pair]:
+                m[pair] = 1
+            else:
+                value = np.rint(most * np.exp(-distance[pair] / (falloff * radius[pair])))
+                m[pair] = int(min(max(value, 1.0), float(most)))
+        return m
+
+    return counts
+
+
+def samples_per_edge(distance, radius, most: int, falloff: float, beyond: float):
+    """Return each pair's samples per edge m: ``clip(rint(most exp(-d / (falloff r))), 1, most)``.
+
+    1 where ``d > beyond * r`` (the centroid alone). ``distance`` and ``radius`` (mm) are
+    per pair; returns int64.
+    """
+    return _compiled_samples_per_edge()(np.ascontiguousarray(distance, dtype=np.float64),
+                                        np.ascontiguousarray(radius, dtype=np.float64),
+                                        int(most), float(falloff), float(beyond))
 
 
 @functools.lru_cache(maxsize=1)
@@ -298,10 +439,6 @@ def _compiled_scattering_samples():
                     sample += 1
         return weight, distance
 
-    @numba.njit(inline="always")
-    def node(r, top, nodes):  # pragma: no cover - compiled
-        return min(int(math.sqrt(max(r, 0.0) / top) * (nodes - 1)), nodes - 2)
-
     @numba.njit(cache=True)
     def operator(offsets, weight, distance, radius):  # pragma: no cover - compiled
         nodes = len(radius)
@@ -314,7 +451,11 @@ def _compiled_scattering_samples():
             for sample in range(offsets[pair], offsets[pair + 1]):
                 if not distance[sample] <= top:
                     continue
-                k = node(distance[sample], top, nodes)
+                # the node of RadialGrid.locate (radii grow as the square of the index);
+                # written out: a jitted helper from this closure would keep the kernel
+                # out of numba's on-disk cache
+                k = min(int(math.sqrt(max(distance[sample], 0.0) / top) * (nodes - 1)),
+                        nodes - 2)
                 for column in (k, k + 1):
                     if mark[column] != pair:
                         mark[column] = pair
@@ -331,7 +472,7 @@ def _compiled_scattering_samples():
                 r = distance[sample]
                 if not r <= top:
                     continue
-                k = node(r, top, nodes)
+                k = min(int(math.sqrt(max(r, 0.0) / top) * (nodes - 1)), nodes - 2)
                 # the float32 offset of RadialGrid.locate
                 f = np.float64(np.float32(min(max((r - radius[k]) / (radius[k + 1] - radius[k]),
                                                   0.0), 1.0)))
@@ -354,23 +495,6 @@ def _compiled_scattering_samples():
                 data[entry] = value[indices[entry]]
                 value[indices[entry]] = 0.0
         return indptr, indices, data
-
-    @numba.njit(cache=True)
-    def move_rows(indptr, indices, data, positions, size):  # pragma: no cover - compiled
-        moved = np.zeros(size + 1, np.int64)
-        for row in range(len(positions)):
-            moved[positions[row] + 1] = indptr[row + 1] - indptr[row]
-        for row in range(size):
-            moved[row + 1] += moved[row]
-        moved_indices = np.empty_like(indices)
-        moved_data = np.empty_like(data)
-        for row in range(len(positions)):
-            target = moved[positions[row]]
-            for entry in range(indptr[row], indptr[row + 1]):
-                moved_indices[target] = indices[entry]
-                moved_data[target] = data[entry]
-                target += 1
-        return moved, moved_indices, moved_data
 
     @numba.njit(cache=True)
     def directed(undirected, centroids, radius, cut_off, with_self):  # pragma: no cover
@@ -400,7 +524,9 @@ def _compiled_scattering_samples():
             lo, hi = start[row], start[row + 1]
             length = hi - lo
             if length * max(1.0, math.log2(max(length, 1))) < count:
-                neighbour[lo:hi] = np.sort(neighbour[lo:hi])
+                # the merge sort of csr_order's rows: one sort compiled for both
+                entries = neighbour[lo:hi].copy()
+                neighbour[lo:hi] = entries[np.argsort(entries, kind="mergesort")]
             else:  # a dense row: a scan of every patch costs less than a sort
                 for entry in range(lo, hi):
                     mark[neighbour[entry]] = row
@@ -425,7 +551,7 @@ def _compiled_scattering_samples():
                     kept += 1
         return exit_local[:kept].copy(), incident[:kept].copy(), distance[:kept].copy()
 
-    return sample_offsets, fill, operator, move_rows, directed
+    return sample_offsets, fill, operator, directed
 
 
 def directed_pairs(undirected, centroids_mm, radius_mm, cut_off_mm: float, *,
@@ -531,13 +657,3 @@ def sample_operator(offsets, weight, distance, radius) -> tuple:
                     np.ascontiguousarray(weight, dtype=np.float64),
                     np.ascontiguousarray(distance, dtype=np.float64),
                     np.ascontiguousarray(radius, dtype=np.float64))
-
-
-def move_rows(indptr, indices, data, positions, size: int) -> tuple:
-    """CSR arrays with row r moved to row ``positions[r]`` of ``size`` rows (others empty).
-
-    ``positions`` must be distinct.
-    """
-    _, _, _, move, _ = _compiled_scattering_samples()
-    return move(np.ascontiguousarray(indptr, dtype=np.int64), indices, data,
-                np.ascontiguousarray(positions, dtype=np.int64), int(size))

@@ -6,7 +6,7 @@ from ...errors import InputError
 from ...scenes.raycast import RAY_ENGINES
 from ..knobs import Knob, KnobSpec
 
-FORMAT_VERSION = 5
+FORMAT_VERSION = 6
 
 #: The iterative solvers.
 SOLVERS = ("jacobi", "gmres", "bicgstab")

@@ -29,6 +29,7 @@ from .kernels import (
     compiled_energy_correction,
     compiled_mixed_profile,
     compiled_rgb_product,
+    scatter_product,
 )
 
 
@@ -130,13 +131,14 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
         # a thin sheet has two blocks of each kind (its two faces): tabulate once per kind
         tables: dict = {}
         if not isinstance(profile, MixedProfiles):
-            for kind, samples, cumulative_operator, segment_operator in item.operators:
+            for kind, pair_position, own_position in item.blocks:
                 if kind not in tables:
                     tables[kind] = _object_profile_tables(profile, grid, kind)
                 table, cumulative = tables[kind]
-                data += samples @ table
-                if cumulative_operator is not None:
-                    data += cumulative_operator @ cumulative + segment_operator @ table
+                scatter_product(item.sample_operator, table, pair_position, data)
+                if item.self_cumulative is not None:
+                    data[own_position] += (item.self_cumulative @ cumulative
+                                           + item.self_segment @ table)
             if item.diffusion is not None and isinstance(profile, DipoleProfile):
                 _carry_finite_object_energy(data, geometry, patches, item, profile)
             continue
@@ -240,7 +242,7 @@ def mixed_values(item: ObjectScattering, profile: MixedProfiles, grid: RadialGri
     tables = np.ascontiguousarray(np.stack([p.tabulate(grid, kind) for p in profile.profiles]),
                                   dtype=np.float64)
     zero = np.ascontiguousarray(tables[:, 0])
-    pairs = item.sample_operator.shape[0]  # kept for heterogeneous objects
+    pairs = item.sample_operator.shape[0]
     pair, distance, weight = samples["pair"], samples["distance"], samples["weight"]
     if len(pair) > 1 and (np.diff(pair) < 0).any():  # scattering_geometry's are in pair order
         order = np.argsort(pair, kind="stable")

@@ -7,12 +7,14 @@ from hypothesis import strategies as st
 from scipy import sparse
 from translucent.fast.form_factors import build_patches
 from translucent.fast.optical_distance import subdivision_barycentrics
-from translucent.fast.radiosity.geometry import _at_positions, pair_fractions
+from translucent.fast.radiosity.geometry import pair_fractions
 from translucent.fast.radiosity.kernels import (
     csr_order,
+    csr_pattern,
     directed_pairs,
-    move_rows,
     sample_operator,
+    samples_per_edge,
+    scatter_product,
     scattering_samples,
 )
 from translucent.fast.radiosity.scattering import mixed_values
@@ -120,16 +122,24 @@ def test_sample_operator_equals_the_coo_assembly(pairs, samples, nodes, seed):
 
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 10), st.integers(0, 6), st.integers(0, 2**32 - 1))
-def test_moved_rows_land_at_their_positions(rows, spare, seed):
+def test_scatter_product_adds_each_row_at_its_position(rows, spare, seed):
     rng = np.random.default_rng(seed)
     operator = sparse.random(rows, 7, density=0.4, random_state=seed % 1000, format="csr")
+    table = rng.normal(size=(7, 3))
     size = rows + spare
     positions = rng.permutation(size)[:rows]
-    indptr, indices, data = move_rows(operator.indptr, operator.indices, operator.data,
-                                      positions, size)
-    moved = sparse.csr_matrix((data, indices, indptr), shape=(size, 7)).toarray()
-    assert np.array_equal(moved[positions], operator.toarray())
-    assert not moved[np.setdiff1d(np.arange(size), positions)].any()
+    out = rng.normal(size=(size, 3))
+    expected = out.copy()
+    expected[positions] += operator @ table
+    scatter_product(operator, table, positions, out)
+    # summed in scipy's order: equal to the last bit
+    assert np.array_equal(out, expected)
+
+
+def test_scatter_product_refuses_a_position_count_that_is_not_the_row_count():
+    operator = sparse.identity(3, format="csr")
+    with pytest.raises(ValueError, match="3 operator rows for 2 positions"):
+        scatter_product(operator, np.ones((3, 3)), np.array([0, 1]), np.zeros((4, 3)))
 
 
 def test_compiled_eq16_equals_mixed_profile_sample_by_sample(rng):
@@ -184,10 +194,33 @@ def test_csr_order_is_a_stable_lexsort(rng):
     assert len(csr_order(np.zeros(0, int), np.zeros(0, int), 3)) == 0
 
 
-def test_moving_operator_rows_keeps_every_entry(rng):
-    operator = sparse.random(6, 9, density=0.4, random_state=1, format="csr")
-    positions = np.array([10, 2, 7, 0, 13, 5])
-    moved = _at_positions(operator, positions, 15)
-    assert moved.shape == (15, 9)
-    assert np.array_equal(moved.toarray()[positions], operator.toarray())
-    assert moved.toarray()[np.setdiff1d(np.arange(15), positions)].sum() == 0
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 12), st.floats(0.1, 8.0), st.floats(0.5, 20.0),
+       st.integers(0, 2**32 - 1))
+def test_samples_per_edge_is_the_numpy_formula(most, falloff, beyond, seed):
+    rng = np.random.default_rng(seed)
+    radius = rng.uniform(0.01, 3.0, 300)
+    edge = beyond * radius[298]
+    distance = np.concatenate([rng.uniform(0.0, 40.0, 296),
+                               [0.0, beyond * radius[297], np.nextafter(edge, np.inf), 1e9]])
+    expected = np.clip(np.rint(most * np.exp(-distance / (falloff * radius))), 1, most)
+    expected = np.where(distance > beyond * radius, 1, expected.astype(np.int64))
+    assert np.array_equal(samples_per_edge(distance, radius, most, falloff, beyond), expected)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 9), st.integers(0, 40), st.integers(0, 2**32 - 1))
+def test_csr_pattern_places_every_entry_in_row_and_column_order(size, count, seed):
+    rng = np.random.default_rng(seed)
+    # S's diagonal first, then sorted and shuffled blocks: rows of 1, 2 and more runs
+    rows = np.concatenate([np.arange(size), np.sort(rng.integers(0, size, count)),
+                           rng.integers(0, size, count // 3)])
+    cols = np.concatenate([np.arange(size), rng.integers(0, size, count),
+                           rng.integers(0, size, count // 3)])
+    order = np.lexsort((cols, rows))
+    indptr, indices, position = csr_pattern(rows, cols, size)
+    assert np.array_equal(csr_order(rows, cols, size), order)
+    counts = np.bincount(rows, minlength=size)
+    assert np.array_equal(indptr, np.concatenate([[0], np.cumsum(counts)]))
+    assert indices.dtype == np.int32 and np.array_equal(indices, cols[order])
+    assert np.array_equal(position[order], np.arange(len(rows)))
