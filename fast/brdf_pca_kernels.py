@@ -12,6 +12,7 @@ import math
 import numba
 import numpy as np
 
+from ..compiled import parallel_njit
 from ..materials.brdfs import (
     MODEL_CODES,
     fixed_term_scalar,
@@ -87,7 +88,7 @@ def _front_facing(x, n_x, positions, normals, b, g):  # pragma: no cover - compi
     return facing > 0.0 and back < 0.0
 
 
-@numba.njit(cache=True, parallel=True)
+@parallel_njit(cache=True)
 def front_counts(x, n_x, positions, normals, counts):  # pragma: no cover - compiled
     """Count, for each point ``x[b]``, the samples it and they face (into ``counts``)."""
     for b in numba.prange(x.shape[0]):
@@ -98,7 +99,7 @@ def front_counts(x, n_x, positions, normals, counts):  # pragma: no cover - comp
         counts[b] = found
 
 
-@numba.njit(cache=True, parallel=True)
+@parallel_njit(cache=True)
 def front_rays(x, n_x, positions, normals, offset, starts, columns, origins, directions,
                 reach):  # pragma: no cover - compiled
     """Fill the shadow rays of the front-facing pairs of a block.
@@ -212,7 +213,7 @@ def disk_estimate(x, n_x, out, g_pos, g_nor, area, first, second, model, f0, c_x
     return used
 
 
-@numba.njit(cache=True, parallel=True)
+@parallel_njit(cache=True)
 def transfer_rows(x, n_x, out, positions, normals, area, first, second, starts, columns,
                    seen, diffuse, glossy_rows, is_glossy, model, f0, c_xy, c_z, grid0, step,
                    matrix, lobe, subarea, subarea_max, tolerance, row_offset,

@@ -32,6 +32,7 @@ from scipy import ndimage, sparse
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
+from ..compiled import parallel_njit
 from ..errors import InputError
 
 __all__ = [
@@ -143,7 +144,7 @@ class VoxelGrid:
 def _compiled_segment_test():
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @parallel_njit(cache=True)
     def segment_test(starts, ends, origin, size, node_of, per_voxel,
                      inside):  # pragma: no cover - compiled
         nx, ny, nz = node_of.shape

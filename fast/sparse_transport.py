@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from ..compiled import parallel_njit
 from ..errors import InputError
 
 __all__ = [
@@ -188,7 +189,7 @@ def select_largest_weighted(row, weights, energy, max_terms, out_indices, out_va
     return count
 
 
-@numba.njit(cache=True, parallel=True)
+@parallel_njit(cache=True)
 def _select_rows(rows, weights, energy, max_terms, out_indices, out_values,
                  counts):  # pragma: no cover
     for r in numba.prange(rows.shape[0]):
@@ -334,7 +335,7 @@ def _quantise(indptr, indices, values, index_bits, value_max, packed, scales):  
             packed[j] = (level << index_bits) | np.int32(indices[j])
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
+@parallel_njit(cache=True, fastmath=True)
 def product_rgb(indptr, packed, scales, index_bits, vector, out):  # pragma: no cover
     mask = (1 << index_bits) - 1
     for r in numba.prange(len(indptr) - 1):
@@ -354,7 +355,7 @@ def product_rgb(indptr, packed, scales, index_bits, vector, out):  # pragma: no 
         out[r, 2] = blue * scale
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
+@parallel_njit(cache=True, fastmath=True)
 def _product_scalar(indptr, packed, scales, index_bits, vector, out):  # pragma: no cover
     mask = (1 << index_bits) - 1
     for r in numba.prange(len(indptr) - 1):
@@ -468,7 +469,7 @@ def _quantise_blocks(indptr, values, levels, scales):  # pragma: no cover
                 levels[j] = np.int16(np.rint(np.float64(values[j]) * inverse))
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
+@parallel_njit(cache=True, fastmath=True)
 def _blocks_product_scalar(indptr, indices, levels, scales, vector, scratch,
                            out):  # pragma: no cover
     """``out[k, r] = scales[r, k] sum_j levels[k, r, j] vector[indices[r, j]]`` (Eq. 8).
@@ -497,7 +498,7 @@ def _blocks_product_scalar(indptr, indices, levels, scales, vector, scratch,
             out[k, r] = total * scales[r, k]
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
+@parallel_njit(cache=True, fastmath=True)
 def _blocks_product_rgb(indptr, indices, levels, scales, vector, scratch,
                         out):  # pragma: no cover
     """:func:`_blocks_product_scalar` for three channels: each level is read once for all."""

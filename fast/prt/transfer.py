@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from ...compiled import parallel_njit
 from ...materials.dipole_pca import (
     DipolePCABasis,
 )
@@ -123,7 +124,7 @@ def illumination_samples(mesh, count: int, parts: int, *, mm_per_unit: float = 1
 # ------------------------------------------------------------------- pass 1 kernel
 
 
-@numba.njit(cache=True, parallel=True)
+@parallel_njit(cache=True)
 def _transfer_rows(vertices, samples, area, table, sqrt_warp, radius_max, local_width, parts,
                    side, selection_weights, local_weights, energy, terms, out_indices,
                    out_values, counts, shared, union_indices, union_values,

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from ...compiled import parallel_njit
+
 #: Below this many form factors scipy's product is as fast as the compiled one.
 COMPILED_PRODUCT_ENTRIES = 200_000
 
@@ -24,7 +26,7 @@ def compiled_rgb_product():
     """
     import numba
 
-    @numba.njit(parallel=True, fastmath=True, cache=True)
+    @parallel_njit(fastmath=True, cache=True)
     def product(indptr, indices, data, x, out):  # pragma: no cover - compiled
         for row in numba.prange(len(indptr) - 1):
             red = green = blue = 0.0
@@ -55,7 +57,7 @@ def compiled_scatter_product():
     """
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @parallel_njit(cache=True)
     def scatter(indptr, indices, data, table, positions, out):  # pragma: no cover
         for row in numba.prange(len(indptr) - 1):
             red = green = blue = 0.0
@@ -100,7 +102,7 @@ def compiled_energy_correction():
     """Compile the two passes of :func:`_carry_finite_object_energy` over S's entries."""
     import numba
 
-    @numba.njit(parallel=True, fastmath=True, cache=True)
+    @parallel_njit(fastmath=True, cache=True)
     def correct(indptr, indices, data, in_object, area, centroid, normal, z_r, sigma_tr,
                 target, applied):  # pragma: no cover - compiled
         size = len(indptr) - 1
@@ -170,7 +172,7 @@ def compiled_mixed_profile():
     """
     import numba
 
-    @numba.njit(parallel=True, fastmath=False, cache=True)
+    @parallel_njit(fastmath=False, cache=True)
     def mixed(distance, counts, starts, points, weight, zero, tables, max_radius,
               out):  # pragma: no cover - compiled
         samples_k = tables.shape[1]
@@ -223,7 +225,7 @@ def compiled_shadow_rays():
     """Compile the per-frame loops of :class:`AreaLightShadows` (geometry and rays)."""
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @parallel_njit(cache=True)
     def strengths(points, normals, positions, light_normal, out):  # pragma: no cover
         # the expressions and their order are those of _area_light_irradiance
         for i in numba.prange(len(points)):
@@ -239,7 +241,7 @@ def compiled_shadow_rays():
                                   + z * light_normal[2]), 0.0)
                 out[i, s] = cos_point * cos_light / distance2
 
-    @numba.njit(parallel=True, cache=True)
+    @parallel_njit(cache=True)
     def rays(starts, positions, lit, count, offset,  # pragma: no cover - compiled
              origins, directions, tmax, close):
         # the segment of visible() with normals_a given, written in the engine's float32
@@ -282,7 +284,7 @@ def _compiled_csr_order():
             fill[rows[i]] += 1
         return indptr, order
 
-    @numba.njit(parallel=True, cache=True)
+    @parallel_njit(cache=True)
     def sort_rows(indptr, order, cols):  # pragma: no cover - compiled
         for row in numba.prange(len(indptr) - 1):
             lo, hi = indptr[row], indptr[row + 1]
@@ -317,9 +319,11 @@ def _compiled_csr_order():
                     right += 1
                     out += 1
             else:
-                order[lo:hi] = entries[np.argsort(cols[entries], kind="mergesort")]
+                ranks = np.argsort(cols[entries], kind="mergesort")
+                for k in range(hi - lo):
+                    order[lo + k] = entries[ranks[k]]
 
-    @numba.njit(parallel=True, cache=True)
+    @parallel_njit(cache=True)
     def placed(order, cols):  # pragma: no cover - compiled
         position = np.empty(len(order), np.int64)
         sorted_cols = np.empty(len(order), np.int32)
@@ -504,7 +508,8 @@ def _compiled_scattering_samples():
             start[undirected[pair, 0] + 1] += 1
             start[undirected[pair, 1] + 1] += 1
         if with_self:
-            start[1:] += 1
+            for row in range(count):
+                start[row + 1] += 1
         for row in range(count):
             start[row + 1] += start[row]
         neighbour = np.empty(start[count], np.int64)
@@ -524,9 +529,13 @@ def _compiled_scattering_samples():
             lo, hi = start[row], start[row + 1]
             length = hi - lo
             if length * max(1.0, math.log2(max(length, 1))) < count:
-                # the merge sort of csr_order's rows: one sort compiled for both
+                # the merge sort of csr_order's rows: one sort compiled for both (and
+                # copied back element by element: a slice assignment compiles numba's
+                # shape-mismatch message, seconds of compilation)
                 entries = neighbour[lo:hi].copy()
-                neighbour[lo:hi] = entries[np.argsort(entries, kind="mergesort")]
+                ranks = np.argsort(entries, kind="mergesort")
+                for k in range(length):
+                    neighbour[lo + k] = entries[ranks[k]]
             else:  # a dense row: a scan of every patch costs less than a sort
                 for entry in range(lo, hi):
                     mark[neighbour[entry]] = row

@@ -45,6 +45,8 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
+from ...compiled import parallel_njit
+
 __all__ = [
     "exp32",
     "segment_table",
@@ -175,7 +177,7 @@ def tile_layout(position: np.ndarray, texel: np.ndarray, valid: np.ndarray):
     return tiled_position, tiled_texel, bounds, tiles_y, tiles_x
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def _fill_tiles(position, texel, valid, tiles_x, tiled_position, tiled_texel, bounds):
     """Fill the arrays of :func:`tile_layout`, in parallel over tiles (padding: 0, texel -1)."""
     height, width = valid.shape
@@ -205,7 +207,7 @@ def untile(tiled: np.ndarray, tiles_y: int, tiles_x: int, height: int, width: in
         tiles_y * TILE, tiles_x * TILE, 3)[:height, :width]
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def untile_float64(tiled, tiles_x, height, width):
     """Return :func:`untile` as a new float64 (H, W, 3) array, filled in parallel over rows."""
     out = np.empty((height, width, 3))
@@ -218,7 +220,7 @@ def untile_float64(tiled, tiles_x, height, width):
     return out
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def splat_windows(position, flux, low, high, origin, forward, right, up, tan_half_fov, width,
                   height):
     r"""Each sample's window on one splatting level: which samples a level splats, and where.
@@ -342,7 +344,7 @@ def _disc_columns(row, centre_x, centre_y, radius, tiles_x):
     return first, last
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@parallel_njit(fastmath=True, cache=True)
 def bin_samples(bounds, tiles_y, tiles_x, sample_position, centre_x, centre_y, radius, low2,
                 high2):
     r"""List, per tile, the samples whose effective rendering range may reach it.
@@ -442,7 +444,7 @@ def _lane_in_range(px, py, pz, labels, i, fx, fy, fz, low, high, step_inverse, s
     return at, (labels[i] >= 0) & (d2 >= low) & (d2 < high) & (at < support)
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@parallel_njit(fastmath=True, cache=True)
 def splat_tiles(out, position, texel, table, step_inverse, sample_position, sample_texel,
                 sample_flux, low2, high2, start, members, narrow=NARROW_WIDTH):
     r"""Eq. 12 of Chen et al. 2012: every tile gathers the splats of its binned samples.
@@ -643,7 +645,7 @@ def _splat_two_segments(accumulated, at, inside, labels, flat, own, stride, firs
     return count
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@parallel_njit(fastmath=True, cache=True)
 def gather_samples(out, pixel_position, pixel_texel, table, step_inverse, sample_position,
                    sample_texel, sample_flux):
     r"""Eq. 5 of Chen et al. 2012 by brute force: each pixel gathers every sample.

@@ -27,6 +27,7 @@ import math
 import numba
 import numpy as np
 
+from ...compiled import parallel_njit
 from ...materials.fresnel import fresnel_transmittance_scalar
 from .backend_numba import prefix_sum
 
@@ -77,7 +78,7 @@ def _median_child(depth, valid, row, col):
     return order[(count - 1) // 2]
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def median_depth_level(position, normal, uv, depth, valid, footprint):
     """One level of the splatting buffer's mipmap: the median-depth texel of each 2 x 2 block.
 
@@ -115,7 +116,7 @@ def median_depth_level(position, normal, uv, depth, valid, footprint):
     return out_position, out_normal, out_uv, out_depth, out_valid, out_footprint
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, depth_max,
                      valid):
     """One level of the irradiance buffer's mipmap (Sect. 4 of Chen et al. 2012).
@@ -185,7 +186,7 @@ def irradiance_level(position, normal, uv, cosine, footprint, flux, depth_min, d
 
 
 # ====================================================================== accumulation
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@parallel_njit(fastmath=True, cache=True)
 def bilateral_upsample_level(coarse, coarse_depth, coarse_valid, coarse_range, fine_depth,
                              fine_valid, fine_range, depth_scale, range_scale):
     r"""Eq. 17 of Chen et al. 2012: bilateral upsampling of :math:`B^{k+1}` to level k.
@@ -237,7 +238,7 @@ def bilateral_upsample_level(coarse, coarse_depth, coarse_valid, coarse_range, f
     return out
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def add_scaled_by_texel(exitance, upsampled, factors, texel):
     """Return ``exitance + factors[texel] * upsampled`` (H, W, 3), in parallel over rows.
 
@@ -388,7 +389,7 @@ def _ray_hit(ox, oy, oz, dx, dy, dz, a, e1x, e1y, e1z, e2x, e2y, e2z, start, dep
     return True
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, height, near,
               orthographic, band_rows=RASTER_BAND_ROWS, span_margin=RASTER_SPAN_MARGIN):
     r"""Find the first triangle seen through each pixel: a z-buffer with exact ray tests.
@@ -528,7 +529,7 @@ def rasterize(vertices, faces, eye, forward, left, up, tan_x, tan_y, width, heig
     return triangle, barycentric, depth
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def interpolate_surface(triangle, barycentric, depth, footprint, first_face, last_face,
                         vertices, faces, normals, uv):
     """Surface attributes of the pixels whose triangle lies in ``[first_face, last_face)``.
@@ -605,7 +606,7 @@ def interpolate_surface(triangle, barycentric, depth, footprint, first_face, las
     return valid, position, normal, out_uv, out_depth, out_footprint
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def perspective_footprint(triangle, depth, tan_x, tan_y):
     r"""Side of each pixel's cross-section perpendicular to its ray at the hit, scene units.
 
@@ -658,7 +659,7 @@ def _finite(value):
 fresnel_transmittance_at = numba.njit(cache=True)(fresnel_transmittance_scalar)
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def light_flux(position, normal, valid, footprint, light, power, eta, point):
     r"""Flux and cosine per irradiance-buffer pixel of a delta light, Eq. 5-6 of Chen et al.
 
@@ -724,7 +725,7 @@ def light_flux(position, normal, valid, footprint, light, power, eta, point):
     return flux, cosine
 
 
-@numba.njit(parallel=True, cache=True)
+@parallel_njit(cache=True)
 def exitant_radiance(exitance, position, normal, valid, origin, eta):
     r"""Eq. 7 of Chen et al. 2012: :math:`L = F_t(\eta, |n\cdot\omega_o|)\,B/\pi` at valid pixels.
 
