@@ -62,6 +62,10 @@ def parallel_njit(function=None, **options):
 
         if parallel_compiles():
             return numba.njit(parallel=True, **options)(kernel)
+        # load numba's threading layer, as a parallel kernel would: it registers the
+        # symbols (``get_thread_id``) that a serial kernel loaded from the cache links to
+        # (unregistered, the call jumps to address 0)
+        numba.get_num_threads()
         # a copy under another name: numba's cache files are named by the qualified name
         serial = types.FunctionType(kernel.__code__, kernel.__globals__, kernel.__name__,
                                     kernel.__defaults__, kernel.__closure__)

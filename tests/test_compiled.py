@@ -25,6 +25,18 @@ def total(values):
         out += values[i] * values[i]
     return out
 
+# a kernel that asks numba for its thread, run off the main thread (as a Dask worker's
+# task): loaded from numba's cache in a one-thread process, it needs the threading layer
+import threading
+from translucent.fast.sparse_transport import _blocks_product_scalar
+product = np.zeros((1, 1), np.float32)
+worker = threading.Thread(target=_blocks_product_scalar, args=(
+    np.array([0, 2]), np.array([0, 1], np.int32), np.ones(2, np.int16),
+    np.ones((1, 1), np.float32), np.array([2.0, 3.0], np.float32),
+    np.zeros((1, 1, 2), np.float32), product))
+worker.start()
+worker.join()
+
 rng = np.random.default_rng(7)
 operator = sparse.random(50, 9, density=0.3, random_state=3, format="csr")
 out = np.zeros((80, 3))
@@ -32,12 +44,14 @@ scatter_product(operator, rng.normal(size=(9, 3)), rng.permutation(80)[:50], out
 print(json.dumps({"parallel": total.targetoptions.get("parallel", False),
                   "name": total.py_func.__qualname__,
                   "scatter_name": compiled_scatter_product().py_func.__qualname__,
-                  "total": total(np.arange(1000.0)), "scatter": out.tolist()}))
+                  "total": total(np.arange(1000.0)), "scatter": out.tolist(),
+                  "thread_product": float(product[0, 0])}))
 """
 
 
-def _probe(threads: int) -> dict:
-    environment = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
+def _probe(threads: int, numba_cache) -> dict:
+    environment = {**os.environ, "NUMBA_NUM_THREADS": str(threads),
+                   "NUMBA_CACHE_DIR": str(numba_cache)}
     found = subprocess.run([sys.executable, "-c", _PROBE], env=environment, check=True,
                            capture_output=True, text=True, timeout=300)
     return json.loads(found.stdout.strip().splitlines()[-1])
@@ -57,8 +71,12 @@ def test_the_choice_follows_this_process_thread_count():
     assert square.py_func.__qualname__.endswith(SERIAL_SUFFIX) == (not parallel_compiles())
 
 
-def test_one_thread_compiles_serial_kernels_under_their_own_name_with_the_same_results():
-    serial, parallel = _probe(1), _probe(2)
+def test_one_thread_compiles_serial_kernels_under_their_own_name_with_the_same_results(
+        tmp_path):
+    # the second one-thread process loads the serial kernels from numba's cache
+    serial, parallel, loaded = _probe(1, tmp_path), _probe(2, tmp_path), _probe(1, tmp_path)
+    assert loaded == serial
+    assert serial["thread_product"] == parallel["thread_product"] == 5.0
     assert serial["parallel"] is False and parallel["parallel"] is True
     # numba names its cache files by the qualified name: the two never load each other's
     assert serial["name"].endswith(SERIAL_SUFFIX) and not parallel["name"].endswith(
