@@ -54,8 +54,10 @@ __all__ = [
     "compare",
     "error_scale",
     "noise_floor",
+    "noise_floors",
     "noise_verdict",
     "evaluate",
+    "evaluate_on",
     "metric",
     "metric_rows",
     "relative_mse",
@@ -546,6 +548,26 @@ def evaluate(reference: Image, test: Image, *, epsilon: float = RELMSE_EPSILON,
     neighbourhoods); PSNR's peak and the display white stay those of the whole
     reference, so that masked and whole-image scores share one exposure.
     """
+    return evaluate_on(reference, test, [mask], epsilon=epsilon)[0]
+
+
+def evaluate_on(reference: Image, test: Image, masks, *,
+                epsilon: float = RELMSE_EPSILON) -> list[Comparison]:
+    """:func:`evaluate` over several pixel sets, the error maps computed once.
+
+    Parameters
+    ----------
+    reference, test : Image
+    masks : sequence of (ndarray of bool, shape (H, W)) or None
+        The pixels each comparison averages over; None: the whole image.
+    epsilon : float
+        Relative MSE's ``epsilon``.
+
+    Returns
+    -------
+    list of Comparison
+        One per mask, in order, sharing the maps (the maps do not depend on the mask).
+    """
     for image, name in ((reference, "reference"), (test, "test")):
         _check_image(image, name)
     if reference.shape != test.shape:
@@ -554,38 +576,46 @@ def evaluate(reference: Image, test: Image, *, epsilon: float = RELMSE_EPSILON,
                          f"{reference.shape}), test is {test.shape[1]} x {test.shape[0]} "
                          f"(H, W = {test.shape})", field="shape",
                          value=(reference.shape, test.shape))
-    mask = _check_mask(mask, reference.shape)
+    masks = [_check_mask(mask, reference.shape) for mask in masks]
     data_range = float(reference.rgb.max())
     if data_range <= 0:
         raise InputError("the reference is black: relative error, PSNR and FLIP are "
                          "undefined against it", field="reference.rgb", value=data_range)
     ref, tst = reference.rgb.astype(np.float64), test.rgb.astype(np.float64)
     white = display_white(ref)
-    mean_ssim, ssim = ssim_map(ref, tst, white=white)
-    hdr_flip, flip = flip_map(ref, tst, dynamic_range="HDR")
-    ldr_flip, ldr = flip_map(ref, tst, dynamic_range="LDR", white=white)
+    whole_ssim, ssim = ssim_map(ref, tst, white=white)
+    whole_flip, flip = flip_map(ref, tst, dynamic_range="HDR")
+    whole_ldr, ldr = flip_map(ref, tst, dynamic_range="LDR", white=white)
     delta_e = ciede2000_map(ref, tst, white=white)
-    variance = reference.variance
-    if mask is not None:
-        ref, tst = ref[mask], tst[mask]
-        variance = None if variance is None else variance[mask]
-        mean_ssim, hdr_flip, ldr_flip = (float(m[mask].mean()) for m in (ssim, flip, ldr))
-        mean_delta_e = float(delta_e[mask].mean())
-    else:
-        mean_delta_e = float(delta_e.mean())
-    raw = relative_mse(ref, tst, epsilon=epsilon)
-    discounted = (raw if variance is None else
-                  relative_mse(ref, tst, reference_variance=variance, epsilon=epsilon))
-    metrics = Metrics(
-        relative_mse=discounted, relative_mse_raw=raw, rmse=rmse(ref, tst),
-        psnr=psnr(ref, tst, data_range=data_range), ssim=mean_ssim, hdr_flip=hdr_flip,
-        ldr_flip=ldr_flip, ciede2000=mean_delta_e, data_range=data_range,
-        display_white=white, noise_discounted=reference.variance is not None,
-        pixels_scored=int(mask.sum()) if mask is not None else int(np.prod(reference.shape)))
     maps = {"flip": flip, "relative_error": relative_error_map(reference.rgb, test.rgb,
                                                                 epsilon=epsilon),
             "ciede2000": delta_e, "ssim": ssim}
-    return Comparison(metrics, maps)
+    comparisons = []
+    for mask in masks:
+        pixels = np.ones(reference.shape, dtype=bool) if mask is None else mask
+        chosen_ref, chosen_tst, variance = ((ref, tst, reference.variance) if mask is None
+                                            else (ref[pixels], tst[pixels],
+                                                  None if reference.variance is None
+                                                  else reference.variance[pixels]))
+        # the whole image's SSIM and FLIP are the libraries' own means (SSIM's leaves out
+        # the border its window does not cover)
+        mean_ssim, hdr_flip, ldr_flip = ((whole_ssim, whole_flip, whole_ldr) if mask is None
+                                         else (float(m[pixels].mean())
+                                               for m in (ssim, flip, ldr)))
+        raw = relative_mse(chosen_ref, chosen_tst, epsilon=epsilon)
+        discounted = (raw if variance is None else
+                      relative_mse(chosen_ref, chosen_tst, reference_variance=variance,
+                                   epsilon=epsilon))
+        metrics = Metrics(
+            relative_mse=discounted, relative_mse_raw=raw, rmse=rmse(chosen_ref, chosen_tst),
+            psnr=psnr(chosen_ref, chosen_tst, data_range=data_range),
+            ssim=mean_ssim, hdr_flip=hdr_flip, ldr_flip=ldr_flip,
+            ciede2000=float(delta_e[pixels].mean()),
+            data_range=data_range, display_white=white,
+            noise_discounted=reference.variance is not None,
+            pixels_scored=int(pixels.sum()))
+        comparisons.append(Comparison(metrics, maps))
+    return comparisons
 
 
 def compare(reference: Image, test: Image, *, epsilon: float = RELMSE_EPSILON,
@@ -694,8 +724,24 @@ def noise_floor(reference: Image, *, draws: int = NOISE_FLOOR_DRAWS, seed: int =
     >>> round(noise_floor(reference).rmse, 3)
     0.01
     """
+    return noise_floors(reference, [mask], draws=draws, seed=seed, epsilon=epsilon)[0]
+
+
+def noise_floors(reference: Image, masks, *, draws: int = NOISE_FLOOR_DRAWS, seed: int = 0,
+                 epsilon: float = RELMSE_EPSILON) -> list:
+    """:func:`noise_floor` over several pixel sets: each draw's error maps computed once.
+
+    The draws are the same for every mask (one seed), so each floor equals
+    :func:`noise_floor` with that mask alone.
+
+    Returns
+    -------
+    list of (Metrics or None)
+        One per mask; every entry None when the reference has no variance.
+    """
+    masks = list(masks)
     if reference.variance is None:
-        return None
+        return [None] * len(masks)
     _check_image(reference, "reference")
     draws = int(draws)
     if draws < 1:
@@ -703,14 +749,16 @@ def noise_floor(reference: Image, *, draws: int = NOISE_FLOOR_DRAWS, seed: int =
     rng = np.random.default_rng(seed)
     plain = Image(reference.rgb)
     sigma = np.sqrt(reference.variance.astype(np.float64))
-    values = []
+    values = [[] for _ in masks]
     for _ in range(draws):
         perturbed = np.maximum(reference.rgb + sigma * rng.standard_normal(sigma.shape), 0.0)
-        values.append(evaluate(plain, Image(perturbed), epsilon=epsilon,
-                               mask=mask).metrics.as_dict())
-    mean = {key: float(np.mean([v[key] for v in values])) for key in values[0]
-            if key not in ("noise_discounted", "pixels_scored")}
-    return Metrics(**mean, noise_discounted=False, pixels_scored=values[0]["pixels_scored"])
+        for found, comparison in zip(values, evaluate_on(plain, Image(perturbed), masks,
+                                                          epsilon=epsilon), strict=True):
+            found.append(comparison.metrics.as_dict())
+    return [Metrics(**{key: float(np.mean([v[key] for v in found])) for key in found[0]
+                       if key not in ("noise_discounted", "pixels_scored")},
+                    noise_discounted=False, pixels_scored=found[0]["pixels_scored"])
+            for found in values]
 
 
 def error_scale(field: str, value: float) -> float:

@@ -29,15 +29,19 @@ __all__ = ["score_scene", "scored_pixels"]
 def score_scene(report: SceneReport, folder: Path) -> None:
     """Write the scene's images and error maps; score each method on its own pixels."""
     from .error_maps import write_error_maps, write_linear_png
-    from .metrics import display_white, evaluate
+    from .metrics import display_white, evaluate_on
 
     scene_folder = folder / report.slug
     scene_folder.mkdir(parents=True, exist_ok=True)
     white = None
+    scored = [name for name, run in report.runs.items()
+              if run.status == "ok" and run.image is not None]
     if report.reference is not None:
         report.scored_mask = scored_pixels(report.scene)
         _reference_noise(report)
-        report.noise_floor = _floor(report, report.scored_mask)
+        for name in scored:
+            _object_scoring(report, name)
+        _floors(report)
         report.reference.write(scene_folder / "reference.exr")
         white = display_white(report.reference.rgb)
         write_linear_png(scene_folder / "reference.png", report.reference, white=white)
@@ -54,16 +58,16 @@ def score_scene(report: SceneReport, folder: Path) -> None:
         if report.reference is None:
             report.metric_errors[name] = f"no reference: {report.reference_error}"
             continue
-        _object_scoring(report, name)
         try:
-            comparison = evaluate(report.reference, run.image)
+            # the whole image (its error maps) and the method's own pixels: one set of maps
+            comparison, on_pixels = evaluate_on(report.reference, run.image,
+                                                [None, report.mask_of(name)])
             maps = write_error_maps(report.reference, run.image, scene_folder,
                                     prefix=f"{name}_", comparison=comparison)
-            scored = evaluate(report.reference, run.image, mask=report.mask_of(name))
         except (InputError, TypeError) as error:
             report.metric_errors[name] = str(error)
             continue
-        report.metrics[name] = scored.metrics.as_dict()
+        report.metrics[name] = on_pixels.metrics.as_dict()
         report.image_metrics[name] = comparison.metrics.as_dict()
         report.verdicts[name] = _verdicts(report.metrics[name], report.floor_of(name))
         for map_name, map_files in maps.items():
@@ -102,22 +106,31 @@ def _object_scoring(report: SceneReport, name: str) -> None:
         return
     key = tuple(sorted(objects))
     if key not in report.object_masks:
-        mask = scored_pixels(report.scene, objects)
-        report.object_masks[key] = (mask, _floor(report, mask))
-    mask, floor = report.object_masks[key]
-    report.method_masks[name] = mask
-    report.method_floors[name] = floor
+        report.object_masks[key] = (scored_pixels(report.scene, objects), None)
+    report.method_masks[name] = report.object_masks[key][0]
 
 
-def _floor(report: SceneReport, mask) -> dict | None:
-    """Return every metric's noise floor over ``mask`` (None without a usable variance)."""
-    from .metrics import noise_floor
+def _floors(report: SceneReport) -> None:
+    """Every metric's noise floor over the scene's scored pixels and each method's own.
 
+    One set of noise draws serves every pixel set (:func:`~translucent.reports.metrics.
+    noise_floors`); a floor is None without a usable variance.
+    """
+    from .metrics import noise_floors
+
+    keys = list(report.object_masks)
+    masks = [report.scored_mask] + [report.object_masks[key][0] for key in keys]
     try:
-        floor = noise_floor(report.reference, mask=mask)
+        floors = [None if floor is None else floor.as_dict()
+                  for floor in noise_floors(report.reference, masks)]
     except InputError:
-        return None
-    return floor.as_dict() if floor is not None else None
+        floors = [None] * len(masks)
+    report.noise_floor = floors[0]
+    for key, floor in zip(keys, floors[1:], strict=True):
+        report.object_masks[key] = (report.object_masks[key][0], floor)
+    for name in report.method_masks:
+        key = tuple(sorted(report.scored_objects[name]))
+        report.method_floors[name] = report.object_masks[key][1]
 
 
 def _verdicts(metrics: dict, floors: dict | None) -> dict[str, str]:

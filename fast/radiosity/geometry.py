@@ -252,6 +252,21 @@ def pair_fractions(centroids_mm, face_centroids_mm, face_labels, exit_local, inc
     return fractions
 
 
+def _gathered(parts, size: int) -> np.ndarray:
+    """Concatenate ``source[index]`` (``source`` where index is None) of every part, int64."""
+    out = np.empty(size, dtype=np.int64)
+    start = 0
+    for source, index in parts:
+        count = len(source) if index is None else len(index)
+        if index is None:
+            out[start:start + count] = source
+        else:
+            # indices are in range: "clip" only spares take's buffered copy of the result
+            np.take(source, index, out=out[start:start + count], mode="clip")
+        start += count
+    return out
+
+
 def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
                         max_distance_mm: float, knobs: dict, log: StageLog | None = None,
                         sheet_thickness_mm: float | None = None) -> ScatteringGeometry:
@@ -283,16 +298,19 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
     log = log if log is not None else StageLog()
     grid = RadialGrid(max_distance_mm, knobs["profile_samples"])
     mm = patches.mm_per_unit
-    rows_all = [np.arange(len(patches))]
-    cols_all = [np.arange(len(patches))]
+    # every block of entries of the pattern, as (patches, index into them or None) for its
+    # rows and its columns: gathered once into the pattern's arrays at the end, with no
+    # temporary array a block
+    rows_all = [(np.arange(len(patches)), None)]
+    cols_all = [(np.arange(len(patches)), None)]
     # every block of entries appended to the pattern: (object, kind, pairs, self) slices
     segments: dict = {}
     filled = [len(patches)]
 
-    def append(rows, cols):
-        rows_all.append(rows)
-        cols_all.append(cols)
-        filled.append(filled[-1] + len(rows))
+    def append(rows, cols, row_index=None, col_index=None):
+        rows_all.append((rows, row_index))
+        cols_all.append((cols, col_index))
+        filled.append(filled[-1] + len(rows if row_index is None else row_index))
         return filled[-2], filled[-1]
 
     sheets = []
@@ -373,15 +391,15 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
                 "mix_points": knobs["mix_points"],
                 "patch_label": material.face_labels[first_face],
             }
-        blocks = [("reflection", append(members[exit_local], members[incident_local]), None)]
+        blocks = [("reflection", append(members, members, exit_local, incident_local), None)]
         if index in sheets:
             # the same samples serve both faces: same side by reflection, across by
             # transmission (Sheng et al. 2014, Sect. 6.1, the petals)
-            blocks.append(("reflection", append(twins[exit_local], twins[incident_local]),
+            blocks.append(("reflection", append(twins, twins, exit_local, incident_local),
                            "twin-twin"))
-            blocks.append(("transmission", append(members[exit_local], twins[incident_local]),
+            blocks.append(("transmission", append(members, twins, exit_local, incident_local),
                            append(members, twins)))
-            blocks.append(("transmission", append(twins[exit_local], members[incident_local]),
+            blocks.append(("transmission", append(twins, members, exit_local, incident_local),
                            append(twins, members)))
         segments[index] = blocks
         diffusion = None
@@ -401,8 +419,8 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
                            self_segment, samples, facts, diffusion))
         log.seconds[f"scattering '{obj.name}'"] = facts["seconds"]
         log.notes.setdefault("scattering", {})[obj.name] = facts
-    indptr, indices, position = csr_pattern(np.concatenate(rows_all),
-                                            np.concatenate(cols_all), len(patches))
+    indptr, indices, position = csr_pattern(_gathered(rows_all, filled[-1]),
+                                            _gathered(cols_all, filled[-1]), len(patches))
     rows_all.clear()
     cols_all.clear()
     diagonal = position[:len(patches)]

@@ -558,6 +558,8 @@ def _compiled_scattering_samples():
                 if length <= cut_off + radius[b]:
                     exit_local[kept], incident[kept], distance[kept] = a, b, length
                     kept += 1
+        if kept == len(neighbour):  # every candidate within reach (a dense S): no copy
+            return exit_local, incident, distance
         return exit_local[:kept].copy(), incident[:kept].copy(), distance[:kept].copy()
 
     return sample_offsets, fill, operator, directed

@@ -16,8 +16,11 @@ from translucent.reports.metrics import (
     compare,
     display_white,
     evaluate,
+    evaluate_on,
     flip_map,
     metric,
+    noise_floor,
+    noise_floors,
     psnr,
     relative_error_map,
     relative_mse,
@@ -320,6 +323,42 @@ def test_evaluate_maps_have_the_image_shape(pair):
         assert values.shape == (32, 32)
     assert comparison.maps["flip"].mean() == pytest.approx(comparison.metrics.hdr_flip,
                                                            rel=FLOAT32_RTOL)
+
+
+def _masks(shape):
+    left = np.zeros(shape, dtype=bool)
+    left[:, : shape[1] // 3] = True
+    ring = np.zeros(shape, dtype=bool)
+    ring[4:-4, 4:-4] = True
+    ring[8:-8, 8:-8] = False
+    return [left, None, ring]
+
+
+def test_evaluate_on_several_masks_equals_one_evaluation_a_mask(pair):
+    reference, test = pair
+    reference = Image(reference.rgb, np.full(reference.shape + (3,), 1e-4))
+    masks = _masks(reference.shape)
+    comparisons = evaluate_on(reference, test, masks)
+    for mask, comparison in zip(masks, comparisons, strict=True):
+        assert comparison.metrics == evaluate(reference, test, mask=mask).metrics
+        assert comparison.maps is comparisons[0].maps
+    # computed independently: the masked means of the whole image's maps and pixels
+    left = comparisons[0].metrics
+    _, flip = flip_map(reference.rgb, test.rgb)
+    assert left.hdr_flip == pytest.approx(float(flip[masks[0]].mean()), rel=FLOAT32_RTOL)
+    assert left.relative_mse_raw == pytest.approx(
+        relative_mse(reference.rgb[masks[0]], test.rgb[masks[0]]), rel=FLOAT64_RTOL)
+    assert left.pixels_scored == int(masks[0].sum())
+    assert comparisons[1].metrics.pixels_scored == reference.shape[0] * reference.shape[1]
+
+
+def test_noise_floors_of_several_masks_equal_one_floor_a_mask(pair):
+    reference = Image(pair[0].rgb, np.full(pair[0].shape + (3,), 4e-4))
+    masks = _masks(reference.shape)
+    floors = noise_floors(reference, masks, draws=2)
+    assert floors == [noise_floor(reference, mask=mask, draws=2) for mask in masks]
+    assert floors[0] != floors[2]
+    assert noise_floors(Image(pair[0].rgb), masks) == [None, None, None]
 
 
 def test_relmse_variance_must_have_the_reference_shape():
