@@ -147,7 +147,7 @@ def compare(reference, test, *, mask=None) -> list[dict]:
         One per metric (relmse, rmse, psnr, ssim, hdr-flip, ldr-flip, ciede2000):
         ``metric``, ``value``, ``noise_floor``, ``verdict`` ("resolved", "within reference
         noise", or None without a variance), ``lower_is_better``, ``about``
-        (:func:`translucent.reports.metrics.metric_rows`).
+        (:func:`translucent.reports.metric_table.metric_rows`).
 
     Examples
     --------
@@ -159,8 +159,9 @@ def compare(reference, test, *, mask=None) -> list[dict]:
     >>> round(rows["rmse"]["value"], 3), rows["rmse"]["verdict"]
     (0.1, 'resolved')
     """
+    from .reports.metric_table import metric_rows
     from .reports.metrics import compare as scores
-    from .reports.metrics import metric_rows, noise_floor
+    from .reports.metrics import noise_floor
 
     reference, test = _image(reference, "reference"), _image(test, "test")
     floor = noise_floor(reference, mask=mask) if mask is not None else noise_floor(reference)

@@ -166,7 +166,7 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
         The image judged and the reference (linear radiance; a reference's variance is
         discounted from relmse).
     metric : str
-        A name of :data:`translucent.reports.metrics.METRICS`: flip, hdr-flip, ldr-flip,
+        A name of :data:`translucent.reports.metric_table.METRICS`: flip, hdr-flip, ldr-flip,
         relmse, rmse, psnr, ssim, ciede2000.
     max : float, optional
         Upper bound, for the error metrics.
@@ -203,8 +203,8 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
         A missing bound, or a bound on the wrong side for the metric.
     """
     __tracebackhide__ = True
+    from .metric_table import metric as metric_definition
     from .metrics import error_scale, evaluate, noise_floor, noise_verdict
-    from .metrics import metric as metric_definition
 
     definition = metric_definition(metric)
     bound_name, bound = ("max", max) if definition.lower_is_better else ("min", min)

@@ -29,7 +29,7 @@ DEFAULT_METRIC = "hdr-flip"
 
 def add_arguments(parser):
     """Add the reference, the test, the metric and its threshold, where the maps go."""
-    from ..metrics import METRICS
+    from ..metric_table import METRICS
 
     parser.add_argument("reference", help="reference OpenEXR (its variance channels, where "
                         "present, are discounted from the relative MSE)")
@@ -49,7 +49,7 @@ def add_arguments(parser):
 
 def _threshold(args):
     """Return the chosen metric and bound, checked against the metric's direction."""
-    from ..metrics import metric
+    from ..metric_table import metric
 
     threshold = args.maximum if args.maximum is not None else args.minimum
     definition = metric(args.metric or DEFAULT_METRIC)
@@ -67,7 +67,7 @@ def _threshold(args):
 
 
 def _table(rows) -> list[str]:
-    """Return the printed table of :func:`~translucent.reports.metrics.metric_rows`."""
+    """Return the printed table of :func:`~translucent.reports.metric_table.metric_rows`."""
     lines = [f"{'metric':<10} {'value':>12}  {'noise floor':>12}  {'verdict':<22}  about"]
     for row in rows:
         mark = ""
@@ -88,7 +88,8 @@ def run(args) -> int:
     from ...image import read_exr
     from ...noise import reference_noise_warning
     from ..error_maps import write_error_maps
-    from ..metrics import NOISE_MARGIN, evaluate, metric_rows, noise_floor
+    from ..metric_table import metric_rows
+    from ..metrics import NOISE_MARGIN, evaluate, noise_floor
     from .record import record
 
     definition, threshold = _threshold(args)

@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from translucent.errors import InputError
 from translucent.image import Image
+from translucent.reports.metric_table import METRICS, metric
 from translucent.reports.metrics import (
-    METRICS,
     RELMSE_EPSILON,
     ciede2000_map,
     compare,
@@ -18,7 +18,6 @@ from translucent.reports.metrics import (
     evaluate,
     evaluate_on,
     flip_map,
-    metric,
     noise_floor,
     noise_floors,
     psnr,
