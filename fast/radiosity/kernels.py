@@ -342,12 +342,17 @@ def csr_order(rows, cols, size: int) -> np.ndarray:
     (docs/radiosity.md gives what it saves): a row that arrives as one or two sorted runs
     (S's diagonal, then an object's pairs in column order) is merged in one pass.
     """
+    return _row_column_order(rows, cols, size)[1]
+
+
+def _row_column_order(rows, cols, size: int) -> tuple:
+    """Return the CSR row pointers, :func:`csr_order`'s order and the columns as int64."""
     rows = np.ascontiguousarray(rows, dtype=np.int64)
     cols = np.ascontiguousarray(cols, dtype=np.int64)
     buckets, sort_rows, _ = _compiled_csr_order()
     indptr, order = buckets(rows, int(size))
     sort_rows(indptr, order, cols)
-    return order
+    return indptr, order, cols
 
 
 def csr_pattern(rows, cols, size: int) -> tuple:
@@ -361,12 +366,8 @@ def csr_pattern(rows, cols, size: int) -> tuple:
     position : ndarray of int64
         ``position[i]``: the place of entry i in ``indices``.
     """
-    rows = np.ascontiguousarray(rows, dtype=np.int64)
-    cols = np.ascontiguousarray(cols, dtype=np.int64)
-    buckets, sort_rows, placed = _compiled_csr_order()
-    indptr, order = buckets(rows, int(size))
-    sort_rows(indptr, order, cols)
-    position, indices = placed(order, cols)
+    indptr, order, cols = _row_column_order(rows, cols, size)
+    position, indices = _compiled_csr_order()[2](order, cols)
     return indptr, indices, position
 
 
