@@ -50,6 +50,9 @@ with its sub-area disks, Haar transform and coefficient selection) runs in compi
 threaded kernels; shadow rays go through the scene's Mitsuba ray engine
 (:mod:`translucent.scenes.raycast`). The fixed terms and PCA variables of
 :mod:`translucent.materials.brdfs` are compiled again here, per pair, and tested equal.
+Visibility between two gather samples is symmetric, so the gather matrix traces each
+unordered pair once and reads the reversed pair's answer back
+(:func:`~translucent.fast.brdf_pca_lighting.gather_pair_visibility`).
 
 Limitations inherited from the paper (Table 1): gather samples reflect as Lambertian
 surfaces, so light reflected by a glossy surface after the first one (a glossy highlight

@@ -99,9 +99,35 @@ def front_counts(x, n_x, positions, normals, counts):  # pragma: no cover - comp
         counts[b] = found
 
 
+@numba.njit(cache=True, nogil=True)
+def _shadow_ray(x, n_x, positions, normals, b, g, offset, k, origins, directions,
+                reach):  # pragma: no cover - compiled
+    """Fill ray k from x[b] to positions[g], both ends ``offset`` along their normals."""
+    ox = x[b, 0] + offset * n_x[b, 0]
+    oy = x[b, 1] + offset * n_x[b, 1]
+    oz = x[b, 2] + offset * n_x[b, 2]
+    ex = positions[g, 0] + offset * normals[g, 0] - ox
+    ey = positions[g, 1] + offset * normals[g, 1] - oy
+    ez = positions[g, 2] + offset * normals[g, 2] - oz
+    length = math.sqrt(ex * ex + ey * ey + ez * ez)
+    origins[0, k] = ox
+    origins[1, k] = oy
+    origins[2, k] = oz
+    if length <= 2.0 * offset:
+        directions[0, k] = 0.0
+        directions[1, k] = 0.0
+        directions[2, k] = 1.0
+        reach[k] = 0.0
+    else:
+        directions[0, k] = ex / length
+        directions[1, k] = ey / length
+        directions[2, k] = ez / length
+        reach[k] = length - offset
+
+
 @parallel_njit(cache=True)
 def front_rays(x, n_x, positions, normals, offset, starts, columns, origins, directions,
-                reach):  # pragma: no cover - compiled
+               reach):  # pragma: no cover - compiled
     """Fill the shadow rays of the front-facing pairs of a block.
 
     Both ends move ``offset`` along their normals, the convention of
@@ -112,28 +138,85 @@ def front_rays(x, n_x, positions, normals, offset, starts, columns, origins, dir
         for g in range(positions.shape[0]):
             if not _front_facing(x, n_x, positions, normals, b, g):
                 continue
-            ox = x[b, 0] + offset * n_x[b, 0]
-            oy = x[b, 1] + offset * n_x[b, 1]
-            oz = x[b, 2] + offset * n_x[b, 2]
-            ex = positions[g, 0] + offset * normals[g, 0] - ox
-            ey = positions[g, 1] + offset * normals[g, 1] - oy
-            ez = positions[g, 2] + offset * normals[g, 2] - oz
-            length = math.sqrt(ex * ex + ey * ey + ez * ez)
             columns[k] = g
-            origins[0, k] = ox
-            origins[1, k] = oy
-            origins[2, k] = oz
-            if length <= 2.0 * offset:
-                directions[0, k] = 0.0
-                directions[1, k] = 0.0
-                directions[2, k] = 1.0
-                reach[k] = 0.0
-            else:
-                directions[0, k] = ex / length
-                directions[1, k] = ey / length
-                directions[2, k] = ez / length
-                reach[k] = length - offset
+            _shadow_ray(x, n_x, positions, normals, b, g, offset, k, origins, directions,
+                        reach)
             k += 1
+
+
+@parallel_njit(cache=True)
+def gather_front_counts(positions, normals, first, counts, later):  # pragma: no cover
+    """Count the front-facing pairs of gather rows ``first + b`` and those with a later gather.
+
+    Into ``counts`` and ``later``.
+    """
+    for b in numba.prange(counts.shape[0]):
+        row = first + b
+        found = 0
+        after = 0
+        for g in range(positions.shape[0]):
+            if _front_facing(positions, normals, positions, normals, row, g):
+                found += 1
+                if g > row:
+                    after += 1
+        counts[b] = found
+        later[b] = after
+
+
+@parallel_njit(cache=True)
+def gather_front_rays(positions, normals, offset, first, starts, later_starts, columns,
+                      traced, origins, directions, reach):  # pragma: no cover - compiled
+    """Fill the pairs of gather rows ``first + b``, and rays for those with a later gather.
+
+    ``traced[k]`` is the ray of pair k, or -1 when its gather comes earlier: that pair's
+    answer is the reversed pair's (:func:`gather_visibility`).
+    """
+    for b in numba.prange(starts.shape[0] - 1):
+        row = first + b
+        k = starts[b]
+        u = later_starts[b]
+        for g in range(positions.shape[0]):
+            if not _front_facing(positions, normals, positions, normals, row, g):
+                continue
+            columns[k] = g
+            if g > row:
+                _shadow_ray(positions, normals, positions, normals, row, g, offset, u,
+                            origins, directions, reach)
+                traced[k] = u
+                u += 1
+            else:
+                traced[k] = -1
+            k += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _pair_bit(i, j):  # pragma: no cover - compiled
+    """Return the bit of the unordered pair i < j: j (j - 1) / 2 + i, a triangle by rows."""
+    return np.int64(j) * (np.int64(j) - 1) // 2 + np.int64(i)
+
+
+@numba.njit(cache=True, nogil=True)
+def gather_visibility(first, starts, columns, traced, blocked, reach, known,
+                      seen):  # pragma: no cover - compiled
+    """Each pair's visibility: traced (and kept in the bitset ``known``) or read back.
+
+    Rows run in order, so a pair with an earlier gather g reads the bit that row g wrote
+    (in an earlier block, or earlier in this one). Serial: rows share bytes of ``known``.
+    """
+    for b in range(starts.shape[0] - 1):
+        row = first + b
+        for k in range(starts[b], starts[b + 1]):
+            u = traced[k]
+            g = columns[k]
+            if u >= 0:
+                visible = (not blocked[u]) or reach[u] == 0.0
+                seen[k] = visible
+                if visible:
+                    bit = _pair_bit(row, g)
+                    known[bit >> 3] |= np.uint8(1) << np.uint8(bit & 7)
+            else:
+                bit = _pair_bit(g, row)
+                seen[k] = ((known[bit >> 3] >> np.uint8(bit & 7)) & np.uint8(1)) == 1
 
 
 @numba.njit(cache=True, nogil=True)

@@ -15,6 +15,9 @@ from ..scenes.lighting import ENVIRONMENT_LIGHTS, SAMPLED_LIGHTS, light_samples,
 from .brdf_pca_kernels import (
     front_counts,
     front_rays,
+    gather_front_counts,
+    gather_front_rays,
+    gather_visibility,
 )
 
 # ---------------------------------------------------------------------------------------
@@ -70,6 +73,41 @@ def pair_visibility(engine, offset, x, n_x, positions, normals):
     reach = np.empty(total, dtype=np.float32)
     front_rays(x, n_x, positions, normals, offset, starts, columns, origins, directions, reach)
     seen = ~occluded_rays(engine, origins, directions, reach) | (reach == 0)
+    return starts, columns, seen
+
+
+def gather_pair_bits(count: int) -> np.ndarray:
+    """Return the bitset :func:`gather_pair_visibility` keeps: a bit per unordered gather pair."""
+    return np.zeros((count * (count - 1) // 2 + 7) // 8, dtype=np.uint8)
+
+
+def gather_pair_visibility(engine, offset, positions, normals, first, stop, known):
+    """Return :func:`pair_visibility` of gather rows ``first:stop``, each pair traced once.
+
+    Visibility between two gathers is symmetric: the pair is front-facing both ways
+    exactly (the offsets are ``d`` and ``-d``), and its two shadow rays run along one
+    segment, each stopping ``offset`` short of the far end.
+    Call with ``first`` increasing from 0 and one ``known`` (:func:`gather_pair_bits`):
+    a pair with a later gather is traced and its answer kept there, one with an earlier
+    gather reads the answer its reverse left. Half of the gather matrix's rays
+    (Nguyen et al. 2010, Sect. 5.2) are saved.
+    """
+    counts = np.zeros(stop - first, dtype=np.int64)
+    later = np.zeros(stop - first, dtype=np.int64)
+    gather_front_counts(positions, normals, first, counts, later)
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    later_starts = np.concatenate([[0], np.cumsum(later)]).astype(np.int64)
+    total, rays = int(starts[-1]), int(later_starts[-1])
+    columns = np.empty(total, dtype=np.int64)
+    traced = np.empty(total, dtype=np.int64)
+    origins = np.empty((3, rays), dtype=np.float32)
+    directions = np.empty((3, rays), dtype=np.float32)
+    reach = np.empty(rays, dtype=np.float32)
+    gather_front_rays(positions, normals, offset, first, starts, later_starts, columns, traced,
+                      origins, directions, reach)
+    blocked = occluded_rays(engine, origins, directions, reach)
+    seen = np.empty(total, dtype=bool)
+    gather_visibility(first, starts, columns, traced, blocked, reach, known, seen)
     return starts, columns, seen
 
 

@@ -30,6 +30,8 @@ from .brdf_pca_kernels import (
     transfer_rows,
 )
 from .brdf_pca_lighting import (
+    gather_pair_bits,
+    gather_pair_visibility,
     hemisphere_directions,
     occluded_rays,
     oriented_normals,
@@ -451,11 +453,12 @@ def _gather_matrix(scene, gather, columns, knobs) -> QuantisedRows:
     block = max(1, knobs["block_pairs"] // count)
     parts = []
     parameters = (0, 0.0, 0.0, 0.0, 0.0, 1.0, np.zeros((2, 1)))
+    known = gather_pair_bits(count)
     for start in range(0, count, block):
         stop = min(count, start + block)
         x, n_x = positions[start:stop], normals[start:stop]
-        starts, pair_columns, seen = pair_visibility(engine, offset, x, n_x, positions,
-                                                      normals)
+        starts, pair_columns, seen = gather_pair_visibility(engine, offset, positions,
+                                                             normals, start, stop, known)
         rows = np.zeros((stop - start, columns), dtype=np.float32)
         transfer_rows(x, n_x, n_x, positions, normals, area, normals, normals, starts,
                        pair_columns, seen, rows, np.zeros((1, 1, 1), dtype=np.float32), False,
