@@ -28,6 +28,7 @@ from ..compiled import parallel_njit
 from ..errors import InputError
 
 __all__ = [
+    "order_by_magnitude",
     "select_largest",
     "select_largest_weighted",
     "nonlinear_approximation",
@@ -92,6 +93,47 @@ def largest_at(values, k):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+def _comes_first(magnitude, candidates, a, b):  # pragma: no cover - compiled
+    """The larger magnitude first; equal magnitudes in ascending candidate order."""
+    return magnitude[a] > magnitude[b] or (magnitude[a] == magnitude[b]
+                                           and candidates[a] < candidates[b])
+
+
+@numba.njit(cache=True, nogil=True)
+def _sift_down(magnitude, candidates, root, end):  # pragma: no cover - compiled
+    while True:
+        child = 2 * root + 1
+        if child >= end:
+            return
+        if child + 1 < end and _comes_first(magnitude, candidates, child, child + 1):
+            child += 1
+        if not _comes_first(magnitude, candidates, root, child):
+            return
+        magnitude[root], magnitude[child] = magnitude[child], magnitude[root]
+        candidates[root], candidates[child] = candidates[child], candidates[root]
+        root = child
+
+
+@numba.njit(cache=True, nogil=True)
+def order_by_magnitude(magnitude, candidates):  # pragma: no cover - compiled
+    """Sort both arrays in place, largest ``magnitude`` first, ties by ascending ``candidates``.
+
+    A heapsort: O(n log n) with no allocation, a total order (so the kept set of
+    :func:`select_largest` does not depend on a sort's handling of ties), and a few
+    dozen lines for numba to compile where ``np.argsort`` and ``np.sort`` instantiate
+    numba's quicksort, seconds of compilation in every process that meets them.
+    With ``magnitude`` all zero it sorts ``candidates`` ascending.
+    """
+    n = magnitude.shape[0]
+    for start in range(n // 2 - 1, -1, -1):
+        _sift_down(magnitude, candidates, start, n)
+    for end in range(n - 1, 0, -1):
+        magnitude[0], magnitude[end] = magnitude[end], magnitude[0]
+        candidates[0], candidates[end] = candidates[end], candidates[0]
+        _sift_down(magnitude, candidates, 0, end)
+
+
+@numba.njit(cache=True, nogil=True)
 def select_largest(row, energy, max_terms, out_indices, out_values):  # pragma: no cover
     """Keep the largest entries of a float32 ``row`` until ``energy`` of its squared norm.
 
@@ -103,7 +145,8 @@ def select_largest(row, energy, max_terms, out_indices, out_values):  # pragma: 
     A float32 magnitude orders like its bit pattern, so one pass builds a histogram of the
     top bits, the bin holding the ``max_terms``-th largest entry is found from the top, and
     a second pass gathers the entries at or above it; only those (cut to ``max_terms`` by a
-    partition when the bin is crowded) are sorted.
+    partition when the bin is crowded) are sorted (:func:`order_by_magnitude`: of equal
+    entries, the lower column is kept).
     """
     length = row.shape[0]
     bits = row.view(np.uint32)
@@ -153,18 +196,19 @@ def select_largest(row, energy, max_terms, out_indices, out_values):  # pragma: 
                 taken += 1
         candidates = kept_candidates
         magnitude = kept_magnitude
-    order = np.argsort(-magnitude)
+    order_by_magnitude(magnitude, candidates)
     target = energy * total
     kept = 0.0
     count = 0
-    for j in order[:budget]:
+    for j in range(min(budget, magnitude.shape[0])):
         if magnitude[j] == 0.0:
             break
         kept += magnitude[j]
         count += 1
         if kept >= target:
             break
-    chosen = np.sort(candidates[order[:count]])
+    chosen = candidates[:count].copy()
+    order_by_magnitude(np.zeros(count), chosen)
     for j in range(count):
         out_indices[j] = chosen[j]
         out_values[j] = row[chosen[j]]

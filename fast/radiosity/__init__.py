@@ -61,10 +61,12 @@ start from the earlier frames' solutions projected on the new irradiance
 (:meth:`RadiosityState.solve`): 2 products per frame on a sliding light.
 
 Relighting with :math:`T = (I - SF)^{-1}S` (Sect. 6.4): T is dense, :math:`3P^2` float32, and
-is precomputed (at the first relighting after a material change, knob ``transfer="auto"``)
-only when that fits the ``transfer_budget_mb`` knob: P <= 6,688 at the default 512 MB; the
-dense solve needs about five times that while it runs. Whether T and a low-rank T pay is
-measured in docs/radiosity.md.
+is precomputed (knob ``transfer="auto"``) at a relighting once the solves since the last
+material change have taken as long as its build is estimated to take (the ski-rental rule:
+at most twice the cost of the better choice in hindsight, however many frames follow), and
+only when it fits the ``transfer_budget_mb`` knob: P <= 6,688 at the default 512 MB; the
+dense solve needs about five times that while it runs. Without form factors T would be S
+itself and is not built. Whether T and a low-rank T pay is measured in docs/radiosity.md.
 
 Images: direct lighting of diffuse surfaces is evaluated per pixel through the G-buffer
 (the paper's hybrid that removes per-patch shadow artifacts), the global part

@@ -64,7 +64,8 @@ KNOBS = KnobSpec([
          keyed=False),
     Knob("warm_start", True, "start from the earlier frames' solutions", kind="bool",
          keyed=False),
-    Knob("transfer", "auto", "auto: T at the first relighting when it fits; never",
+    Knob("transfer", "auto", "auto: T at a relighting once the solves have cost its "
+         "estimated build and it fits; never",
          kind="choice", choices=("auto", "never"), keyed=False),
     Knob("transfer_budget_mb", 512, "T fits when 3 P^2 float32 do (P <= 6,688 at 512 MB)",
          kind="float", positive=True, unit="MB", keyed=False),

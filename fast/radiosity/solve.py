@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import functools
+import time
+
 import numpy as np
 from scipy.sparse import linalg as sparse_linalg
 
@@ -224,21 +227,60 @@ def transfer_matrix(S: ScatteringMatrix, F) -> list[np.ndarray]:
     and solved in float32, the precision T is kept in: :math:`I - SF` is diagonally
     dominant (every row of SF sums to an albedo below 1), and the float32 solve agrees with
     the float64 one to a relative 2.4e-7 of T's largest entry (measured on the bowl), at
-    half the time.
+    half the time. :math:`SF` is formed as :math:`(F^T S^T)^T` with F sparse: a ray-cast
+    row of F holds at most ``rays_per_patch`` entries, so the product costs
+    :math:`P \cdot \mathrm{nnz}(F)` where a dense product costs :math:`2P^3`.
     """
     import scipy.linalg
 
     if F is None:
         return [S.channel(c).toarray().astype(np.float32) for c in range(3)]
     size = len(S.indptr) - 1
-    dense_F = F.toarray().astype(np.float32)
+    F_transposed = F.T.tocsr().astype(np.float32)
     out = []
     for c in range(3):
         S_c = S.channel(c).toarray().astype(np.float32)
-        system = -(S_c @ dense_F)  # S is a third full on the bowl: dense BLAS beats sparse
+        # (F^T S^T)^T = S F, in Fortran order: LAPACK's own, so the solve copies nothing
+        system = np.asfortranarray(-(F_transposed @ S_c.T).T)
         system[np.diag_indices(size)] += 1.0
         out.append(scipy.linalg.solve(system, S_c, overwrite_a=True, overwrite_b=True,
                                       check_finite=False))
     return out
 
 
+#: Patches of the system timed once a process by :func:`transfer_seconds_estimate`: small
+#: enough to cost milliseconds, large enough for LAPACK's blocked kernels.
+TRANSFER_CALIBRATION_PATCHES = 384
+
+
+@functools.lru_cache(maxsize=1)
+def _solve_seconds_per_cubed_patch() -> float:
+    """Seconds of one float32 :func:`transfer_matrix` channel solve per :math:`P^3`, measured.
+
+    The best of three solves of a diagonally dominant ``TRANSFER_CALIBRATION_PATCHES``
+    system with as many right-hand sides, in this process's BLAS threads.
+    """
+    import scipy.linalg
+
+    n = TRANSFER_CALIBRATION_PATCHES
+    rng = np.random.default_rng(0)
+    best = np.inf
+    for _ in range(3):
+        system = np.eye(n, dtype=np.float32) - rng.random((n, n), dtype=np.float32) / n
+        right = rng.random((n, n), dtype=np.float32)
+        started = time.perf_counter()
+        scipy.linalg.solve(system, right, overwrite_a=True, overwrite_b=True,
+                           check_finite=False)
+        best = min(best, time.perf_counter() - started)
+    return best / n**3
+
+
+def transfer_seconds_estimate(patches: int) -> float:
+    """Estimated seconds of :func:`transfer_matrix` with form factors for ``patches`` patches.
+
+    Three channel solves of :math:`O(P^3)`, scaled from a small solve timed once in this
+    process (:data:`TRANSFER_CALIBRATION_PATCHES`). Small systems run below the blocked
+    kernels' peak rate, so this overestimates large ones (measured on the bowl's 3872
+    patches: docs/radiosity.md).
+    """
+    return 3 * _solve_seconds_per_cubed_patch() * float(patches) ** 3

@@ -26,6 +26,7 @@ from .solve import (
     form_factor_product,
     solve_radiosity,
     transfer_matrix,
+    transfer_seconds_estimate,
 )
 
 
@@ -107,6 +108,7 @@ class RadiosityState:
         self.transfer = None
         self._transfer_materials = None
         self._frames = []  # (E, B - SE) of earlier frames: stale once S changes
+        self._solve_seconds = 0.0  # spent solving for these materials (T's rental)
         return time.perf_counter() - started
 
     def _energy_beyond_cutoff(self):
@@ -139,13 +141,28 @@ class RadiosityState:
     def transfer_fits(self) -> bool:
         """Return True when 3 P^2 float32 numbers fit ``transfer_budget_mb`` (the rule for T).
 
-        Memory decides, since T's cost is its size: 12 P^2 bytes read per frame and an
-        O(P^3) solve that holds about five P x P float64 arrays at once. Where it fits it
-        is measured as fast as the warm-started iterative solve, not faster (the module
-        docstring has the numbers); set ``transfer="never"`` to skip its precomputation.
+        Memory decides whether T may be built, since T's cost is its size: 12 P^2 bytes
+        read per frame and an O(P^3) solve that holds about five P x P float64 arrays at
+        once. Whether it is worth building is :meth:`transfer_pays`.
         """
         size = len(self.patches)
         return 3 * size * size * 4 <= self.knobs["transfer_budget_mb"] * 2**20
+
+    def transfer_pays(self) -> bool:
+        """Return True once T's build is cheaper than the solves it would have saved.
+
+        The rule of ``transfer="auto"``, the ski-rental rule: iterate until the solves for
+        the current materials have taken as long as building T is estimated to take
+        (:func:`~translucent.fast.radiosity.solve.transfer_seconds_estimate`), then build
+        it. However many frames follow, that costs at most twice the better of the two
+        choices made in hindsight (with an exact estimate). Without form factors it never
+        pays: T would be S itself, a dense copy of what one sparse product already applies.
+        A T-product frame saves at most its solve; the measured figures are in
+        docs/radiosity.md.
+        """
+        if self.form_factors is None or self.form_factors.nnz == 0:
+            return False
+        return self._solve_seconds >= transfer_seconds_estimate(len(self.patches))
 
     def precompute_transfer(self) -> float | None:
         """Compute T for the current materials when it fits; returns seconds (None: skipped)."""
@@ -385,16 +402,17 @@ class RadiosityState:
 
         A new material rebuilds S (the translucency change of Sect. 5.2) and drops T; new
         lights recompute E and solve, or multiply by T (Sect. 6.4). With the knob
-        ``transfer="auto"`` the first relighting after a material change computes T when
-        it fits ``transfer_budget_mb`` (:meth:`transfer_fits`); translucency changes
-        always iterate, since T would have to be inverted again.
+        ``transfer="auto"`` a relighting computes T when it fits ``transfer_budget_mb``
+        (:meth:`transfer_fits`) and the solves since the last material change have taken
+        as long as its build would (:meth:`transfer_pays`); translucency changes always
+        iterate, since T would have to be inverted again.
         """
         started = time.perf_counter()
         facts = {}
         if material is not None:
             facts["material_seconds"] = self.set_material(material)
         if lights is not None and self.transfer is None and self.knobs["transfer"] == "auto" \
-                and component == "both" and self.transfer_fits():
+                and component == "both" and self.transfer_fits() and self.transfer_pays():
             # relighting: one O(P^3) solve now, one product per channel per frame after
             facts["transfer_seconds"] = self.precompute_transfer()
         light_started = time.perf_counter()
@@ -403,6 +421,8 @@ class RadiosityState:
         solve_started = time.perf_counter()
         B, info = self.solve(E, component)
         facts["solve_seconds"] = time.perf_counter() - solve_started
+        if component == "both" and info.get("solver") != "transfer":
+            self._solve_seconds += facts["solve_seconds"]
         image_started = time.perf_counter()
         rgb = self.image(B, lights, component)
         facts["image_seconds"] = time.perf_counter() - image_started

@@ -677,15 +677,62 @@ def test_render_and_bounce_decomposition():
     assert parts["both"].rgb.mean() > parts["direct"].rgb.mean()
 
 
-def test_relighting_with_new_lights_changes_only_the_lighting():
+def test_relighting_with_new_lights_changes_only_the_lighting(monkeypatch):
+    from translucent.fast.radiosity import state as state_module
+
+    # a build estimated free pays at once: the first relighting computes T
+    monkeypatch.setattr(state_module, "transfer_seconds_estimate", lambda patches: 0.0)
     state = _block_state()
     state.set_material(measured_medium("Skin1"))
     dim = state.render(lights=[PointLight([1.0, 3.0, 1.0], 10.0)])
-    # the first relighting computed T (it fits the budget): later frames multiply by it
     assert state.transfer is not None and dim.metadata["transfer_seconds"] > 0
     bright = state.render(lights=[PointLight([1.0, 3.0, 1.0], 20.0)])
     assert bright.metadata["solver"] == "transfer"
     assert bright.rgb == pytest.approx(2.0 * dim.rgb, rel=1e-4, abs=1e-7)
+
+
+def test_transfer_is_built_once_the_solves_have_cost_its_build(monkeypatch):
+    """The ski-rental rule of transfer="auto": iterate until the solves add up to T's build."""
+    from translucent.fast.radiosity import state as state_module
+
+    state = precompute(_block_scene(), rays_per_patch=64)
+    state.render()
+    spent = state._solve_seconds
+    assert spent > 0
+    # a build estimated dear: every relighting iterates
+    monkeypatch.setattr(state_module, "transfer_seconds_estimate", lambda patches: 1e9)
+    frames = [state.render(lights=[PointLight([1.0, 3.0, 1.0], 10.0 + k)]) for k in range(3)]
+    assert state.transfer is None
+    assert all(f.metadata["solver"] == "jacobi" for f in frames)
+    assert "transfer_seconds" not in frames[-1].metadata
+    monkeypatch.setattr(state_module, "transfer_seconds_estimate",
+                        lambda patches: state._solve_seconds)
+    built = state.render(lights=[PointLight([1.0, 3.0, 1.0], 20.0)])
+    assert built.metadata["solver"] == "transfer" and built.metadata["transfer_seconds"] > 0
+    # a material change drops T and starts the count again
+    state.set_material(measured_medium("Skin1"))
+    assert state.transfer is None and state._solve_seconds == 0.0
+
+
+def test_transfer_never_pays_without_form_factors(monkeypatch):
+    from translucent.fast.radiosity import state as state_module
+
+    monkeypatch.setattr(state_module, "transfer_seconds_estimate", lambda patches: 0.0)
+    block = box((1.0, 1.0, 1.0), subdivisions=2)
+    state = precompute(Scene([SceneObject("block", block, measured_medium("Skin1"))],
+                             (PointLight([1.0, 3.0, 1.0], 20.0),), CAMERA, mm_per_unit=10.0))
+    assert state.form_factors is None
+    state.render(lights=[PointLight([0.0, 3.0, 0.0], 10.0)])
+    # T would be S itself: one sparse product already applies it
+    assert state.transfer is None and not state.transfer_pays()
+
+
+def test_transfer_estimate_scales_as_the_cube_of_the_patches():
+    from translucent.fast.radiosity.solve import transfer_seconds_estimate
+
+    small = transfer_seconds_estimate(1000)
+    assert small > 0 and np.isfinite(small)
+    assert transfer_seconds_estimate(2000) == pytest.approx(8 * small, rel=1e-12)
 
 
 def test_warm_start_projects_on_earlier_frames_and_is_dropped_with_the_material():

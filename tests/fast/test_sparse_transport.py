@@ -65,6 +65,30 @@ def test_largest_at_is_the_partition_of_the_negated_values(values, data):
     assert np.array_equal(np.sort(copy), np.sort(values))  # reordered, nothing lost
 
 
+@settings(max_examples=80, deadline=None)
+@given(magnitude=arrays(np.float64, st.integers(0, 300),
+                        elements=st.sampled_from([0.0, 1.0, 2.0, 2.0, 3.5]) | st.floats(0, 1e6)),
+       data=st.data())
+def test_order_by_magnitude_is_the_lexicographic_sort(magnitude, data):
+    from translucent.fast.sparse_transport import order_by_magnitude
+
+    candidates = np.array(data.draw(st.permutations(range(len(magnitude)))), dtype=np.int64)
+    expected = np.lexsort((candidates, -magnitude))
+    m, c = magnitude.copy(), candidates.copy()
+    order_by_magnitude(m, c)
+    assert np.array_equal(m, magnitude[expected]) and np.array_equal(c, candidates[expected])
+    # all-zero magnitudes: an ascending sort of the candidates
+    zeros, c = np.zeros(len(candidates)), candidates.copy()
+    order_by_magnitude(zeros, c)
+    assert np.array_equal(c, np.sort(candidates))
+
+
+def test_selection_keeps_the_lower_column_of_equal_entries():
+    row = np.array([1.0, -2.0, 2.0, 0.5, -2.0, 2.0], dtype=np.float32)
+    assert list(nonlinear_approximation(row[None, :], 1.0, 2).indices) == [1, 2]
+    assert list(nonlinear_approximation(row[None, :], 1.0, 3).indices) == [1, 2, 4]
+
+
 def test_selection_respects_the_budget_on_a_decaying_row(rng):
     row = (rng.normal(size=4096) * np.geomspace(1, 1e-6, 4096)).astype(np.float32)
     sparse = nonlinear_approximation(row[None, :], 1.0, 100)
