@@ -137,7 +137,8 @@ def _after(function: Callable[..., Any], marker: None, *args) -> Any:
 def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], *,
               scheduler: str | None = None, local: bool = False, progress: bool = True,
               workers: int = 2, timed: bool = False,
-              groups: Sequence[Any] | None = None) -> list[Any]:
+              groups: Sequence[Any] | None = None,
+              on_result: Callable[[int, Any], None] | None = None) -> list[Any]:
     """Run ``function(*args)`` for each ``args`` in ``arguments``; results in the same order.
 
     Parameters
@@ -163,6 +164,10 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         For tasks that compile the same numba kernels: the first compiles them into the
         on-disk cache and the others, on any local worker, load them (two workers that
         start one method at once each compile it, docs/references.md).
+    on_result : callable, optional
+        Called in this process as ``on_result(position, result)`` for each task as its
+        result arrives (in order of completion; serially, in order), while the other
+        tasks run on: work on finished results then fills the workers' idle time.
     """
     from tqdm.auto import tqdm
 
@@ -173,7 +178,12 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         arguments = [(function, *args) for args in arguments]
         function = timed_call
     if local or (scheduler is None and len(arguments) <= 1):
-        return [function(*args) for args in tqdm(arguments, disable=not progress, leave=False)]
+        results = []
+        for position, args in enumerate(tqdm(arguments, disable=not progress, leave=False)):
+            results.append(function(*args))
+            if on_result is not None:
+                on_result(position, results[-1])
+        return results
     from dask.distributed import as_completed
 
     # the bar starts with the cluster, whose workers take seconds to start
@@ -188,8 +198,11 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         index = {future.key: position for position, future in enumerate(futures)}
         results: list[Any] = [None] * len(futures)
         for future in as_completed(futures):
-            results[index[future.key]] = future.result()
+            position = index[future.key]
+            results[position] = future.result()
             bar.update()
+            if on_result is not None:
+                on_result(position, results[position])
     return results
 
 

@@ -608,54 +608,73 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
               f"{sum(1 for t in tasks if t[0] == 'path tracing')} path-tracing ladder(s)",
               file=stream,
               flush=True)
-    timing: dict[str, Any] = {"planning": time.perf_counter() - started, "tasks": 0.0}
+    timing: dict[str, Any] = {"planning": time.perf_counter() - started, "tasks": 0.0,
+                              "scoring": 0.0, "scoring_during_tasks": 0.0}
     task_times: list[dict] = []
-    if tasks:
-        tasks_started = time.perf_counter()
-        with limited_entries(None if keep_precomputations else REPORT_CACHE_ENTRY_LIMIT):
-            # on local workers one method's runs wait for its first, which compiles its
-            # kernels into numba's on-disk cache for the others
-            groups = [task[2] if task[0] == "method" else None for task in tasks]
-            timed = run_tasks(report_task, tasks, scheduler=scheduler, local=serial,
-                              progress=progress, timed=True,
-                              groups=groups if scheduler is None else None)
-        timing["tasks"] = time.perf_counter() - tasks_started
-        results = [result for result, _, _ in timed]
-        task_times = [task_time(task, owner, seconds, worker)
-                      for task, owner, (_, seconds, worker) in zip(tasks, owners, timed,
-                                                                    strict=True)]
-    else:
-        results = []
-    for (report, name, key), result in zip(owners, results, strict=True):
-        if name == PATH_TRACING:
-            report.path_tracing = result
-            if isinstance(result, list) and not any("error" in p for p in result):
-                run_cache.store_object(key, result)
-            continue
-        if name is None:
-            if isinstance(result, Image):
-                report.reference = result
-            else:
-                report.reference_error = str(result)
-            continue
-        _keep_run(report, name, result)
-        if result.status == "ok":
-            run_cache.store_object(key, result)
-
     chosen = chosen + renderers
-    for report in reports:
-        for name in renderers:
-            if report.reference_error and report.runs[name].status == "ok":
-                report.runs[name] = MethodRun(name, report.name, "not run",
-                                              "the scene has no reference to compare with")
+    pending = {report.slug: 0 for report in reports}
+    for report, _, _ in owners:
+        pending[report.slug] += 1
     staging = None
     try:
         staging = _staging_folder(out)
-        scoring_started = time.perf_counter()
-        for report in tqdm(reports, desc="metrics and error maps", disable=not progress,
-                           leave=False, file=sys.stderr):
+        bar = None  # the scenes scored after the tasks (the tasks' own bar runs before)
+        scored: set[str] = set()
+
+        def score(report: SceneReport) -> None:
+            for name in renderers:
+                if report.reference_error and report.runs[name].status == "ok":
+                    report.runs[name] = MethodRun(name, report.name, "not run",
+                                                  "the scene has no reference to compare with")
+            scored.add(report.slug)
+            scoring_started = time.perf_counter()
             score_scene(report, staging)
-        timing["scoring"] = time.perf_counter() - scoring_started
+            timing["scoring"] += time.perf_counter() - scoring_started
+            if bar is not None:
+                bar.update()
+
+        def arrived(position: int, timed_result) -> None:
+            # a scene is scored as soon as its last task is in, while the others run on
+            report, name, key = owners[position]
+            result = timed_result[0]
+            if name == PATH_TRACING:
+                report.path_tracing = result
+                if isinstance(result, list) and not any("error" in p for p in result):
+                    run_cache.store_object(key, result)
+            elif name is None:
+                if isinstance(result, Image):
+                    report.reference = result
+                else:
+                    report.reference_error = str(result)
+            else:
+                _keep_run(report, name, result)
+                if result.status == "ok":
+                    run_cache.store_object(key, result)
+            pending[report.slug] -= 1
+            if pending[report.slug] == 0:
+                score(report)
+
+        if tasks:
+            tasks_started = time.perf_counter()
+            with limited_entries(None if keep_precomputations else REPORT_CACHE_ENTRY_LIMIT):
+                # on local workers one method's runs wait for its first, which compiles its
+                # kernels into numba's on-disk cache for the others
+                groups = [task[2] if task[0] == "method" else None for task in tasks]
+                timed = run_tasks(report_task, tasks, scheduler=scheduler, local=serial,
+                                  progress=progress, timed=True,
+                                  groups=groups if scheduler is None else None,
+                                  on_result=arrived)
+            timing["tasks"] = time.perf_counter() - tasks_started
+            timing["scoring_during_tasks"] = timing["scoring"]
+            task_times = [task_time(task, owner, seconds, worker)
+                          for task, owner, (_, seconds, worker) in zip(tasks, owners, timed,
+                                                                        strict=True)]
+        left = [report for report in reports if report.slug not in scored]
+        bar = tqdm(total=len(left), desc="metrics and error maps", disable=not progress,
+                   leave=False, file=sys.stderr)
+        for report in left:
+            score(report)
+        bar.close()
         regressions = []
         for report in reports:
             reference = _made_with(report)

@@ -78,7 +78,9 @@ def time_line(timing: dict, task_times: list[dict]) -> str:
         workers = len({t["worker"] for t in task_times})
         line += (f" ({len(task_times)} tasks, {busy:.1f} s of task time on {workers} "
                  f"process(es); longest {longest['scene']} {what} {longest['seconds']:.1f} s)")
-    return line + f", metrics and error maps {timing.get('scoring', 0.0):.1f} s"
+    line += f", metrics and error maps {timing.get('scoring', 0.0):.1f} s"
+    during = timing.get("scoring_during_tasks", 0.0)
+    return line + (f" ({during:.1f} s of it while the tasks ran)" if during else "")
 
 
 def print_summary(summary, regressions, out, seconds, updated, baseline_path, stream,

@@ -21,6 +21,22 @@ def test_local_cluster_on_loopback_gives_the_numbers_of_the_local_run():
     assert np.all(np.diff([serial[i] for i in range(0, 12, 3)]) < 0)
 
 
+def test_each_result_is_handed_over_as_it_arrives():
+    import time
+
+    serial_calls = []
+    serial = run_tasks(_sweep_point, ARGUMENTS, local=True, progress=False,
+                       on_result=lambda position, result: serial_calls.append((position, result)))
+    assert serial_calls == list(enumerate(serial))  # serially: in order, each once
+    # on workers: each position once, in whatever order the tasks finish
+    calls = []
+    with dask_client(workers=2) as client:
+        results = run_tasks(time.sleep, [(0.01,)] * 5, scheduler=client.scheduler.address,
+                            progress=False,
+                            on_result=lambda position, result: calls.append(position))
+    assert results == [None] * 5 and sorted(calls) == [0, 1, 2, 3, 4]
+
+
 def test_a_local_cluster_leaves_this_process_environment_as_it_was(monkeypatch):
     import os
 

@@ -190,6 +190,9 @@ def test_the_report_says_where_its_time_went(tiny):
     assert {t["worker"] for t in tasks} == {os.getpid()}
     assert sum(t["seconds"] for t in tasks) <= timing["tasks_seconds"]
     assert timing["planning_seconds"] > 0 and timing["scoring_seconds"] > 0
+    # the scene was scored as its last task came in, inside the tasks phase
+    assert timing["scoring_during_tasks_seconds"] == timing["scoring_seconds"]
+    assert sum(t["seconds"] for t in tasks) + timing["scoring_seconds"] <= timing["tasks_seconds"]
 
 
 def test_ladder_knobs_take_the_cheap_end_of_the_first_ladder():
