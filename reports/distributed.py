@@ -15,7 +15,8 @@ from typing import Any
 
 from ..errors import InputError
 
-__all__ = ["run_tasks", "dask_client", "prepare_worker", "timed_call", "worker_environment"]
+__all__ = ["WORKER_MALLOC_TUNABLES", "run_tasks", "dask_client", "prepare_worker", "timed_call",
+           "worker_environment"]
 
 
 @contextlib.contextmanager
@@ -86,6 +87,15 @@ def prepare_worker() -> str:
     return variant()
 
 
+#: glibc's malloc in a local worker: one arena, no mmap, no trimming. A worker runs its
+#: tasks one after another on one thread; with these, the memory a task frees stays in the
+#: heap for the next one, where by default every array over 32 MiB is mapped afresh and
+#: its pages faulted in again (radiosity's 26 M-entry arrays: half its time was system
+#: time, docs/references.md). A worker keeps its largest task's memory until it exits.
+WORKER_MALLOC_TUNABLES = {"glibc.malloc.arena_max": "1", "glibc.malloc.mmap_max": "0",
+                          "glibc.malloc.trim_threshold": str(1 << 40)}
+
+
 def worker_environment(threads: int) -> dict[str, str]:
     """Environment of a local worker process: its thread pools sized to its ``threads``.
 
@@ -94,7 +104,8 @@ def worker_environment(threads: int) -> dict[str, str]:
     and sets ``MALLOC_TRIM_THRESHOLD_``, which turns off glibc's adaptive mmap threshold:
     every large temporary array is then mapped and faulted in afresh. Both showed as
     system time in the radiosity precomputation (docs/references.md, "The time of a
-    fresh report").
+    fresh report"). ``GLIBC_TUNABLES`` adds :data:`WORKER_MALLOC_TUNABLES` to those this
+    process has (its own settings of the same tunables win); other C libraries ignore it.
 
     Parameters
     ----------
@@ -107,8 +118,14 @@ def worker_environment(threads: int) -> dict[str, str]:
         Variables set in each worker process before it starts.
     """
     count = str(max(1, int(threads)))
-    return {name: count for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS",
-                                     "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")}
+    environment = {name: count for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                                            "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")}
+    own = [item for item in os.environ.get("GLIBC_TUNABLES", "").split(":") if "=" in item]
+    named = {item.split("=", 1)[0] for item in own}
+    added = [f"{name}={value}" for name, value in WORKER_MALLOC_TUNABLES.items()
+             if name not in named]
+    environment["GLIBC_TUNABLES"] = ":".join(own + added)
+    return environment
 
 
 def timed_call(function: Callable[..., Any], *args) -> tuple[Any, float, int]:

@@ -51,6 +51,39 @@ def test_a_local_cluster_leaves_this_process_environment_as_it_was(monkeypatch):
     assert "NUMBA_NUM_THREADS" not in os.environ and os.environ["OMP_NUM_THREADS"] == "2"
 
 
+def test_a_workers_freed_memory_is_reused_without_faulting_its_pages_again(monkeypatch):
+    import platform
+
+    from translucent.reports.distributed import WORKER_MALLOC_TUNABLES, worker_environment
+
+    if platform.libc_ver()[0] != "glibc":
+        pytest.skip("GLIBC_TUNABLES is glibc's")
+    # a setting of the user's own is kept, ours are added
+    monkeypatch.setenv("GLIBC_TUNABLES", "glibc.malloc.arena_max=2")
+    tunables = worker_environment(1)["GLIBC_TUNABLES"].split(":")
+    assert "glibc.malloc.arena_max=2" in tunables and "glibc.malloc.mmap_max=0" in tunables
+    monkeypatch.delenv("GLIBC_TUNABLES")
+    assert sorted(worker_environment(1)["GLIBC_TUNABLES"].split(":")) == sorted(
+        f"{k}={v}" for k, v in WORKER_MALLOC_TUNABLES.items())
+    def _refaulted_pages():
+        # a local function: pickled by value for the worker
+        import resource
+
+        first = bytearray(1 << 28)
+        del first
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        second = bytearray(1 << 28)
+        del second
+        return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+
+    # 256 MiB freed and taken again, on the worker's task thread: 65536 pages faulted in
+    # afresh under glibc's defaults (this process), none in a worker
+    here = _refaulted_pages()
+    with dask_client(workers=1) as client:
+        there = client.submit(_refaulted_pages, pure=False).result()
+    assert here > 60000 and there < 1000
+
+
 def test_bad_scheduler_address():
     with pytest.raises(InputError, match="--scheduler"):
         run_tasks(_sweep_point, ARGUMENTS, scheduler="not an address", progress=False)
