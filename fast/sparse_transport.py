@@ -94,7 +94,7 @@ def largest_at(values, k):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def _comes_first(magnitude, candidates, a, b):  # pragma: no cover - compiled
-    """The larger magnitude first; equal magnitudes in ascending candidate order."""
+    """Return True where entry a precedes b: larger magnitude, then lower candidate."""
     return magnitude[a] > magnitude[b] or (magnitude[a] == magnitude[b]
                                            and candidates[a] < candidates[b])
 
