@@ -23,6 +23,8 @@ import os
 import shutil
 import sys
 import tempfile
+import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +34,9 @@ from .atomic import atomic_path
 from .errors import InputError
 
 __all__ = ["cache_dir", "content_hash", "private_cache", "limited_entries", "entry_limit",
-           "environment_variable", "ENTRY_LIMIT_VARIABLE", "ENTRY_SUFFIX", "Cache"]
+           "environment_variable", "ENTRY_LIMIT_VARIABLE", "ENTRY_SUFFIX", "Cache",
+           "BUDGET_VARIABLE", "DEFAULT_BUDGET_BYTES", "CacheEntry", "budget", "cache_entries",
+           "prune", "keep_within_budget", "mark_used", "IN_USE_SECONDS"]
 
 #: The file suffix of an object entry.
 ENTRY_SUFFIX = ".entry.npz"
@@ -40,6 +44,17 @@ ENTRY_SUFFIX = ".entry.npz"
 #: The largest entry, in bytes, that :meth:`Cache.store_object` keeps when told its size;
 #: unset or empty: no limit. Set by :func:`limited_entries`, inherited by worker processes.
 ENTRY_LIMIT_VARIABLE = "TRANSLUCENT_CACHE_MAX_ENTRY_BYTES"
+
+
+#: The most bytes the whole cache may hold; least recently used entries go first beyond it.
+BUDGET_VARIABLE = "TRANSLUCENT_CACHE_MAX_BYTES"
+
+#: The budget where :data:`BUDGET_VARIABLE` is unset: twice what a report that keeps
+#: every precomputation writes (``--keep-precomputations``, about 10 GB).
+DEFAULT_BUDGET_BYTES = 20 * 2**30
+
+#: An entry written or read this recently (seconds) is in use: never pruned.
+IN_USE_SECONDS = 60.0
 
 
 def cache_dir() -> Path:
@@ -279,6 +294,7 @@ class Cache:
             with _byte_progress(f"reading the {self.folder.name} cache",
                                 path.stat().st_size) as bar:
                 value = read_entry(path, key, progress=bar.update)
+            mark_used(path)
             return value
         except EntryError as error:
             _report_rejected(path, str(error))
@@ -326,7 +342,124 @@ class Cache:
             raise InputError(f"the cache cannot be written ({error.reason}); point "
                              "TRANSLUCENT_CACHE at a writable folder", field="TRANSLUCENT_CACHE",
                              value=str(self.root)) from error
+        keep_within_budget(self.root)
         return path
+
+
+def budget() -> int | None:
+    """Return the cache's budget in bytes (:data:`BUDGET_VARIABLE`), or None (no limit).
+
+    Unset: :data:`DEFAULT_BUDGET_BYTES`; ``0``: no limit.
+
+    Raises
+    ------
+    InputError
+        When the variable holds anything but a whole number >= 0.
+    """
+    given = os.environ.get(BUDGET_VARIABLE, "").strip()
+    if not given:
+        return DEFAULT_BUDGET_BYTES
+    try:
+        value = int(given)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise InputError("must be a whole number of bytes >= 0 (0: no limit)",
+                         field=BUDGET_VARIABLE, value=given)
+    return value or None
+
+
+def mark_used(path) -> None:
+    """Mark a cache entry as just used (its modification time): pruned last."""
+    with contextlib.suppress(OSError):
+        os.utime(path)
+
+
+@dataclass(frozen=True)
+class CacheEntry:
+    """One file of the cache: an entry, a reference image or a resumable render.
+
+    Attributes
+    ----------
+    path : Path
+    namespace : str
+        Its sub-folder (``"radiosity"``, ``"reference"``, ...).
+    nbytes : int
+    used : float
+        When it was last written or read (POSIX time).
+    """
+
+    path: Path
+    namespace: str
+    nbytes: int
+    used: float
+
+
+def cache_entries(root=None) -> list[CacheEntry]:
+    """Return the cache's entries, least recently used first.
+
+    Lock files and the hidden temporary files of a write in progress are not entries.
+    """
+    root = Path(root) if root is not None else cache_dir()
+    found = []
+    if not root.is_dir():
+        return found
+    for folder, _, files in os.walk(root):
+        for name in files:
+            if name.startswith(".") or name.endswith(".lock"):
+                continue
+            path = Path(folder) / name
+            try:
+                stat = path.stat()
+            except OSError:  # removed meanwhile
+                continue
+            namespace = path.relative_to(root).parts[0] if path.parent != root else ""
+            found.append(CacheEntry(path, namespace, stat.st_size, stat.st_mtime))
+    return sorted(found, key=lambda entry: (entry.used, str(entry.path)))
+
+
+def prune(max_bytes: int | None, root=None, *, keep_recent: bool = True) -> list[CacheEntry]:
+    """Remove least recently used entries until the cache holds at most ``max_bytes``.
+
+    Parameters
+    ----------
+    max_bytes : int or None
+        None: remove nothing. 0 with ``keep_recent=False``: remove every entry.
+    root : path, optional
+        Overrides :func:`cache_dir`.
+    keep_recent : bool
+        Never remove an entry written or read in the last :data:`IN_USE_SECONDS` (another
+        process may be about to read what it just stored).
+
+    Returns
+    -------
+    list of CacheEntry
+        What was removed. A reader that meets a removed entry computes it again.
+    """
+    if max_bytes is None:
+        return []
+    entries = cache_entries(root)
+    total = sum(entry.nbytes for entry in entries)
+    recent = time.time() - IN_USE_SECONDS
+    removed = []
+    for entry in entries:
+        if total <= max_bytes:
+            break
+        if keep_recent and entry.used > recent:
+            continue
+        with contextlib.suppress(FileNotFoundError):
+            entry.path.unlink()
+            removed.append(entry)
+        total -= entry.nbytes
+    return removed
+
+
+def keep_within_budget(root=None) -> list[CacheEntry]:
+    """Prune the cache to :func:`budget`, least recently used first (after every store)."""
+    try:
+        return prune(budget(), root)
+    except OSError:  # a folder another process is pruning or removing: the next store tries
+        return []
 
 
 def _byte_progress(description: str, total: int | None):

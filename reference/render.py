@@ -20,7 +20,7 @@ import numpy as np
 
 from .. import signals
 from ..backend import mitsuba
-from ..cache import Cache, content_hash
+from ..cache import Cache, content_hash, keep_within_budget, mark_used
 from ..errors import InputError, check_count
 from ..image import Image, read_exr
 from ..scenes import Scene
@@ -300,7 +300,7 @@ def _render_passes(scene, store, key, settings, *, spp, passes, seed, progress, 
                             spp=spp, passes=passes, seed=seed,
                             seconds=time.perf_counter() - start))
     if store is not None:
-        image.write(store.path(key, ".exr"))
+        _store_image(store, key, image)
     return image
 
 
@@ -320,11 +320,18 @@ def _cached(store, key, scene, passes) -> Image | None:
         image = read_exr(path)
     except InputError:
         return None
+    mark_used(path)
     if image.shape != (scene.camera.height, scene.camera.width):
         return None
     if passes > 1 and image.variance is None:
         return None
     return image
+
+
+def _store_image(store, key, image) -> None:
+    """Write a finished reference into the cache, then keep the cache within its budget."""
+    image.write(store.path(key, ".exr"))
+    keep_within_budget(store.root)
 
 
 def _check_finite_render(scene, mean) -> None:
@@ -636,7 +643,7 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
                                 target_p99_rse=target_p99_rse, budget_seconds=budget_seconds,
                                 stopped=stopped))
         if store is not None:
-            image.write(store.path(key, ".exr"))
+            _store_image(store, key, image)
         return image
 
 

@@ -37,6 +37,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "scenes": ("scenes", "list the built-in scenes"),
     "render": ("render", "render a reference image of a scene with Mitsuba"),
     "references": ("references", "the built-in scenes' committed references: list, render"),
+    "cache": ("cache", "the cache: size by kind, budget; prune or clear it"),
     "compare": ("compare", "compare a test image with a reference: metrics and error maps"),
     "approx": ("approx", "render a scene with a fast method"),
     "export": ("export", "write a scene for another renderer (Mitsuba 3 XML with meshes)"),
