@@ -79,6 +79,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..backend import mitsuba
+from ..scenes.mesh_shape import welded_faces
 from .manifold_settings import COUNTERS, INTEGRATOR_NAME, MAX_TRIALS
 
 __all__ = ["INTEGRATOR_NAME", "COUNTERS", "MAX_TRIALS", "register", "counts"]
@@ -109,16 +110,12 @@ def counts(mitsuba_scene) -> dict[str, int] | None:
 def boundary_edge_count(vertices, faces) -> int:
     """Return how many edges of a mesh fail to be shared by exactly two opposed faces.
 
-    Vertices are welded by position first (a box has separate vertices along its edges
-    for its flat normals). 0 for a closed, consistently oriented 2-manifold: the inside
-    the solve refracts into is well defined.
+    Vertices are welded by position first
+    (:func:`~translucent.scenes.mesh_shape.welded_faces`: a box has separate vertices along
+    its edges for its flat normals). 0 for a closed, consistently oriented 2-manifold: the
+    inside the solve refracts into is well defined.
     """
-    vertices = np.asarray(vertices, dtype=np.float64)
-    faces = np.asarray(faces, dtype=np.int64)
-    scale = float(np.abs(vertices).max()) if vertices.size else 1.0
-    keys = np.round(vertices / (1e-7 * max(scale, 1e-30))).astype(np.int64)
-    _, welded = np.unique(keys, axis=0, return_inverse=True)
-    welded = welded.ravel()[faces]
+    welded = welded_faces(vertices, np.asarray(faces, dtype=np.int64))
     directed = np.concatenate([welded[:, [0, 1]], welded[:, [1, 2]], welded[:, [2, 0]]])
     directed = directed[directed[:, 0] != directed[:, 1]]  # degenerate triangles' edges
     forward, counts = np.unique(directed, axis=0, return_counts=True)
