@@ -75,6 +75,34 @@ def compiled_scatter_product():
     return scatter
 
 
+@functools.lru_cache(maxsize=1)
+def compiled_add_rows():
+    """Compile ``out[positions[r]] += values[r]`` for (rows, 3) values and distinct positions.
+
+    One pass where numpy's ``out[positions] += values`` gathers, adds and scatters through
+    two temporaries of the values' size (26 M rows on a solid sphere's S).
+    """
+    import numba
+
+    @parallel_njit(cache=True)
+    def add(values, positions, out):  # pragma: no cover - compiled
+        for row in numba.prange(len(positions)):
+            target = positions[row]
+            out[target, 0] += values[row, 0]
+            out[target, 1] += values[row, 1]
+            out[target, 2] += values[row, 2]
+
+    return add
+
+
+def add_rows(values, positions, out) -> None:
+    """Add ``values`` (rows, 3) to the distinct rows ``positions`` of ``out`` (nnz, 3)."""
+    if len(values) != len(positions):
+        raise ValueError(f"{len(values)} rows of values for {len(positions)} positions")
+    compiled_add_rows()(np.ascontiguousarray(values, dtype=np.float64),
+                        np.ascontiguousarray(positions, dtype=np.int64), out)
+
+
 def scatter_product(operator, table, positions, out) -> None:
     """Add ``operator @ table`` (rows, 3) to the rows ``positions`` of ``out`` (nnz, 3).
 

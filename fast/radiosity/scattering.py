@@ -26,6 +26,7 @@ from ..form_factors import Patches
 from .geometry import ObjectScattering, ScatteringGeometry
 from .kernels import (
     COMPILED_PRODUCT_ENTRIES,
+    add_rows,
     compiled_energy_correction,
     compiled_mixed_profile,
     compiled_rgb_product,
@@ -156,7 +157,7 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
                                               for homogeneous in profile.profiles)]
                 tables[kind] = (mixed_values(item, profile, grid, kind), own_values)
             pair_values, own_values = tables[kind]
-            data[pair_position] += pair_values
+            add_rows(pair_values, pair_position, data)
             for label, values in enumerate(own_values):
                 mine = labels == label
                 data[own_position[mine]] += values[mine]

@@ -142,6 +142,24 @@ def test_scatter_product_refuses_a_position_count_that_is_not_the_row_count():
         scatter_product(operator, np.ones((3, 3)), np.array([0, 1]), np.zeros((4, 3)))
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10), st.integers(0, 6), st.integers(0, 2**32 - 1))
+def test_add_rows_is_numpys_fancy_add(rows, spare, seed):
+    from translucent.fast.radiosity.kernels import add_rows
+
+    rng = np.random.default_rng(seed)
+    size = rows + spare
+    positions = rng.permutation(size)[:rows]
+    values = rng.normal(size=(rows, 3))
+    out = rng.normal(size=(size, 3))
+    expected = out.copy()
+    expected[positions] += values
+    add_rows(values, positions, out)
+    assert np.array_equal(out, expected)
+    with pytest.raises(ValueError, match=f"{rows} rows of values for {rows + 1} positions"):
+        add_rows(values, np.arange(rows + 1), out)
+
+
 def test_compiled_eq16_equals_mixed_profile_sample_by_sample(rng):
     from types import SimpleNamespace
 
