@@ -178,6 +178,14 @@ class RadiosityState:
         self.transfer = transfer_matrix(self.S, self.form_factors)
         return time.perf_counter() - started
 
+    def _say_relighting_iterates(self) -> None:
+        """Say once, among what was skipped, that relit frames iterate until T pays."""
+        sentence = (f"T not built yet: relit frames iterate until their solves have cost its "
+                    f"estimated build of {transfer_seconds_estimate(len(self.patches)):.1f} s "
+                    "(transfer='auto', the ski-rental rule; transfer='never' never builds it)")
+        if not any(s.startswith("T not built yet") for s in self.log.skipped):
+            self.log.skip(sentence)
+
     def patch_irradiance(self, lights=None) -> np.ndarray:
         """Direct irradiance E of every patch (at its centroid), shape (P, 3).
 
@@ -412,9 +420,12 @@ class RadiosityState:
         if material is not None:
             facts["material_seconds"] = self.set_material(material)
         if lights is not None and self.transfer is None and self.knobs["transfer"] == "auto" \
-                and component == "both" and self.transfer_fits() and self.transfer_pays():
-            # relighting: one O(P^3) solve now, one product per channel per frame after
-            facts["transfer_seconds"] = self.precompute_transfer()
+                and component == "both" and self.transfer_fits():
+            if self.transfer_pays():
+                # relighting: one O(P^3) solve now, one product per channel per frame after
+                facts["transfer_seconds"] = self.precompute_transfer()
+            elif self.form_factors is not None and self.form_factors.nnz:
+                self._say_relighting_iterates()
         light_started = time.perf_counter()
         E = self.patch_irradiance(lights)
         facts["irradiance_seconds"] = time.perf_counter() - light_started

@@ -682,6 +682,9 @@ def test_transfer_is_built_once_the_solves_have_cost_its_build(monkeypatch):
     assert state.transfer is None
     assert all(f.metadata["solver"] == "jacobi" for f in frames)
     assert "transfer_seconds" not in frames[-1].metadata
+    # the page says why the frames iterate, once
+    said = [s for s in state.log.skipped if s.startswith("T not built yet")]
+    assert len(said) == 1 and "ski-rental" in said[0]
     monkeypatch.setattr(state_module, "transfer_seconds_estimate",
                         lambda patches: state._solve_seconds)
     built = state.render(lights=[PointLight([1.0, 3.0, 1.0], 20.0)])
