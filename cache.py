@@ -110,7 +110,19 @@ def entry_limit() -> int | None:
     InputError
         When the variable holds anything but a whole number >= 0.
     """
-    given = os.environ.get(ENTRY_LIMIT_VARIABLE, "").strip()
+    return _bytes_setting(ENTRY_LIMIT_VARIABLE, "or unset: no limit")
+
+
+def _bytes_setting(variable: str, zero_or_unset: str) -> int | None:
+    """Return the whole number of bytes >= 0 that ``variable`` holds; None where unset.
+
+    Raises
+    ------
+    InputError
+        Naming the variable, when it holds anything else; ``zero_or_unset`` says what
+        0 or no value means for it.
+    """
+    given = os.environ.get(variable, "").strip()
     if not given:
         return None
     try:
@@ -118,8 +130,8 @@ def entry_limit() -> int | None:
     except ValueError:
         value = -1
     if value < 0:
-        raise InputError("must be a whole number of bytes >= 0 (or unset: no limit)",
-                         field=ENTRY_LIMIT_VARIABLE, value=given)
+        raise InputError(f"must be a whole number of bytes >= 0 ({zero_or_unset})",
+                         field=variable, value=given)
     return value
 
 
@@ -356,17 +368,8 @@ def budget() -> int | None:
     InputError
         When the variable holds anything but a whole number >= 0.
     """
-    given = os.environ.get(BUDGET_VARIABLE, "").strip()
-    if not given:
-        return DEFAULT_BUDGET_BYTES
-    try:
-        value = int(given)
-    except ValueError:
-        value = -1
-    if value < 0:
-        raise InputError("must be a whole number of bytes >= 0 (0: no limit)",
-                         field=BUDGET_VARIABLE, value=given)
-    return value or None
+    value = _bytes_setting(BUDGET_VARIABLE, "0: no limit")
+    return DEFAULT_BUDGET_BYTES if value is None else (value or None)
 
 
 def mark_used(path) -> None:
