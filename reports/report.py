@@ -615,18 +615,18 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     pending = {report.slug: 0 for report in reports}
     for report, _, _ in owners:
         pending[report.slug] += 1
+    # a scene with no task is scored after the tasks; the others as their last task is in
+    untasked = [report for report in reports if pending[report.slug] == 0]
     staging = None
     try:
         staging = _staging_folder(out)
         bar = None  # the scenes scored after the tasks (the tasks' own bar runs before)
-        scored: set[str] = set()
 
         def score(report: SceneReport) -> None:
             for name in renderers:
                 if report.reference_error and report.runs[name].status == "ok":
                     report.runs[name] = MethodRun(name, report.name, "not run",
                                                   "the scene has no reference to compare with")
-            scored.add(report.slug)
             scoring_started = time.perf_counter()
             score_scene(report, staging)
             timing["scoring"] += time.perf_counter() - scoring_started
@@ -669,10 +669,9 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
             task_times = [task_time(task, owner, seconds, worker)
                           for task, owner, (_, seconds, worker) in zip(tasks, owners, timed,
                                                                         strict=True)]
-        left = [report for report in reports if report.slug not in scored]
-        bar = tqdm(total=len(left), desc="metrics and error maps", disable=not progress,
+        bar = tqdm(total=len(untasked), desc="metrics and error maps", disable=not progress,
                    leave=False, file=sys.stderr)
-        for report in left:
+        for report in untasked:
             score(report)
         bar.close()
         regressions = []

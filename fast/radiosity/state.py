@@ -84,6 +84,7 @@ class RadiosityState:
         self._solved = None                 # (B, F B) of the last solve, for image()
         # the F half of the bound of Eq. 15 does not change with the materials
         self._form_factor_facts = form_factor_bounds(F, patches)
+        self._inter_reflects = F is not None and F.nnz > 0  # else T would be S itself
         self._shadow_points: dict = {}      # AreaLightShadows per point set and engine
         self._interreflected = None         # S F B of the last solve (warm start)
         self._cached_gbuffer = None
@@ -160,9 +161,8 @@ class RadiosityState:
         A T-product frame saves at most its solve; the measured figures are in
         docs/radiosity.md.
         """
-        if self.form_factors is None or self.form_factors.nnz == 0:
-            return False
-        return self._solve_seconds >= transfer_seconds_estimate(len(self.patches))
+        return self._inter_reflects and \
+            self._solve_seconds >= transfer_seconds_estimate(len(self.patches))
 
     def precompute_transfer(self) -> float | None:
         """Compute T for the current materials when it fits; returns seconds (None: skipped)."""
@@ -180,11 +180,12 @@ class RadiosityState:
 
     def _say_relighting_iterates(self) -> None:
         """Say once, among what was skipped, that relit frames iterate until T pays."""
-        sentence = (f"T not built yet: relit frames iterate until their solves have cost its "
-                    f"estimated build of {transfer_seconds_estimate(len(self.patches)):.1f} s "
-                    "(transfer='auto', the ski-rental rule; transfer='never' never builds it)")
-        if not any(s.startswith("T not built yet") for s in self.log.skipped):
-            self.log.skip(sentence)
+        if any(s.startswith("T not built yet") for s in self.log.skipped):
+            return
+        self.log.skip(f"T not built yet: relit frames iterate until their solves have cost "
+                      f"its estimated build of "
+                      f"{transfer_seconds_estimate(len(self.patches)):.1f} s (transfer='auto', "
+                      "the ski-rental rule; transfer='never' never builds it)")
 
     def patch_irradiance(self, lights=None) -> np.ndarray:
         """Direct irradiance E of every patch (at its centroid), shape (P, 3).
@@ -424,7 +425,7 @@ class RadiosityState:
             if self.transfer_pays():
                 # relighting: one O(P^3) solve now, one product per channel per frame after
                 facts["transfer_seconds"] = self.precompute_transfer()
-            elif self.form_factors is not None and self.form_factors.nnz:
+            elif self._inter_reflects:
                 self._say_relighting_iterates()
         light_started = time.perf_counter()
         E = self.patch_irradiance(lights)

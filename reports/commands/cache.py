@@ -28,6 +28,8 @@ def _size(nbytes: int) -> str:
 
 def run(args) -> int:
     """Print the cache's contents; prune or clear it when asked."""
+    from collections import Counter
+
     from ...cache import budget, cache_dir, cache_entries, prune
     from ...errors import InputError, check_count
     from .record import record
@@ -44,15 +46,16 @@ def run(args) -> int:
     elif args.prune:
         removed = prune(limit, folder)
     entries = cache_entries(folder)
-    kinds: dict[str, list[int]] = {}
+    counts, sizes = Counter(), Counter()
     for entry in entries:
-        count, nbytes = kinds.setdefault(entry.namespace or "(top)", [0, 0])
-        kinds[entry.namespace or "(top)"] = [count + 1, nbytes + entry.nbytes]
+        counts[entry.namespace or "(top)"] += 1
+        sizes[entry.namespace or "(top)"] += entry.nbytes
+    kinds = {name: (counts[name], sizes[name]) for name in sorted(counts)}
     total = sum(entry.nbytes for entry in entries)
     print(f"cache: {folder}")
     print(f"budget: {_size(limit) if limit else 'no limit'}"
           + ("" if args.max_bytes is not None else " (TRANSLUCENT_CACHE_MAX_BYTES)"))
-    for name, (count, nbytes) in sorted(kinds.items()):
+    for name, (count, nbytes) in kinds.items():
         print(f"  {name}: {count} entr{'y' if count == 1 else 'ies'}, {_size(nbytes)}")
     print(f"total: {len(entries)} entries, {_size(total)}")
     if args.prune or args.clear:
