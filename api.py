@@ -144,7 +144,8 @@ def compare(reference, test, *, mask=None) -> list[dict]:
     Returns
     -------
     list of dict
-        One per metric (relmse, rmse, psnr, ssim, hdr-flip, ldr-flip, ciede2000):
+        One per metric of the registry (hdr_flip, ldr_flip, relative_mse, relative_mse_raw,
+        rmse, psnr, ssim, ciede2000):
         ``metric``, ``value``, ``noise_floor``, ``verdict`` ("resolved", "within reference
         noise", or None without a variance), ``lower_is_better``, ``about``
         (:func:`translucent.reports.metric_table.metric_rows`).

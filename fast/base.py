@@ -44,8 +44,9 @@ from ..image import Image
 from .registry import METHODS, method
 
 __all__ = ["METHODS", "PrecomputedState", "Refusal", "applicability", "method", "refusal_of",
-           "refuse_inapplicable", "StageLog", "StageProgress", "scored_object_names",
-           "with_defaults"]
+           "refuse_inapplicable", "StageLog", "NO_LIGHT", "NO_TRANSLUCENT_OBJECT",
+           "NOTHING_TO_EDIT", "UNSUPPORTED_LIGHT", "UNSUPPORTED_MATERIAL", "StageProgress",
+           "scored_object_names", "with_defaults"]
 
 @dataclass(frozen=True)
 class Refusal:
@@ -70,6 +71,14 @@ class Refusal:
 
     def __str__(self) -> str:
         return self.sentence
+
+
+#: Reason codes of :class:`Refusal` that the built-in methods share (a method may add its own).
+NO_LIGHT = "no_light"
+NO_TRANSLUCENT_OBJECT = "no_translucent_object"
+UNSUPPORTED_LIGHT = "unsupported_light"
+UNSUPPORTED_MATERIAL = "unsupported_material"
+NOTHING_TO_EDIT = "nothing_to_edit"
 
 
 def refusal_of(reason) -> Refusal | None:
@@ -149,9 +158,9 @@ class StageLog:
 class StageProgress:
     """Time a precomputation's stages into a :class:`StageLog`, one progress-bar step each.
 
-    The bar (tqdm, on standard error) names the stage under way; it stays hidden where
-    standard error is not a terminal, and under the command line's ``--no-progress`` or
-    ``--quiet``.
+    The bar (:func:`translucent.progress.progress_bar`) names the stage under way; it
+    stays hidden where standard error is not a terminal, and inside
+    :func:`translucent.progress.hidden` (the command line's ``--no-progress``).
 
     Parameters
     ----------
@@ -175,11 +184,11 @@ class StageProgress:
     """
 
     def __init__(self, log: StageLog, description: str, stages: int, enabled: bool = True):
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
         self.log = log
-        self._bar = tqdm(total=stages, desc=description, unit="stage", leave=False,
-                         disable=not enabled or None)
+        self._bar = progress_bar(total=stages, description=description, unit="stage",
+                                 enabled=enabled)
 
     @contextlib.contextmanager
     def stage(self, name: str):
@@ -195,6 +204,62 @@ class StageProgress:
 
     def __exit__(self, *exc) -> None:
         self._bar.close()
+
+
+#: The note a precomputation leaves in ``StageLog.notes["cache"]``: made now, or read back.
+CACHE_MISS = "miss"
+CACHE_HIT = "hit"
+
+
+def load_or_precompute(namespace: str, key: str, make, *, what: str, log_of, valid=None,
+                       nbytes=None, part: str | None = None):
+    """Return a precomputation from the method's cache, or ``make()`` it and store it.
+
+    The one load-or-make step of every method: under the entry's lock (of several processes
+    asking at once one computes, the others read), with one wording of the cache note
+    (:data:`CACHE_HIT` or :data:`CACHE_MISS` in ``log.notes["cache"]``, per ``part`` where
+    a method stores several entries), and the sentence saying when an entry was too large
+    to keep (``TRANSLUCENT_CACHE_ENTRY_LIMIT``).
+
+    Parameters
+    ----------
+    namespace : str
+        The method's cache folder (``"prt"``).
+    key : str
+        The content hash of everything the precomputation depends on.
+    make : callable
+        ``make() -> value``, called on a miss.
+    what : str
+        Named while another process waits for the entry ("the PRT transfer of 'bunny'").
+    log_of : callable
+        ``log_of(value) -> StageLog`` where the note goes.
+    valid : callable, optional
+        ``valid(value) -> bool``: a stored value it refuses (another layout) is a miss.
+    nbytes : callable, optional
+        ``nbytes(value) -> int`` for the cache's entry limit.
+    part : str, optional
+        The note goes to ``notes["cache"][part]`` (one entry per object).
+
+    Returns
+    -------
+    value, made : object, bool
+    """
+    from ..cache import ENTRY_LIMIT_VARIABLE, Cache, entry_limit
+
+    value, made = Cache(namespace).load_or_make(key, make, valid=valid, what=what,
+                                                nbytes=nbytes)
+    log = log_of(value)
+    note = CACHE_MISS if made else CACHE_HIT
+    if part is None:
+        log.notes["cache"] = note
+    else:
+        log.notes.setdefault("cache", {})[part] = note
+    limit = entry_limit()
+    if made and nbytes is not None and limit is not None and nbytes(value) > limit:
+        log.skip(f"the precomputation ({nbytes(value) / 2**20:.0f} MiB) is not kept in the "
+                 f"cache: over its entry limit of {limit / 2**20:.4g} MiB "
+                 f"({ENTRY_LIMIT_VARIABLE}); the next run computes it again")
+    return value, made
 
 
 def scored_object_names(module, scene) -> list[str]:

@@ -14,6 +14,11 @@ The checks, and why each matters to a user of the report:
 
 ``contract``
     The module has the contract's names (:func:`~translucent.fast.registry.contract_problems`).
+``refusal``
+    Where the method does not apply (a catalogue scene it refuses, and the scene with its
+    lights taken away), ``applies_to`` says why with a
+    :class:`~translucent.fast.base.Refusal`: a reason code programs branch on and a
+    sentence, never a bare string or a falsy answer.
 ``knobs``
     An unknown knob is refused with an :class:`~translucent.errors.InputError` (a typo in
     a benchmark must not run the defaults silently).
@@ -40,7 +45,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..image import Image
-from .base import applicability, scored_object_names
+from .base import Refusal, applicability, scored_object_names
 from .registry import contract_problems, method
 
 __all__ = ["CHECKS", "ConformanceFailure", "IMAGE_RTOL", "NotChecked", "TINY_SPHERE",
@@ -180,6 +185,31 @@ def check_contract(module, scene, knobs) -> str:
     return "applies_to, precompute and DEFAULT_KNOBS are there"
 
 
+def check_refusal(module, scene, knobs) -> str:
+    """Check that every refusal is a Refusal with a code and a sentence."""
+    from ..scenes import load_scene, loads_scene
+
+    candidates = [(name, loads_scene(TINY_SPHERE) if name == "conformance_sphere"
+                   else load_scene(name)) for name in SCENES]
+    candidates.append(("the scene without its lights", scene.with_lights(())))
+    refused = []
+    for name, candidate in candidates:
+        reason = module.applies_to(candidate)
+        if reason is None:
+            continue
+        if not isinstance(reason, Refusal):
+            raise ConformanceFailure(f"applies_to({name}) returned a {type(reason).__name__} "
+                                     f"({reason!r}): a refusal is a translucent.fast.base."
+                                     "Refusal(code, sentence)")
+        if not reason.code or not reason.sentence:
+            raise ConformanceFailure(f"applies_to({name}): a Refusal without a code or a "
+                                     f"sentence ({reason!r})")
+        refused.append(f"{name} ({reason.code})")
+    if not refused:
+        raise NotChecked("applies to every catalogue scene and to the scene without lights")
+    return "refuses with a Refusal: " + ", ".join(refused)
+
+
 def check_knobs(module, scene, knobs) -> str:
     """Check that an unknown knob is an InputError."""
     try:
@@ -297,7 +327,8 @@ def check_editing(module, scene, knobs) -> str:
 
 
 #: The checks by name, in the order :func:`check_method` runs them.
-CHECKS = {"contract": check_contract, "knobs": check_knobs, "render": check_render,
+CHECKS = {"contract": check_contract, "refusal": check_refusal, "knobs": check_knobs,
+          "render": check_render,
           "determinism": check_determinism, "relighting": check_relighting,
           "editing": check_editing}
 
@@ -321,8 +352,6 @@ def _prepared(name: str, scene, knobs):
     if scene is None:
         scene = conformance_scene(module)
     chosen = dict(getattr(module, "QUICK_KNOBS", {}) or {}) if knobs is None else dict(knobs)
-    if "progress" in getattr(module, "DEFAULT_KNOBS", {}):
-        chosen.setdefault("progress", False)
     return module, scene, chosen
 
 

@@ -12,10 +12,9 @@ runs in ``translucent approx``, ``translucent report --methods``, ``translucent 
 tradeoff`` and the conformance checks of :mod:`translucent.fast.conformance`, with no edit
 to the suite.
 
-The contract a method's module (or object) follows is checked by :func:`contract_problems`
-and described in docs/methods.md: ``applies_to(scene)``, ``precompute(scene, **knobs)``
-and ``DEFAULT_KNOBS``; optionally ``scored_objects(scene)``, ``QUICK_KNOBS``,
-``approx(scene, args)`` with ``add_approx_arguments(parser)``.
+The contract a method's module (or object) follows is written once, in
+:mod:`translucent.fast.contract` (and docs/methods.md, derived from it), and checked here
+by :func:`contract_problems`.
 """
 
 from __future__ import annotations
@@ -31,10 +30,11 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
+from .contract import CONTRACT, OPTIONAL, REQUIRED
 
 __all__ = ["ENTRY_POINT_GROUP", "EntryPointTarget", "METHODS", "MethodContractError",
-           "MethodRegistry", "contract_problems", "method", "method_fingerprint", "register_method",
-           "unregister_method"]
+           "MethodRegistry", "check_known", "contract_problems", "method", "method_fingerprint",
+           "register_method", "unregister_method"]
 
 #: The entry-point group fast methods are registered under.
 ENTRY_POINT_GROUP = "translucent.methods"
@@ -52,19 +52,8 @@ BUILTIN_METHODS = {
     "brdf_pca": "translucent.fast.brdf_pca",
 }
 
-#: The attributes every method has, and what each must be.
-REQUIRED = {"applies_to": "a function applies_to(scene) returning None or a reason",
-            "precompute": "a function precompute(scene, **knobs) returning a state",
-            "DEFAULT_KNOBS": "a dict of the knobs and their defaults"}
-
-#: The attributes a method may have.
-OPTIONAL = {"scored_objects": "a function scored_objects(scene) -> list of object names",
-            "QUICK_KNOBS": "a dict of cheap knobs for smoke runs and the conformance checks",
-            "LADDERS": "a dict of ladder name -> list of knob dicts for `bench tradeoff`",
-            "KNOBS": "a translucent.fast.knobs.KnobSpec declaring the knobs (validation, "
-                     "flags, cache key, ladders)",
-            "approx": "a function approx(scene, args) -> Image for `translucent approx`",
-            "add_approx_arguments": "a function add_approx_arguments(parser)"}
+#: Where the contract is written (parts by name): required and optional attributes.
+_PARTS = {part.name: part for part in CONTRACT if part.kind != "state"}
 
 
 class MethodContractError(InputError):
@@ -84,14 +73,15 @@ def contract_problems(target) -> list[str]:
     for name, what in REQUIRED.items():
         if not hasattr(target, name):
             problems.append(f"{name}: missing ({what})")
-    for name in ("applies_to", "precompute", "scored_objects", "approx",
-                 "add_approx_arguments"):
-        if hasattr(target, name) and not callable(getattr(target, name)):
-            problems.append(f"{name}: not callable ({(REQUIRED | OPTIONAL)[name]})")
-    for name in ("DEFAULT_KNOBS", "QUICK_KNOBS"):
-        knobs = getattr(target, name, {})
-        if not isinstance(knobs, dict) or not all(isinstance(k, str) for k in knobs):
-            problems.append(f"{name}: not a dict with str keys ({(REQUIRED | OPTIONAL)[name]})")
+    for name, part in _PARTS.items():
+        if not hasattr(target, name):
+            continue
+        value = getattr(target, name)
+        if part.kind == "function" and not callable(value):
+            problems.append(f"{name}: not callable ({part.summary})")
+        elif part.kind == "dict" and (not isinstance(value, dict)
+                                      or not all(isinstance(k, str) for k in value)):
+            problems.append(f"{name}: not a dict with str keys ({part.summary})")
     quick = getattr(target, "QUICK_KNOBS", {})
     defaults = getattr(target, "DEFAULT_KNOBS", {})
     if hasattr(target, "KNOBS"):
@@ -108,6 +98,22 @@ def contract_problems(target) -> list[str]:
         if unknown:
             problems.append(f"QUICK_KNOBS: knobs not in DEFAULT_KNOBS: {', '.join(unknown)}")
     return problems
+
+
+def check_known(name, field: str = "method") -> str:
+    """Return ``name`` if a fast method of that name is registered; otherwise refuse it.
+
+    The one place an unknown method name is refused, with the valid ones listed.
+
+    Raises
+    ------
+    InputError
+        ``name`` is not registered.
+    """
+    if name not in METHODS:
+        raise InputError(f"unknown fast method; valid: {', '.join(METHODS)}", field=field,
+                         value=name)
+    return name
 
 
 def _check_name(name) -> str:
@@ -246,10 +252,7 @@ def register_method(name: str, target) -> None:
 
 def unregister_method(name: str) -> None:
     """Forget a method registered in this process (an unknown name is an error)."""
-    if name not in METHODS:
-        raise InputError(f"unknown fast method; valid: {', '.join(METHODS)}", field="method",
-                         value=name)
-    del METHODS[name]
+    del METHODS[check_known(name)]
 
 
 def _load(name: str, target):
@@ -259,7 +262,7 @@ def _load(name: str, target):
         except ModuleNotFoundError as error:
             if error.name is not None and (target == error.name
                                            or target.startswith(error.name + ".")):
-                raise InputError(f"this fast method is not built yet (no module {target})",
+                raise InputError(f"this fast method is not installed (no module {target})",
                                  field="method", value=name) from error
             raise
     if isinstance(target, EntryPointTarget):
@@ -269,7 +272,7 @@ def _load(name: str, target):
         except ModuleNotFoundError as error:
             if error.name is not None and (module_name == error.name
                                            or module_name.startswith(error.name + ".")):
-                raise InputError(f"this fast method is not built yet (entry point "
+                raise InputError(f"this fast method is not installed (entry point "
                                  f"{target.value} of group {ENTRY_POINT_GROUP})",
                                  field="method", value=name) from error
             raise
@@ -286,13 +289,11 @@ def method(name: str):
     ------
     InputError
         An unknown name (the valid ones listed), a method whose module is not installed
-        ("not built yet"), a name two installed distributions claim.
+        ("not installed"), a name two installed distributions claim.
     MethodContractError
         A method that does not follow the contract (each missing part named).
     """
-    if name not in METHODS:
-        raise InputError(f"unknown fast method; valid: {', '.join(METHODS)}", field="method",
-                         value=name)
+    check_known(name)
     conflict = METHODS.conflict(name)
     if conflict and isinstance(METHODS[name], EntryPointTarget):
         raise InputError("two installed distributions register this fast method: "

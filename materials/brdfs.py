@@ -321,7 +321,7 @@ def fixed_term_scalar(code: int, cos_l: float, cos_v: float, l_dot_v: float,
 
     ``code`` is the model's :data:`MODEL_CODES` entry. Written so that compiled kernels
     take this very function (``numba.njit(fixed_term_scalar)`` in
-    :mod:`translucent.fast.brdf_pca_kernels`) instead of a copy of the formulas; tested
+    :mod:`translucent.fast.brdf_pca.kernels`) instead of a copy of the formulas; tested
     equal to the array version.
     """
     if code == _BP or code == _LA:

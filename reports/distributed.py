@@ -186,7 +186,7 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         result arrives (in order of completion; serially, in order), while the other
         tasks run on: work on finished results then fills the workers' idle time.
     """
-    from tqdm.auto import tqdm
+    from ..progress import progress_bar
 
     arguments = [tuple(args) for args in arguments]
     if groups is not None and len(groups) != len(arguments):
@@ -196,7 +196,7 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         function = timed_call
     if local or (scheduler is None and len(arguments) <= 1):
         results = []
-        for position, args in enumerate(tqdm(arguments, disable=not progress, leave=False)):
+        for position, args in enumerate(progress_bar(arguments, enabled=progress)):
             results.append(function(*args))
             if on_result is not None:
                 on_result(position, results[-1])
@@ -204,7 +204,7 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
     from dask.distributed import as_completed
 
     # the bar starts with the cluster, whose workers take seconds to start
-    with tqdm(total=len(arguments), disable=not progress, leave=False) as bar, \
+    with progress_bar(total=len(arguments), enabled=progress) as bar, \
             dask_client(scheduler, workers=workers) as client:
         bar.set_postfix_str("starting the workers")
         # each worker process imports Mitsuba and sets its variant once, before any task:

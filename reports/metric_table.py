@@ -8,11 +8,11 @@ on a pair of images and says which way is better; :func:`metric_rows` lays a
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Callable
 
-from ..errors import InputError
 from ..image import Image
+from .metric_registry import REGISTRY, MetricSpec, metric_spec
 from .metrics import (
     Metrics,
     check_image,
@@ -39,29 +39,40 @@ def _on_images(function: Callable) -> Callable[[Image, Image], float]:
 
 @dataclass(frozen=True)
 class MetricDefinition:
-    """One metric as users pick it by name: how to compute it and which way is better.
+    """One metric as users pick it by name: its :class:`MetricSpec` and how to compute it.
 
     Calling it with ``(reference, test)`` images computes only this metric.
 
     Parameters
     ----------
-    name : str
-        The name on the command line (``"hdr-flip"``).
-    field : str
-        The :class:`Metrics` attribute holding it.
-    lower_is_better : bool
-        True for errors (a threshold is a maximum), False for PSNR and SSIM (a minimum).
-    description : str
-        One line for tables and help.
+    spec : MetricSpec
+        Name, label, unit, direction and tolerance (:mod:`.metric_registry`).
     function : callable
         ``(reference: Image, test: Image) -> float``.
     """
 
-    name: str
-    field: str
-    lower_is_better: bool
-    description: str
+    spec: MetricSpec
     function: Callable[[Image, Image], float]
+
+    @property
+    def name(self) -> str:
+        """The metric's name: its :class:`Metrics` field and JSON key."""
+        return self.spec.name
+
+    @property
+    def field(self) -> str:
+        """The :class:`Metrics` attribute holding it (its name)."""
+        return self.spec.name
+
+    @property
+    def lower_is_better(self) -> bool:
+        """True for errors (a threshold is a maximum), False for PSNR and SSIM."""
+        return self.spec.lower_is_better
+
+    @property
+    def description(self) -> str:
+        """One line for tables and help."""
+        return self.spec.description
 
     def __call__(self, reference: Image, test: Image) -> float:
         """Compute the metric of ``test`` against ``reference``."""
@@ -80,39 +91,38 @@ def _relmse_on_images(reference: Image, test: Image) -> float:
     return relative_mse(reference.rgb, test.rgb, reference_variance=reference.variance)
 
 
-_HDR_FLIP = MetricDefinition(
-    "hdr-flip", "hdr_flip", True, "HDR-FLIP, mean over pixels (0 = identical)",
-    _on_images(lambda r, t: flip_map(r, t, dynamic_range="HDR")[0]))
+def _relmse_raw_on_images(reference: Image, test: Image) -> float:
+    for image, name in ((reference, "reference"), (test, "test")):
+        check_image(image, name)
+    return relative_mse(reference.rgb, test.rgb)
 
-#: name -> definition; ``flip`` is HDR-FLIP (renders are HDR).
-METRICS: dict[str, MetricDefinition] = {
-    "flip": replace(_HDR_FLIP, name="flip"),
-    "hdr-flip": _HDR_FLIP,
-    "ldr-flip": MetricDefinition(
-        "ldr-flip", "ldr_flip", True, "LDR-FLIP of the sRGB display images",
-        _on_images(lambda r, t: flip_map(r, t, dynamic_range="LDR")[0])),
-    "relmse": MetricDefinition(
-        "relmse", "relative_mse", True, "relative MSE, reference noise discounted",
-        _relmse_on_images),
-    "rmse": MetricDefinition("rmse", "rmse", True, "root mean squared error (radiance)",
-                             _on_images(rmse)),
-    "psnr": MetricDefinition("psnr", "psnr", False, "PSNR in dB, peak = reference maximum",
-                             _on_images(lambda r, t: psnr(r, t, data_range=float(r.max())))),
-    "ssim": MetricDefinition("ssim", "ssim", False, "mean SSIM of the sRGB display images",
-                             _on_images(lambda r, t: ssim_map(r, t)[0])),
-    "ciede2000": MetricDefinition(
-        "ciede2000", "ciede2000", True, "mean CIEDE2000 of the display images",
-        _on_images(lambda r, t: ciede2000_map(r, t).mean())),
+
+#: How each metric of the registry is computed on a pair of images.
+_FUNCTIONS: dict[str, Callable[[Image, Image], float]] = {
+    "hdr_flip": _on_images(lambda r, t: flip_map(r, t, dynamic_range="HDR")[0]),
+    "ldr_flip": _on_images(lambda r, t: flip_map(r, t, dynamic_range="LDR")[0]),
+    "relative_mse": _relmse_on_images,
+    "relative_mse_raw": _relmse_raw_on_images,
+    "rmse": _on_images(rmse),
+    "psnr": _on_images(lambda r, t: psnr(r, t, data_range=float(r.max()))),
+    "ssim": _on_images(lambda r, t: ssim_map(r, t)[0]),
+    "ciede2000": _on_images(lambda r, t: ciede2000_map(r, t).mean()),
 }
+
+#: name -> definition, one per metric of :data:`~.metric_registry.REGISTRY`; :func:`metric`
+#: also takes the earlier spellings (``flip`` and ``hdr-flip`` are HDR-FLIP: renders are HDR).
+METRICS: dict[str, MetricDefinition] = {spec.name: MetricDefinition(spec, _FUNCTIONS[spec.name])
+                                        for spec in REGISTRY}
 
 
 def metric(name: str) -> MetricDefinition:
-    """Return the metric called ``name`` (case-insensitive).
+    """Return the metric called ``name`` or one of its aliases (case-insensitive).
 
     Parameters
     ----------
     name : str
-        One of ``METRICS``: flip, hdr-flip, ldr-flip, relmse, rmse, psnr, ssim, ciede2000.
+        One of ``METRICS`` (hdr_flip, ldr_flip, relative_mse, relative_mse_raw, rmse, psnr,
+        ssim, ciede2000), or an earlier spelling (flip, hdr-flip, relmse, ...).
 
     Returns
     -------
@@ -124,11 +134,7 @@ def metric(name: str) -> MetricDefinition:
     InputError
         For an unknown name; the message lists the valid ones.
     """
-    key = str(name).strip().lower()
-    if key not in METRICS:
-        raise InputError(f"unknown metric; valid: {', '.join(METRICS)}", field="metric",
-                         value=name)
-    return METRICS[key]
+    return METRICS[metric_spec(name).name]
 
 
 def metric_rows(metrics: Metrics, floor: Metrics | None = None, *,
@@ -150,7 +156,7 @@ def metric_rows(metrics: Metrics, floor: Metrics | None = None, *,
     Returns
     -------
     list of dict
-        One per metric of :data:`METRICS` (``flip`` folded into ``hdr-flip``): ``metric``,
+        One per metric of :data:`METRICS`: ``metric``,
         ``value``, ``noise_floor``, ``verdict`` (:data:`RESOLVED`, :data:`WITHIN_NOISE` or
         None), ``lower_is_better``, ``about``.
     """
@@ -158,8 +164,6 @@ def metric_rows(metrics: Metrics, floor: Metrics | None = None, *,
     floors = floor.as_dict() if floor is not None else {}
     rows = []
     for name, entry in METRICS.items():
-        if name == "flip":
-            continue  # the same number as hdr-flip
         value = values[entry.field]
         noise = floors.get(entry.field)
         row = {"metric": name, "value": value, "noise_floor": noise,

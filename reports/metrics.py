@@ -408,6 +408,19 @@ def flip_map(reference, test, *, dynamic_range: str = "HDR",
     return float(mean_flip), np.asarray(errors, dtype=np.float32).reshape(reference.shape[:2])
 
 
+def _colour():
+    """Import colour-science without its change to how numpy prints arrays.
+
+    colour sets numpy's print options to the legacy 1.13 style when it is imported, which
+    would change every array a user's program prints after its first CIEDE2000.
+    """
+    options = np.get_printoptions()
+    import colour
+
+    np.set_printoptions(**options)
+    return colour
+
+
 def ciede2000_map(reference, test, *, white: float | None = None) -> np.ndarray:
     """Return the per-pixel CIEDE2000 colour difference of the display images.
 
@@ -428,8 +441,7 @@ def ciede2000_map(reference, test, *, white: float | None = None) -> np.ndarray:
     ndarray, shape (...)
         Delta E 2000 (about 1 is just noticeable; L* spans 0-100); NaN where a pixel is NaN.
     """
-    import colour
-
+    colour = _colour()
     reference, test = _pair(reference, test)
     white = display_white(reference) if white is None else white
     srgb = colour.RGB_COLOURSPACES["sRGB"]
@@ -664,9 +676,6 @@ NOISE_MARGIN = 4.0
 RESOLVED = "resolved"
 WITHIN_NOISE = "within reference noise"
 
-#: The metrics that get a noise floor and a verdict.
-NOISE_FLOOR_FIELDS = ("relative_mse", "relative_mse_raw", "rmse", "psnr", "ssim", "hdr_flip",
-                      "ldr_flip", "ciede2000")
 
 
 def noise_floor(reference: Image, *, draws: int = NOISE_FLOOR_DRAWS, seed: int = 0,

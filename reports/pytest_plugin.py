@@ -3,7 +3,7 @@
 Installed with ``translucent`` and registered through the ``pytest11`` entry point, so a
 project's tests need no conftest. It offers:
 
-``assert_image_close(test, reference, metric="hdr-flip", max=...)``
+``assert_image_close(test, reference, metric="hdr_flip", max=...)``
     Fails when a metric of :mod:`translucent.reports.metrics` is beyond its bound
     (``max`` for errors, ``min`` for psnr and ssim) and writes the error maps
     (:func:`~translucent.reports.error_maps.write_error_maps`) into a folder the
@@ -155,7 +155,7 @@ def _as_image(value, role: str):
                     f"path; got {type(value).__name__}")
 
 
-def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | None = None,
+def assert_image_close(test, reference, metric: str = "hdr_flip", max: float | None = None,
                        min: float | None = None, *, artifacts=None,
                        name: str | None = None) -> float:
     """Assert that ``test`` is within a metric's bound of ``reference``.
@@ -166,8 +166,9 @@ def assert_image_close(test, reference, metric: str = "hdr-flip", max: float | N
         The image judged and the reference (linear radiance; a reference's variance is
         discounted from relmse).
     metric : str
-        A name of :data:`translucent.reports.metric_table.METRICS`: flip, hdr-flip, ldr-flip,
-        relmse, rmse, psnr, ssim, ciede2000.
+        A name of :data:`translucent.reports.metric_table.METRICS` (hdr_flip, ldr_flip,
+        relative_mse, relative_mse_raw, rmse, psnr, ssim, ciede2000) or an earlier spelling
+        (flip, hdr-flip, relmse).
     max : float, optional
         Upper bound, for the error metrics.
     min : float, optional
@@ -387,7 +388,7 @@ class ImageChecks:
     def __init__(self, artifacts: Path):
         self.artifacts = Path(artifacts)
 
-    def assert_image_close(self, test, reference, metric: str = "hdr-flip",
+    def assert_image_close(self, test, reference, metric: str = "hdr_flip",
                            max: float | None = None, min: float | None = None, *,
                            name: str | None = None) -> float:
         """Run :func:`assert_image_close` with this test's artifacts folder."""

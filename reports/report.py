@@ -23,7 +23,7 @@ A method run is kept in the ``"report"`` cache, keyed by the scene, the method, 
 the versions and a hash of the source of the packages it depends on; a second report with
 nothing changed therefore renders nothing and shows the image and times measured when it
 was first rendered (the page says so). A method that fails shows its error in the page and
-the run goes on; one that is not built yet or does not apply to a scene is listed with the
+the run goes on; one that is not installed or does not apply to a scene is listed with the
 reason.
 
 Regression: the four gated metrics (:data:`TOLERANCES`) are compared with a stored baseline
@@ -43,14 +43,15 @@ import shutil
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..atomic import atomic_write_text, check_output_folder
+from ..atomic import atomic_write_text, check_output_folder, note_input
 from ..errors import InputError, check_count
 from ..image import Image
-from .regression import (
+from ..progress import progress_bar
+from .baselines import (
     BASELINE_FORMAT,
     DEFAULT_BASELINE,
     METRIC_LABELS,
@@ -63,16 +64,18 @@ from .regression import (
     updated_baseline,
 )
 from .renderer_images import renderer_images, renderers_in
+from .report_model import LADDER, PATH_TRACING, ReportResult, SceneReport, keep_run
 from .report_page import html_page
-from .report_summary import print_summary, speedup_fields, summary_rows, task_time
+from .report_summary import print_summary, speedup_fields, summary_rows
+from .report_tasks import MethodTask, PathTracingTask, ReferenceTask, run_task, task_entry
 from .runs import (
     MethodRun,
     backend_versions,
     committed_reference_for,
     json_safe,
     portable_scene,
+    reference_path,
     render_reference,
-    report_task,
     run_method,
     timestamp,
 )
@@ -85,7 +88,6 @@ __all__ = [
     "committed_reference_for",
     "json_safe",
     "render_reference",
-    "reference_path",
     "BASELINE_FORMAT",
     "DEFAULT_BASELINE",
     "DEFAULT_PASSES",
@@ -122,8 +124,8 @@ DEFAULT_REFERENCE_BUDGET = 300.0
 PROGRESSIVE_SPP = 32
 
 #: The largest method precomputation (bytes) a report keeps in the cache by default
-#: (``--keep-precomputations`` keeps all): PRT's and BRDF-PCA's tens of MB are kept,
-#: radiosity's dense operators on the default spheres (1-3 GB each) are not.
+#: (``--keep-precomputations`` keeps all): PRT's and BRDF-PCA's are kept, radiosity's
+#: dense operators on the default spheres are not (their sizes: docs/report.md).
 REPORT_CACHE_ENTRY_LIMIT = 256 * 2**20
 
 #: Bumped when what a cached method run holds changes, so older entries miss (2: the warm
@@ -138,12 +140,9 @@ REPORT_RELIGHT_FRAMES = 3
 #: cheapest settings of its first ladder (the method's ``LADDERS`` or knob spec:
 #: :func:`~translucent.reports.bench.tradeoff.declared_ladders`), so that the plot shows
 #: which way, and how fast, the error falls with cost.
-#: One point keeps a fresh report within 5 minutes on the 2-core machine (docs/report.md).
+#: One point, since each adds a method run per scene and method to a fresh report (what
+#: it cost, measured: docs/report.md).
 REPORT_LADDER_POINTS = 1
-
-#: The owner of a ladder run among a report's tasks: ``(LADDER, method name)``.
-LADDER = "ladder"
-
 
 def ladder_knobs(module, name: str, points: int = REPORT_LADDER_POINTS) -> list[dict]:
     """Return the knob settings of the report's ladder for a method (cheap first).
@@ -161,16 +160,6 @@ def ladder_knobs(module, name: str, points: int = REPORT_LADDER_POINTS) -> list[
         return chosen[:points]
     return []
 
-
-def _keep_run(report, owner, run: MethodRun) -> None:
-    """File a finished run under its method, or under its method's ladder."""
-    if isinstance(owner, tuple) and owner[0] == LADDER:
-        report.ladders.setdefault(owner[1], []).append(run)
-    else:
-        report.runs[owner] = run
-
-#: The owner name of a scene's path-tracing ladder task (not a method).
-PATH_TRACING = "path tracing"
 
 #: Built-in scenes the default run leaves out, and why (shown in the page).
 EXCLUDED_SCENES: dict[str, str] = {
@@ -238,27 +227,6 @@ def _run_key(method_name: str, scene, knobs: dict, fingerprint: str, versions: d
                         versions)
 
 
-def reference_path(scene, spp: int, passes: int) -> Path:
-    """Where the reference ``render(scene, spp=spp, passes=passes)`` is cached (may not exist).
-
-    The settings are those of :func:`translucent.reference.render` with its own defaults, read
-    from its signature, so a change of a default there cannot make this look in the wrong
-    place.
-    """
-    import inspect
-
-    from ..cache import Cache
-    from ..reference.render import reference_key, reference_settings, render
-
-    defaults = {name: parameter.default
-                for name, parameter in inspect.signature(render).parameters.items()
-                if parameter.default is not inspect.Parameter.empty}
-    wanted = inspect.signature(reference_settings).parameters
-    settings = reference_settings(**{**{name: defaults[name] for name in wanted
-                                        if name in defaults}, "spp": spp, "passes": passes})
-    return Cache("reference").path(reference_key(scene, settings), ".exr")
-
-
 def _unconvertible(scene) -> str:
     """Return why Mitsuba cannot take ``scene`` (no render needed to know), or ""."""
     from ..reference import convert_scene
@@ -271,102 +239,22 @@ def _unconvertible(scene) -> str:
 
 
 def _cached_reference(scene, spp: int, passes: int) -> Image | None:
-    from ..image import read_exr
+    from ..reference.render import read_cached_reference
 
     path = reference_path(scene, spp, passes)
-    if not path.is_file():
-        return None
-    try:
-        return read_exr(path)
-    except InputError:
-        return None  # unreadable: rendered again
-
-
-# ====================================================================== the run
-
-
-@dataclass
-class SceneReport:
-    """Everything the page shows for one scene (internal to the report)."""
-
-    name: str
-    slug: str
-    scene: Any
-    scene_hash: str
-    spp: int
-    reference: Image | None = None
-    reference_error: str = ""
-    reference_cached: bool = False
-    #: "committed", "progressive" or "fixed passes"
-    reference_source: str = ""
-    #: the reference's noise (:class:`~translucent.noise.NoiseSummary`) and its warning
-    reference_noise: Any = None
-    noise_warning: str = ""
-    #: the noise floor of every metric (:func:`~translucent.reports.metrics.noise_floor`)
-    noise_floor: dict | None = None
-    verdicts: dict[str, dict[str, str]] = field(default_factory=dict)
-    #: the pixels scored (those that see an object of the scene) and the whole-image scores
-    scored_mask: Any = None
-    image_metrics: dict[str, dict] = field(default_factory=dict)
-    runs: dict[str, MethodRun] = field(default_factory=dict)
-    metrics: dict[str, dict] = field(default_factory=dict)
-    metric_errors: dict[str, str] = field(default_factory=dict)
-    checks: dict[str, BaselineCheck] = field(default_factory=dict)
-    files: dict[str, dict[str, str]] = field(default_factory=dict)
-    #: what the path-tracing ladder task returned, its scored curve, each method's speed-up
-    #: (:mod:`translucent.reports.speedup`)
-    path_tracing: Any = None
-    curve: Any = None
-    speedups: dict[str, dict] = field(default_factory=dict)
-    #: per method, the objects it is scored on; where fewer than the scene's, its pixels
-    #: and noise floor (:mod:`translucent.reports.scoring`), kept per set of objects
-    scored_objects: dict[str, list[str]] = field(default_factory=dict)
-    method_masks: dict[str, Any] = field(default_factory=dict)
-    method_floors: dict[str, dict | None] = field(default_factory=dict)
-    object_masks: dict[tuple, tuple] = field(default_factory=dict)
-    object_curves: dict[tuple, Any] = field(default_factory=dict)
-    #: per method, its runs at the cheap end of its quality ladder (:func:`ladder_knobs`),
-    #: and their (frame seconds, relative MSE on its scored pixels)
-    ladders: dict[str, list[MethodRun]] = field(default_factory=dict)
-    ladder_points: dict[str, list[dict]] = field(default_factory=dict)
-
-    def mask_of(self, name: str):
-        """Return the pixels method ``name`` is scored on (None: the whole image)."""
-        return self.method_masks.get(name, self.scored_mask)
-
-    def floor_of(self, name: str) -> dict | None:
-        """Return the noise floor of every metric over the pixels ``name`` is scored on."""
-        return self.method_floors.get(name, self.noise_floor)
-
-
-@dataclass
-class ReportResult:
-    """What :func:`make_report` did.
-
-    Parameters
-    ----------
-    exit_code : int
-        0 fine, 1 a regression against the baseline.
-    out : Path
-        The report folder.
-    regressions : list of str
-        ``"scene/method: message"`` for each regression.
-    seconds : float
-        Wall-clock seconds of the whole run.
-    summary : list of dict
-        Per scene and method: status, the gated metrics, times, baseline verdict.
-    """
-
-    exit_code: int
-    out: Path
-    regressions: list[str]
-    seconds: float
-    summary: list[dict]
+    # served only if made for this key (the file's name); else rendered again
+    return read_cached_reference(path, path.name.removesuffix(".exr"))
 
 
 def _check_out(out) -> Path:
     """Check ``out`` can take a report before anything is computed."""
-    out = check_output_folder(Path(out).expanduser(), "--out")
+    try:
+        out = Path(out).expanduser()
+    except RuntimeError as error:  # "~someone" of no such user
+        raise InputError(f"cannot be resolved ({error})", field="--out", value=str(out)) \
+            from None
+    # the folder's content is replaced: no input (the --images folder) may lie inside it
+    out = check_output_folder(out, "--out", replaces=True)
     if out.is_dir() and any(out.iterdir()) and not (out / "metrics.json").is_file():
         raise InputError("is a folder with other files in it; give a new or empty folder (a "
                          "previous report there is replaced)", field="--out", value=str(out))
@@ -381,15 +269,14 @@ def _check_out(out) -> Path:
 
 def _methods(methods) -> list[str]:
     from ..fast.base import METHODS
+    from ..fast.registry import check_known
 
     if methods is None:
         return list(METHODS)
     chosen = []
     for name in methods:
         name = str(name).strip()
-        if name not in METHODS:
-            raise InputError(f"unknown fast method; valid: {', '.join(METHODS)}",
-                             field="--methods", value=name)
+        check_known(name, field="--methods")
         if name not in chosen:
             chosen.append(name)
     if not chosen:
@@ -436,7 +323,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         The report folder (created; a previous report there is replaced).
     methods : list of str, optional
         Fast methods to run; default all of :data:`translucent.fast.base.METHODS` (those
-        not built yet are listed as such).
+        not installed are listed as such).
     baseline : str or PathLike, optional
         Baseline JSON; default :data:`DEFAULT_BASELINE`. A file given explicitly must exist
         unless ``update_baseline``.
@@ -461,8 +348,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     keep_precomputations : bool
         Keep every method's precomputation in the cache. Default: those up to
         :data:`REPORT_CACHE_ENTRY_LIMIT` bytes (the report keeps its own results; writing
-        radiosity's dense operators, 1-3 GB a scene, cost more than recomputing them saves
-        on a later run, docs/references.md). A method says what it did not keep.
+        radiosity's dense operators costs more than recomputing them saves on a later
+        run, docs/report.md). A method says what it did not keep.
     images : str or PathLike, optional
         A folder of another renderer's images, scored beside (or, without ``methods``,
         instead of) the fast methods: one subfolder per renderer, named as it is to be
@@ -480,251 +367,330 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         unreadable baseline, a stale or unusable committed reference; raised before
         anything is written.
     """
-    from tqdm.auto import tqdm
-
-    from ..cache import Cache, content_hash, limited_entries
-    from ..fast.base import applicability
-    from ..fast.base import method as method_module
-    from ..fast.registry import MethodContractError, method_fingerprint
-    from ..scenes import Scene, load_scene
-    from .distributed import run_tasks
-
     stream = sys.stdout if stream is None else stream
     started = time.perf_counter()
     spp = None if spp is None else check_count(spp, "--spp")
     passes = check_count(passes, "--passes")
     chosen = _methods(methods) if methods is not None or images is None else []
     renderers = renderers_in(images, chosen)
+    note_input(images, "--images")
     out = _check_out(out)
     baseline_path = Path(baseline) if baseline is not None else DEFAULT_BASELINE
     stored_baseline = load_baseline(baseline_path,
                                     required=baseline is not None and not update_baseline)
+    plan = _plan(scenes, chosen, renderers, images, spp, passes, local_workers=scheduler is None)
+    _announce(plan.tasks, stream)
+    timing: dict[str, Any] = {"planning": time.perf_counter() - started, "tasks": 0.0,
+                              "scoring": 0.0, "scoring_during_tasks": 0.0}
+    staging = None
+    try:
+        staging = _staging_folder(out)
+        task_times = _run(plan, staging, timing, scheduler=scheduler, serial=serial,
+                          progress=progress, keep_precomputations=keep_precomputations)
+        regressions = _judge(plan, stored_baseline)
+        exit_code = 1 if regressions and not update_baseline else 0
+        context = {
+            "generated": timestamp(), "versions": plan.versions,
+            "reference": plan.reference_settings, "baseline": str(baseline_path),
+            "baseline_updated": update_baseline,
+            "baseline_versions": stored_baseline.get("versions", {}),
+            "excluded": plan.excluded, "methods": plan.scored, "regressions": regressions,
+            "exit_code": exit_code, "fingerprint": plan.fingerprint,
+            "scheduler": "this process" if serial else (scheduler or "local processes"),
+            "seconds": time.perf_counter() - started,
+            "timing": {**{f"{phase}_seconds": value for phase, value in timing.items()},
+                       "task_seconds": task_times},
+        }
+        summary = summary_rows(plan.reports, plan.scored)
+        _write(plan, staging, context)
+        _replace_folder(staging, out)
+        staging = None
+    finally:
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
+    if update_baseline:
+        _update_baseline(plan, stored_baseline, baseline_path)
+    seconds = time.perf_counter() - started
+    print_summary(summary, regressions, out, seconds, update_baseline, baseline_path, stream,
+                  timing, task_times)
+    for report in plan.reports:
+        if report.noise_warning:
+            print(f"warning: {report.name}: {report.noise_warning}", file=sys.stderr)
+    return ReportResult(exit_code, out, regressions, seconds, summary)
+
+
+# ====================================================================== plan
+
+
+@dataclass
+class _Planned:
+    """A task and whose result it is: a scene's reference, method run or ladder."""
+
+    task: Any
+    report: SceneReport
+    #: None: the reference; a method's name; ``(LADDER, name)``; :data:`PATH_TRACING`
+    owner: Any
+    #: where a finished method run or ladder is kept in the report's cache (None: nowhere)
+    key: str | None
+
+
+@dataclass
+class _Plan:
+    """What a report will do: its scenes, the tasks still to run, how references are made."""
+
+    reports: list[SceneReport]
+    tasks: list[_Planned]
+    #: the methods and other renderers scored
+    scored: list[str]
+    renderers: list[str]
+    excluded: dict[str, str]
+    reference_settings: dict
+    versions: dict
+    fingerprint: str
+    run_cache: Any
+
+
+def _plan(scenes, chosen, renderers, images, spp, passes, *, local_workers: bool) -> _Plan:
+    """Load the scenes, find what is cached (references, runs, ladders), list the rest."""
+    from ..cache import Cache, content_hash
+    from ..scenes import Scene, load_scene
+
     excluded: dict[str, str] = {}
-    if scenes:
-        names = list(scenes)
-    else:
+    names = list(scenes) if scenes else None
+    if names is None:
         names, excluded = default_scenes()
     loaded = [name if isinstance(name, Scene) else load_scene(name) for name in names]
     _check_distinct_names(loaded)
-    versions = backend_versions()
-    fingerprint = _source_fingerprint()
-    reference_settings = ({"spp": spp, "passes": passes, "seed": 0} if spp is not None else
-                          {"committed": True, "target_rse": DEFAULT_TARGET_RSE,
-                           "budget_seconds": DEFAULT_REFERENCE_BUDGET,
-                           "spp": PROGRESSIVE_SPP})
-
     taken: set[str] = set()
     reports = [SceneReport(scene.name, _slug(scene.name, taken), scene, content_hash(scene),
-                           spp if spp is not None else PROGRESSIVE_SPP)
-               for scene in loaded]
+                           spp if spp is not None else PROGRESSIVE_SPP) for scene in loaded]
     if spp is None:
         # before any work: a stale committed reference stops the run, naming the fix
         for report in reports:
             report.reference = committed_reference_for(report.scene)
             if report.reference is not None:
-                report.reference_source = "committed"
-                report.reference_cached = True
+                report.reference_source, report.reference_cached = "committed", True
     for report in reports:
         report.runs.update(renderer_images(images, renderers, report.scene))
-    run_cache = Cache("report")
-    method_sources: dict[str, str] = {}
-    tasks: list[tuple] = []
-    owners: list[tuple[SceneReport, str | None, str | None]] = []
+    plan = _Plan(reports, [], chosen + renderers, renderers, excluded,
+                 ({"spp": spp, "passes": passes, "seed": 0} if spp is not None else
+                  {"committed": True, "target_rse": DEFAULT_TARGET_RSE,
+                   "budget_seconds": DEFAULT_REFERENCE_BUDGET, "spp": PROGRESSIVE_SPP}),
+                 backend_versions(), _source_fingerprint(), Cache("report"))
     portables: dict[str, Any] = {}
 
     def portable(report: SceneReport):
         # worked out only for a scene with a task: it may load the scene file again
         if report.slug not in portables:
             portables[report.slug] = portable_scene(report.scene, report.scene_hash,
-                                               scheduler is None)
+                                                    local_workers)
         return portables[report.slug]
 
+    method_sources: dict[str, str] = {}
     for report in reports:
-        if report.reference is None and spp is not None:
-            report.reference_source = "fixed passes"
-            report.reference = _cached_reference(report.scene, report.spp, passes)
-            report.reference_cached = report.reference is not None
-        if report.reference is None:
-            report.reference_error = _unconvertible(report.scene)
-        if report.reference is None and not report.reference_error:
-            if spp is None:
-                report.reference_source = "progressive"
-                tasks.append(("reference", portable(report), PROGRESSIVE_SPP, None,
-                              DEFAULT_TARGET_RSE, DEFAULT_REFERENCE_BUDGET))
-            else:
-                tasks.append(("reference", portable(report), report.spp, passes))
-            owners.append((report, None, None))
+        _plan_reference(plan, report, portable, spp, passes)
         for name in chosen:
-            if report.reference_error:
+            _plan_method(plan, report, name, portable, method_sources)
+        _plan_path_tracing(plan, report, portable, chosen)
+    return plan
+
+
+def _plan_reference(plan: _Plan, report: SceneReport, portable, spp, passes) -> None:
+    """Find the scene's reference in the cache, or plan its render."""
+    if report.reference is None and spp is not None:
+        report.reference_source = "fixed passes"
+        report.reference = _cached_reference(report.scene, report.spp, passes)
+        report.reference_cached = report.reference is not None
+    if report.reference is None:
+        report.reference_error = _unconvertible(report.scene)
+    if report.reference is not None or report.reference_error:
+        return
+    if spp is None:
+        report.reference_source = "progressive"
+        task = ReferenceTask(portable(report), PROGRESSIVE_SPP, None, DEFAULT_TARGET_RSE,
+                             DEFAULT_REFERENCE_BUDGET)
+    else:
+        task = ReferenceTask(portable(report), report.spp, passes)
+    plan.tasks.append(_Planned(task, report, None, None))
+
+
+def _plan_method(plan: _Plan, report: SceneReport, name: str, portable,
+                 method_sources: dict) -> None:
+    """Plan a method on a scene at its defaults and the cheap end of its ladder.
+
+    Or say why not: no reference, not installed, not applicable, a broken contract.
+    """
+    from ..fast.base import applicability
+    from ..fast.base import method as method_module
+    from ..fast.registry import MethodContractError, method_fingerprint
+
+    def refused(status: str, reason: str, **extra) -> None:
+        report.runs[name] = MethodRun(name, report.name, status, reason, **extra)
+
+    if report.reference_error:
+        return refused("not run", "the scene has no reference to compare with")
+    try:
+        module = method_module(name)
+    except MethodContractError as error:
+        return refused("failed", error.reason)
+    except InputError as error:
+        return refused("not installed", error.reason)
+    try:
+        reason = applicability(module.applies_to, report.scene)
+    except Exception as error:  # the method's own check failed: show it
+        return refused("failed", f"applies_to: {type(error).__name__}: {error}")
+    if reason is not None:
+        return refused("not applicable", reason.sentence, reason_code=reason.code)
+    if name not in method_sources:  # its own files, read once a run
+        method_sources[name] = plan.fingerprint + method_fingerprint(name)
+    for knobs in [{}] + ladder_knobs(module, name):
+        key = _run_key(name, report.scene, knobs, method_sources[name], plan.versions)
+        owner = name if not knobs else (LADDER, name)
+        stored = plan.run_cache.load_object(key)
+        if isinstance(stored, MethodRun) and stored.status == "ok":
+            stored.cached = True
+            keep_run(report, owner, stored)
+            continue
+        task = MethodTask(portable(report), name, knobs, REPORT_RELIGHT_FRAMES)
+        plan.tasks.append(_Planned(task, report, owner, key))
+
+
+def _plan_path_tracing(plan: _Plan, report: SceneReport, portable, chosen) -> None:
+    """Find or plan the path-tracing ladder, for the speed-ups of the methods to be scored."""
+    from ..cache import content_hash
+
+    if report.reference_error or not any(
+            report.runs.get(n) is None or report.runs[n].status == "ok"
+            for n in chosen + plan.renderers):
+        return
+    key = content_hash("path tracing", report.scene_hash, PATH_TRACING_SPP, plan.versions,
+                       plan.fingerprint)
+    report.path_tracing = plan.run_cache.load_object(key)
+    if report.path_tracing is None:
+        plan.tasks.append(_Planned(PathTracingTask(portable(report), tuple(PATH_TRACING_SPP)),
+                                   report, PATH_TRACING, key))
+
+
+def _announce(tasks: list[_Planned], stream) -> None:
+    if not tasks:
+        return
+    count = {kind: sum(1 for p in tasks if p.task.kind == kind)
+             for kind in ("reference", "method", "path tracing")}
+    print(f"running {len(tasks)} task(s): {count['reference']} reference render(s), "
+          f"{count['method']} method run(s), {count['path tracing']} path-tracing ladder(s)",
+          file=stream, flush=True)
+
+
+# ====================================================================== run
+
+
+def _run(plan: _Plan, staging: Path, timing: dict, *, scheduler, serial: bool,
+         progress: bool, keep_precomputations: bool) -> list[dict]:
+    """Run the tasks; score each scene as soon as its last task is in, the rest after.
+
+    Returns the tasks' timing entries (:func:`~.report_tasks.task_entry`).
+    """
+    from ..cache import limited_entries
+    from .distributed import run_tasks
+
+    pending = {report.slug: 0 for report in plan.reports}
+    for planned in plan.tasks:
+        pending[planned.report.slug] += 1
+
+    def score(report: SceneReport) -> None:
+        for name in plan.renderers:
+            if report.reference_error and report.runs[name].status == "ok":
                 report.runs[name] = MethodRun(name, report.name, "not run",
                                               "the scene has no reference to compare with")
-                continue
-            try:
-                module = method_module(name)
-            except MethodContractError as error:
-                report.runs[name] = MethodRun(name, report.name, "failed", error.reason)
-                continue
-            except InputError as error:
-                report.runs[name] = MethodRun(name, report.name, "not built", error.reason)
-                continue
-            try:
-                reason = applicability(module.applies_to, report.scene)
-            except Exception as error:  # the method's own check failed: show it
-                report.runs[name] = MethodRun(name, report.name, "failed",
-                                              f"applies_to: {type(error).__name__}: {error}")
-                continue
-            if reason is not None:
-                report.runs[name] = MethodRun(name, report.name, "not applicable",
-                                              reason.sentence, reason_code=reason.code)
-                continue
-            if name not in method_sources:  # its own files, read once a run
-                method_sources[name] = fingerprint + method_fingerprint(name)
-            # the method at its defaults, then the cheap end of its quality ladder
-            for knobs in [{}] + ladder_knobs(module, name):
-                key = _run_key(name, report.scene, knobs, method_sources[name], versions)
-                owner = name if not knobs else (LADDER, name)
-                stored = run_cache.load_object(key)
-                if isinstance(stored, MethodRun) and stored.status == "ok":
-                    stored.cached = True
-                    _keep_run(report, owner, stored)
-                    continue
-                tasks.append(("method", portable(report), name, knobs, REPORT_RELIGHT_FRAMES))
-                owners.append((report, owner, key))
-        # the path-tracing ladder, for the speed-ups of the methods that will be scored
-        if not report.reference_error and any(
-                report.runs.get(n) is None or report.runs[n].status == "ok"
-                for n in chosen + renderers):
-            key = content_hash("path tracing", report.scene_hash, PATH_TRACING_SPP, versions,
-                               fingerprint)
-            report.path_tracing = run_cache.load_object(key)
-            if report.path_tracing is None:
-                tasks.append(("path tracing", portable(report), list(PATH_TRACING_SPP)))
-                owners.append((report, PATH_TRACING, key))
+        scoring_started = time.perf_counter()
+        score_scene(report, staging)
+        timing["scoring"] += time.perf_counter() - scoring_started
 
-    if tasks:
-        print(f"running {len(tasks)} task(s): "
-              f"{sum(1 for t in tasks if t[0] == 'reference')} reference render(s), "
-              f"{sum(1 for t in tasks if t[0] == 'method')} method run(s), "
-              f"{sum(1 for t in tasks if t[0] == 'path tracing')} path-tracing ladder(s)",
-              file=stream,
-              flush=True)
-    timing: dict[str, Any] = {"planning": time.perf_counter() - started, "tasks": 0.0,
-                              "scoring": 0.0, "scoring_during_tasks": 0.0}
+    def arrived(position: int, timed_result) -> None:
+        planned = plan.tasks[position]
+        _keep_result(plan, planned, timed_result[0])
+        pending[planned.report.slug] -= 1
+        if pending[planned.report.slug] == 0:
+            score(planned.report)
+
     task_times: list[dict] = []
-    chosen = chosen + renderers
-    pending = {report.slug: 0 for report in reports}
-    for report, _, _ in owners:
-        pending[report.slug] += 1
-    # a scene with no task is scored after the tasks; the others as their last task is in
-    untasked = [report for report in reports if pending[report.slug] == 0]
-    staging = None
-    try:
-        staging = _staging_folder(out)
-        bar = None  # the scenes scored after the tasks (the tasks' own bar runs before)
-
-        def score(report: SceneReport) -> None:
-            for name in renderers:
-                if report.reference_error and report.runs[name].status == "ok":
-                    report.runs[name] = MethodRun(name, report.name, "not run",
-                                                  "the scene has no reference to compare with")
-            scoring_started = time.perf_counter()
-            score_scene(report, staging)
-            timing["scoring"] += time.perf_counter() - scoring_started
-            if bar is not None:
-                bar.update()
-
-        def arrived(position: int, timed_result) -> None:
-            # a scene is scored as soon as its last task is in, while the others run on
-            report, name, key = owners[position]
-            result = timed_result[0]
-            if name == PATH_TRACING:
-                report.path_tracing = result
-                if isinstance(result, list) and not any("error" in p for p in result):
-                    run_cache.store_object(key, result)
-            elif name is None:
-                if isinstance(result, Image):
-                    report.reference = result
-                else:
-                    report.reference_error = str(result)
-            else:
-                _keep_run(report, name, result)
-                if result.status == "ok":
-                    run_cache.store_object(key, result)
-            pending[report.slug] -= 1
-            if pending[report.slug] == 0:
-                score(report)
-
-        if tasks:
-            tasks_started = time.perf_counter()
-            with limited_entries(None if keep_precomputations else REPORT_CACHE_ENTRY_LIMIT):
-                # on local workers one method's runs wait for its first, which compiles its
-                # kernels into numba's on-disk cache for the others
-                groups = [task[2] if task[0] == "method" else None for task in tasks]
-                timed = run_tasks(report_task, tasks, scheduler=scheduler, local=serial,
-                                  progress=progress, timed=True,
-                                  groups=groups if scheduler is None else None,
-                                  on_result=arrived)
-            timing["tasks"] = time.perf_counter() - tasks_started
-            timing["scoring_during_tasks"] = timing["scoring"]
-            task_times = [task_time(task, owner, seconds, worker)
-                          for task, owner, (_, seconds, worker) in zip(tasks, owners, timed,
-                                                                        strict=True)]
-        bar = tqdm(total=len(untasked), desc="metrics and error maps", disable=not progress,
-                   leave=False, file=sys.stderr)
+    if plan.tasks:
+        tasks_started = time.perf_counter()
+        with limited_entries(None if keep_precomputations else REPORT_CACHE_ENTRY_LIMIT):
+            groups = [planned.task.group for planned in plan.tasks]
+            timed = run_tasks(run_task, [(planned.task,) for planned in plan.tasks],
+                              scheduler=scheduler, local=serial, progress=progress,
+                              timed=True, groups=groups if scheduler is None else None,
+                              on_result=arrived)
+        timing["tasks"] = time.perf_counter() - tasks_started
+        timing["scoring_during_tasks"] = timing["scoring"]
+        task_times = [task_entry(planned.task, planned.report.name, seconds, worker)
+                      for planned, (_, seconds, worker) in zip(plan.tasks, timed, strict=True)]
+    # a scene with no task is scored after the tasks (the tasks' own bar runs before)
+    untasked = [report for report in plan.reports if pending[report.slug] == 0
+                and not any(p.report is report for p in plan.tasks)]
+    with progress_bar(total=len(untasked), description="metrics and error maps",
+                      enabled=progress) as bar:
         for report in untasked:
             score(report)
-        bar.close()
-        regressions = []
-        for report in reports:
-            reference = _made_with(report)
-            for name in chosen:
-                run = report.runs.get(name)
-                metrics = report.metrics.get(name)
-                failure = report.metric_errors.get(name) or (run.reason if run else "") \
-                    or report.reference_error
-                check = check_against_baseline(report.name, report.scene_hash, reference, name,
-                                               metrics, stored_baseline, failure=failure)
-                report.checks[name] = check
-                if check.status == "regression":
-                    regressions.append(f"{report.name}/{name}: {check.message}")
-        exit_code = 1 if regressions and not update_baseline else 0
-        context = {
-            "generated": timestamp(), "versions": versions, "reference": reference_settings,
-            "baseline": str(baseline_path), "baseline_updated": update_baseline,
-            "baseline_versions": stored_baseline.get("versions", {}),
-            "excluded": excluded, "methods": chosen, "regressions": regressions,
-            "exit_code": exit_code, "fingerprint": fingerprint,
-            "scheduler": "this process" if serial else (scheduler or "local processes"),
-        }
-        summary = summary_rows(reports, chosen)
-        context["seconds"] = time.perf_counter() - started
-        context["timing"] = {**{f"{phase}_seconds": value for phase, value in timing.items()},
-                             "task_seconds": task_times}
-        atomic_write_text(staging / "metrics.json",
-                          json.dumps(_metrics_json(reports, chosen, context), indent=2,
-                                     sort_keys=False, allow_nan=False))
-        context["overview"] = _overview(reports, staging)
-        atomic_write_text(staging / "index.html", html_page(reports, chosen, context))
-        _replace_folder(staging, out)
-        staging = None
-    finally:
-        if staging is not None:
-            shutil.rmtree(staging, ignore_errors=True)
+            bar.update()
+    return task_times
 
-    if update_baseline:
-        results_for_baseline = [
-            {"name": r.name, "scene_hash": r.scene_hash, "reference": _made_with(r),
-             "metrics": r.metrics, "methods_run": chosen}
-            for r in reports if r.reference is not None]
-        new = updated_baseline(stored_baseline, results_for_baseline, versions)
-        atomic_write_text(baseline_path, json.dumps(new, indent=2, allow_nan=False) + "\n")
-    seconds = time.perf_counter() - started
-    print_summary(summary, regressions, out, seconds, update_baseline, baseline_path, stream,
-                   timing, task_times)
-    for report in reports:
-        if report.noise_warning:
-            print(f"warning: {report.name}: {report.noise_warning}", file=sys.stderr)
-    return ReportResult(exit_code, out, regressions, seconds, summary)
+
+def _keep_result(plan: _Plan, planned: _Planned, result) -> None:
+    """File a finished task's result in its scene's report (and the report's cache)."""
+    report = planned.report
+    if planned.owner == PATH_TRACING:
+        report.path_tracing = result
+        if isinstance(result, list) and not any("error" in p for p in result):
+            plan.run_cache.store_object(planned.key, result)
+    elif planned.owner is None:
+        if isinstance(result, Image):
+            report.reference = result
+        else:
+            report.reference_error = str(result)
+    else:
+        keep_run(report, planned.owner, result)
+        if result.status == "ok":
+            plan.run_cache.store_object(planned.key, result)
+
+
+# ====================================================================== judge and write
+
+
+def _judge(plan: _Plan, stored_baseline: dict) -> list[str]:
+    """Check every scored result against the baseline; return the regressions."""
+    regressions = []
+    for report in plan.reports:
+        reference = _made_with(report)
+        for name in plan.scored:
+            run = report.runs.get(name)
+            metrics = report.metrics.get(name)
+            failure = report.metric_errors.get(name) or (run.reason if run else "") \
+                or report.reference_error
+            check = check_against_baseline(report.name, report.scene_hash, reference, name,
+                                           metrics, stored_baseline, failure=failure)
+            report.checks[name] = check
+            if check.status == "regression":
+                regressions.append(f"{report.name}/{name}: {check.message}")
+    return regressions
+
+
+def _write(plan: _Plan, staging: Path, context: dict) -> None:
+    """Write ``metrics.json`` and the page into the staging folder."""
+    atomic_write_text(staging / "metrics.json",
+                      json.dumps(_metrics_json(plan.reports, plan.scored, context), indent=2,
+                                 sort_keys=False, allow_nan=False))
+    context["overview"] = _overview(plan.reports, staging)
+    atomic_write_text(staging / "index.html", html_page(plan.reports, plan.scored, context))
+
+
+def _update_baseline(plan: _Plan, stored_baseline: dict, baseline_path: Path) -> None:
+    results = [{"name": r.name, "scene_hash": r.scene_hash, "reference": _made_with(r),
+                "metrics": r.metrics, "methods_run": plan.scored}
+               for r in plan.reports if r.reference is not None]
+    new = updated_baseline(stored_baseline, results, plan.versions)
+    atomic_write_text(baseline_path, json.dumps(new, indent=2, allow_nan=False) + "\n")
 
 
 #: The verdicts of one metric in ``metrics.json``.
@@ -741,7 +707,7 @@ def metric_verdict(noise_verdict: str, check, key: str) -> str:
 
     Examples
     --------
-    >>> from translucent.reports.regression import BaselineCheck
+    >>> from translucent.reports.baselines import BaselineCheck
     >>> check = BaselineCheck("regression", "worse", {"hdr_flip": {"verdict": "worse"}})
     >>> metric_verdict("resolved", check, "hdr_flip"), metric_verdict("resolved", check, "ssim")
     ('regression', 'no baseline')

@@ -3,46 +3,15 @@
 from __future__ import annotations
 
 import html
-import math
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-from .regression import METRIC_LABELS, REPORTED_METRICS, TOLERANCES, BaselineCheck
+from .baselines import BaselineCheck
+from .formatting import format_seconds, format_speedup, format_value
+from .metric_registry import METRIC_LABELS, REPORTED_METRICS, TOLERANCES
+from .report_model import SceneReport
+from .runs import MethodRun
 
-if TYPE_CHECKING:  # annotations only: the report imports this module
-    from .report import SceneReport
-    from .runs import MethodRun
-
-__all__ = ["format_seconds", "format_value", "html_page"]
-
-
-def format_value(value, digits: int = 4) -> str:
-    """Return a metric for a table: ``digits`` significant figures, a dash for None."""
-    if value is None:
-        return "–"
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            return str(value)
-        return f"{value:.{digits}g}"
-    return str(value)
-
-
-def format_seconds(value) -> str:
-    """Return a duration for a table: ms below a second, else s; a dash for None."""
-    if value is None:
-        return "–"
-    return f"{value * 1000:.0f} ms" if value < 1 else f"{value:.1f} s"
-
-
-
-
-
-def format_speedup(value, extrapolated: bool = False) -> str:
-    """Return a speed-up over path tracing: ``"38x"``, ``"~5x"`` (extrapolated), "–" (None)."""
-    if value is None:
-        return "–"
-    text = f"{value:.2g}x" if value < 100 else f"{value:.0f}x"
-    return ("~" if extrapolated else "") + text
+__all__ = ["html_page"]
 
 
 def _reference_text(settings: dict) -> str:
@@ -181,7 +150,7 @@ def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
                         f"{_score_line(report, name, 'relative_mse', 'relMSE', 2)}<br>"
                         f"{_times_line(report, name, run)} "
                         f'<span class="tag">{_e(check.status)}</span>')
-            elif run is not None and run.status in ("not applicable", "not built", "not run"):
+            elif run is not None and run.status in ("not applicable", "not installed", "not run"):
                 text, css = f"<small>{_e(run.status)}</small>", "muted"
                 if check is not None and check.status == "regression":
                     text, css = f"<small>{_e(run.status)}; regression</small>", "bad"
@@ -277,7 +246,7 @@ def _scene_section(report: SceneReport, chosen: list[str]) -> str:
     not_run = []
     for name in chosen:
         run = report.runs.get(name)
-        if run is None or run.status in ("not applicable", "not built", "not run"):
+        if run is None or run.status in ("not applicable", "not installed", "not run"):
             reason = run.reason if run else "not run"
             status = run.status if run else "not run"
             extra = ""
@@ -358,9 +327,10 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         cached = (f" Image and times from the run of {_e(run.measured_at)} (cached: nothing "
                   "it depends on has changed since)." if run.cached else "")
         cache_note = run.notes.get("cache") if isinstance(run.notes, dict) else None
+        notes = cache_note.values() if isinstance(cache_note, dict) else [cache_note]
         from_cache = (" The method loaded its precomputation from its own cache; the stage "
-                      "times below are those of the run that computed it." if cache_note == "hit"
-                      else "")
+                      "times below are those of the run that computed it."
+                      if cache_note and all(note == "hit" for note in notes) else "")
         first = run.first_frame_seconds if run.first_frame_seconds is not None \
             else run.frame_seconds
         parts.append(f"<p>Precomputation {format_seconds(run.precompute_seconds)}, first frame "

@@ -7,11 +7,11 @@ tracing and the baseline's verdict) and the line that says where the report's ti
 
 from __future__ import annotations
 
-from .report_page import format_seconds, format_speedup, format_value
+from .formatting import format_seconds, format_speedup, format_value
 from .runs import json_safe
 from .speedup import same_run_ratios
 
-__all__ = ["summary_rows", "speedup_fields", "task_time", "print_summary"]
+__all__ = ["summary_rows", "speedup_fields", "print_summary"]
 
 
 def summary_rows(reports: list, chosen: list[str]) -> list[dict]:
@@ -55,15 +55,6 @@ def speedup_fields(report, name: str) -> dict:
             "path_tracing_seconds_at_equal_error": json_safe(found["path_tracing_seconds"]),
             "speedup_extrapolated": found["extrapolated"],
             **same_run_ratios(report.curve, report.runs.get(name))}
-
-
-def task_time(task: tuple, owner: tuple, seconds: float, worker: int) -> dict:
-    """One task's entry in ``metrics.json``'s timing: what it ran, where and how long."""
-    kind, report = task[0], owner[0]
-    entry = {"scene": report.name, "kind": kind, "seconds": seconds, "worker": worker}
-    if kind == "method":
-        entry["method"], entry["knobs"] = task[2], json_safe(task[3])
-    return entry
 
 
 def time_line(timing: dict, task_times: list[dict]) -> str:

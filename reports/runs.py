@@ -22,9 +22,10 @@ import numpy as np
 from ..cache import private_cache
 from ..errors import InputError
 from ..image import Image
+from ..progress import hidden
 
 __all__ = ["MethodRun", "backend_versions", "committed_reference_for", "json_safe",
-           "portable_scene", "render_reference", "report_task", "run_method", "timestamp"]
+           "portable_scene", "reference_path", "render_reference", "run_method", "timestamp"]
 
 
 
@@ -37,7 +38,7 @@ class MethodRun:
     ----------
     method, scene : str
         Names.
-    status : {"ok", "failed", "not applicable", "not built", "not run"}
+    status : {"ok", "failed", "not applicable", "not installed", "not run"}
         What happened ("not run": the scene has no reference to compare with).
     reason : str
         Why a method did not run, or the error it raised.
@@ -125,14 +126,6 @@ def json_safe(value: Any, depth: int = 0) -> Any:
     return str(value)
 
 
-def _quiet_knobs(module, knobs: dict) -> dict:
-    """Turn off a method's own progress bars (they would garble the run's bar)."""
-    defaults = getattr(module, "DEFAULT_KNOBS", {}) or {}
-    if "progress" in defaults and "progress" not in knobs:
-        return {**knobs, "progress": False}
-    return dict(knobs)
-
-
 def run_method(method_name: str, scene, knobs: dict | None = None, *,
                cold: bool = False, relight_frames: int = 0, applies: bool = False) -> MethodRun:
     """Precompute and render ``scene`` with a fast method, timing both; never raises.
@@ -163,7 +156,7 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
     Returns
     -------
     MethodRun
-        Status "ok" with the image, "not built", "not applicable" (with the method's
+        Status "ok" with the image, "not installed", "not applicable" (with the method's
         reason) or "failed" (with the error and its traceback).
     """
     from ..fast.base import applicability, method
@@ -177,15 +170,16 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
     except MethodContractError as error:
         return MethodRun(status="failed", reason=error.reason, **base)
     except InputError as error:
-        return MethodRun(status="not built", reason=error.reason, **base)
+        return MethodRun(status="not installed", reason=error.reason, **base)
     try:
         reason = applicability(module.applies_to, scene, *([None] if applies else []))
         if reason is not None:
             return MethodRun(status="not applicable", reason=reason.sentence,
                              reason_code=reason.code, **base)
-        with private_cache() if cold else contextlib.nullcontext():
+        # the method's own bars would garble the run's bar
+        with private_cache() if cold else contextlib.nullcontext(), hidden():
             started = time.perf_counter()
-            state = module.precompute(scene, **_quiet_knobs(module, knobs))
+            state = module.precompute(scene, **knobs)
             precomputed = time.perf_counter()
             image = state.render()
             finished = time.perf_counter()
@@ -233,6 +227,27 @@ def render_reference(scene, spp: int, passes: int | None, target_rse: float | No
         return f"{type(error).__name__}: {error}"
 
 
+def reference_path(scene, spp: int, passes: int) -> Path:
+    """Where the reference ``render(scene, spp=spp, passes=passes)`` is cached (may not exist).
+
+    The settings are those of :func:`translucent.reference.render` with its own defaults, read
+    from its signature, so a change of a default there cannot make this look in the wrong
+    place.
+    """
+    import inspect
+
+    from ..cache import Cache
+    from ..reference.render import reference_key, reference_settings, render
+
+    defaults = {name: parameter.default
+                for name, parameter in inspect.signature(render).parameters.items()
+                if parameter.default is not inspect.Parameter.empty}
+    wanted = inspect.signature(reference_settings).parameters
+    settings = reference_settings(**{**{name: defaults[name] for name in wanted
+                                        if name in defaults}, "spp": spp, "passes": passes})
+    return Cache("reference").path(reference_key(scene, settings), ".exr")
+
+
 def committed_reference_for(scene):
     """Return the committed reference of a built-in scene loaded from the catalogue, or None.
 
@@ -270,27 +285,6 @@ def nudged_lights(lights, step: int) -> list:
     from ..scenes.scene import moved_lights
 
     return moved_lights(lights, step * LIGHT_NUDGE)
-
-
-def report_task(kind: str, scene, *arguments):
-    """Run one task of the report on a worker: a reference render, a method run or a ladder.
-
-    ``scene`` is a Scene, or the path of the scene file it was loaded from (a local worker
-    reads the file instead of receiving the pickled meshes and textures).
-    """
-    if isinstance(scene, str):
-        from ..scenes import load_scene
-
-        scene = load_scene(scene)
-    if kind == "reference":
-        return render_reference(scene, *arguments)
-    if kind == "path tracing":
-        from .speedup import path_tracing_ladder
-
-        return path_tracing_ladder(scene, *arguments)
-    name, knobs, relight_frames = arguments
-    # the report asked applies_to when it planned the task
-    return run_method(name, scene, knobs, relight_frames=relight_frames, applies=True)
 
 
 def portable_scene(scene, scene_hash: str, local_workers: bool):

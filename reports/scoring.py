@@ -13,15 +13,12 @@ Whole-image scores are kept beside them.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import InputError
+from .report_model import SceneReport
 from .speedup import scored_curve, scored_relative_mse, speedup, tradeoff_plot
-
-if TYPE_CHECKING:  # annotations only: the report imports this module
-    from .report import SceneReport
 
 __all__ = ["score_scene", "scored_pixels"]
 
@@ -134,7 +131,8 @@ def _floors(report: SceneReport) -> None:
 
 
 def _verdicts(metrics: dict, floors: dict | None) -> dict[str, str]:
-    from .metrics import NOISE_FLOOR_FIELDS, noise_verdict
+    from .metric_registry import NOISE_FLOOR_FIELDS
+    from .metrics import noise_verdict
 
     floors = floors or {}
     return {key: noise_verdict(key, metrics[key], floors.get(key))

@@ -73,3 +73,28 @@ def test_an_entry_of_another_key_is_refused():
     buffer.seek(0)
     with pytest.raises(EntryError, match="another key"):
         read_entry(buffer, "second")
+
+
+def test_an_entry_naming_a_moved_module_is_a_miss_and_made_again(tmp_path, monkeypatch):
+    # a precomputation stored before its module moved (fast/brdf_pca_transfer.py is now
+    # fast/brdf_pca/transfer.py) names a module that is gone: read as a miss, made again
+    from translucent.cache import Cache
+    from translucent.fast.base import load_or_precompute
+
+    monkeypatch.setenv("TRANSLUCENT_CACHE", str(tmp_path))
+    with monkeypatch.context() as moved:
+        moved.setattr(StageLog, "__module__", "translucent.fast.brdf_pca_transfer")
+        Cache("moved").store_object("key", StageLog(skipped=["old layout"]))
+        buffer = io.BytesIO()
+        write_entry(buffer, "key", StageLog())
+    buffer.seek(0)
+    with pytest.raises(EntryError, match="does not exist"):
+        read_entry(buffer, "key")
+    assert Cache("moved").load_object("key") is None
+    made = []
+    value, fresh = load_or_precompute("moved", "key", lambda: made.append(1) or StageLog(),
+                                      what="a test entry", log_of=lambda log: log)
+    assert fresh and made == [1] and value.skipped == [] and value.notes["cache"] == "miss"
+    again, fresh = load_or_precompute("moved", "key", lambda: made.append(2) or StageLog(),
+                                      what="a test entry", log_of=lambda log: log)
+    assert not fresh and made == [1] and again.notes["cache"] == "hit"

@@ -144,3 +144,96 @@ def test_no_file_holds_two_concepts():
         if lines > MOST_LINES:
             long[str(path.relative_to(ROOT))] = lines
     assert not long, f"over {MOST_LINES} lines: {long}"
+
+
+#: The modules every built-in method's package has: the contract (``method``), its knobs
+#: and the interactive state; the physics and kernels beside them are the method's own.
+METHOD_MODULES = ("__init__", "knobs", "method", "state")
+BUILTIN_METHODS = ("prt", "radiosity", "splatting", "brdf_pca")
+
+
+@pytest.mark.parametrize("name", BUILTIN_METHODS)
+def test_every_method_is_a_package_of_the_same_shape(name):
+    folder = ROOT / "fast" / name
+    assert folder.is_dir(), f"fast/{name} is not a package"
+    have = {path.stem for path in folder.glob("*.py")}
+    assert set(METHOD_MODULES) <= have, f"fast/{name} lacks {set(METHOD_MODULES) - have}"
+    # the contract lives in method.py: applies_to and precompute are defined there
+    tree = ast.parse((folder / "method.py").read_text(encoding="utf-8"))
+    defined = {node.name for node in tree.body if isinstance(node, ast.FunctionDef)}
+    assert {"applies_to", "precompute"} <= defined, f"fast/{name}/method.py: {defined}"
+    assert (ROOT / "docs" / f"{name}.md").is_file(), f"docs/{name}.md is missing"
+
+
+def test_fast_holds_only_what_methods_share():
+    # a loose module of fast/ serves several methods (or all): one that only one method
+    # imports belongs in that method's package
+    loose = [p for p in (ROOT / "fast").glob("*.py") if p.stem != "__init__"]
+    for path in loose:
+        module = f"translucent.fast.{path.stem}"
+        users = {importer.split(".")[2] for importer, imported, _ in IMPORTS
+                 if imported == module and importer.startswith("translucent.fast.")
+                 and importer.count(".") >= 3 and importer.split(".")[2] in BUILTIN_METHODS}
+        assert len(users) != 1, f"fast/{path.name} serves {users} alone: move it there"
+
+
+def test_the_contract_tables_of_the_docs_are_made_from_the_contract():
+    from translucent.fast.contract import contract_table
+
+    page = (ROOT / "docs" / "methods.md").read_text(encoding="utf-8")
+    assert contract_table(required=True) in page
+    assert contract_table(required=False) in page
+
+
+#: The report's orchestrator is called, not drawn from: only these import it (the command
+#: and the package's functions); the data model, tasks and formatting have modules of
+#: their own that everything else imports.
+REPORT_CALLERS = {"translucent.reports.commands.report", "translucent.api"}
+
+
+def test_only_the_reports_callers_import_the_orchestrator():
+    importers = {importer for importer, imported, _ in IMPORTS
+                 if imported == "translucent.reports.report"}
+    assert importers <= REPORT_CALLERS, sorted(importers - REPORT_CALLERS)
+
+
+#: The tables a metric's identity used to be spread over: each is made once, in the
+#: metric registry, from the metrics' definitions.
+METRIC_TABLES = {"METRIC_LABELS", "NOISE_FLOOR_FIELDS", "REPORTED_METRICS", "TOLERANCES"}
+
+
+def test_each_metric_is_defined_once():
+    from translucent.reports.metric_registry import REGISTRY
+
+    assigned = sorted((name, target.id) for name, path in MODULES.items()
+                      for node in ast.parse(path.read_text()).body
+                      if isinstance(node, (ast.Assign, ast.AnnAssign))
+                      for target in (node.targets if isinstance(node, ast.Assign)
+                                     else [node.target])
+                      if isinstance(target, ast.Name) and target.id in METRIC_TABLES)
+    assert {module for module, _ in assigned} == {"translucent.reports.metric_registry"}, \
+        assigned
+    names = [spec.name for spec in REGISTRY]
+    aliases = [alias for spec in REGISTRY for alias in spec.aliases]
+    assert len(set(names + aliases)) == len(names) + len(aliases)
+
+
+#: Lines a function of reports/ may have besides its docstring: a longer one does several
+#: things (plan, run, judge, write) and is split.
+MOST_FUNCTION_LINES = 80
+
+
+def test_no_function_of_reports_is_over_80_lines():
+    long = {}
+    for name, path in MODULES.items():
+        if not name.startswith("translucent.reports"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                docstring = ast.get_docstring(node, clean=False)
+                lines = node.end_lineno - node.lineno + 1
+                if docstring:
+                    lines -= docstring.count("\n") + 1
+                if lines > MOST_FUNCTION_LINES:
+                    long[f"{name}.{node.name}"] = lines
+    assert not long, long

@@ -85,7 +85,7 @@ def test_a_radiosity_precomputation_too_large_is_refused_before_its_samples(eigh
 
 def test_the_radiosity_pair_count_bounds_the_stored_entries():
     from translucent.fast.conformance import tiny_sphere_text
-    from translucent.fast.form_factors import build_patches
+    from translucent.fast.radiosity.form_factors import build_patches
     from translucent.fast.radiosity.method import precompute, scattering_pairs
     from translucent.scenes import loads_scene
 

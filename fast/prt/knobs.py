@@ -70,7 +70,6 @@ KNOBS = KnobSpec([
     # how, not what
     Knob("workers", 2, "threads of the transfer computation", kind="int", low=1, high=256,
          keyed=False),
-    Knob("progress", True, "a progress bar on a terminal", check=bool, keyed=False),
 ], checks=[_quadtree], ladders={
     # illumination samples (parts x 4^n), PCA terms of the profile basis (Eq. 4) and Haar
     # terms kept per transfer row (Eq. 8)

@@ -9,7 +9,15 @@ import numpy as np
 from ...errors import InputError
 from ...image import Image
 from ...materials import Dipole, measured_medium
-from ..base import StageLog, applicability, refuse_inapplicable
+from ..base import (
+    NO_LIGHT,
+    NO_TRANSLUCENT_OBJECT,
+    Refusal,
+    StageLog,
+    applicability,
+    load_or_precompute,
+    refuse_inapplicable,
+)
 from .knobs import KNOBS, check_knobs
 from .state import PRTState
 from .transfer import ObjectTransfer, precompute_object, spatial_decision, transfer_key
@@ -30,7 +38,7 @@ def _other_objects_in_view(scene) -> list[str]:
     return [scene.objects[i].name for i in sorted(seen - translucent)]
 
 
-def applies_to(scene) -> str | None:
+def applies_to(scene) -> Refusal | None:
     """None when the method renders ``scene``; otherwise why not.
 
     It needs a homogeneous translucent object (a :class:`~translucent.materials.Dipole`
@@ -41,9 +49,10 @@ def applies_to(scene) -> str | None:
     method's error there.
     """
     if not _translucent_objects(scene):
-        return "no homogeneous translucent object (Dipole material) in the scene"
+        return Refusal(NO_TRANSLUCENT_OBJECT,
+                       "no homogeneous translucent object (Dipole material) in the scene")
     if not scene.lights:
-        return "the scene has no light"
+        return Refusal(NO_LIGHT, "the scene has no light")
     return None
 
 
@@ -73,13 +82,10 @@ def precompute(scene, **knobs) -> PRTState:
     InputError
         The method does not apply (see :func:`applies_to`) or a knob is invalid.
     """
-    from ...cache import Cache
-
     refuse_inapplicable(scene, applicability(applies_to, scene),
                         "the prt method cannot render this scene")
     knobs = check_knobs(knobs)
     log = StageLog()
-    cache = Cache("prt")
     transfers = []
     start = time.perf_counter()
     others = _other_objects_in_view(scene)
@@ -92,14 +98,11 @@ def precompute(scene, **knobs) -> PRTState:
     for index in _translucent_objects(scene):
         item = scene.objects[index]
         key = transfer_key(item, scene.mm_per_unit, knobs)
-        transfer, made = cache.load_or_make(
-            key, lambda item=item: precompute_object(item, scene.mm_per_unit, knobs, log),
-            valid=lambda value: isinstance(value, ObjectTransfer),
-            what=f"the PRT transfer of {item.name!r}")
-        if made:
-            log.notes.setdefault("cache", {})[item.name] = "computed and stored"
-        else:
-            log.notes.setdefault("cache", {})[item.name] = "loaded from the cache"
+        transfer, made = load_or_precompute(
+            "prt", key, lambda item=item: precompute_object(item, scene.mm_per_unit, knobs, log),
+            what=f"the PRT transfer of {item.name!r}", log_of=lambda _: log,
+            valid=lambda value: isinstance(value, ObjectTransfer), part=item.name)
+        if not made:
             spatial_decision(item, knobs, log)
         transfers.append(transfer)
     others = [o.name for o in scene.objects if not isinstance(o.material, Dipole)]
@@ -125,8 +128,7 @@ def add_approx_arguments(parser) -> None:
                         help="reduced scattering coefficient, mm^-1 (with --sigma-a)")
     parser.add_argument("--eta", type=float, default=None,
                         help="relative index of refraction (default 1.3, or the medium's)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    KNOBS.add_arguments(parser, [name for name in KNOBS.knobs if name != "progress"])
+    KNOBS.add_arguments(parser)
 
 
 def material_from_arguments(args) -> Dipole | None:
@@ -160,7 +162,7 @@ def material_from_arguments(args) -> Dipole | None:
 def approx(scene, args) -> Image:
     """Render ``scene`` with the options parsed by :func:`add_approx_arguments`."""
     material = material_from_arguments(args)
-    knobs = KNOBS.from_arguments(args) | {"progress": not args.no_progress}
+    knobs = KNOBS.from_arguments(args)
     state = precompute(scene, **knobs)
     image = state.render(material=material)
     for sentence in image.metadata.get("skipped", []):

@@ -208,16 +208,15 @@ def _threads(workers: int):
         numba.set_num_threads(previous)
 
 
-def _progress(total: int, description: str, enabled: bool, unit: str = "vertex"):
-    from tqdm import tqdm
+def _progress(total: int, description: str, unit: str = "vertex"):
+    from ...progress import progress_bar
 
-    return tqdm(total=total, desc=description, unit=unit, disable=not enabled or None,
-                leave=False)
+    return progress_bar(total=total, description=description, unit=unit)
 
 
 def _first_pass(vertices_mm, samples: IlluminationSamples, samples_mm, basis: DipolePCABasis,
-                energy: float, terms: int, selection: str, workers: int, progress: bool,
-                label: str, shared: bool = False):
+                energy: float, terms: int, selection: str, workers: int, label: str,
+                shared: bool = False):
     """Per basis function k (and the local kernel last), Haar-compressed rows for every vertex.
 
     Returns a list of K + 1 :class:`SparseRows` (one per block), or with ``shared`` one
@@ -237,8 +236,7 @@ def _first_pass(vertices_mm, samples: IlluminationSamples, samples_mm, basis: Di
     selection_weights = local_weights if selection == "support" \
         else np.ones(len(samples), dtype=np.float32)
     pieces: list[list] = [[] for _ in range(rows_per_vertex)]
-    with _threads(workers), _progress(len(vertices_mm), f"prt transfer {label}",
-                                      progress) as bar:
+    with _threads(workers), _progress(len(vertices_mm), f"prt transfer {label}") as bar:
         for start in range(0, len(vertices_mm), VERTICES_PER_BLOCK):
             block = np.ascontiguousarray(vertices_mm[start:start + VERTICES_PER_BLOCK])
             indices = np.zeros((rows_per_vertex, len(block), budget), dtype=np.int32)
@@ -454,7 +452,7 @@ def precompute_object(scene_object, mm_per_unit: float, knobs: dict,
             "rows layout: the spatial pass keeps each T_k's own coefficients")
     matrices = _first_pass(vertices_mm, samples, samples_mm, basis, knobs["energy"],
                            first_terms, knobs["selection"], knobs["workers"],
-                           knobs["progress"], scene_object.name, shared=shared)
+                           scene_object.name, shared=shared)
     first_seconds = time.perf_counter() - start
     statistics = {"vertices": len(mesh.vertices), "samples": len(samples),
                   "basis_terms": basis.terms, "pass1_seconds": first_seconds,
@@ -468,8 +466,7 @@ def precompute_object(scene_object, mm_per_unit: float, knobs: dict,
         budget = knobs["spatial_terms"] * len(mesh.vertices)
         compressed, kept = [], []
         blocks = sum(-(-matrix.columns // SPATIAL_COLUMNS_PER_BLOCK) for matrix in matrices)
-        with _progress(blocks, f"prt spatial pass {scene_object.name}", knobs["progress"],
-                       unit="block") as bar:
+        with _progress(blocks, f"prt spatial pass {scene_object.name}", unit="block") as bar:
             for matrix in matrices:
                 result, fraction = _spatial_pass(matrix, wavelet, knobs["spatial_energy"],
                                                  budget, knobs["workers"], bar)

@@ -8,7 +8,7 @@ The scene is cut into patches; the radiosity (exitance) :math:`B` of every patch
 .. math:: B = \sum_{N \ge 1} (SF)^{N-1} SE = (I - SF)^{-1} SE \qquad \text{(Eq. 14)}
 
 with :math:`E` the irradiance from the lights, :math:`F` the form factors (irradiance of
-patch i from the radiosity of patch j, :mod:`translucent.fast.form_factors`) and
+patch i from the radiosity of patch j, :mod:`translucent.fast.radiosity.form_factors`) and
 :math:`S` the scattering factors: :math:`S_{ji}` takes the irradiance of patch i to the
 radiosity of patch j through the material (Eq. 7-8). For an opaque Lambertian patch
 :math:`S = P = \mathrm{diag}(\rho)` and Eq. 14 is classical radiosity (Eq. 2).
@@ -19,7 +19,7 @@ Scattering factors (Eq. 8, Sect. 5.2). With the exit point at the centroid :math
           \approx \int_{A_i} s(d(x, c_j))\,dA_x,
 
 where :math:`s(r)` is a 1D profile (:mod:`translucent.materials.profiles`) of the
-shortest optical distance :math:`d` (:mod:`translucent.fast.optical_distance`). The
+shortest optical distance :math:`d` (:mod:`translucent.fast.radiosity.optical_distance`). The
 normalisation by :math:`A_j` (the paper prints :math:`A_i`; the two agree for equal
 patches) makes :math:`B_j = \sum_i S_{ji} E_i` an exitance for patches of any size, and the
 energy condition of Eq. 15 reads :math:`\sum_j A_j S_{ji} / A_i < 1` (the power-form
@@ -42,7 +42,7 @@ block (30 x 60 x 30 mm) at a quarter of skim milk's scattering it re-emits 0.77 
 0.61 (R, G, B) of the light entering the top where a photon random walk in the box gives
 0.97 / 0.95 / 0.81. Each translucent patch's column of S is therefore brought to the power
 sum :math:`g_i\int s`, with :math:`g_i` the escape probability of diffusion in the
-object's own shape over the half-space's (:mod:`translucent.fast.diffusion_escape`: one
+object's own shape over the half-space's (:mod:`translucent.fast.radiosity.diffusion_escape`: one
 finite-volume solve per channel on a voxel grid of the object, ``diffusion_voxels_per_axis``
 cells along its longest side), the light added spread over the column's patches in
 proportion to the fluence of the dipole's source with its mirror image in the entry

@@ -21,13 +21,12 @@ from ...materials.profiles import (
 )
 from ...scenes.mesh_shape import closed_surface, is_convex
 from ..base import StageLog
-from ..diffusion_escape import (
+from .diffusion_escape import (
     DiffusionGrid,
     diffusion_grid,
     voxel_size_for,
 )
-from ..form_factors import Patches
-from ..optical_distance import optical_distances, voxelize
+from .form_factors import Patches
 from .kernels import (
     csr_pattern,
     directed_pairs,
@@ -36,6 +35,7 @@ from .kernels import (
     scattering_samples,
 )
 from .knobs import POLAR_NODES
+from .optical_distance import optical_distances, voxelize
 
 
 @dataclass(eq=False)
@@ -67,7 +67,7 @@ class ObjectScattering:
         ``fractions`` (pairs x materials), ``patch_label``.
     diffusion : DiffusionGrid or None
         The finite-volume grid of a closed object when the knob ``finite_object_energy``
-        is on (:mod:`translucent.fast.diffusion_escape`).
+        is on (:mod:`translucent.fast.radiosity.diffusion_escape`).
     facts : dict
         Counts and timings for the report.
     """
@@ -288,7 +288,7 @@ def scattering_geometry(scene, patches: Patches, translucent: list[int], *,
         Receives what was skipped (voxel grids of convex objects) and the timings.
     sheet_thickness_mm : float, optional
         Thickness of the thin sheets (objects whose patches have twins, see
-        :func:`~translucent.fast.form_factors.build_patches`): a Dipole on a sheet becomes
+        :func:`~translucent.fast.radiosity.form_factors.build_patches`): a Dipole on a sheet becomes
         the reflection and transmission of a slab this thick.
 
     Returns

@@ -630,7 +630,7 @@ def scattering_samples(exit_local, incident, m, centroids_mm, patches, *, points
     """Midpoint-rule samples of every pair's incident patch (Sheng et al. 2014, Sect. 5.2).
 
     Pair p integrates over the triangles of patch ``incident[p]``, each split ``m[p]``
-    times per edge (:func:`~translucent.fast.optical_distance.subdivision_barycentrics`),
+    times per edge (:func:`~translucent.fast.radiosity.optical_distance.subdivision_barycentrics`),
     from the centroid of exit patch ``exit_local[p]``. Samples come in pair order.
 
     Parameters
@@ -658,7 +658,7 @@ def scattering_samples(exit_local, incident, m, centroids_mm, patches, *, points
     points : ndarray, shape (samples, 3) or (0, 3)
         mm.
     """
-    from ..optical_distance import subdivision_barycentrics
+    from .optical_distance import subdivision_barycentrics
 
     sample_offsets, fill, *_ = _compiled_scattering_samples()
     m = np.ascontiguousarray(m, dtype=np.int64)

@@ -13,21 +13,23 @@ from ...materials.profiles import (
 from ...resources import RADIOSITY_BYTES_PER_PAIR, check_memory
 from ...scenes.mesh_shape import closed_surface
 from ..base import (
+    NO_TRANSLUCENT_OBJECT,
+    UNSUPPORTED_MATERIAL,
     Refusal,
     StageLog,
     StageProgress,
     applicability,
+    load_or_precompute,
     refuse_inapplicable,
 )
-from ..form_factors import build_patches, form_factors, needs_form_factors
 from ..solid_inputs import mixed_profiles_from_solid, surface_scene
+from .form_factors import build_patches, form_factors, needs_form_factors
 from .geometry import scattering_geometry
 from .knobs import COMPONENTS, FORMAT_VERSION, KNOBS
 from .state import RadiosityState, materials_of
 
 #: The reason code of a scene with no translucent object: still solved (classical radiosity)
 #: when asked for directly, but not this method's to be scored on.
-NO_TRANSLUCENT_OBJECT = "no_translucent_object"
 
 
 def applies_to(scene) -> Refusal | None:
@@ -42,7 +44,7 @@ def applies_to(scene) -> Refusal | None:
         try:
             profile = profile_for(obj.material)
         except InputError:
-            return Refusal("unsupported_material",
+            return Refusal(UNSUPPORTED_MATERIAL,
                            f"object '{obj.name}' has a {type(obj.material).__name__} "
                            "material; translucent radiosity takes diffuse (Lambertian) "
                            "surfaces and dipole or tabulated radial profiles only")
@@ -128,7 +130,7 @@ def precompute(scene, **knobs) -> RadiosityState:
     -------
     RadiosityState
     """
-    from ...cache import ENTRY_LIMIT_VARIABLE, Cache, content_hash, entry_limit
+    from ...cache import content_hash
 
     scene, solid_notes = surface_scene(scene, mixed_profiles_from_solid)
     reason = applicability(applies_to, scene)
@@ -145,7 +147,6 @@ def precompute(scene, **knobs) -> RadiosityState:
     geometry_knobs = KNOBS.keyed(resolved)
     key = content_hash("radiosity", FORMAT_VERSION, scene.geometry_key(), geometry_knobs,
                        [scene.objects[i].name for i in translucent], labels)
-    cache = Cache("radiosity")
 
     def compute():
         log = StageLog()
@@ -177,7 +178,6 @@ def precompute(scene, **knobs) -> RadiosityState:
                     knobs=resolved, log=log, sheet_thickness_mm=resolved["sheet_thickness_mm"])
         log.notes["scattering_bytes"] = geometry.bytes
         log.notes["max_distance_mm"] = resolved["max_distance_mm"]
-        log.notes["cache"] = "miss"
         if solid_notes:
             log.notes["solid medium"] = solid_notes
         return patches, F, geometry, log
@@ -187,19 +187,12 @@ def precompute(scene, **knobs) -> RadiosityState:
         return geometry.bytes + (0 if F is None else F.data.nbytes + F.indices.nbytes
                                  + F.indptr.nbytes)
 
-    # one process computes it, another asking at once waits and reads
-    (patches, F, geometry, log), made = cache.load_or_make(
-        key, compute, valid=lambda stored: isinstance(stored, tuple) and len(stored) == 4,
-        what="the radiosity precomputation", nbytes=size)
-    if not made:
-        log.notes["cache"] = "hit"
-        if solid_notes:
-            log.notes["solid medium"] = solid_notes
-    elif entry_limit() is not None and size((patches, F, geometry, log)) > entry_limit():
-        nbytes = size((patches, F, geometry, log))
-        log.skip(f"the precomputation ({nbytes / 2**20:.0f} MiB) is not kept in the cache: "
-                 f"over its entry limit of {entry_limit() / 2**20:.4g} MiB "
-                 f"({ENTRY_LIMIT_VARIABLE}); the next run computes it again")
+    (patches, F, geometry, log), made = load_or_precompute(
+        "radiosity", key, compute, what="the radiosity precomputation",
+        log_of=lambda stored: stored[3],
+        valid=lambda stored: isinstance(stored, tuple) and len(stored) == 4, nbytes=size)
+    if not made and solid_notes:
+        log.notes["solid medium"] = solid_notes
     return _state(scene, patches, F, geometry, resolved, log)
 
 

@@ -18,11 +18,11 @@ from ...materials.profiles import (
     profile_for,
     radial_cumulative_integral,
 )
-from ..diffusion_escape import (
+from .diffusion_escape import (
     finite_object_gain,
     source_escape_probability,
 )
-from ..form_factors import Patches
+from .form_factors import Patches
 from .geometry import ObjectScattering, ScatteringGeometry
 from .kernels import (
     COMPILED_PRODUCT_ENTRIES,
@@ -170,9 +170,9 @@ def _carry_finite_object_energy(data, geometry: ScatteringGeometry, patches: Pat
 
     Column i (incident patch i) is brought to the power sum :math:`g_i\int s`: the
     profile's semi-infinite total (at most the entry transmittance times
-    :func:`~translucent.fast.diffusion_escape.source_escape_probability`, so that no column
-    exceeds what diffusion lets out of the object) times the gain of
-    :func:`~translucent.fast.diffusion_escape.finite_object_gain` (1 in a large object,
+    :func:`~translucent.fast.radiosity.diffusion_escape.source_escape_probability`, so that
+    no column exceeds what diffusion lets out of the object) times the gain of
+    :func:`~translucent.fast.radiosity.diffusion_escape.finite_object_gain` (1 in a large object,
     above 1 where the object is comparable to the diffusion length :math:`1/\sigma_{tr}`).
     The light added is light the half-space would have absorbed deep below the surface,
     so it is spread over the column's patches past the entry patch's tangent plane, with

@@ -9,7 +9,7 @@ import numpy as np
 from scipy.sparse import linalg as sparse_linalg
 
 from ...errors import InputError
-from ..form_factors import Patches
+from .form_factors import Patches
 from .kernels import COMPILED_PRODUCT_ENTRIES, compiled_rgb_product
 from .knobs import DIVERGENCE_FACTOR, SOLVERS, ConvergenceError
 from .scattering import ScatteringMatrix

@@ -193,11 +193,8 @@ class RadiosityState:
         Translucent patches take ``light_samples`` per area light; diffuse ones take
         ``diffuse_light_samples`` when it is set: their E reaches the image only through the
         form factors, which average it over everything a pixel's surface sees (the image's
-        own direct light is per pixel), so fewer shadow rays cost little there. Measured
-        against the index-matched Mitsuba references at 96 x 96 (the slow tests): 4 rays
-        instead of 16 move the Cornell box from relative MSE 0.00775 / HDR-FLIP 0.160 to
-        0.00795 / 0.169 (the bowl: 0.0236 / 0.267 either way) and cut the 25,080-patch
-        irradiance from 0.029 to 0.012 s; it stays off by default.
+        own direct light is per pixel), so fewer shadow rays cost little there. It stays
+        off by default; what it saves and costs, measured, is in docs/radiosity.md.
 
         Rectangular area lights go through :class:`AreaLightShadows` (set up once per point
         set), other lights through :func:`direct_irradiance`; the two agree to round-off.

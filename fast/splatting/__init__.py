@@ -89,7 +89,7 @@ from .buffers import (
 from .frame import LightView, gather_frame, light_view, rendering_radius_table, splat_frame
 from .ground_truth import brute_force_exitance
 from .knobs import BACKENDS, DEFAULT_KNOBS, KNOBS, LADDERS, QUICK_KNOBS, SAMPLING_RANGES
-from .method import add_approx_arguments, approx
+from .method import add_approx_arguments, applies_to, approx, precompute, scored_objects
 from .radius_table import MIN_LEVEL_RESOLUTION, RenderingRadiusTable, minimal_rendering_radius_table
 from .selection import (
     IrradianceSamples,
@@ -99,14 +99,7 @@ from .selection import (
     select_irradiance_samples,
 )
 from .splats import effective_rendering_ranges, splat_level
-from .state import (
-    RasterView,
-    SplattingState,
-    applies_to,
-    precompute,
-    rasterize_view,
-    scored_objects,
-)
+from .state import RasterView, SplattingState, rasterize_view
 
 __all__ = [
     "BACKENDS",

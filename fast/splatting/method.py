@@ -1,10 +1,76 @@
-"""The fast-method contract of splatting: command-line options and approx."""
+"""The fast-method contract of splatting: applicability, precompute, the command line."""
 
 from __future__ import annotations
 
 from ...image import Image
+from ...scenes.scene import DirectionalLight, PointLight, SpotLight
+from ..base import (
+    NO_LIGHT,
+    NO_TRANSLUCENT_OBJECT,
+    UNSUPPORTED_LIGHT,
+    Refusal,
+    applicability,
+    refuse_inapplicable,
+)
+from .emitters import AREA_LIGHTS
 from .knobs import KNOBS
-from .state import precompute
+from .state import SplattingState, translucent_objects
+
+#: The lights the method splats (area lights become point emitters).
+_LIGHTS = (PointLight, SpotLight, DirectionalLight, *AREA_LIGHTS)
+
+#: How an InputError for a scene the method cannot render begins (the reason follows).
+REFUSAL = "the splatting method cannot render this scene"
+
+
+def applies_to(scene) -> Refusal | None:
+    """None when the method renders ``scene``; otherwise why not.
+
+    It needs a translucent object (Dipole, SubEdit or solid material) and point, spot,
+    directional, rectangular or spherical lights (Chen et al. 2012 splat point and
+    directional lights; the others become point emitters,
+    :mod:`~translucent.fast.splatting.emitters`). Environments are refused.
+    """
+    if not translucent_objects(scene):
+        return Refusal(NO_TRANSLUCENT_OBJECT,
+                       "no translucent object (Dipole, SubEdit or solid material) in the scene")
+    others = sorted({type(light).__name__ for light in scene.lights
+                     if not isinstance(light, _LIGHTS)})
+    if others:
+        return Refusal(UNSUPPORTED_LIGHT, "the method handles point, spot, directional and "
+                       f"area lights only; the scene has {', '.join(others)}")
+    if not scene.lights:
+        return Refusal(NO_LIGHT, "the scene has no light")
+    return None
+
+
+def scored_objects(scene) -> list[str]:
+    """Return the objects the method renders, and is scored on: the translucent ones.
+
+    Each is splatted from its own buffers; other objects stay black in its image.
+    """
+    return [scene.objects[i].name for i in translucent_objects(scene)]
+
+
+def _check_knobs(knobs: dict) -> dict:
+    return KNOBS.resolve(knobs)
+
+
+def _check_scene(scene) -> None:
+    refuse_inapplicable(scene, applicability(applies_to, scene), REFUSAL)
+
+
+def precompute(scene, **knobs) -> SplattingState:
+    """Validate the scene and knobs; nothing geometric is precomputed (Chen et al. 2012).
+
+    The method needs no precomputation: every buffer is rebuilt each frame from the current
+    mesh, so a deforming mesh costs nothing extra and nothing can go stale. The only
+    tables (the SubEdit conversion of a dipole, Eq. 14's lookup table and the mean
+    profile's energy of the profile upsampling) depend on the material alone and are built
+    on first use.
+    """
+    _check_scene(scene)
+    return SplattingState(scene, _check_knobs(knobs), check_scene=_check_scene)
 
 
 def add_approx_arguments(parser) -> None:

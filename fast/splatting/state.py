@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -13,15 +14,13 @@ from ...image import Image
 from ...materials.homogeneous import Dipole
 from ...materials.solid import SolidMedium
 from ...materials.subedit import SubEditProfiles
-from ...scenes.scene import DirectionalLight, PointLight, SpotLight
-from ..base import StageLog, applicability, refuse_inapplicable
+from ...scenes.scene import DirectionalLight
+from ..base import StageLog
 from ..solid_inputs import subedit_from_solid
 from .buffers import CameraModel, SurfaceBuffer
-from .emitters import AREA_LIGHTS, PointEmitter, point_emitters
+from .emitters import PointEmitter, point_emitters
 from .frame import LightView, as_subedit, gather_frame, light_view, splat_frame
-from .knobs import KNOBS
 
-_LIGHTS = (PointLight, SpotLight, DirectionalLight, *AREA_LIGHTS)
 #: Widest irradiance-buffer cone for a point light (degrees): a light inside the object's
 #: bounding sphere sees only this cone of it.
 MAX_LIGHT_FOV = 160.0
@@ -29,59 +28,11 @@ MAX_LIGHT_FOV = 160.0
 VIEW_MARGIN = 1.02
 
 
-#: How an InputError for a scene the method cannot render begins (the reason follows).
-_REFUSAL = "the splatting method cannot render this scene"
-
-
-def _translucent_objects(scene) -> list[int]:
+def translucent_objects(scene) -> list[int]:
+    """Return the indices of the objects the method renders: Dipole, SubEdit or solid."""
     return [index for index, item in enumerate(scene.objects)
             if isinstance(item.material, (Dipole, SubEditProfiles, SolidMedium))]
 
-
-def applies_to(scene) -> str | None:
-    """None when the method renders ``scene``; otherwise why not.
-
-    It needs a translucent object (Dipole, SubEdit or solid material) and point, spot,
-    directional, rectangular or spherical lights (Chen et al. 2012 splat point and
-    directional lights; the others become point emitters,
-    :mod:`~translucent.fast.splatting.emitters`). Environments are refused.
-    """
-    if not _translucent_objects(scene):
-        return "no translucent object (Dipole, SubEdit or solid material) in the scene"
-    others = sorted({type(light).__name__ for light in scene.lights
-                     if not isinstance(light, _LIGHTS)})
-    if others:
-        return (f"the method handles point, spot, directional and area lights only; the "
-                f"scene has "
-                f"{', '.join(others)}")
-    if not scene.lights:
-        return "the scene has no light"
-    return None
-
-
-def scored_objects(scene) -> list[str]:
-    """Return the objects the method renders, and is scored on: the translucent ones.
-
-    Each is splatted from its own buffers; other objects stay black in its image.
-    """
-    return [scene.objects[i].name for i in _translucent_objects(scene)]
-
-
-def _check_knobs(knobs: dict) -> dict:
-    return KNOBS.resolve(knobs)
-
-
-def precompute(scene, **knobs) -> SplattingState:
-    """Validate the scene and knobs; nothing geometric is precomputed (Chen et al. 2012).
-
-    The method needs no precomputation: every buffer is rebuilt each frame from the current
-    mesh, so a deforming mesh costs nothing extra and nothing can go stale. The only
-    tables (the SubEdit conversion of a dipole, Eq. 14's lookup table and the mean
-    profile's energy of the profile upsampling) depend on the material alone and are built
-    on first use.
-    """
-    refuse_inapplicable(scene, applicability(applies_to, scene), _REFUSAL)
-    return SplattingState(scene, _check_knobs(knobs))
 
 
 def _surface_buffer(gbuffer_view, object_index: int, uv_values, footprint) -> SurfaceBuffer:
@@ -193,6 +144,10 @@ class SplattingState:
     scene: object
     knobs: dict
     log: StageLog = field(default_factory=StageLog)
+    #: ``check_scene(scene)`` refuses a scene the method cannot render (the contract's
+    #: ``applies_to``, given by :func:`precompute`): asked again of every frame's scene,
+    #: whose lights or material may have changed
+    check_scene: Callable[[object], None] | None = None
 
     def render_ground_truth(self, lights=None, material=None, *, scene=None) -> Image:
         """Render the brute-force ground truth of :meth:`render` (see :func:`gather_frame`).
@@ -218,16 +173,17 @@ class SplattingState:
         if lights is not None:
             scene = scene.with_lights(lights)
         if material is not None:
-            for index in _translucent_objects(scene):
+            for index in translucent_objects(scene):
                 scene = scene.with_material(scene.objects[index].name, material)
-        refuse_inapplicable(scene, applicability(applies_to, scene), _REFUSAL)
+        if self.check_scene is not None:
+            self.check_scene(scene)
         log = StageLog()
         start = time.perf_counter()
         camera_view = self._camera_view(scene)
         camera = CameraModel.from_camera(scene.camera)
         log.seconds["buffer generation"] = time.perf_counter() - start
         radiance = np.zeros((scene.camera.height, scene.camera.width, 3))
-        for index in _translucent_objects(scene):
+        for index in translucent_objects(scene):
             radiance += self._render_object(scene, index, camera_view, camera, log,
                                             _ground_truth)
         seconds = time.perf_counter() - start
@@ -251,7 +207,7 @@ class SplattingState:
         scene = self.scene if scene is None else scene
         if lights is not None:
             scene = scene.with_lights(lights)
-        index = _translucent_objects(scene)[0]
+        index = translucent_objects(scene)[0]
         camera_buffer, views, material, radius = self._object_buffers(
             scene, index, self._camera_view(scene))
         return camera_buffer, CameraModel.from_camera(scene.camera), views, material, radius

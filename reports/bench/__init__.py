@@ -13,12 +13,10 @@ def steps_bar(description: str, total: int, unit: str = "step", enabled: bool = 
     ``bar.set_postfix_str(name)`` and count it with ``bar.update()``. ``enabled=False``
     hides it too.
     """
-    import sys
+    from ...progress import progress_bar
 
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=description, unit=unit, leave=False, file=sys.stderr,
-                delay=PROGRESS_DELAY_SECONDS, disable=None if enabled else True)
+    return progress_bar(total=total, description=description, unit=unit, enabled=enabled,
+                        delay=PROGRESS_DELAY_SECONDS)
 
 
 def at_width(scene, width: int):
@@ -99,3 +97,52 @@ def count_list(text: str, field: str, *, allow_empty: bool = False) -> list[int]
         raise InputError("must be comma-separated integers >= 1"
                          + ("" if allow_empty else " (at least one)"), field=field, value=text)
     return counts
+
+
+def json_figures(value):
+    """Return ``value`` as strict JSON data.
+
+    Numpy numbers and arrays become Python ones, NaN and infinities None, tuples lists, and
+    anything else its text.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> json_figures({"fps": np.float32(2.5), "error": float("nan"), "shape": (2, 3)})
+    {'fps': 2.5, 'error': None, 'shape': [2, 3]}
+    """
+    import math
+
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {str(key): json_figures(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_figures(item) for item in value]
+    if isinstance(value, np.ndarray):
+        return json_figures(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if value is None or isinstance(value, str):
+        return value
+    return str(value)
+
+
+def write_figures(path, name: str, figures: dict):
+    """Write a bench's figures as JSON: to ``path``, or ``bench_NAME.json`` without one.
+
+    The one writer of every bench (``--json FILE``): strict JSON (:func:`json_figures`),
+    indented, written whole or not at all. Returns the path written.
+    """
+    import json
+    from pathlib import Path
+
+    from ...atomic import atomic_write_text
+
+    out = Path(path) if path else Path(f"bench_{name}.json")
+    atomic_write_text(out, json.dumps(json_figures(figures), indent=2, allow_nan=False) + "\n")
+    return out

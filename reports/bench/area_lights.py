@@ -14,14 +14,12 @@ frame of the same scene, measured in the same run.
 
 from __future__ import annotations
 
-import json
 import time
-from pathlib import Path
 
 import numpy as np
 
 from ...errors import InputError
-from . import count_list, steps_bar
+from . import count_list, steps_bar, write_figures
 
 #: Scenes lit by area lights whose translucent objects splatting renders.
 DEFAULT_SCENES = ("bowl", "cornell_block")
@@ -85,8 +83,6 @@ def measure(scene_name: str, counts, frames: int) -> dict:
 
 def run(args) -> int:
     """Measure every scene, print the table, write the JSON."""
-    from ...atomic import atomic_write_text
-
     counts = count_list(args.counts, "--counts")
     if args.frames < 1:
         raise InputError("must be an integer >= 1", field="--frames", value=args.frames)
@@ -103,7 +99,6 @@ def run(args) -> int:
         for row in result["rows"]:
             print(f"  {row['points']:>6} {row['relative_mse']:>9.4g} {row['hdr_flip']:>8.4f} "
                   f"{row['frame_seconds']:>8.3f}s {row['time_ratio']:>9.2f}")
-    out = Path(args.json or "bench_area_lights.json")
-    atomic_write_text(out, json.dumps({"scenes": results}, indent=2) + "\n")
+    out = write_figures(args.json, "area_lights", {"scenes": results})
     print(f"wrote {out}")
     return 0

@@ -25,20 +25,19 @@ effect of sub-area sampling.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_save_figure, atomic_write_text, check_output_folder
+from ...atomic import atomic_save_figure, check_output_folder
 from ...errors import InputError
 from ...fast import brdf_pca
 from ...materials.brdf_pca import pca_analysis
 from ...materials.brdfs import GAMMA_RANGES, MODELS, AnalyticBRDF
 from ...scenes import PointLight, load_scene
-from . import steps_bar, with_size
+from . import steps_bar, with_size, write_figures
 
 #: Targets of the task (frames per second on this machine).
 TARGET_EDIT_FPS = 20.0
@@ -336,7 +335,6 @@ def run(args) -> int:
             bar.set_postfix_str(section)
             out[section] = measure()
             bar.update()
-    path = args.json or "bench_brdf_pca.json"
-    atomic_write_text(path, json.dumps(out, indent=2, default=str))
+    path = write_figures(args.json, "brdf_pca", out)
     print(f"wrote {path}")
     return 0

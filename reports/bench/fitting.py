@@ -26,14 +26,13 @@ as misfits. Each finished medium is printed and ``DIR/bias_<generator>[_walk].js
 
 from __future__ import annotations
 
-import json
 import time
 
 import numpy as np
 
 from ...atomic import atomic_write_text, check_output_folder
 from ...errors import check_count
-from . import steps_bar
+from . import steps_bar, write_figures
 
 #: Targets, seconds; the walk model's posterior at most this multiple of the dipole's.
 TARGET_DIPOLE_SECONDS = 60.0
@@ -118,7 +117,7 @@ def _bias_table(args) -> int:
                    "photons": int(args.photons) if args.generator == "walk" else None,
                    "seconds": time.perf_counter() - began,
                    "rows": [r.to_json() for r in rows]}
-        atomic_write_text(json_path, json.dumps(figures, indent=2) + "\n")
+        write_figures(json_path, "fitting", figures)
         atomic_write_text(text_path, bias_table_text(rows) + "\n")
         print(f"[{len(rows)}] {row.material} (r_min {row.r_min_mm:.3g} mm): "
               f"{row.seconds:.0f} s, {'converged' if row.converged else 'NOT converged'}; "
@@ -214,7 +213,6 @@ def run(args) -> int:
         status = max(status, 0 if ok else 1)
     bar.update()
     bar.close()
-    out = args.json or "bench_fitting.json"
-    atomic_write_text(out, json.dumps(figures, indent=2) + "\n")
+    out = write_figures(args.json, "fitting", figures)
     print(f"wrote {out}")
     return status

@@ -190,8 +190,7 @@ def heterogeneous_table(out, *, pair=None, contrasts=DEFAULT_CONTRASTS, cells=DE
         The context, ``rows`` (sweep, t, cells, cell size and its ratio to the diffusion
         length, contrast, and :func:`measure_checker`'s row) and ``complete``.
     """
-    from tqdm.auto import tqdm
-
+    from ...progress import progress_bar
     from ..runs import backend_versions
 
     methods = tuple(methods)
@@ -222,7 +221,8 @@ def heterogeneous_table(out, *, pair=None, contrasts=DEFAULT_CONTRASTS, cells=DE
               "methods": list(methods), "versions": backend_versions(), "complete": False,
               "rows": []}
     started = time.perf_counter()
-    for sweep, t, count in tqdm(plan, desc="heterogeneous", unit="row", disable=not progress):
+    for sweep, t, count in progress_bar(plan, description="heterogeneous", unit="row",
+                                        enabled=progress):
         other = _mixed(first, second, t)
         base = _mixed(first, second, 0.0)
         scene = checker_scene(base, other, count, size=size, rows=rows)

@@ -36,7 +36,6 @@ exposure).
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from pathlib import Path
@@ -46,6 +45,7 @@ import numpy as np
 from ...atomic import atomic_write_text, check_output_folder
 from ...errors import InputError, check_count
 from ...materials import Dipole, measured_medium, measured_medium_names
+from . import write_figures
 
 __all__ = [
     "DEFAULT_ETA",
@@ -246,7 +246,7 @@ def object_metrics(reference, test, mask: np.ndarray) -> dict:
 def _reference(scene, spp: int, passes: int):
     """Render (or load from the cache) the reference; return it and whether it was cached."""
     from ...reference import render
-    from ..report import reference_path
+    from ..runs import reference_path
 
     cached = reference_path(scene, spp, passes).is_file()
     return render(scene, spp=spp, passes=passes, progress=False), cached
@@ -430,9 +430,7 @@ def markdown(result: dict) -> str:
 
 def write_table(result: dict, json_path: Path, markdown_path: Path, to_markdown=None) -> None:
     """Write a benchmark's result as JSON and its Markdown table (default :func:`markdown`)."""
-    from ..runs import json_safe
-
-    atomic_write_text(json_path, json.dumps(json_safe(result), indent=2) + "\n")
+    write_figures(json_path, "model_error", result)
     atomic_write_text(markdown_path, (to_markdown or markdown)(result))
 
 
@@ -480,7 +478,7 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
     InputError
         Bad sizes or counts, an unknown method or medium, ``eta`` outside [1, 3].
     """
-    from tqdm.auto import tqdm
+    from ...progress import progress_bar
 
     size, spp, passes, methods, eta = _check(size, spp, passes, methods, eta)
     names = list(measured_medium_names() if media is None else media)
@@ -495,7 +493,7 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
     result = {**_context(scene, mask, size, spp, passes, methods, eta,
                          [m.name for m in chosen]), "complete": False, "rows": []}
     started = time.perf_counter()
-    bar = tqdm(chosen, desc="model error", unit="medium", disable=not progress)
+    bar = progress_bar(chosen, description="model error", unit="medium", enabled=progress)
     for medium in bar:
         bar.set_postfix_str(medium.name)
         result["rows"].append(measure_medium(scene, medium, methods, spp=spp, passes=passes,

@@ -36,13 +36,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_save_figure, atomic_write_text, check_output_file
+from ...atomic import atomic_save_figure, check_output_file
 from ...cache import environment_variable, private_cache
 from ...errors import check_count
 from ...fast import prt
 from ...materials import Dipole, measured_medium
 from ...scenes import Camera, PointLight, Scene, SceneObject, geometry_image, icosphere
-from . import count_list, steps_bar
+from . import count_list, steps_bar, write_figures
 
 #: Targets of the task on this 2-core machine.
 TARGET_EDIT_FPS = 500.0
@@ -398,7 +398,6 @@ def run(args) -> int:
         figure = write_sweep_figure(args.png or "bench_prt_sweep.png", sweep)
         print(f"error sweep: {json.dumps(sweep['basis_terms'])}; terms: "
               f"{json.dumps(sweep['terms'])}; figure {figure}")
-    path = args.json or "bench_prt.json"
-    atomic_write_text(path, json.dumps(output, indent=2, default=float))
+    path = write_figures(args.json, "prt", output)
     print(f"wrote {path}")
     return 0

@@ -35,7 +35,6 @@ report the bytes a frame moves against that bandwidth. The paper's GPU figures (
 from __future__ import annotations
 
 import itertools
-import json
 import os
 import re
 import resource
@@ -43,14 +42,13 @@ import time
 
 import numpy as np
 
-from ...atomic import atomic_write_text
 from ...errors import check_count
 from ...fast import radiosity
 from ...materials import Dipole, measured_medium
 from ...scenes import RectangularAreaLight, SceneObject
 from ...scenes.raycast import embree_available, ray_engine
 from ...scenes.scene_file import builtin_scene_path, loads_scene
-from . import count_list, steps_bar
+from . import count_list, steps_bar, write_figures
 
 #: The paper's Table 1, Cornell box (24,640 polygons, GTX 590).
 PAPER = {"relighting fps": 14.0, "translucency change fps": 4.0,
@@ -448,7 +446,7 @@ def _low_rank(state, args, out):
 
 
 def _sampling(out):
-    from ...fast.form_factors import build_patches
+    from ...fast.radiosity.form_factors import build_patches
     from ...materials.profiles import DipoleProfile
     from ...scenes import Camera, Scene, plane
 
@@ -507,7 +505,6 @@ def run(args) -> int:
             bar.update()
     print("paper (GTX 590): 14 fps relighting, 4 fps translucency change, 4 + 3 min "
           "precomputation, 800 MB")
-    path = args.json or "bench_radiosity.json"
-    atomic_write_text(path, json.dumps(out, indent=2, default=float))
+    path = write_figures(args.json, "radiosity", out)
     print(f"wrote {path}")
     return 0

@@ -32,15 +32,12 @@ scaled to :data:`DELTA_LIGHT_CPU_MINUTES` CPU minutes against
 
 from __future__ import annotations
 
-import json
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_write_text
-from . import at_width, steps_bar
+from . import at_width, steps_bar, write_figures
 
 #: The overhead the suite may add to a plain Mitsuba render (issue 2).
 TARGET_OVERHEAD = 1.05
@@ -317,7 +314,6 @@ def run(args) -> int:
         result = _overhead(scene, args)
         _print_overhead(result)
         default = "bench_reference.json"
-    path = Path(args.json or default)
-    atomic_write_text(path, json.dumps(result, indent=2) + "\n")
+    path = write_figures(args.json or default, "reference", result)
     print(f"wrote {path}")
     return 0

@@ -37,17 +37,15 @@ wall clock.
 
 from __future__ import annotations
 
-import json
 import os
 import time
 
 import numpy as np
 
-from ...atomic import atomic_write_text
 from ...fast import splatting
 from ...materials.subedit import BUILTIN_SUBEDIT
 from ...scenes import load_scene
-from . import steps_bar, with_size
+from . import steps_bar, with_size, write_figures
 
 #: The ablation settings of the paper's Table 1.
 SETTINGS = {
@@ -156,8 +154,14 @@ def _time_frames(state, frames: int):
     return image, float(np.median(wall)), float(np.median(cpu))
 
 
-def run(args) -> int:
-    """Time each setting, measure its error, print the tables, write the JSON."""
+def _checked_arguments(args):
+    """Return the settings, epsilons, level samplings, level counts and materials asked for.
+
+    Raises
+    ------
+    InputError
+        An unknown setting or material, a bad number or count.
+    """
     from ...errors import InputError, check_count
 
     names = [name.strip() for name in args.settings.split(",") if name.strip()]
@@ -178,6 +182,12 @@ def run(args) -> int:
     for name in ("frames", "validation_stride", "validation_width", "validation_irradiance",
                  "width", "height", "irradiance_resolution"):
         check_count(getattr(args, name), f"--{name.replace('_', '-')}")
+    return names, epsilons, pitches, level_counts, materials
+
+
+def run(args) -> int:
+    """Time each setting, measure its error, print the tables, write the JSON."""
+    names, epsilons, pitches, level_counts, materials = _checked_arguments(args)
     base = load_scene(args.scene)
     full = with_size(base, args.width, args.height)
     small = with_size(base, args.validation_width,
@@ -231,8 +241,7 @@ def run(args) -> int:
     per_material = _materials(small, small_common, materials)
     bar.update()
     bar.close()
-    out = args.json or "bench_splatting.json"
-    atomic_write_text(out, json.dumps({
+    out = write_figures(args.json, "splatting", {
         "scene": base.name, "width": args.width, "height": args.height,
         "irradiance_resolution": args.irradiance_resolution, "backend": args.backend,
         "load average (1, 5, 15 min)": load, "equal error ratio": EQUAL_ERROR_RATIO,
@@ -241,7 +250,7 @@ def run(args) -> int:
                        "brute force seconds": truth_seconds,
                        "small frame": [small.camera.width, small.camera.height],
                        "small irradiance_resolution": args.validation_irradiance},
-        "results": results, "materials": per_material}, indent=2, default=str))
+        "results": results, "materials": per_material})
     print(f"wrote {out}")
     return 0
 
@@ -261,13 +270,13 @@ def _materials(small, small_common, names) -> dict:
         image = state.render(material=material).rgb
         truth = state.render_ground_truth(material=material).rgb
         out[name] = {"relative error": float(relative_error(image, truth)),
-                     "hdr-flip": flip_map(truth, image)[0]}
+                     "hdr_flip": flip_map(truth, image)[0]}
     if out:
         print(f"\nbuilt-in heterogeneous materials, defaults against brute force on the whole "
               f"{small.camera.width} x {small.camera.height} frame:")
         for name, row in out.items():
             print(f"  {name:16s} relative error {row['relative error']:.4f}  HDR-FLIP "
-                  f"{row['hdr-flip']:.4f}")
+                  f"{row['hdr_flip']:.4f}")
     return out
 
 

@@ -35,17 +35,16 @@ one log-log PNG beside it (``--plot``, default the JSON's name with ``.png``).
 from __future__ import annotations
 
 import datetime
-import json
 import math
 import os
 from pathlib import Path
 
 import numpy as np
 
-from ...atomic import atomic_save_figure, atomic_write_text, check_output_file
+from ...atomic import atomic_save_figure, check_output_file
 from ...errors import InputError, check_count
 from ..speedup import equal_error_seconds, path_tracing_point
-from . import at_width, steps_bar
+from . import at_width, steps_bar, write_figures
 
 __all__ = ["DEFAULT_SCENES", "add_arguments", "declared_ladders", "run", "sweep",
            "path_tracing_point", "equal_error_seconds"]
@@ -216,7 +215,7 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
         ``{"scenes": {name: {...}}, ...}``; see the module docstring.
     """
     from ...fast.base import METHODS, applicability, method
-    from ...fast.registry import MethodContractError
+    from ...fast.registry import MethodContractError, check_known
     from ...scenes import Scene, load_scene
     from ..distributed import run_tasks
     from ..runs import backend_versions
@@ -231,9 +230,7 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
         raise InputError("must be >= 0", field="--ladder-points", value=ladder_points)
     chosen = list(METHODS) if methods is None else list(methods)
     for name in chosen:
-        if name not in METHODS:
-            raise InputError(f"unknown fast method; valid: {', '.join(METHODS)}",
-                             field="--methods", value=name)
+        check_known(name, field="--methods")
     loaded = [at_width(s if isinstance(s, Scene) else load_scene(s), size) for s in scenes]
     spps = [2**k for k in range(int(math.log2(max_spp)) + 1)]
 
@@ -256,7 +253,7 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
                 entry["methods"][name] = {"status": "failed", "reason": error.reason}
                 continue
             except InputError as error:
-                entry["methods"][name] = {"status": "not built", "reason": error.reason}
+                entry["methods"][name] = {"status": "not installed", "reason": error.reason}
                 continue
             reason = applicability(module.applies_to, scene)
             if reason is not None:
@@ -272,6 +269,20 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
                     owners.append((scene.name, "method", name, ladder))
 
     answers = run_tasks(_task, tasks, scheduler=scheduler, local=serial, progress=progress)
+    _score_answers(owners, answers, results, progress)
+    for entry in results.values():
+        _ratios_and_speedups(entry)
+    return {"benchmark": "tradeoff",
+            "generated": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+            "cpu_count": os.cpu_count(), "versions": backend_versions(),
+            "where": "this process" if serial else (scheduler or "local processes"),
+            "error_metric": "relative MSE, reference noise discounted",
+            "time_baseline": "the 1-spp path-traced render of the same scene in this run",
+            "scenes": results}
+
+
+def _score_answers(owners: list, answers: list, results: dict, progress: bool) -> None:
+    """Score every task's answer against its scene's reference into ``results``."""
     references = {}
     for (scene_name, kind, _, _), answer in zip(owners, answers, strict=True):
         if kind == "reference":
@@ -305,15 +316,6 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
             point["reason"] = answer.reason
         entry["methods"][name]["ladders"][ladder].append(point)
     scoring.close()
-    for entry in results.values():
-        _ratios_and_speedups(entry)
-    return {"benchmark": "tradeoff",
-            "generated": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-            "cpu_count": os.cpu_count(), "versions": backend_versions(),
-            "where": "this process" if serial else (scheduler or "local processes"),
-            "error_metric": "relative MSE, reference noise discounted",
-            "time_baseline": "the 1-spp path-traced render of the same scene in this run",
-            "scenes": results}
 
 
 def _ratios_and_speedups(entry: dict) -> None:
@@ -454,20 +456,7 @@ def run(args) -> int:
     _print_table(figures)
     json_path = Path(args.json or "bench_tradeoff.json")
     plot_path = Path(args.plot) if args.plot else json_path.with_suffix(".png")
-    atomic_write_text(json_path, json.dumps(_finite(figures), indent=2, allow_nan=False))
+    write_figures(json_path, "tradeoff", figures)
     plot(figures, plot_path)
     print(f"wrote {json_path} and {plot_path}")
     return 0
-
-
-def _finite(value):
-    """Replace NaN and infinities by None for strict JSON."""
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_finite(v) for v in value]
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value

@@ -25,7 +25,7 @@ def add_arguments(parser):
         try:
             module = method(name)
         except InputError:
-            continue  # not built, or not a method: `report` and `approx` name why when asked
+            continue  # not installed, or not a method: `report` and `approx` name why when asked
         command = sub.add_parser(name, help=(module.__doc__ or "").strip().split("\n")[0])
         command.add_argument("scene", help="built-in scene name or path to a scene TOML file")
         command.add_argument("--out", "-o", default=None,
@@ -103,7 +103,7 @@ def _render_with_knobs(module, scene, args):
 
 def run(args) -> int:
     """Load the scene, check the output path, render with the method, write the EXR atomically."""
-    from ...atomic import check_output_file
+    from ...atomic import check_output_file, safe_file_name
     from ...errors import InputError
     from ...scenes import load_scene
     from .record import record
@@ -112,7 +112,7 @@ def run(args) -> int:
         raise InputError("the output must be an OpenEXR file ending in .exr", field="--out",
                          value=args.out)
     scene = load_scene(args.scene)
-    out = args.out or f"{scene.name}_{args.method}.exr"
+    out = args.out or f"{safe_file_name(scene.name)}_{args.method}.exr"
     check_output_file(out, "--out", what="a file name ending in .exr")
     module = args.approx_module
     image = module.approx(scene, args) if hasattr(module, "approx") else \

@@ -31,8 +31,8 @@ def add_arguments(parser):
                         help="report folder (default ./report; a previous report there is "
                              "replaced)")
     parser.add_argument("--methods", default=None, metavar="M1,M2",
-                        help="comma-separated fast methods (default: all; those not built "
-                             "yet are listed as such)")
+                        help="comma-separated fast methods (default: all; those not installed "
+                             "are listed as such)")
     parser.add_argument("--baseline", default=None, metavar="FILE",
                         help="baseline JSON (default: the committed reports/baseline/"
                              "default.json)")

@@ -20,9 +20,8 @@ def add_arguments(parser):
 
 def run(args) -> int:
     """Run the sweeps and print the table."""
-    from tqdm.auto import tqdm
-
     from ...errors import InputError
+    from ...progress import progress_bar
     from ..stress import all_kernels
 
     check_output_file(args.json, "--json", what="a file name for the results")
@@ -33,7 +32,7 @@ def run(args) -> int:
             raise InputError(f"no kernel matches; kernels: {', '.join(all_kernels())}",
                              field="--only", value=args.only)
     results = {}
-    for name, kernel in tqdm(kernels.items(), desc="stress", leave=False):
+    for name, kernel in progress_bar(kernels.items(), description="stress"):
         results[name] = kernel()
     width = max(len(n) for n in results)
     print(f"{'kernel':<{width}}  {'evals':>9} {'NaN':>5} {'Inf':>5} {'neg':>5} "

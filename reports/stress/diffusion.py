@@ -1,4 +1,4 @@
-r"""Stability of the finite-object diffusion gain (:mod:`translucent.fast.diffusion_escape`).
+r"""Stability of the finite-object diffusion gain (:mod:`.fast.radiosity.diffusion_escape`).
 
 A slab-like box (40 x 6 x 40 mm, 1 mm cells) under coefficients from nearly transparent
 to nearly opaque and from no absorption to total (sigma_a 1e-8 .. 10 mm^-1, sigma_s'
@@ -7,7 +7,7 @@ probability lies in [0, 1]; the gain is finite and positive; the energy it gives
 :math:`\min(R_d, e_h(z_r))\,g`, never exceeds 1; where the source lies outside the slab
 the gain is 1. Where the scheme resolves the problem (diffusion length at least two cells,
 source inside the slab) the gain at the face's centre is compared with the closed-form
-slab (:func:`~translucent.fast.diffusion_escape.slab_gain`).
+slab (:func:`~translucent.fast.radiosity.diffusion_escape.slab_gain`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import itertools
 
 import numpy as np
 
-from ...fast.diffusion_escape import (
+from ...fast.radiosity.diffusion_escape import (
     SOLVE_TOLERANCE,
     diffusion_grid,
     escape_probability,

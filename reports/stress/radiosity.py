@@ -34,7 +34,7 @@ from . import StressResult, count_nonfinite, stress_kernel
 
 ALBEDOS = (0.9, 0.99, 0.999, 1.0 - 1e-6, 1.0, 1.01)
 #: The paper's 0.5 % relative residual, and a tight one.
-TOLERANCES = (5e-3, 1e-10)
+SOLVER_TOLERANCES = (5e-3, 1e-10)
 #: Patches of the sphere: enough for a dense F of 16,384 entries, few enough that the 2,000
 #: Jacobi iterations of a refusal take about a second on a shared 2-core machine.
 PATCHES = 128
@@ -119,7 +119,7 @@ def _outcome(result: StressResult, rho, solver, tolerance, form_factors, row, so
 
 @stress_kernel("radiosity near the convergence limit")
 def radiosity_limit(albedos=ALBEDOS, patches: int = PATCHES, solvers=SOLVERS,
-                    tolerances=TOLERANCES) -> StressResult:
+                    tolerances=SOLVER_TOLERANCES) -> StressResult:
     """Every solver at every albedo and tolerance on the closed sphere, against Eq. 14.
 
     Parameters

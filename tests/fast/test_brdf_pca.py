@@ -1,4 +1,4 @@
-"""BRDF editing by PCA with global illumination (Nguyen et al. 2010), fast/brdf_pca.py."""
+"""BRDF editing by PCA with global illumination (Nguyen et al. 2010), fast/brdf_pca/."""
 
 import math
 import os
@@ -10,9 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from translucent.errors import InputError
 from translucent.fast import brdf_pca as bp
-from translucent.fast import brdf_pca_kernels as bk
-from translucent.fast import brdf_pca_lighting as bl
-from translucent.fast import brdf_pca_transfer as bt
+from translucent.fast.base import Refusal
+from translucent.fast.brdf_pca import kernels as bk
+from translucent.fast.brdf_pca import lighting as bl
+from translucent.fast.brdf_pca import transfer as bt
 from translucent.materials import Dipole, Lambertian
 from translucent.materials.brdf_pca import build_pca_basis
 from translucent.materials.brdfs import (
@@ -367,15 +368,18 @@ def test_bad_knobs_and_scenes(scene):
     with pytest.raises(InputError, match=r"glossy_ratio = 2.0: must be in \[0, 1\]"):
         bp.precompute(scene, glossy_ratio=2.0)
     milk = scene.with_material("box", Dipole(sigma_a=0.01, sigma_s_prime=1.0))
-    assert "Dipole material" in bp.applies_to(milk)
+    assert bp.applies_to(milk).code == "unsupported_material"
+    assert "Dipole material" in str(bp.applies_to(milk))
     with pytest.raises(InputError, match="does not apply: object 'box' has a Dipole"):
         bp.precompute(milk)
     diffuse = scene
     for name in ("floor", "sphere", "box"):
         diffuse = diffuse.with_material(name, Lambertian(0.5))
-    assert bp.applies_to(diffuse) == "no object has an analytic BRDF: there is nothing to edit"
+    assert bp.applies_to(diffuse) == Refusal("nothing_to_edit", "no object has an analytic BRDF: "
+                                             "there is nothing to edit")
     lit = scene.with_lights([ConstantEnvironment(1.0)])
-    assert "environment lights are not supported" in bp.applies_to(lit)
+    assert bp.applies_to(lit).code == "unsupported_light"
+    assert "environment lights are not supported" in str(bp.applies_to(lit))
 
 
 def test_bad_edits(state, scene):
@@ -456,7 +460,7 @@ def test_approx_checks_the_edit_before_precomputing(tmp_path, capsys, monkeypatc
     def never(*args, **kwargs):
         raise AssertionError("precomputed before the edit was checked")
 
-    monkeypatch.setattr(bp, "precompute", never)
+    monkeypatch.setattr(bp.method, "precompute", never)
     assert main(["approx", "brdf_pca", "glossy", *arguments, "--out",
                  str(tmp_path / "g.exr")]) == 2
     assert message in capsys.readouterr().err

@@ -204,7 +204,7 @@ def test_a_method_registered_by_module_name_is_imported_when_used(registered, tm
     registered("late", "late_method")
     assert method("late").__name__ == "late_method"
     registered("missing", "no_such_module_anywhere")
-    with pytest.raises(InputError, match="not built yet"):
+    with pytest.raises(InputError, match="not installed"):
         method("missing")
     (tmp_path / "not_a_method.py").write_text("VALUE = 1\n")
     registered("not_a_method", "not_a_method")

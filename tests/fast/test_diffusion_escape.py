@@ -1,4 +1,4 @@
-"""Escape probability of diffusion in a finite object (translucent.fast.diffusion_escape)."""
+"""Escape probability of diffusion in a finite object (fast/radiosity/diffusion_escape.py)."""
 
 import math
 
@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from translucent.errors import InputError
-from translucent.fast.diffusion_escape import (
+from translucent.fast.radiosity.diffusion_escape import (
     diffusion_grid,
     escape_probability,
     finite_object_gain,

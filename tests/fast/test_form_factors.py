@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 from translucent.errors import InputError
-from translucent.fast.form_factors import (
+from translucent.fast.radiosity.form_factors import (
     DROPPED_ENERGY_WARNING,
     build_patches,
     form_factors,

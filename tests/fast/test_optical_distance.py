@@ -3,7 +3,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from translucent.errors import InputError
-from translucent.fast.optical_distance import (
+from translucent.fast.radiosity.optical_distance import (
     optical_distances,
     subdivision_barycentrics,
     voxelize,
@@ -136,7 +136,7 @@ def test_voxelize_rejects_bad_size():
 
 def _segment_inside_point_by_point(grid, start, end):
     """The definition: every test point of the segment lies in an occupied voxel."""
-    from translucent.fast.optical_distance import SEGMENT_POINTS_PER_VOXEL
+    from translucent.fast.radiosity.optical_distance import SEGMENT_POINTS_PER_VOXEL
 
     steps = int(np.ceil(np.linalg.norm(end - start) / grid.voxel_size
                         * SEGMENT_POINTS_PER_VOXEL))

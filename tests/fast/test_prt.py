@@ -87,7 +87,7 @@ def state(tmp_path_factory):
     with pytest.MonkeyPatch.context() as patch:
         if not os.environ.get("TRANSLUCENT_CACHE"):
             patch.setenv("TRANSLUCENT_CACHE", str(tmp_path_factory.getbasetemp() / "cache"))
-        yield prt.precompute(sphere_scene(), samples=SAMPLES, progress=False)
+        yield prt.precompute(sphere_scene(), samples=SAMPLES)
 
 
 def relative_error(approximation, reference):
@@ -162,7 +162,7 @@ TWO_HALF_LEVELS = 1.0 / 32767 + 1e-6
 
 
 def test_shared_layout_keeps_every_row_selection_and_more(state):
-    rows = prt.precompute(sphere_scene(), samples=SAMPLES, layout="rows", progress=False)
+    rows = prt.precompute(sphere_scene(), samples=SAMPLES, layout="rows")
     separate = rows.transfers[0].transfer.dequantised()
     shared = state.transfers[0].transfer.dequantised()
     assert rows.transfers[0].statistics["layout"] == "rows"
@@ -305,7 +305,7 @@ def test_far_small_emitters_act_as_point_lights(state, emitter):
 
 def test_constant_environment_on_a_convex_object(state):
     scene = sphere_scene(lights=[ConstantEnvironment(1.0)])
-    environment_state = prt.precompute(scene, samples=1024, progress=False)
+    environment_state = prt.precompute(scene, samples=1024)
     transfer = environment_state.transfers[0]
     irradiance = environment_state.irradiance(transfer, scene.lights, 1.3)[:, 0]
     mu = np.linspace(0, 1, 20001)
@@ -331,19 +331,19 @@ def test_fresnel_factors_reproduce_the_hemispherical_integral():
 def test_precomputation_is_cached_by_geometry_and_knobs(state):
     relit = sphere_scene(material=measured_medium("Skin1"),
                          lights=[DirectionalLight([0, -1, 0], 1.0)])
-    again = prt.precompute(relit, samples=SAMPLES, progress=False)
-    assert again.log.notes["cache"]["sphere"] == "loaded from the cache"
-    other_knobs = prt.precompute(relit, samples=1024, seed=7, progress=False)
-    assert other_knobs.log.notes["cache"]["sphere"] == "computed and stored"
+    again = prt.precompute(relit, samples=SAMPLES)
+    assert again.log.notes["cache"]["sphere"] == "hit"
+    other_knobs = prt.precompute(relit, samples=1024, seed=7)
+    assert other_knobs.log.notes["cache"]["sphere"] == "miss"
 
 
 def test_spatial_compression_on_a_geometry_image():
     mesh = geometry_image(17)
     scene = sphere_scene(material=measured_medium("Skin1"), mesh=mesh)
-    automatic = prt.precompute(scene, samples=1024, progress=False)
+    automatic = prt.precompute(scene, samples=1024)
     assert automatic.transfers[0].spatial_shape is None
     assert "289 vertices <= 20000" in " ".join(automatic.log.skipped)
-    spatial = prt.precompute(scene, samples=1024, spatial="on", progress=False)
+    spatial = prt.precompute(scene, samples=1024, spatial="on")
     transfer = spatial.transfers[0]
     assert transfer.spatial_shape == (17, 17)
     assert "CDF 9/7" in spatial.log.notes["spatial"]["sphere"]
@@ -420,15 +420,18 @@ def test_approx_command_refuses_a_material_with_a_coefficient_it_would_ignore(tm
 ])
 def test_bad_knobs_are_rejected(knobs, message):
     with pytest.raises(InputError, match=message):
-        prt.precompute(sphere_scene(), progress=False, **knobs)
+        prt.precompute(sphere_scene(), **knobs)
 
 
 def test_scenes_it_cannot_render():
     opaque = sphere_scene(material=Lambertian(0.5))
-    assert "no homogeneous translucent object" in prt.applies_to(opaque)
+    refusal = prt.applies_to(opaque)
+    assert refusal.code == "no_translucent_object"
+    assert "no homogeneous translucent object" in str(refusal)
     with pytest.raises(InputError, match="prt method cannot render"):
         prt.precompute(opaque)
-    assert "no light" in prt.applies_to(sphere_scene(lights=()))
+    dark = prt.applies_to(sphere_scene(lights=()))
+    assert dark.code == "no_light" and "no light" in str(dark)
 
 
 def test_other_objects_in_view_are_left_black_named_and_not_scored():
@@ -444,7 +447,7 @@ def test_other_objects_in_view_are_left_black_named_and_not_scored():
     scene = Scene(list(plain.objects) + [ball], list(plain.lights), plain.camera,
                   mm_per_unit=MM_PER_UNIT)
     assert prt.scored_objects(scene) == ["sphere"]
-    image = prt.precompute(scene, samples=SAMPLES, progress=False).render()
+    image = prt.precompute(scene, samples=SAMPLES).render()
     from translucent.scenes import gbuffer
 
     seen = gbuffer(scene).object_id

@@ -3,7 +3,6 @@ import pytest
 from scipy import sparse
 from translucent.errors import InputError
 from translucent.fast import radiosity
-from translucent.fast.form_factors import build_patches, sphere_form_factors
 from translucent.fast.radiosity import (
     COMPONENTS,
     ConvergenceError,
@@ -16,6 +15,7 @@ from translucent.fast.radiosity import (
     solve_radiosity,
 )
 from translucent.fast.radiosity import method as radiosity_method
+from translucent.fast.radiosity.form_factors import build_patches, sphere_form_factors
 from translucent.materials import Lambertian, measured_medium
 from translucent.materials.profiles import (
     DipoleProfile,
@@ -330,7 +330,10 @@ GAIN_TARGET_RTOL = 1e-9
 
 
 def test_finite_object_energy_brings_columns_to_the_diffusion_gain():
-    from translucent.fast.diffusion_escape import finite_object_gain, source_escape_probability
+    from translucent.fast.radiosity.diffusion_escape import (
+        finite_object_gain,
+        source_escape_probability,
+    )
 
     state, plain = _block_state(), _block_state(finite_object_energy=False)
     patches = state.patches
@@ -381,7 +384,10 @@ def test_finite_object_energy_leaves_a_large_object_alone():
 
 
 def test_finite_object_energy_never_exceeds_the_escape_probability():
-    from translucent.fast.diffusion_escape import finite_object_gain, source_escape_probability
+    from translucent.fast.radiosity.diffusion_escape import (
+        finite_object_gain,
+        source_escape_probability,
+    )
     from translucent.materials import Dipole
 
     # eta 1.5 and reduced albedo 0.7, where the dipole's total exceeds the half-space's

@@ -5,8 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import sparse
-from translucent.fast.form_factors import build_patches
-from translucent.fast.optical_distance import subdivision_barycentrics
+from translucent.fast.radiosity.form_factors import build_patches
 from translucent.fast.radiosity.geometry import pair_fractions
 from translucent.fast.radiosity.kernels import (
     csr_order,
@@ -17,6 +16,7 @@ from translucent.fast.radiosity.kernels import (
     scatter_product,
     scattering_samples,
 )
+from translucent.fast.radiosity.optical_distance import subdivision_barycentrics
 from translucent.fast.radiosity.scattering import mixed_values
 from translucent.materials import Lambertian
 from translucent.materials.profiles import MixedProfiles, RadialGrid, TwoExponentialProfile

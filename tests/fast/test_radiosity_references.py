@@ -91,7 +91,7 @@ def test_against_volumetric_path_tracing(name, tmp_path):
 #: x0.25: a 5.7 mm mean free path (1 / sigma_tr = 37 mm in red) in a 30 mm block, where
 #: the semi-infinite dipole sends 17-23 % of the light that the block re-emits into a
 #: half-space that is not there (the limitation of Sheng et al. 2014, Sect. 7); the
-#: diffusion gain in the block's own shape (translucent.fast.diffusion_escape) gives back
+#: diffusion gain in the block's own shape (translucent.fast.radiosity.diffusion_escape) gives back
 #: 1.23 / 1.19 / 1.10 at the top face's centre, more near its edges.
 #: x8: albedo 0.9997, where a reference with Russian roulette from depth 5 came out 4 / 11 /
 #: 7 % darker than without (its heavy tail of long walks unconverged): the reference is

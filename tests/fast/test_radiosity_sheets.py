@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from translucent.errors import InputError
 from translucent.fast import radiosity
-from translucent.fast.form_factors import build_patches
 from translucent.fast.radiosity import precompute, scattering_geometry, scattering_matrix
+from translucent.fast.radiosity.form_factors import build_patches
 from translucent.materials import Lambertian, measured_medium
 from translucent.materials.profiles import TwoExponentialProfile
 from translucent.scenes import Camera, PointLight, Scene, SceneObject, plane

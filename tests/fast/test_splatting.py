@@ -685,7 +685,9 @@ def test_applies_to_and_knob_errors(heterogeneous_scene):
 
     assert splatting.applies_to(heterogeneous_scene) is None
     sky = heterogeneous_scene.with_lights([ConstantEnvironment(1.0)])
-    assert "point, spot, directional and area lights only" in splatting.applies_to(sky)
+    refusal = splatting.applies_to(sky)
+    assert refusal.code == "unsupported_light"
+    assert "point, spot, directional and area lights only" in str(refusal)
     with pytest.raises(InputError, match="cannot render this scene"):
         splatting.precompute(sky)
     with pytest.raises(InputError, match="area_light_points = 0: must be an integer"):

@@ -312,12 +312,12 @@ def test_the_scalar_terms_are_the_array_terms(model, pair):
 @settings(max_examples=100, deadline=None)
 @given(st.sampled_from(MODELS), _PAIRS)
 def test_the_compiled_terms_are_the_scalar_terms(model, pair):
-    from translucent.fast import brdf_pca_kernels
+    from translucent.fast.brdf_pca import kernels
     from translucent.materials.brdfs import MODEL_CODES, fixed_term_scalar, pca_variable_scalar
 
     code = MODEL_CODES[model]
     cos_l, cos_v, l_dot_v, f0 = pair
-    assert brdf_pca_kernels._fixed_scalar(code, cos_l, cos_v, l_dot_v, f0) == \
+    assert kernels._fixed_scalar(code, cos_l, cos_v, l_dot_v, f0) == \
         pytest.approx(fixed_term_scalar(code, cos_l, cos_v, l_dot_v, f0), rel=1e-14)
-    assert brdf_pca_kernels._variable_scalar(code, cos_l, cos_v, l_dot_v, -1.1, 0.9) == \
+    assert kernels._variable_scalar(code, cos_l, cos_v, l_dot_v, -1.1, 0.9) == \
         pytest.approx(pca_variable_scalar(code, cos_l, cos_v, l_dot_v, -1.1, 0.9), rel=1e-14)

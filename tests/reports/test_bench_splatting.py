@@ -19,7 +19,7 @@ def test_tiny_bench_writes_every_row_with_its_error(tmp_path, capsys):
     results = written["results"]
     assert list(written["materials"]) == ["checker", "wax_gradient"]
     for row in written["materials"].values():
-        assert 0 < row["relative error"] < 1 and 0 < row["hdr-flip"] < 1
+        assert 0 < row["relative error"] < 1 and 0 < row["hdr_flip"] < 1
     assert list(results) == ["no acceleration", "both", "both, Eq. 17 as published",
                              "both, level sampling 1", "both, 4 levels",
                              "both, 4 levels, level sampling 1"]

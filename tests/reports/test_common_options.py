@@ -71,7 +71,7 @@ def test_compare_records_each_metric_with_its_noise_floor_and_verdict(tmp_path, 
     assert content["command"] == "compare" and content["exit_code"] == 0
     assert (content["width"], content["height"]) == (32, 24)
     metrics = {row["metric"]: row for row in content["metrics"]}
-    assert set(metrics) >= {"relmse", "rmse", "psnr", "ssim", "hdr-flip", "ldr-flip",
+    assert set(metrics) >= {"relative_mse", "rmse", "psnr", "ssim", "hdr_flip", "ldr_flip",
                             "ciede2000"}
     for row in metrics.values():
         assert row["noise_floor"] is not None and row["verdict"] == "resolved", row
@@ -81,7 +81,7 @@ def test_compare_records_each_metric_with_its_noise_floor_and_verdict(tmp_path, 
                if line.split() and line.split()[0] in metrics}
     for name, value in printed.items():
         assert value == pytest.approx(metrics[name]["value"], rel=1e-5)
-    assert metrics["hdr-flip"]["within_threshold"] is True
+    assert metrics["hdr_flip"]["within_threshold"] is True
     assert [p.name for p in record.parent.iterdir()] == ["compare.json"]  # no temporary left
 
 

@@ -43,7 +43,8 @@ def test_within_threshold_exits_0_and_writes_maps_beside_the_test(pair, capsys):
     assert main(["compare", str(pair[0]), str(pair[1]), "--metric", "flip",
                  "--max", str(2 * value)]) == 0
     out = capsys.readouterr().out
-    for name in ("hdr-flip", "ldr-flip", "relmse", "rmse", "psnr", "ssim", "ciede2000"):
+    for name in ("hdr_flip", "ldr_flip", "relative_mse", "relative_mse_raw", "rmse", "psnr",
+                 "ssim", "ciede2000"):
         assert f"\n{name} " in out
     assert "reference variance discounted" in out
     assert "ok" in out
@@ -224,13 +225,13 @@ def test_each_metric_is_printed_beside_its_noise_floor_and_verdict(tmp_path, cap
     out = capsys.readouterr().out
     assert "noise floor" in out
     rows = {line.split()[0]: line for line in out.splitlines() if line[:1].isalpha()}
-    for name in ("hdr-flip", "ldr-flip", "rmse", "ciede2000", "ssim", "psnr"):
+    for name in ("hdr_flip", "ldr_flip", "rmse", "ciede2000", "ssim", "psnr"):
         assert "within reference noise" in rows[name], rows[name]
     assert main(["compare", str(tmp_path / "ref.exr"), str(tmp_path / "off.exr"),
                  "--no-maps"]) == 0
     rows = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()
             if line[:1].isalpha()}
-    for name in ("hdr-flip", "relmse", "rmse", "ciede2000", "psnr"):
+    for name in ("hdr_flip", "relative_mse", "rmse", "ciede2000", "psnr"):
         assert " resolved " in rows[name], rows[name]
 
 

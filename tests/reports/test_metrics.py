@@ -300,12 +300,13 @@ def test_each_named_metric_equals_the_compare_field(pair):
 
 def test_flip_is_hdr_flip():
     assert metric("flip").field == metric("hdr-flip").field == "hdr_flip"
+    assert metric("relmse") is metric("RELATIVE_MSE") is metric("relative_mse")
 
 
 def test_unknown_metric_lists_the_valid_ones():
-    with pytest.raises(InputError, match="metric = 'mse': unknown metric; valid: flip, "
-                                         "hdr-flip, ldr-flip, relmse, rmse, psnr, ssim, "
-                                         "ciede2000"):
+    with pytest.raises(InputError, match="metric = 'mse': unknown metric; valid: hdr_flip, "
+                                         "ldr_flip, relative_mse, relative_mse_raw, rmse, "
+                                         "psnr, ssim, ciede2000"):
         metric("mse")
 
 
@@ -383,7 +384,8 @@ def test_noise_floor_matches_the_exact_noise_only_score(relative_noise):
     carries the reference's noise as well as its own, which SSIM's contrast term counts
     (measured 16 % low; the noise_floor docstring says so), so 25 % there.
     """
-    from translucent.reports.metrics import NOISE_FLOOR_FIELDS, error_scale, evaluate, noise_floor
+    from translucent.reports.metric_registry import NOISE_FLOOR_FIELDS
+    from translucent.reports.metrics import error_scale, evaluate, noise_floor
 
     rng = np.random.default_rng(7)
     truth = _smooth_truth()
@@ -471,3 +473,14 @@ def test_a_bad_mask_is_an_input_error(mask):
     truth = _smooth_truth(32)
     with pytest.raises(InputError, match="mask"):
         evaluate(Image(truth), Image(truth), mask=mask)
+
+
+def test_ciede2000_leaves_how_numpy_prints_arrays_alone():
+    # colour-science switches numpy to its legacy 1.13 printing when imported
+    import numpy
+
+    from translucent.reports.metrics import ciede2000_map
+
+    before = numpy.get_printoptions()
+    ciede2000_map(numpy.full((2, 2, 3), 0.5), numpy.full((2, 2, 3), 0.25))
+    assert numpy.get_printoptions() == before

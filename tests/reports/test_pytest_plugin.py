@@ -34,10 +34,10 @@ def test_the_fixture_is_registered_here(image_checks, tmp_path_factory):
 
 def test_a_failed_image_check_leaves_its_maps_where_the_message_says(image_checks):
     reference = gradient()
-    with pytest.raises(AssertionError, match=r"hdr-flip = [\d.]+, above the maximum 0.01 "
+    with pytest.raises(AssertionError, match=r"hdr_flip = [\d.]+, above the maximum 0.01 "
                                              r"\(24 x 24 pixels\); error maps in ") as failure:
         image_checks.assert_image_close(reference * 1.5, reference, max=0.01)
-    folder = image_checks.artifacts / "hdr-flip"
+    folder = image_checks.artifacts / "hdr_flip"
     assert str(folder) in str(failure.value)
     assert {path.name for path in folder.iterdir()} == {
         f"{name}.{ext}" for name in ("flip", "relative_error", "ciede2000", "ssim")
@@ -56,7 +56,7 @@ def test_a_failure_against_a_noisy_reference_gives_the_noise_floor(tmp_path, rng
     truth = gradient()
     sigma = 0.02 * truth
     reference = Image(truth + sigma * rng.standard_normal(truth.shape), sigma**2)
-    with pytest.raises(AssertionError, match=r"hdr-flip = [\d.]+ \(noise floor [\d.]+: "
+    with pytest.raises(AssertionError, match=r"hdr_flip = [\d.]+ \(noise floor [\d.]+: "
                                              r"resolved\), above the maximum"):
         assert_image_close(truth * 1.5, reference, max=0.05, artifacts=tmp_path)
 
@@ -84,7 +84,7 @@ def test_similarity_metrics_take_a_minimum(tmp_path):
 
 
 @pytest.mark.parametrize("metric, bounds, match", [
-    ("hdr-flip", {}, r"needs max= and only that bound \(hdr-flip is an error\)"),
+    ("hdr-flip", {}, r"needs max= and only that bound \(hdr_flip is an error\)"),
     ("psnr", {"max": 3.0}, r"needs min= and only that bound \(psnr is a similarity\)"),
 ])
 def test_the_bound_must_match_the_metric(metric, bounds, match):
@@ -156,10 +156,10 @@ def test_a_fresh_project_gets_the_plugin_from_the_entry_point(pytester):
     artifacts = pytester.path / "artifacts"
     result = pytester.runpytest_subprocess(*QUIET, f"--translucent-artifacts={artifacts}")
     result.assert_outcomes(passed=2, failed=1)
-    result.stdout.fnmatch_lines([f"*hdr-flip = *above the maximum 0.01*error maps in "
+    result.stdout.fnmatch_lines([f"*hdr_flip = *above the maximum 0.01*error maps in "
                                  f"{artifacts}*",
                                  "*references regenerated*", "*refs/gradient.exr"])
-    assert (artifacts / "test_consumer.py_test_too_far" / "hdr-flip" / "flip.png").is_file()
+    assert (artifacts / "test_consumer.py_test_too_far" / "hdr_flip" / "flip.png").is_file()
     assert (pytester.path / "refs" / "gradient.exr").is_file()
 
 

@@ -30,7 +30,7 @@ from translucent.scenes import builtin_scene_names, loads_scene
 #: The methods the quick tier runs: a stand-in that renders a flat image at once (so the
 #: report's own logic is tested in seconds, whatever the built methods cost: PRT's first
 #: run computes its dipole PCA basis, splatting compiles its kernels, each tens of seconds
-#: here), one that fails, one that is not built, and brdf_pca, which does not apply to a
+#: here), one that fails, one that is not installed, and brdf_pca, which does not apply to a
 #: translucent sphere. Every built method runs on the tiny scene in the slow test below.
 QUICK_METHODS = ["flat", "failing", "unbuilt", "brdf_pca"]
 
@@ -250,7 +250,8 @@ def test_every_error_map_has_its_colour_bar_with_range_and_unit(tiny):
 
 
 def test_every_metric_comes_with_its_noise_floor_and_verdict(tiny):
-    from translucent.reports.metrics import NOISE_FLOOR_FIELDS, noise_floor, noise_verdict
+    from translucent.reports.metric_registry import NOISE_FLOOR_FIELDS
+    from translucent.reports.metrics import noise_floor, noise_verdict
 
     scene = _data(tiny["out"])
     reference = scene["reference"]
@@ -394,10 +395,10 @@ def test_failing_and_unbuilt_methods_are_shown_and_the_run_goes_on(tiny):
     methods = _data(tiny["out"])["methods"]
     assert methods["failing"]["status"] == "failed"
     assert "NaN on purpose" in methods["failing"]["reason"]
-    assert methods["unbuilt"]["status"] == "not built"
+    assert methods["unbuilt"]["status"] == "not installed"
     page = (tiny["out"] / "index.html").read_text()
     assert "The method failed: RuntimeError: the transfer matrix has a NaN on purpose" in page
-    assert "this fast method is not built yet" in page
+    assert "this fast method is not installed" in page
     if methods["brdf_pca"]["status"] == "not applicable":
         assert html.escape(methods["brdf_pca"]["reason"]) in page
     assert methods["flat"]["status"] == "ok"

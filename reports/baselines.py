@@ -1,7 +1,8 @@
-"""Regression against a stored baseline: the gated metrics' tolerances and the checks.
+"""Baselines: the stored results a run is checked against, read, judged and written.
 
-A result is a regression when a gated metric (:data:`TOLERANCES`) is worse than its
-baseline entry beyond the metric's tolerance, or when a baseline entry now has no result.
+A result is a regression when a gated metric (:data:`TOLERANCES`, from
+:mod:`translucent.reports.metric_registry`) is worse than its baseline entry beyond the
+metric's tolerance, or when a baseline entry now has no result.
 :func:`load_baseline` reads and validates a baseline file, :func:`check_against_baseline`
 judges one result, :func:`updated_baseline` writes a run's results into it.
 """
@@ -14,6 +15,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
+from .metric_registry import (
+    METRIC_LABELS,
+    REPORTED_METRICS,
+    TOLERANCES,
+    Tolerance,
+    canonical_metric,
+)
 from .runs import json_safe, timestamp
 
 __all__ = ["BASELINE_FORMAT", "DEFAULT_BASELINE", "METRIC_LABELS", "REPORTED_METRICS",
@@ -25,92 +33,6 @@ DEFAULT_BASELINE = Path(__file__).resolve().parent / "baseline" / "default.json"
 
 #: Bumped when the baseline layout changes.
 BASELINE_FORMAT = 1
-
-
-# ====================================================================== tolerances
-
-
-@dataclass(frozen=True)
-class Tolerance:
-    """How much worse than its baseline a metric may get before it is a regression.
-
-    A value is a regression when it is worse than the baseline by more than
-    ``absolute + relative * |baseline|`` (worse: higher for errors, lower for SSIM).
-
-    Parameters
-    ----------
-    field : str
-        The :class:`~translucent.reports.metrics.Metrics` attribute.
-    absolute : float
-        Allowed worsening in the metric's units.
-    relative : float
-        Allowed worsening as a fraction of the baseline value.
-    lower_is_better : bool
-        True for errors, False for similarities.
-    """
-
-    field: str
-    absolute: float
-    relative: float
-    lower_is_better: bool = True
-
-    def limit(self, baseline: float) -> float:
-        """Return the worst value still accepted for ``baseline``."""
-        allowed = self.absolute + self.relative * abs(baseline)
-        return baseline + allowed if self.lower_is_better else baseline - allowed
-
-    def is_worse(self, value: float, baseline: float) -> bool:
-        """Return True when ``value`` is worse than ``baseline`` beyond the tolerance (NaN is)."""
-        if not math.isfinite(value):
-            return True
-        limit = self.limit(baseline)
-        return value > limit if self.lower_is_better else value < limit
-
-    def is_better(self, value: float, baseline: float) -> bool:
-        """Return True when ``value`` improved on ``baseline`` by more than the tolerance."""
-        allowed = self.absolute + self.relative * abs(baseline)
-        if not math.isfinite(value):
-            return False
-        return value < baseline - allowed if self.lower_is_better else value > baseline + allowed
-
-
-# The tolerances are about twice the largest change that re-rendering the references alone
-# caused: the default scenes' references were rendered again with another seed (same spp
-# and passes) and every method's image compared with both (measured here, Mitsuba 3.9.1).
-# A regression must exceed what a new reference (another Mitsuba version, another seed)
-# could cause; the noisy references of the bowl and the Cornell box set the scale.
-
-#: HDR-FLIP (0 to 1): 0.005 absolute plus 3 % of the baseline. The largest change measured
-#: was 0.0046 (bowl, radiosity: 1.6 %); the largest relative one 2.5 % (sphere, PRT).
-HDR_FLIP_TOLERANCE = Tolerance("hdr_flip", absolute=0.005, relative=0.03)
-
-#: Relative MSE (dimensionless): 0.001 absolute plus 30 %. The reference's noise is
-#: discounted from it, yet the largest change measured was 0.0033 (bowl, radiosity: 15 %);
-#: on the sphere 0.0004 (6 %).
-RELATIVE_MSE_TOLERANCE = Tolerance("relative_mse", absolute=0.001, relative=0.30)
-
-#: Mean CIEDE2000 (delta E; about 1 is just noticeable): 0.1 absolute plus 15 %. The largest
-#: change measured was 2.0 (Cornell box, PRT, whose walls are black: 7 %); radiosity on the
-#: Cornell box moved 0.28 (7 %).
-CIEDE2000_TOLERANCE = Tolerance("ciede2000", absolute=0.1, relative=0.15)
-
-#: Mean SSIM (1 is identical): 0.03 absolute, no relative part (it is bounded by 1). The
-#: largest change measured was 0.015 (Cornell box, radiosity): reference noise lowers SSIM.
-SSIM_TOLERANCE = Tolerance("ssim", absolute=0.03, relative=0.0, lower_is_better=False)
-
-#: The gated metrics, by :class:`Metrics` field.
-TOLERANCES: dict[str, Tolerance] = {t.field: t for t in (
-    HDR_FLIP_TOLERANCE, RELATIVE_MSE_TOLERANCE, CIEDE2000_TOLERANCE, SSIM_TOLERANCE)}
-
-#: Metrics stored and shown besides the gated ones.
-REPORTED_METRICS = ("hdr_flip", "ldr_flip", "relative_mse", "relative_mse_raw", "rmse",
-                    "psnr", "ssim", "ciede2000")
-
-#: Names shown in the page for each metric field.
-METRIC_LABELS = {"hdr_flip": "HDR-FLIP", "ldr_flip": "LDR-FLIP", "relative_mse": "relMSE",
-                 "relative_mse_raw": "relMSE (raw)", "rmse": "RMSE", "psnr": "PSNR (dB)",
-                 "ssim": "SSIM", "ciede2000": "CIEDE2000"}
-
 
 
 # ====================================================================== baseline
@@ -175,6 +97,11 @@ def _check_baseline_entry(path: Path, where: str, entry) -> None:
         if not isinstance(values, dict):
             raise InputError("must be an object of metric -> value", file=path,
                              field=f"{where}.methods.{method_name}", value=values)
+        # a baseline written with an earlier spelling of a metric ("relmse") reads as today's
+        for key in list(values):
+            name = canonical_metric(key)
+            if name is not None and name != key and name not in values:
+                values[name] = values.pop(key)
         for metric_name in TOLERANCES:
             value = values.get(metric_name, 0.0)
             if isinstance(value, bool) or not isinstance(value, (int, float)) \

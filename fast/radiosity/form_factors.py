@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-from ..errors import InputError
-from ..scenes.lighting import stratified_cosine_directions
-from ..scenes.mesh_shape import is_convex
+from ...errors import InputError
+from ...scenes.lighting import stratified_cosine_directions
+from ...scenes.mesh_shape import is_convex
 
 __all__ = [
     "Patches",
@@ -399,7 +399,7 @@ def form_factors(scene, patches: Patches, *, rays_per_patch: int = 256,
     if not 0.0 <= float(threshold) < 1.0:
         raise InputError("must be in [0, 1)", field="form_factor_threshold", value=threshold)
     if trace is None:
-        from ..scenes.raycast import trace
+        from ...scenes.raycast import trace
     rng = np.random.default_rng(seed)
     count = len(patches)
     rays = int(rays_per_patch)

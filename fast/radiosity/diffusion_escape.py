@@ -55,8 +55,8 @@ from scipy import ndimage, sparse
 from scipy.sparse import linalg as sparse_linalg
 from scipy.spatial import cKDTree
 
-from ..errors import InputError, check_count
-from ..materials.dipole import (
+from ...errors import InputError, check_count
+from ...materials.dipole import (
     dipole_boundary_factor,
     effective_transport_coefficient,
     mean_free_path,

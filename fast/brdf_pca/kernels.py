@@ -12,8 +12,8 @@ import math
 import numba
 import numpy as np
 
-from ..compiled import parallel_njit
-from ..materials.brdfs import (
+from ...compiled import parallel_njit
+from ...materials.brdfs import (
     MODEL_CODES,
     fixed_term_scalar,
     pca_variable_scalar,

@@ -13,23 +13,25 @@ import numba
 import numpy as np
 import scipy.sparse
 
-from ..errors import InputError
-from ..materials.brdf_pca import PCABasis, build_pca_basis
-from ..materials.brdfs import (
+from ...errors import InputError
+from ...materials.brdf_pca import PCABasis, build_pca_basis
+from ...materials.brdfs import (
     GAMMA_RANGES,
     MODEL_CODES,
     AnalyticBRDF,
     edited_term,
     uses_half_angle,
 )
-from ..materials.homogeneous import Lambertian
-from ..scenes.lighting import tangent_frames
-from .base import StageLog, StageProgress
-from .brdf_pca_kernels import (
+from ...materials.homogeneous import Lambertian
+from ...scenes.lighting import tangent_frames
+from ..base import StageLog, StageProgress
+from ..sparse_transport import QuantisedRows, SparseRows, nonlinear_approximation, product_rgb
+from ..wavelets import haar2d_forward, haar2d_support_weights, quadtree_layout
+from .kernels import (
     disk_estimate,
     transfer_rows,
 )
-from .brdf_pca_lighting import (
+from .lighting import (
     gather_pair_bits,
     gather_pair_visibility,
     hemisphere_directions,
@@ -38,8 +40,6 @@ from .brdf_pca_lighting import (
     pair_visibility,
     scene_ray_engine,
 )
-from .sparse_transport import QuantisedRows, SparseRows, nonlinear_approximation, product_rgb
-from .wavelets import haar2d_forward, haar2d_support_weights, quadtree_layout
 
 # ---------------------------------------------------------------------------------------
 # wavelets over gather samples
@@ -77,9 +77,8 @@ def _select(rows: np.ndarray, keep: int, weights: np.ndarray) -> SparseRows:
 
     Weighting by the square root of a Haar function's support (its largest possible inner
     product with the lighting, Ng et al. 2003's area weighting) keeps the coarse terms
-    that carry the product: measured on the glossy Cornell box, the indirect light of D^w
-    with 96 of 4096 terms kept 96 % of its energy this way against 92 % by magnitude
-    alone (and 85 % with a 1D Haar over a Z-order curve).
+    that carry the product: they are small but meet most of a smooth lighting vector
+    (the energy kept, measured against magnitude alone: docs/brdf_pca.md).
     """
     selected = nonlinear_approximation(np.ascontiguousarray(rows * weights,
                                                             dtype=np.float32), 1.0, keep)
@@ -89,10 +88,9 @@ def _select(rows: np.ndarray, keep: int, weights: np.ndarray) -> SparseRows:
 
 
 #: The product of :class:`~translucent.fast.sparse_transport.QuantisedRows` with an RGB
-#: vector, compiled without threads for the interactive path: its rows take a few
-#: milliseconds, and on a loaded machine waking a thread team costs more than that
-#: (measured on 2 shared cores: 25 ms per threaded call whatever its size, against 5 ms
-#: serial for 20k rows of 96). Not cached on disk: the cache is keyed by the Python
+#: vector, compiled without threads for the interactive path: the product is short, and on
+#: a loaded machine waking a thread team costs more than the whole serial product
+#: (measured: docs/brdf_pca.md). Not cached on disk: the cache is keyed by the Python
 #: function, whose threaded build it would load instead.
 _product_serial = numba.njit(cache=False)(product_rgb.py_func)
 
@@ -250,7 +248,7 @@ class Precomputation:
 
 
 def _view_samples(scene):
-    from ..scenes.gbuffer import gbuffer
+    from ...scenes.gbuffer import gbuffer
 
     buffer = gbuffer(scene)
     pixel = np.flatnonzero(buffer.hit.reshape(-1))
@@ -262,7 +260,7 @@ def _view_samples(scene):
 
 def _shoot_gather_samples(scene, view, glossy_view, count, knobs, rng, log):
     """Backward photon shooting from the eye (Sect. 5.1): second hits of reflected rays."""
-    from ..scenes.raycast import trace
+    from ...scenes.raycast import trace
 
     _, _, position, normal, out, _ = view
     glossy_count = int(round(count * knobs["glossy_ratio"] / (1.0 + knobs["glossy_ratio"])))

@@ -10,9 +10,9 @@ import math
 
 import numpy as np
 
-from ..errors import InputError
-from ..scenes.lighting import ENVIRONMENT_LIGHTS, SAMPLED_LIGHTS, light_samples, tangent_frames
-from .brdf_pca_kernels import (
+from ...errors import InputError
+from ...scenes.lighting import ENVIRONMENT_LIGHTS, SAMPLED_LIGHTS, light_samples, tangent_frames
+from .kernels import (
     front_counts,
     front_rays,
     gather_front_counts,
@@ -45,7 +45,7 @@ def hemisphere_directions(normals, rng, exponent=None, axes=None):
 
 def scene_ray_engine(scene):
     """Return the scene's ray engine and the offset its rays start at."""
-    from ..scenes.raycast import OFFSET_FRACTION, ray_engine
+    from ...scenes.raycast import OFFSET_FRACTION, ray_engine
 
     engine = ray_engine(scene)
     return engine, engine.diagonal * OFFSET_FRACTION

@@ -32,8 +32,8 @@ from scipy import ndimage, sparse
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from ..compiled import parallel_njit
-from ..errors import InputError
+from ...compiled import parallel_njit
+from ...errors import InputError
 
 __all__ = [
     "VoxelGrid",
