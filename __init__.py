@@ -8,7 +8,8 @@ The suite is organised one folder a concept, data flowing left to right::
 
 From Python, the package offers what the command line does (:mod:`translucent.api`):
 ``load_scene``, ``render``, ``compare``, ``approx``, ``method`` and ``fit``, with ``Image``
-and ``InputError``.
+and ``InputError``; and ``profile`` (a scattering profile by name,
+:mod:`translucent.materials.profiles`).
 
 Importing the top-level package is cheap: those functions are imported when first used,
 and Mitsuba only when a ray query or a reference render first needs it (see
@@ -26,7 +27,10 @@ __version__ = "0.1.0"
 #: The functions of :mod:`translucent.api`, imported on first use.
 API = ("load_scene", "render", "compare", "approx", "method", "fit")
 
-__all__ = ["Image", "InputError", "__version__", *API]
+#: Functions of other modules, imported on first use: name -> module.
+LAZY = {"profile": "translucent.materials.profiles.registry"}
+
+__all__ = ["Image", "InputError", "__version__", *API, *LAZY]
 
 
 def __getattr__(name):
@@ -34,8 +38,12 @@ def __getattr__(name):
         from . import api
 
         return getattr(api, name)
+    if name in LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(LAZY[name]), name)
     raise AttributeError(f"module 'translucent' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(API))
+    return sorted(set(globals()) | set(API) | set(LAZY))
