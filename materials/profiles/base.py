@@ -42,7 +42,7 @@ import numpy as np
 
 from ...errors import InputError, check_finite
 from ..fresnel import fresnel_reflectance
-from ..homogeneous import rgb_field
+from ..homogeneous import Dipole, rgb_field
 from .sampling import RadialSampler
 
 __all__ = [
@@ -475,3 +475,49 @@ class ScaledProfile(RadialProfile):
         """Return what identifies this profile in content hashes."""
         return {"type": "scaled", "profile": self.profile.cache_key(),
                 "factor": self.factor.tolist()}
+
+
+class MediumProfile(RadialProfile):
+    """A profile made from a homogeneous medium: it keeps the medium and is named after it."""
+
+    model = ""
+
+    def adopt(self, medium) -> Dipole:
+        """Keep ``medium`` (a :class:`~translucent.materials.homogeneous.Dipole`); return it.
+
+        The profile is named ``"MODEL (MEDIUM)"``.
+
+        Raises
+        ------
+        InputError
+            ``medium`` is not a Dipole.
+        """
+        if not isinstance(medium, Dipole):
+            raise InputError("expected a Dipole medium", field="medium",
+                             value=type(medium).__name__)
+        self.medium = medium
+        self.name = f"{self.model} ({medium.name})" if medium.name else self.model
+        return medium
+
+
+class LookupProfile(MediumProfile):
+    """A medium's profile evaluated through a per-channel lookup table (``self.lookup``).
+
+    The exact form is tabulated once on log-spaced radii
+    (:class:`~translucent.materials.profiles.sampling.LogRadialTable`); evaluation and the
+    total read the table, and lengths scale with the reduced mean free path.
+    """
+
+    def reflection(self, r) -> np.ndarray:
+        """:math:`R(r)`, mm^-2, shape ``r.shape + (3,)`` (the per-channel lookup)."""
+        return self.lookup(r)
+
+    def total(self, kind: str = "reflection", max_radius: float | None = None) -> np.ndarray:
+        """Return the profile's integral to infinity (trapezoidal on the lookup's nodes)."""
+        if kind == "reflection" and max_radius is None:
+            return self.sampler.energy.copy()
+        return super().total(kind, max_radius)
+
+    def length_scale(self) -> np.ndarray:
+        """Return the reduced mean free path 1/sigma_t' per channel, mm."""
+        return self.medium.mean_free_path

@@ -37,9 +37,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...errors import InputError
 from ..homogeneous import Dipole
-from .base import RadialProfile, check_albedo
+from .base import MediumProfile, check_albedo
 from .boundary import boundary_factor, exitance_weights
 
 __all__ = ["BetterDipoleProfile", "better_dipole_total_reflectance", "grosjean_diffusion"]
@@ -102,7 +101,7 @@ def better_dipole_total_reflectance(reduced_albedo, eta) -> np.ndarray:
     return 0.5 * albedo ** 2 * np.exp(-sigma_tr) * (c_e * (1.0 + np.exp(-x)) + c_phi * fluence)
 
 
-class BetterDipoleProfile(RadialProfile):
+class BetterDipoleProfile(MediumProfile):
     """The better dipole (d'Eon 2012) of a homogeneous medium; see the module docstring.
 
     Parameters
@@ -126,11 +125,7 @@ class BetterDipoleProfile(RadialProfile):
                   "at eta; alpha' = sigma_s'/sigma_t'")
 
     def __init__(self, medium: Dipole):
-        if not isinstance(medium, Dipole):
-            raise InputError("expected a Dipole medium", field="medium",
-                             value=type(medium).__name__)
-        self.medium = medium
-        self.name = f"{self.model} ({medium.name})" if medium.name else self.model
+        self.adopt(medium)
         sigma_a, sigma_s = medium.sigma_a, medium.sigma_s_prime
         sigma_t = sigma_a + sigma_s
         self.present = sigma_t > 0  # a channel without a medium reflects nothing

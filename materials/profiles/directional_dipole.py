@@ -45,7 +45,7 @@ import numpy as np
 
 from ...errors import InputError, check_finite
 from ..homogeneous import Dipole
-from .base import RadialProfile
+from .base import LookupProfile, RadialProfile
 from .boundary import boundary_factor, exitance_weights
 from .sampling import LogRadialTable, geometric_nodes
 
@@ -185,7 +185,7 @@ class DirectionalDipoleProfile:
                 "incident_angle": self.incident_angle}
 
 
-class DirectionalDipoleAverage(RadialProfile):
+class DirectionalDipoleAverage(LookupProfile):
     """The azimuthal average of a :class:`DirectionalDipoleProfile`: a radial profile.
 
     Tabulated per channel on a geometric grid
@@ -218,20 +218,6 @@ class DirectionalDipoleAverage(RadialProfile):
         values = self.directional_profile.evaluate(r[..., None] * np.cos(phi),
                                                    r[..., None] * np.sin(phi))
         return values.mean(axis=-2)
-
-    def reflection(self, r) -> np.ndarray:
-        """:math:`R(r)`, the average, mm^-2, shape ``r.shape + (3,)`` (the lookup)."""
-        return self.lookup(r)
-
-    def total(self, kind: str = "reflection", max_radius: float | None = None) -> np.ndarray:
-        """Return the integral to infinity (trapezoidal on the lookup's nodes)."""
-        if kind == "reflection" and max_radius is None:
-            return self.sampler.energy.copy()
-        return super().total(kind, max_radius)
-
-    def length_scale(self) -> np.ndarray:
-        """Return the reduced mean free path 1/sigma_t' per channel, mm."""
-        return self.medium.mean_free_path
 
     def parameters(self) -> dict[str, tuple[np.ndarray, str]]:
         """Return the directional profile's parameters."""

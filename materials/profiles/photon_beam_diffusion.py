@@ -52,7 +52,7 @@ import numpy as np
 from ...errors import InputError
 from ..fresnel import fresnel_reflectance
 from ..homogeneous import Dipole
-from .base import RadialProfile
+from .base import LookupProfile
 from .boundary import boundary_factor, exitance_weights
 from .sampling import LogRadialTable, geometric_nodes
 
@@ -286,7 +286,7 @@ def beam_diffusion_table(g: float = 0.0, eta: float = 1.33) -> BeamDiffusionTabl
     return BeamDiffusionTable(float(g), float(eta), albedos, radii, profile, total)
 
 
-class PhotonBeamDiffusionProfile(RadialProfile):
+class PhotonBeamDiffusionProfile(LookupProfile):
     """Photon beam diffusion (MS + SS) of a medium, read from pbrt-v4's table.
 
     Parameters
@@ -311,11 +311,7 @@ class PhotonBeamDiffusionProfile(RadialProfile):
                   "(2 pi sigma_t r)")
 
     def __init__(self, medium: Dipole):
-        if not isinstance(medium, Dipole):
-            raise InputError("expected a Dipole medium", field="medium",
-                             value=type(medium).__name__)
-        self.medium = medium
-        self.name = f"{self.model} ({medium.name})" if medium.name else self.model
+        self.adopt(medium)
         self.table = beam_diffusion_table(float(medium.g), float(medium.eta))
         sigma_s = medium.sigma_s
         sigma_t = medium.sigma_a + sigma_s
@@ -348,10 +344,6 @@ class PhotonBeamDiffusionProfile(RadialProfile):
                 value = np.where(optical > 0, value / (2.0 * np.pi * optical), value)
             out[..., c] = np.where(inside, np.maximum(value, 0.0), 0.0) * self.sigma_t[c] ** 2
         return out
-
-    def reflection(self, r) -> np.ndarray:
-        """:math:`R(r)`, mm^-2, shape ``r.shape + (3,)`` (the per-channel lookup)."""
-        return self.lookup(r)
 
     def total(self, kind: str = "reflection", max_radius: float | None = None) -> np.ndarray:
         """Return the interpolated ``rhoEff``: the spline's exact integral (pbrt's total)."""

@@ -46,9 +46,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import erfcx
 
-from ...errors import InputError
 from ..homogeneous import Dipole
-from .base import RadialProfile
+from .base import LookupProfile
 from .better_dipole import grosjean_diffusion
 from .boundary import boundary_factor, exitance_weights
 from .sampling import LogRadialTable, geometric_nodes
@@ -66,7 +65,7 @@ FIRST_TIME = 1e-6
 GROWTH = 1.2
 
 
-class QuantizedDiffusionProfile(RadialProfile):
+class QuantizedDiffusionProfile(LookupProfile):
     r"""Quantized diffusion (d'Eon and Irving 2011) of a medium; see the module docstring.
 
     Parameters
@@ -90,11 +89,7 @@ class QuantizedDiffusionProfile(RadialProfile):
                   "alpha' sigma_t' exp(-sigma_t' z); tau_1 = 1e-6/sigma_t', steps x 1.2")
 
     def __init__(self, medium: Dipole):
-        if not isinstance(medium, Dipole):
-            raise InputError("expected a Dipole medium", field="medium",
-                             value=type(medium).__name__)
-        self.medium = medium
-        self.name = f"{self.model} ({medium.name})" if medium.name else self.model
+        self.adopt(medium)
         sigma_a, sigma_s = medium.sigma_a, medium.sigma_s_prime
         sigma_t = sigma_a + sigma_s
         self.present = sigma_t > 0
@@ -145,19 +140,11 @@ class QuantizedDiffusionProfile(RadialProfile):
         r = np.asarray(r, dtype=np.float64)
         return np.stack([self._channel_sum(r, c) for c in range(3)], axis=-1)
 
-    def reflection(self, r) -> np.ndarray:
-        """:math:`R(r)`, mm^-2, shape ``r.shape + (3,)`` (the per-channel lookup)."""
-        return self.lookup(r)
-
     def total(self, kind: str = "reflection", max_radius: float | None = None) -> np.ndarray:
         """Return the sum of the Gaussians' weights (each integrates to its weight)."""
         if kind == "reflection" and max_radius is None:
             return self.weights.sum(axis=-1)
         return super().total(kind, max_radius)
-
-    def length_scale(self) -> np.ndarray:
-        """Return the reduced mean free path 1/sigma_t' per channel, mm."""
-        return self.medium.mean_free_path
 
     def parameters(self) -> dict[str, tuple[np.ndarray, str]]:
         """Return alpha', D, the image distance d_e, C_phi and C_E."""

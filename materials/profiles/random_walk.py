@@ -50,7 +50,7 @@ import numpy as np
 from ...errors import InputError
 from ..fresnel import fresnel_reflectance
 from ..homogeneous import Dipole
-from .base import RadialProfile
+from .base import LookupProfile
 from .sampling import LogRadialTable, geometric_nodes
 
 __all__ = [
@@ -450,7 +450,7 @@ def _ln_tail_ratio(radius, start, kappa):
 SINGULAR_FLOOR = 1e-6
 
 
-class RandomWalkProfile(RadialProfile):
+class RandomWalkProfile(LookupProfile):
     r"""The photon random walk's radial profile of a medium, from the shipped table.
 
     :math:`R(r) = \sigma'^2_t \hat R(\sigma'_t r; \alpha', \eta)` per channel, read from
@@ -479,13 +479,9 @@ class RandomWalkProfile(RadialProfile):
                   "(sqrt(3 (1 - alpha')), ln r) and linearly in eta; g > 0 by similarity")
 
     def __init__(self, medium: Dipole, *, table: WalkProfileTable | None = None):
-        if not isinstance(medium, Dipole):
-            raise InputError("expected a Dipole medium", field="medium",
-                             value=type(medium).__name__)
+        self.adopt(medium)
         self.table = load_table() if table is None else table
         self.table.check_eta(medium.eta)
-        self.medium = medium
-        self.name = f"{self.model} ({medium.name})" if medium.name else self.model
         sigma_t = medium.sigma_a + medium.sigma_s_prime
         self.present = sigma_t > 0
         self.sigma_t = sigma_t
@@ -507,20 +503,6 @@ class RandomWalkProfile(RadialProfile):
         r = np.asarray(r, dtype=np.float64)
         flat = np.broadcast_to(r.reshape(1, -1), (3, r.size))
         return self._exact_per_channel(flat).T.reshape(r.shape + (3,))
-
-    def reflection(self, r) -> np.ndarray:
-        """:math:`R(r)`, mm^-2, shape ``r.shape + (3,)`` (the per-channel lookup)."""
-        return self.lookup(r)
-
-    def total(self, kind: str = "reflection", max_radius: float | None = None) -> np.ndarray:
-        """Return the profile's integral to infinity (trapezoidal on the lookup's nodes)."""
-        if kind == "reflection" and max_radius is None:
-            return self.sampler.energy.copy()
-        return super().total(kind, max_radius)
-
-    def length_scale(self) -> np.ndarray:
-        """Return the reduced mean free path 1/sigma_t' per channel, mm."""
-        return self.medium.mean_free_path
 
     def parameters(self) -> dict[str, tuple[np.ndarray, str]]:
         """Return alpha' and sigma_t' per channel."""
