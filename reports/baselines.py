@@ -89,7 +89,7 @@ def _check_baseline_entry(path: Path, where: str, entry) -> None:
     if not isinstance(entry, dict):
         raise InputError("must be an object with scene_hash, reference and methods",
                          file=path, field=where, value=entry)
-    for key in ("reference", "methods"):
+    for key in ("reference", "methods", "failures"):
         if not isinstance(entry.get(key, {}), dict):
             raise InputError("must be an object", file=path, field=f"{where}.{key}",
                              value=entry[key])
@@ -117,8 +117,9 @@ class BaselineCheck:
 
     Parameters
     ----------
-    status : {"ok", "regression", "improved", "no baseline", "not compared"}
-        "regression" makes the report exit 1.
+    status : {"ok", "regression", "improved", "known failure", "no baseline", "not compared"}
+        "regression" makes the report exit 1; "known failure": the method fails on the scene
+        as it did when the baseline was made (the entry's ``failures``).
     message : str
         One sentence for the page.
     metrics : dict of str to dict
@@ -163,6 +164,13 @@ def check_against_baseline(scene_name: str, scene_hash: str, reference: dict, me
     """
     entry = baseline.get("entries", {}).get(scene_name)
     stored = None if entry is None else entry.get("methods", {}).get(method_name)
+    known = None if entry is None else entry.get("failures", {}).get(method_name)
+    if stored is None and known is not None and entry.get("scene_hash") == scene_hash:
+        if metrics is None:
+            return BaselineCheck("known failure", f"fails as when the baseline was made: "
+                                 f"{failure or known}")
+        return BaselineCheck("improved", "the baseline records a failure here; this run has "
+                             "metrics (--update-baseline records them)")
     if stored is None:
         if metrics is None:
             return BaselineCheck("no baseline", "no result and no baseline entry")
@@ -204,8 +212,9 @@ def updated_baseline(baseline: dict, results: list[dict], versions: dict) -> dic
     """Return ``baseline`` with this run's scenes replaced by their results.
 
     Entries of scenes this run did not cover are kept; for a covered scene the entry is
-    rebuilt from the methods that produced metrics (a method that failed or no longer
-    applies loses its entry).
+    rebuilt from the methods that produced metrics; a method that failed is kept under
+    ``failures`` with its reason (so the gate still sees the scene and method), one that no
+    longer applies loses its entry.
 
     Parameters
     ----------
@@ -213,8 +222,8 @@ def updated_baseline(baseline: dict, results: list[dict], versions: dict) -> dic
         From :func:`load_baseline`.
     results : list of dict
         Per scene: ``name``, ``scene_hash``, ``reference`` (spp, passes) and ``metrics``
-        ({method: Metrics dict}) of the methods that ran, plus ``methods_run`` (the
-        methods this run asked for).
+        ({method: Metrics dict}) of the methods that ran, ``failures`` ({method: reason}) of
+        those that failed, plus ``methods_run`` (the methods this run asked for).
     versions : dict
         Mitsuba, Dr.Jit, variant: recorded for information.
 
@@ -230,9 +239,13 @@ def updated_baseline(baseline: dict, results: list[dict], versions: dict) -> dic
              if name not in result["methods_run"]}
         for name, values in result["metrics"].items():
             methods[name] = {key: json_safe(values[key]) for key in REPORTED_METRICS}
+        failures = {name: str(reason) for name, reason in result.get("failures", {}).items()
+                    if name not in methods}
         entries[result["name"]] = {"scene_hash": result["scene_hash"],
                                    "reference": dict(result["reference"]),
                                    "methods": dict(sorted(methods.items()))}
+        if failures:
+            entries[result["name"]]["failures"] = dict(sorted(failures.items()))
     return {"format": BASELINE_FORMAT,
             "note": "image metrics of the fast methods against their references; written by "
                     "`translucent report --update-baseline`",

@@ -24,7 +24,8 @@ from ..errors import InputError
 from ..image import Image
 from .metrics import Comparison, display_white, evaluate, to_display
 
-__all__ = ["MAP_STYLES", "MapStyle", "ErrorMapFiles", "colour_map", "srgb8", "write_png",
+__all__ = ["ERROR_MAPS", "error_map_paths", "MAP_STYLES", "MapStyle", "ErrorMapFiles",
+           "NOT_SCORED_GREYS", "colour_map", "hatch_not_scored", "srgb8", "write_png",
            "write_linear_png", "write_map", "write_error_maps", "write_z_test_maps"]
 
 
@@ -76,6 +77,36 @@ class ErrorMapFiles:
 
     exr: Path
     png: Path
+
+
+#: The two greys of the hatching that marks pixels a map does not score (sRGB, 8 bit), and
+#: the period of its diagonal stripes in pixels.
+NOT_SCORED_GREYS = (96, 160)
+NOT_SCORED_PERIOD = 4
+
+
+def hatch_not_scored(rgb: np.ndarray, scored) -> np.ndarray:
+    """Draw grey diagonal stripes over the pixels outside ``scored`` (a copy).
+
+    The report scores a method on the pixels of the objects it renders; its maps show the
+    others hatched, so that what a map shows and what its numbers count are the same pixels.
+
+    Examples
+    --------
+    >>> rgb = np.zeros((2, 4, 3), np.uint8)
+    >>> hatched = hatch_not_scored(rgb, np.array([[True] * 4, [True, True, False, False]]))
+    >>> int(hatched[0].max()), sorted(set(hatched[1, 2:, 0].tolist())) <= list(NOT_SCORED_GREYS)
+    (0, True)
+    """
+    out = np.array(rgb, copy=True)
+    if scored is None:
+        return out
+    scored = np.asarray(scored, dtype=bool)
+    rows, columns = np.indices(scored.shape)
+    stripe = ((rows + columns) // (NOT_SCORED_PERIOD // 2)) % 2
+    greys = np.asarray(NOT_SCORED_GREYS, dtype=np.uint8)[stripe]
+    out[~scored] = greys[~scored][:, None]
+    return out
 
 
 def colour_map(values, style: MapStyle) -> np.ndarray:
@@ -173,7 +204,8 @@ def write_linear_png(path, image, *, white: float | None = None) -> Path:
     return write_png(path, srgb8(rgb, white=white))
 
 
-def write_map(folder, stem: str, values, name: str, **metadata) -> ErrorMapFiles:
+def write_map(folder, stem: str, values, name: str, *, scored=None,
+              **metadata) -> ErrorMapFiles:
     """Write one scalar map as ``STEM.exr`` (values) and ``STEM.png`` (colour-mapped).
 
     Parameters
@@ -186,6 +218,9 @@ def write_map(folder, stem: str, values, name: str, **metadata) -> ErrorMapFiles
         The map.
     name : str
         A key of ``MAP_STYLES``.
+    scored : array_like of bool, shape (H, W), optional
+        The pixels the map's numbers count: the PNG hatches the others in grey
+        (:func:`hatch_not_scored`); the EXR keeps every value and says how many were scored.
     **metadata
         Extra JSON-serialisable header entries.
 
@@ -199,11 +234,15 @@ def write_map(folder, stem: str, values, name: str, **metadata) -> ErrorMapFiles
     style = MAP_STYLES[name]
     values = np.asarray(values, dtype=np.float32)
     folder = Path(folder)
+    if scored is not None:
+        metadata["scored_pixels"] = int(np.count_nonzero(scored))
+        metadata["png_not_scored"] = "hatched grey"
     exr = Image(np.repeat(values[..., None], 3, axis=2),
                 metadata={"map": name, "unit": style.unit, "png_range": [style.vmin, style.vmax],
                           "colormap": style.colormap, **metadata}).write(folder / f"{stem}.exr")
     with _all_or_nothing([exr]):
-        png = write_png(folder / f"{stem}.png", colour_map(values, style))
+        png = write_png(folder / f"{stem}.png",
+                        hatch_not_scored(colour_map(values, style), scored))
     return ErrorMapFiles(exr, png)
 
 
@@ -219,8 +258,20 @@ def _all_or_nothing(written: list[Path]):
         raise
 
 
+#: The maps :func:`write_error_maps` writes (the maps of
+#: :func:`translucent.reports.metrics.evaluate`).
+ERROR_MAPS = ("flip", "relative_error", "ciede2000", "ssim")
+
+
+def error_map_paths(folder, prefix: str = "") -> list[Path]:
+    """Return the files :func:`write_error_maps` writes into ``folder``: named before any work."""
+    return [Path(folder) / f"{prefix}{name}{suffix}" for name in ERROR_MAPS
+            for suffix in (".exr", ".png")]
+
+
 def write_error_maps(reference: Image, test: Image, folder, *, prefix: str = "",
-                     comparison: Comparison | None = None) -> dict[str, ErrorMapFiles]:
+                     comparison: Comparison | None = None, scored=None,
+                     scored_metrics=None) -> dict[str, ErrorMapFiles]:
     """Write the FLIP, relative-error, CIEDE2000 and SSIM maps of ``test`` against ``reference``.
 
     Files are ``PREFIXflip``, ``PREFIXrelative_error``, ``PREFIXciede2000`` and
@@ -238,6 +289,11 @@ def write_error_maps(reference: Image, test: Image, folder, *, prefix: str = "",
         Put before each file name (``"scene_prt_"``).
     comparison : Comparison, optional
         The result of ``evaluate(reference, test)`` when already computed.
+    scored : array_like of bool, shape (H, W), optional
+        The pixels the numbers beside the maps count (a method's own objects): the others
+        are hatched grey in the PNGs.
+    scored_metrics : Metrics, optional
+        The metrics over ``scored``: the headers' means are theirs.
 
     Returns
     -------
@@ -245,14 +301,14 @@ def write_error_maps(reference: Image, test: Image, folder, *, prefix: str = "",
         Map name -> its two files.
     """
     comparison = evaluate(reference, test) if comparison is None else comparison
-    metrics = comparison.metrics
+    metrics = comparison.metrics if scored_metrics is None else scored_metrics
     written: list[Path] = []
     files: dict[str, ErrorMapFiles] = {}
     with _all_or_nothing(written):
         for name, values in comparison.maps.items():
             mean_value = {"flip": metrics.hdr_flip, "ssim": metrics.ssim,
                           "ciede2000": metrics.ciede2000}.get(name)
-            files[name] = write_map(folder, f"{prefix}{name}", values, name,
+            files[name] = write_map(folder, f"{prefix}{name}", values, name, scored=scored,
                                     mean=mean_value, display_white=metrics.display_white)
             written += [files[name].exr, files[name].png]
     return files

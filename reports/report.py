@@ -687,7 +687,9 @@ def _write(plan: _Plan, staging: Path, context: dict) -> None:
 
 def _update_baseline(plan: _Plan, stored_baseline: dict, baseline_path: Path) -> None:
     results = [{"name": r.name, "scene_hash": r.scene_hash, "reference": _made_with(r),
-                "metrics": r.metrics, "methods_run": plan.scored}
+                "metrics": r.metrics, "methods_run": plan.scored,
+                "failures": {name: run.reason for name, run in r.runs.items()
+                             if run.status == "failed"}}
                for r in plan.reports if r.reference is not None]
     new = updated_baseline(stored_baseline, results, plan.versions)
     atomic_write_text(baseline_path, json.dumps(new, indent=2, allow_nan=False) + "\n")

@@ -206,7 +206,9 @@ def _legend(styles) -> str:
                     f"from {style.vmin:g} to {style.vmax:g}</li>"
                     for name, style in styles.items() if name != "p_value")
     return (f"<details><summary>How to read the error maps</summary><ul>{items}</ul><p>"
-            "Method images are shown with the reference's exposure (its 99th-percentile "
+            "Grey stripes: not scored. A map shows in colour the pixels its method's "
+            "numbers count (the objects it renders); the others are hatched grey. Method "
+            "images are shown with the reference's exposure (its 99th-percentile "
             "luminance is white), so a brightness error stays visible.</p></details>")
 
 

@@ -57,10 +57,12 @@ def score_scene(report: SceneReport, folder: Path) -> None:
             continue
         try:
             # the whole image (its error maps) and the method's own pixels: one set of maps
-            comparison, on_pixels = evaluate_on(report.reference, run.image,
-                                                [None, report.mask_of(name)])
+            mask = report.mask_of(name)
+            comparison, on_pixels = evaluate_on(report.reference, run.image, [None, mask])
+            # the maps hatch what the numbers beside them do not count
             maps = write_error_maps(report.reference, run.image, scene_folder,
-                                    prefix=f"{name}_", comparison=comparison)
+                                    prefix=f"{name}_", comparison=comparison, scored=mask,
+                                    scored_metrics=on_pixels.metrics)
         except (InputError, TypeError) as error:
             report.metric_errors[name] = str(error)
             continue

@@ -82,3 +82,30 @@ def test_a_renderer_named_as_a_method_being_run_is_refused(tmp_path, capsys):
 def _made(folder):
     folder.mkdir(parents=True, exist_ok=True)
     return folder
+
+
+def test_error_maps_hatch_the_pixels_the_numbers_do_not_count(tmp_path):
+    # a map and the numbers beside it count the same pixels: the others are hatched grey
+    import numpy as np
+    from translucent.image import Image, read_exr
+    from translucent.reports.error_maps import NOT_SCORED_GREYS, write_error_maps
+    from translucent.reports.metrics import evaluate_on
+
+    rng = np.random.default_rng(3)
+    reference = Image(rng.random((12, 16, 3)).astype(np.float32) + 0.5)
+    test = Image(reference.rgb * 1.2)
+    scored = np.zeros((12, 16), bool)
+    scored[3:9, 4:12] = True
+    comparison, on_pixels = evaluate_on(reference, test, [None, scored])
+    files = write_error_maps(reference, test, tmp_path, comparison=comparison, scored=scored,
+                             scored_metrics=on_pixels.metrics)
+    import png
+
+    width, height, rows, _ = png.Reader(filename=str(files["flip"].png)).asRGBA8()
+    pixels = np.array([list(row) for row in rows], np.uint8).reshape(height, width, 4)[..., :3]
+    outside = pixels[~scored]
+    assert set(np.unique(outside).tolist()) <= set(NOT_SCORED_GREYS)
+    assert (outside[:, 0] == outside[:, 1]).all() and (outside[:, 1] == outside[:, 2]).all()
+    header = read_exr(files["flip"].exr).metadata
+    assert header["scored_pixels"] == int(scored.sum())
+    assert header["mean"] == pytest.approx(on_pixels.metrics.hdr_flip)
