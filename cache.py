@@ -21,6 +21,7 @@ import hashlib
 import json
 import os
 import shutil
+import stat
 import sys
 import tempfile
 import time
@@ -33,10 +34,11 @@ import numpy as np
 from .atomic import atomic_path
 from .errors import InputError
 
-__all__ = ["cache_dir", "content_hash", "private_cache", "limited_entries", "entry_limit",
+__all__ = ["cache_dir", "check_settings", "content_hash", "private_cache", "limited_entries",
+           "entry_limit",
            "environment_variable", "ENTRY_LIMIT_VARIABLE", "ENTRY_SUFFIX", "Cache",
            "BUDGET_VARIABLE", "DEFAULT_BUDGET_BYTES", "CacheEntry", "budget", "cache_entries",
-           "prune", "keep_within_budget", "mark_used", "IN_USE_SECONDS"]
+           "prune", "keep_within_budget", "mark_used", "report_rejected", "IN_USE_SECONDS"]
 
 #: The file suffix of an object entry.
 ENTRY_SUFFIX = ".entry.npz"
@@ -58,12 +60,35 @@ IN_USE_SECONDS = 60.0
 
 
 def cache_dir() -> Path:
-    """Return the cache folder (created on first use)."""
+    """Return the cache folder (created on first use).
+
+    Raises
+    ------
+    InputError
+        Naming ``TRANSLUCENT_CACHE`` where its ``~user`` names no user.
+    """
     given = os.environ.get("TRANSLUCENT_CACHE")
     if given:
-        return Path(given).expanduser()
+        try:
+            return Path(given).expanduser()
+        except RuntimeError as error:  # "~someone" of no such user
+            raise InputError(f"cannot be resolved ({error}): give a folder", field=
+                             "TRANSLUCENT_CACHE", value=given) from None
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "translucent"
+
+
+def check_settings() -> None:
+    """Check the cache's settings (folder, budget, entry limit) before any work.
+
+    Raises
+    ------
+    InputError
+        Naming the environment variable and its value, where one cannot be used.
+    """
+    cache_dir()
+    budget()
+    entry_limit()
 
 
 @contextlib.contextmanager
@@ -197,6 +222,26 @@ class Cache:
         """Where the entry for ``key`` lives (it may not exist)."""
         return self.folder / key[:2] / f"{key}{suffix}"
 
+    def make_room(self, path: Path) -> Path:
+        """Remove what stands at the entry ``path`` but is no file (a folder, a link): a miss.
+
+        Said once on standard error; the entry is then made again in its place. Returns
+        ``path``.
+        """
+        try:
+            found = os.lstat(path)
+        except OSError:
+            return path
+        if stat.S_ISREG(found.st_mode):
+            return path
+        report_rejected(path, "it is not a file")
+        with contextlib.suppress(OSError):
+            if stat.S_ISDIR(found.st_mode):
+                shutil.rmtree(path)
+            else:
+                path.unlink()
+        return path
+
     @contextlib.contextmanager
     def locked(self, key: str, what: str = "this entry"):
         """Hold the entry's lock for the block: one process makes an entry, the others wait.
@@ -301,6 +346,8 @@ class Cache:
 
         path = self.path(key, ENTRY_SUFFIX)
         if not path.is_file():
+            if os.path.lexists(path):
+                report_rejected(path, "it is not a file")
             return None
         try:
             with _byte_progress(f"reading the {self.folder.name} cache",
@@ -309,7 +356,7 @@ class Cache:
             mark_used(path)
             return value
         except EntryError as error:
-            _report_rejected(path, str(error))
+            report_rejected(path, str(error))
             return None
         except OSError:
             return None
@@ -343,7 +390,7 @@ class Cache:
         limit = entry_limit()
         if nbytes is not None and limit is not None and nbytes > limit:
             return None
-        path = self.path(key, ENTRY_SUFFIX)
+        path = self.make_room(self.path(key, ENTRY_SUFFIX))
         try:
             with atomic_path(path, suffix=".npz") as tmp, open(tmp, "w+b") as handle, \
                     _byte_progress(f"writing the {self.folder.name} cache", nbytes) as bar:
@@ -476,7 +523,8 @@ def _byte_progress(description: str, total: int | None):
 _REPORTED: set[str] = set()
 
 
-def _report_rejected(path: Path, reason: str) -> None:
+def report_rejected(path: Path, reason: str) -> None:
+    """Say once on standard error that the cache entry ``path`` is not used, and why."""
     if str(path) not in _REPORTED:
         _REPORTED.add(str(path))
         print(f"translucent: note: the cache entry {path} is not trusted ({reason}); it is "

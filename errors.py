@@ -4,7 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["InputError", "check_finite", "check_positive", "check_nonnegative"]
+__all__ = ["InputError", "check_finite", "check_positive", "check_nonnegative", "json_object",
+           "nesting_depth", "check_nesting", "MAX_NESTING"]
+
+#: The deepest nesting of tables and arrays a file the suite reads may have (scene files,
+#: capture sidecars, header metadata: the suite's own go 4 levels deep).
+MAX_NESTING = 64
 
 
 class InputError(ValueError):
@@ -55,6 +60,9 @@ def check_finite(value, field: str, *, file=None):
         raise InputError("must be a number, not text", file=file, field=field, value=value)
     try:
         array = np.asarray(value, dtype=np.float64)
+    except OverflowError as error:  # an integer of hundreds of digits
+        raise InputError("is too large a number (beyond float64)", file=file, field=field,
+                         value=value) from error
     except (TypeError, ValueError) as error:
         raise InputError("must be a number or an array of numbers", file=file, field=field,
                          value=value) from error
@@ -92,3 +100,82 @@ def check_positive(value, field: str, *, file=None):
     if (array <= 0).any():
         raise InputError("must be > 0", file=file, field=field, value=value)
     return array
+
+
+#: The integers a file may hold: TOML's own range (64-bit signed), which JSON files the
+#: suite reads keep too; beyond it a number is no float and no array element.
+INTEGER_RANGE = (-2**63, 2**63 - 1)
+
+
+def nesting_depth(value) -> int:
+    """Return how deeply ``value``'s dicts, lists and tuples nest (0 for a scalar).
+
+    Counted without recursion, so that any depth can be measured.
+    """
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        item, level = stack.pop()
+        if isinstance(item, dict):
+            children = item.values()
+        elif isinstance(item, (list, tuple)):
+            children = item
+        else:
+            continue
+        deepest = max(deepest, level)
+        stack.extend((child, level + 1) for child in children)
+    return deepest
+
+
+def check_nesting(value, *, file=None, field: str | None = None,
+                  max_depth: int = MAX_NESTING, integers: bool = True):
+    """Return a parsed file's ``value``; :class:`InputError` where it cannot be used.
+
+    Refused: tables and arrays nested deeper than ``max_depth``, and with ``integers``
+    integers outside :data:`INTEGER_RANGE` (the key holding the first is named). Walked
+    without recursion.
+    """
+    depth = nesting_depth(value)
+    if depth > max_depth:
+        raise InputError(f"nests {depth} levels deep; at most {max_depth} are read", file=file,
+                         field=field)
+    stack = [(value, field or "")] if integers else []
+    while stack:
+        item, where = stack.pop()
+        if isinstance(item, dict):
+            stack.extend((child, f"{where}.{key}" if where else str(key))
+                         for key, child in item.items())
+        elif isinstance(item, (list, tuple)):
+            stack.extend((child, f"{where}[{index}]") for index, child in enumerate(item))
+        elif isinstance(item, int) and not isinstance(item, bool) and \
+                not INTEGER_RANGE[0] <= item <= INTEGER_RANGE[1]:
+            raise InputError(f"is an integer of {len(str(abs(item)))} digits; integers must lie "
+                             "within 64 bits", file=file, field=where or None, value=item)
+    return value
+
+
+def json_object(text, *, file=None, field: str | None = None, max_depth: int = MAX_NESTING,
+                what: str = "JSON", integers: bool = True) -> dict:
+    """Parse ``text`` as a JSON object of at most ``max_depth`` levels.
+
+    Raises
+    ------
+    InputError
+        Naming ``file`` and ``field``: not JSON, nested too deep to parse or deeper than
+        ``max_depth``, integers beyond 64 bits, or not an object (the type found is the
+        value). ``what`` is what the message calls the text (``"JSON file"``); without
+        ``integers`` large integers are left to the caller's own checks.
+    """
+    import json
+
+    try:
+        value = json.loads(text)
+    except RecursionError:
+        raise InputError(f"not a readable {what}: nested too deeply (at most {max_depth} "
+                         "levels are read)", file=file, field=field) from None
+    except (TypeError, ValueError) as error:
+        raise InputError(f"not a readable {what} ({error})", file=file, field=field) from None
+    if not isinstance(value, dict):
+        raise InputError("must be a JSON object ({...})", file=file, field=field,
+                         value=type(value).__name__)
+    return check_nesting(value, file=file, field=field, max_depth=max_depth,
+                         integers=integers)

@@ -19,7 +19,7 @@ import numpy as np
 from .atomic import atomic_path
 from .errors import InputError
 
-__all__ = ["Image", "pixel_checksum", "read_exr", "write_exr"]
+__all__ = ["Image", "pixel_checksum", "read_exr", "read_exr_header", "write_exr"]
 
 #: Rec. 709 / linear-sRGB luminance weights (the Y row of the sRGB -> XYZ matrix).
 LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
@@ -174,50 +174,167 @@ def write_exr(path, image: Image) -> Path:
     return path
 
 
-def read_exr(path) -> Image:
-    """Read an RGB OpenEXR into an :class:`Image`.
+#: Bytes a declared pixel costs :func:`read_exr` per channel it keeps: the decoded plane,
+#: its float32 copy and the stacked image (4 bytes each), and room for the checks' masks.
+READ_BYTES_PER_SAMPLE = 16
+
+#: The deepest nesting the metadata JSON may have (the suite writes 3 or 4 levels).
+MAX_METADATA_DEPTH = 64
+
+#: The channels :func:`read_exr` keeps.
+_CHANNELS = ("R", "G", "B", "variance.R", "variance.G", "variance.B")
+
+
+def _declared_size(path: Path, header: dict) -> tuple[int, int]:
+    """Return ``(height, width)`` of the header's data window; refuse an empty one."""
+    try:
+        (x_min, y_min), (x_max, y_max) = (np.asarray(corner, dtype=np.int64)
+                                          for corner in header["dataWindow"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise InputError("the header has no usable dataWindow", file=path,
+                         field="dataWindow") from error
+    height, width = int(y_max - y_min + 1), int(x_max - x_min + 1)
+    if height < 1 or width < 1:
+        raise InputError("the data window holds no pixel", file=path, field="dataWindow",
+                         value=[int(x_min), int(y_min), int(x_max), int(y_max)])
+    return height, width
+
+
+def read_exr_header(path, channels=_CHANNELS, *, field: str = "path",
+                    bytes_per_sample: int = READ_BYTES_PER_SAMPLE) -> tuple[Path, dict]:
+    """Read an EXR's header and refuse, from it alone, a file that cannot be read whole.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    channels : sequence of str
+        The channels the caller will read: each must have a sample per pixel.
+    field : str
+        What the message calls ``path`` when it is missing or a folder.
+    bytes_per_sample : int
+        Memory the caller takes per declared pixel and channel it reads.
+
+    Returns
+    -------
+    path : Path
+    header : dict
+        With ``"size"``: the data window's ``(height, width)``.
 
     Raises
     ------
     InputError
-        When the file is missing, is not a readable EXR, has no R, G and B channels, holds
-        NaN/Inf pixels, or holds pixels that do not match the checksum written with them;
-        the message names the file and what was found.
+        A missing file or a folder, no readable EXR, an empty data window, a subsampled
+        channel, or more declared pixels than the machine can hold
+        (:func:`translucent.resources.check_memory`), before any pixel is read.
     """
     import OpenEXR
 
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("no such file", file=path, field="path", value=str(path))
+    from .atomic import check_input_file
+    from .resources import check_memory
+
+    path = check_input_file(path, field)
+    try:
+        with OpenEXR.File(str(path), header_only=True) as exr:
+            header = dict(exr.header())
+    except Exception as error:  # OpenEXR raises bare exceptions on corrupt files
+        raise InputError(f"not a readable OpenEXR file ({error})", file=path) from error
+    height, width = _declared_size(path, header)
+    found = header.get("channels") or []
+    for channel in found:
+        sampling = (getattr(channel, "xSampling", 1), getattr(channel, "ySampling", 1))
+        if channel.name in channels and sampling != (1, 1):
+            raise InputError(f"is subsampled ({sampling[0]} x {sampling[1]}); every channel "
+                             "read must have a sample per pixel", file=path,
+                             field=f"channel {channel.name}", value=list(sampling))
+    kept = sum(1 for channel in found if channel.name in channels) or 3
+    check_memory(height * width * kept * bytes_per_sample,
+                 what=f"reading a {width} x {height} image", file=path, field="dataWindow",
+                 value=f"{width} x {height}")
+    header["size"] = (height, width)
+    return path, header
+
+
+def check_planes(path, planes: dict, size: tuple[int, int]) -> None:
+    """Refuse channel planes whose shape is not the data window's ``size`` (H, W)."""
+    height, width = size
+    for name, plane in planes.items():
+        if plane.shape != (height, width):
+            raise InputError(f"holds {plane.shape} samples for a {width} x {height} image",
+                             file=path, field=f"channel {name}", value=list(plane.shape))
+
+
+def _metadata_object(path: Path, text) -> dict:
+    """Parse the metadata attribute: a JSON object of at most MAX_METADATA_DEPTH levels."""
+    from .errors import json_object
+
+    return json_object(text, file=path, field=METADATA_ATTRIBUTE,
+                       max_depth=MAX_METADATA_DEPTH)
+
+
+def read_exr(path, *, require_checksum: bool = False) -> Image:
+    """Read an RGB OpenEXR into an :class:`Image`.
+
+    The header is read first: a data window the machine cannot hold
+    (:func:`translucent.resources.check_memory`) or subsampled channels are refused before
+    any pixel is read.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    require_checksum : bool
+        Refuse a file without the pixels' checksum (what the suite writes): for files the
+        suite made itself, such as cache entries.
+
+    Raises
+    ------
+    InputError
+        When the file is missing or a folder, is not a readable EXR, declares more pixels
+        than the machine can hold, has subsampled channels, no R, G and B channels, or only
+        some variance channels, holds NaN/Inf pixels or variance, or negative variance,
+        holds pixels that do not match the checksum written with them, or metadata that
+        are not a JSON object; the message names the file and what was found.
+    """
+    import OpenEXR
+
+    path, header = read_exr_header(path)
     try:
         with OpenEXR.File(str(path), separate_channels=True) as exr:
             # the header is a view that empties when the file closes: copy what we need
             metadata_text = exr.header().get(METADATA_ATTRIBUTE)
             checksum = exr.header().get(CHECKSUM_ATTRIBUTE)
+            names = sorted(exr.channels())
             planes = {name: np.array(ch.pixels, dtype=np.float32)
-                      for name, ch in exr.channels().items()}
+                      for name, ch in exr.channels().items() if name in _CHANNELS}
     except Exception as error:  # OpenEXR raises bare exceptions on corrupt files
         raise InputError(f"not a readable OpenEXR file ({error})", file=path) from error
     missing = [c for c in "RGB" if c not in planes]
     if missing:
         raise InputError("an RGB image needs channels R, G and B", file=path,
-                         field="channels", value=sorted(planes))
+                         field="channels", value=names)
+    check_planes(path, planes, header["size"])
     rgb = np.stack([planes[c] for c in "RGB"], axis=-1)
     _refuse_non_finite(rgb, "pixel channels", "", file=path, field="pixels")
     variance = None
-    if all(f"variance.{c}" in planes for c in "RGB"):
+    present = [f"variance.{c}" for c in "RGB" if f"variance.{c}" in planes]
+    if present and len(present) < 3:
+        raise InputError("variance needs all of variance.R, variance.G and variance.B",
+                         file=path, field="channels", value=names)
+    if present:
         variance = np.stack([planes[f"variance.{c}"] for c in "RGB"], axis=-1)
+        _refuse_non_finite(variance, "variance channels", "", file=path, field="variance")
+        if (variance < 0).any():
+            y, x, c = np.argwhere(variance < 0)[0]
+            raise InputError(f"{int((variance < 0).sum())} variance channels are negative "
+                             f"(first at x={x}, y={y}, channel {'RGB'[c]})", file=path,
+                             field="variance", value=float(variance[y, x, c]))
+    if checksum is None and require_checksum:
+        raise InputError("the pixels carry no checksum: not a file this suite wrote",
+                         file=path, field=CHECKSUM_ATTRIBUTE)
     if checksum is not None and str(checksum) != pixel_checksum(rgb, variance):
         raise InputError("the pixels do not match the checksum written with them: the file "
                          "was changed or damaged after it was written", file=path,
                          field=CHECKSUM_ATTRIBUTE, value=str(checksum)[:16])
-    metadata = {}
-    if metadata_text is not None:
-        try:
-            metadata = json.loads(metadata_text)
-        except (TypeError, ValueError) as error:
-            raise InputError("metadata attribute is not valid JSON", file=path,
-                             field=METADATA_ATTRIBUTE) from error
+    metadata = {} if metadata_text is None else _metadata_object(path, metadata_text)
     return Image(rgb, variance, metadata)
 
 

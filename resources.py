@@ -16,7 +16,7 @@ from .errors import InputError
 
 __all__ = ["RENDER_BYTES_PER_PIXEL", "CAPTURE_BYTES_PER_PIXEL", "WALK_BYTES_PER_PHOTON",
            "RADIOSITY_BYTES_PER_PAIR", "MEMORY_SHARE", "available_memory", "check_memory",
-           "format_bytes"]
+           "format_bytes", "check_npz_memory"]
 
 #: A reference render holds per pixel Mitsuba's film and the float64 mean and spread of its
 #: passes, for each channel render: 203 bytes a pixel measured (peak RSS, Skin1 sphere,
@@ -39,6 +39,10 @@ RADIOSITY_BYTES_PER_PAIR = 320
 
 #: The share of the available memory a job may plan to take.
 MEMORY_SHARE = 0.8
+
+#: Memory an ``.npz`` reader takes per byte its arrays declare: the arrays as stored, their
+#: float64 copies (twice a float32's bytes) and one validated copy more.
+NPZ_READ_FACTOR = 6
 
 
 def available_memory() -> int | None:
@@ -105,3 +109,45 @@ def check_memory(nbytes: float, *, what: str, field: str, value, file=None,
     raise InputError(f"{what} needs about {format_bytes(nbytes)} of memory; this machine has "
                      f"{format_bytes(available)} available (a job may plan on "
                      f"{MEMORY_SHARE:.0%} of it)", file=file, field=field, value=value)
+
+
+def npz_declared_bytes(path) -> int | None:
+    """Return the bytes the arrays of the ``.npz`` ``path`` declare in their headers.
+
+    Read from the headers alone, without loading an array; None where the file is no
+    readable archive of ``.npy`` members (its reader then says why).
+    """
+    import zipfile
+
+    import numpy as np
+
+    total = 0
+    try:
+        with zipfile.ZipFile(path) as archive:
+            for info in archive.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                with archive.open(info) as member:
+                    version = np.lib.format.read_magic(member)
+                    read = np.lib.format.read_array_header_1_0 if version == (1, 0) \
+                        else np.lib.format.read_array_header_2_0
+                    shape, _, dtype = read(member)
+                total += int(np.prod(shape, dtype=object)) * dtype.itemsize
+    except Exception:  # noqa: BLE001 - zipfile and numpy raise many types on bad files
+        return None
+    return total
+
+
+def check_npz_memory(path, *, field: str, file=None, what: str = "reading") -> None:
+    """Refuse, from its headers, an ``.npz`` whose arrays the machine cannot hold.
+
+    Raises
+    ------
+    InputError
+        Naming ``file`` (default ``path``), ``field``, the declared size and what is there.
+    """
+    declared = npz_declared_bytes(path)
+    if declared is not None:
+        check_memory(declared * NPZ_READ_FACTOR, what=f"{what} arrays that declare "
+                     f"{format_bytes(declared)}", file=path if file is None else file,
+                     field=field, value=format_bytes(declared))

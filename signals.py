@@ -8,9 +8,10 @@ steps, so that a render stops at the next pass at the latest.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 
-__all__ = ["Terminated", "check", "record", "reset"]
+__all__ = ["Terminated", "check", "deferred", "deferring", "record", "reset"]
 
 
 class Terminated(Exception):
@@ -39,3 +40,28 @@ def check() -> None:
         raise Terminated()
     if _received["interrupt"]:
         raise KeyboardInterrupt()
+
+
+_deferred = [0]
+
+
+@contextlib.contextmanager
+def deferred():
+    """Hold a received signal as recorded for the block, to be raised by :func:`check`.
+
+    For loops over a library call that reports any exception raised inside it as its own
+    failure (emcee prints a traceback for one raised in the log-probability): the loop
+    calls :func:`check` between calls, so the signal ends it there, quietly.
+    """
+    with _lock:
+        _deferred[0] += 1
+    try:
+        yield
+    finally:
+        with _lock:
+            _deferred[0] -= 1
+
+
+def deferring() -> bool:
+    """Whether a signal received now is to be held (inside :func:`deferred`)."""
+    return _deferred[0] > 0

@@ -15,7 +15,25 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["tomllib", "toml_value"]
+__all__ = ["tomllib", "toml_value", "parse_toml"]
+
+
+def parse_toml(text: str, *, file=None) -> dict:
+    """Parse TOML ``text``; :class:`InputError` naming ``file`` where it cannot be used.
+
+    Refused: text that is not TOML, and tables or arrays nested deeper than
+    :data:`~translucent.errors.MAX_NESTING` (the suite's own files go 3 levels deep).
+    """
+    from .errors import MAX_NESTING, check_nesting
+
+    try:
+        table = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise InputError(f"not valid TOML ({error})", file=file) from error
+    except RecursionError:
+        raise InputError(f"not readable TOML: nested too deeply (at most {MAX_NESTING} levels "
+                         "are read)", file=file) from None
+    return check_nesting(table, file=file)
 
 
 def toml_value(value) -> str:

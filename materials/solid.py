@@ -478,9 +478,11 @@ def load_solid(path) -> SolidMedium:
         A missing or unreadable file, a missing array, a grid of the wrong shape, a NaN or
         negative coefficient (naming the voxel), bounds that are not a box.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("no such file", file=path, field="path", value=str(path))
+    from ..atomic import check_input_file
+    from ..resources import check_npz_memory
+
+    path = check_input_file(path, "path", what="file")
+    check_npz_memory(path, field="sigma_a")  # before an array is read
     try:
         with np.load(path, allow_pickle=False) as data:
             fields = {key: data[key] for key in data.files}

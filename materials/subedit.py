@@ -64,6 +64,12 @@ DEFAULT_RADIUS_ENERGY = 0.999
 #: Cap (mm) on the default r_s: a non-absorbing medium (Spectralon) has a 1/r^3 tail whose
 #: 99.9 % radius is astronomically far; beyond a metre the truncation is reported instead.
 MAX_DEFAULT_RADIUS = 1000.0
+#: Largest maximum scattering radius r_s accepted (mm): a kilometre, far beyond any
+#: object rendered, and small enough that r^2 and the energy integrals stay finite.
+MAX_RADIUS = 1e6
+#: Bytes a built-in texture takes per knot and channel while it is made: the blend's
+#: float64 table, its temporaries and the validated copy.
+BUILD_BYTES_PER_KNOT = 32
 #: Relative weight added to every fitted sample so that knots where the dipole carries no
 #: energy still follow ln R_d instead of the least-squares minimum-norm value 0.
 TAIL_WEIGHT = 1e-9
@@ -78,6 +84,18 @@ FORMAT_NAME = "translucent-subedit"
 FORMAT_VERSION = 1
 #: Below this |delta ln P| across a segment the moment integrals use their Taylor series.
 _SERIES_THRESHOLD = 1e-2
+
+
+def _checked_radius(r_s) -> float:
+    """Return the maximum scattering radius ``r_s`` as a float in (0, MAX_RADIUS] mm."""
+    value = check_finite(r_s, "r_s")
+    if value.shape != ():
+        raise InputError("must be a number (mm)", field="r_s", value=r_s)
+    if not float(value) > 0:
+        raise InputError("must be > 0 mm", field="r_s", value=r_s)
+    if float(value) > MAX_RADIUS:
+        raise InputError(f"must be <= {MAX_RADIUS:g} mm", field="r_s", value=r_s)
+    return float(value)
 
 
 def _moment_factors(delta):
@@ -156,10 +174,7 @@ class SubEditProfiles:
         table = np.maximum(table, LOG_FLOOR)
         table.flags.writeable = False
         object.__setattr__(self, "log_profile", table)
-        r_s = float(check_finite(self.r_s, "r_s"))
-        if r_s <= 0:
-            raise InputError("must be > 0 mm", field="r_s", value=self.r_s)
-        object.__setattr__(self, "r_s", r_s)
+        object.__setattr__(self, "r_s", _checked_radius(self.r_s))
         eta = float(check_finite(self.eta, "eta"))
         if not 1.0 <= eta <= 3.0:
             raise InputError("must be in [1, 3]", field="eta", value=self.eta)
@@ -499,9 +514,7 @@ def subedit_from_dipole(dipole: Dipole, *, segments: int = DEFAULT_SEGMENTS,
     segments = int(segments)
     if r_s is None:
         r_s = _dipole_energy_radius(dipole, DEFAULT_RADIUS_ENERGY)
-    r_s = float(check_finite(r_s, "r_s"))
-    if r_s <= 0:
-        raise InputError("must be > 0 mm", field="r_s", value=r_s)
+    r_s = _checked_radius(r_s)
     finite_depths = dipole.mean_free_path[np.isfinite(dipole.mean_free_path)]
     grid = _quadrature_grid(r_s, segments, 0.01 * float(np.min(finite_depths, initial=1.0)))
     target = dipole.profile(grid)  # (m, 3)
@@ -646,11 +659,27 @@ def builtin_subedit(name: str, **options) -> SubEditProfiles:
     if name not in BUILTIN_SUBEDIT:
         raise InputError(f"unknown built-in SubEdit material; valid: {', '.join(BUILTIN_SUBEDIT)}",
                          field="builtin", value=name)
+    _check_texture_memory(name, options)
     try:
         return _builtin_cached(name, tuple(sorted(options.items())))
     except TypeError as error:
         raise InputError(f"bad option for '{name}' ({error})", field="builtin",
                          value=options) from error
+
+
+def _check_texture_memory(name: str, options: dict) -> None:
+    """Refuse, before it is made, a built-in texture the machine cannot hold."""
+    import inspect
+
+    from ..resources import check_memory
+
+    defaults = {key: parameter.default for key, parameter in
+                inspect.signature(BUILTIN_SUBEDIT[name]).parameters.items()}
+    resolution = check_count(options.get("resolution", defaults["resolution"]), "resolution")
+    segments = check_count(options.get("segments", defaults["segments"]), "segments")
+    check_memory(float(resolution) ** 2 * (segments + 1) * 3 * BUILD_BYTES_PER_KNOT,
+                 what=f"a {resolution} x {resolution} SubEdit texture of {segments} segments",
+                 field="resolution", value=resolution)
 
 
 # -------------------------------------------------------------------- file format
@@ -677,9 +706,11 @@ def load_subedit(path) -> SubEditProfiles:
         Missing or unreadable file, wrong format name or version, a missing field, a
         wrong shape, or NaN values; the message names the file and the field.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("no such file", file=path, field="path", value=str(path))
+    from ..atomic import check_input_file
+    from ..resources import check_npz_memory
+
+    path = check_input_file(path, "path", what="file")
+    check_npz_memory(path, field="log_profile")  # before an array is read
     try:
         with np.load(path, allow_pickle=False) as data:
             fields = {key: data[key] for key in data.files}

@@ -35,6 +35,7 @@ __all__ = ["main", "COMMANDS"]
 COMMANDS: dict[str, tuple[str, str]] = {
     "doctor": ("doctor", "versions, Mitsuba variant, libLLVM, GPU and cache folder"),
     "scenes": ("scenes", "list the built-in scenes"),
+    "profiles": ("profiles", "list the scattering profiles; describe one of a medium"),
     "render": ("render", "render a reference image of a scene with Mitsuba"),
     "references": ("references", "the built-in scenes' committed references: list, render"),
     "cache": ("cache", "the cache: size by kind, budget; prune or clear it"),
@@ -67,7 +68,7 @@ def _build_parser() -> argparse.ArgumentParser:
             module = importlib.import_module(f"translucent.reports.commands.{module_name}")
         except ModuleNotFoundError as error:
             if error.name == f"translucent.reports.commands.{module_name}":
-                continue  # a command not built yet is simply absent
+                continue  # a command whose module is absent is left out
             raise
         command = sub.add_parser(name, help=help_text, description=module.__doc__)
         module.add_arguments(command)
@@ -94,6 +95,8 @@ def _progress_bars(shown: bool):
     The command's own ``--no-progress`` already hides its bars; this reaches those of the
     steps it calls (precomputations, renders) that take no such argument.
     """
+    from ..progress import hidden as bars_hidden
+
     if shown:
         yield
         return
@@ -107,7 +110,8 @@ def _progress_bars(shown: bool):
 
     std.tqdm.__init__ = hidden
     try:
-        yield
+        with bars_hidden():
+            yield
     finally:
         std.tqdm.__init__ = original
 
@@ -172,14 +176,70 @@ def _is_number(token: str) -> bool:
     return True
 
 
+#: Options that do something else than run the command: never from TRANSLUCENT_OPTIONS,
+#: where they would make every command of a CI job exit 0 having done nothing.
+_NOT_FROM_ENVIRONMENT = ("-h", "--help", "--version")
+
+
+class StandardOutputError(InputError):
+    """Standard output cannot be written (a full device, a closed pipe)."""
+
+
+class _CheckedOutput:
+    """Standard output whose write errors end the command with one line, no traceback."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _checked(self, call, *args):
+        try:
+            return call(*args)
+        except OSError as error:
+            global _STANDARD_OUTPUT_FAILED
+            _STANDARD_OUTPUT_FAILED = True
+            raise StandardOutputError(f"cannot be written ({error.strerror or error})",
+                                      field="standard output") from None
+
+    def write(self, text):
+        return self._checked(self._stream.write, text)
+
+    def writelines(self, lines):
+        return self._checked(self._stream.writelines, lines)
+
+    def flush(self):
+        return self._checked(self._stream.flush)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+#: Whether the last command met a standard output it could not write.
+_STANDARD_OUTPUT_FAILED = False
+
+
+@contextlib.contextmanager
+def _checked_standard_output():
+    """Route what the command prints through :class:`_CheckedOutput` for the block."""
+    global _STANDARD_OUTPUT_FAILED
+    _STANDARD_OUTPUT_FAILED = False
+    original = sys.stdout
+    sys.stdout = _CheckedOutput(original)
+    try:
+        yield
+    finally:
+        sys.stdout = original
+
+
 def _on_sigterm(signum, frame):
     signals.record("terminate")
-    raise Terminated()
+    if not signals.deferring():  # else raised by signals.check() at the next step
+        raise Terminated()
 
 
 def _on_sigint(signum, frame):
     signals.record("interrupt")
-    raise KeyboardInterrupt()
+    if not signals.deferring():
+        raise KeyboardInterrupt()
 
 
 def _signal_behind(error: BaseException) -> BaseException | None:
@@ -212,6 +272,11 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as error:
         print(f"translucent: error: TRANSLUCENT_OPTIONS = {text!r}: {error}", file=sys.stderr)
         return 2
+    asked = [token for token in options if token.split("=", 1)[0] in _NOT_FROM_ENVIRONMENT]
+    if asked:
+        print(f"translucent: error: TRANSLUCENT_OPTIONS = {text!r}: {asked[0]} is asked for on "
+              "the command line, not set for every command", file=sys.stderr)
+        return 2
     parser = _build_parser()
     end, command_parser = _command_end(parser, argv)
     if end and options:
@@ -238,17 +303,22 @@ def main(argv: list[str] | None = None) -> int:
         signals.reset()
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
         previous_interrupt = signal.signal(signal.SIGINT, _on_sigint)
-    try:
-        target = json_target(args)
-        if target not in (None, "-"):
-            from ..atomic import check_output_file
+    from ..atomic import check_output_file, guarded_files
+    from ..cache import check_settings
 
-            check_output_file(target, "--json", what="a file name for the JSON record")
-        silent = quiet(args)
-        with _progress_bars(not (silent or getattr(args, "no_progress", False))), \
-                _standard_output(silent):
-            code = int(args.run(args) or 0)
-        write_record(args, code)
+    try:
+        # every output is compared with every input the command names (guarded_files)
+        with guarded_files(), _checked_standard_output():
+            check_settings()  # a bad cache setting is refused before any work
+            target = json_target(args)
+            if target not in (None, "-"):
+                check_output_file(target, "--json", what="a file name for the JSON record")
+            silent = quiet(args)
+            with _progress_bars(not (silent or getattr(args, "no_progress", False))), \
+                    _standard_output(silent):
+                code = int(args.run(args) or 0)
+            write_record(args, code)
+            sys.stdout.flush()  # a full device or a closed pipe is found here, not at exit
         return code
     except InputError as error:
         print(f"translucent {args.command}: error: {error}", file=sys.stderr)
@@ -271,6 +341,11 @@ def main(argv: list[str] | None = None) -> int:
 def entry_point() -> None:
     """Run :func:`main` as the ``translucent`` program and exit with its code."""
     code = main()
+    if _STANDARD_OUTPUT_FAILED:
+        # what is still buffered for it would fail again at exit, with a second message
+        with contextlib.suppress(OSError, ValueError):
+            sink = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(sink, sys.stdout.fileno())
     if code in (130, 143):
         # a render cut short inside a Dr.Jit kernel can leave its thread pool waiting at
         # interpreter shutdown; the command has already unwound and removed its files

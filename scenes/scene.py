@@ -43,9 +43,13 @@ UNIT_NORMAL_TOLERANCE = 1e-12
 
 def vector3(value, field_name: str, *, unit: bool = False, file=None) -> np.ndarray:
     """Validate a finite 3-vector (normalised when ``unit``) and return it read-only."""
-    array = np.asarray(value, dtype=np.float64)
-    if array.shape != (3,):
-        raise InputError("must be a 3-vector [x, y, z]", file=file, field=field_name, value=value)
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):  # text, ragged lists, huge integers
+        array = None
+    if array is None or array.shape != (3,):
+        raise InputError("must be a 3-vector [x, y, z] of numbers", file=file, field=field_name,
+                         value=value)
     check_finite(array, field_name, file=file)
     if unit:
         length = np.linalg.norm(array)
@@ -461,14 +465,16 @@ class Camera:
         if np.linalg.norm(np.cross(forward, self.up)) < 1e-9:
             raise InputError("camera.up must not be parallel to the viewing direction",
                              field="camera.up", value=self.up.tolist())
-        fov = float(check_finite(self.fov, "camera.fov"))
-        if not 0 < fov < 180:
-            raise InputError("must be in (0, 180) degrees", field="camera.fov", value=self.fov)
-        object.__setattr__(self, "fov", fov)
+        fov = check_finite(self.fov, "camera.fov")
+        if fov.shape != () or not 0 < float(fov) < 180:
+            raise InputError("must be in (0, 180) degrees", field="camera.fov",
+                             value=self.fov)
+        object.__setattr__(self, "fov", float(fov))
         for name in ("width", "height"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not np.isfinite(float(value)) \
-                    or int(value) != value or not 1 <= int(value) <= 16384:
+            # compared before any conversion: an integer of hundreds of digits is no float
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) \
+                    or not 1 <= value <= 16384 or int(value) != value:
                 raise InputError("must be an integer in [1, 16384]", field=f"camera.{name}",
                                  value=value)
             object.__setattr__(self, name, int(value))

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..materials.factory import material_from_dict, material_to_dict
-from ..tomlio import toml_value, tomllib
+from ..tomlio import parse_toml, toml_value, tomllib
 from .meshes import MESH_GENERATORS, cornell_box, load_mesh, rotation_matrix, save_mesh
 from .scene import (
     Camera,
@@ -274,8 +274,12 @@ def scene_from_dict(table: dict, *, file=None, base_dir=None) -> Scene:
     except InputError as error:
         raise _rewrap(error, file=file, prefix="camera") from error
     except TypeError as error:
-        raise InputError("the camera needs origin and target", file=file,
-                         field="camera") from error
+        missing = [key for key in ("origin", "target") if key not in camera_table]
+        if missing:
+            raise InputError("the camera needs origin and target", file=file,
+                             field=f"camera.{missing[0]}") from error
+        raise InputError(f"a camera value is not of its type ({error})", file=file,
+                         field="camera", value=camera_table) from error
     object_tables = table.get("objects", [])
     if not isinstance(object_tables, list) or not object_tables:
         raise InputError("a scene needs at least one [[objects]] entry", file=file,
@@ -314,18 +318,14 @@ def scene_from_dict(table: dict, *, file=None, base_dir=None) -> Scene:
 
 def loads_scene(text: str, *, file=None, base_dir=None) -> Scene:
     """Parse scene-file text (TOML) into a :class:`Scene` (see :func:`scene_from_dict`)."""
-    try:
-        table = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise InputError(f"not valid TOML ({error})", file=file) from error
-    return scene_from_dict(table, file=file, base_dir=base_dir)
+    return scene_from_dict(parse_toml(text, file=file), file=file, base_dir=base_dir)
 
 
 def _stamp(path: Path):
     """``(modification time, size)`` of a file, or None when it cannot be read."""
     try:
         stat = path.stat()
-    except OSError:
+    except (OSError, ValueError):  # missing, a name too long, a NUL: loading says which
         return None
     return stat.st_mtime_ns, stat.st_size
 
@@ -337,8 +337,8 @@ def _referenced_file_stamps(path: Path) -> tuple:
     that does not parse gives no stamps: loading it raises anyway.
     """
     try:
-        table = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        table = parse_toml(path.read_text(encoding="utf-8"), file=path)
+    except (OSError, UnicodeDecodeError, InputError):
         return ()
     tables = []
     for entry in table.get("objects", []) if isinstance(table.get("objects"), list) else []:
@@ -404,15 +404,21 @@ def load_scene(name_or_path) -> Scene:
         Unknown name (listing the built-in scenes), missing file, or anything wrong in the
         file (naming the file and key).
     """
+    from ..atomic import check_input_file, note_input
+
     text = os.fspath(name_or_path)
     looks_like_path = isinstance(name_or_path, os.PathLike) or os.sep in text \
-        or text.lower().endswith(".toml") or Path(text).is_file()
+        or text.lower().endswith(".toml") or os.path.isfile(text)
     path = Path(text) if looks_like_path else builtin_scene_path(text)
-    if not path.is_file():
-        raise InputError("no such scene file", file=path, field="scene", value=text)
+    check_input_file(path, "scene", what="scene file")
     stat = path.stat()
-    return _load_file(str(path.resolve()), stat.st_mtime_ns, stat.st_size,
-                      _referenced_file_stamps(path))
+    referenced = _referenced_file_stamps(path)
+    scene = _load_file(str(path.resolve()), stat.st_mtime_ns, stat.st_size, referenced)
+    # what an output of the command must never replace: the file and those it names
+    note_input(path, "scene")
+    for name, _ in referenced:
+        note_input(name, f"a file {path.name} names")
+    return scene
 
 
 def builtin_scene_names() -> list[str]:

@@ -95,21 +95,35 @@ def _check_out(sidecar: Path, image: Path) -> None:
     make_output_folder(sidecar.parent, field="--out", value=str(sidecar))
 
 
-def run(args) -> int:
-    """Generate the capture and write the image and sidecar."""
+def _material_and_sidecar(args):
+    """Return the material (with ``--eta``) and the sidecar to write, checked before work.
+
+    The default sidecar is named after the material, as a file name of the working folder
+    (:func:`~translucent.atomic.safe_file_name`: a material file's name may hold anything).
+    """
     from dataclasses import replace
 
-    from ...errors import InputError
+    from ...atomic import safe_file_name
+    from ...errors import InputError, check_count
     from ...fitting.results import read_material
-    from ...fitting.synthetic import Camera, default_pixel_size, dipole_capture
 
+    if args.seed is not None:  # numpy takes no negative seed
+        check_count(args.seed, "--seed", 0)
     material = read_material(args.material)
     if args.eta is not None:
         if not 1.0 <= args.eta <= 3.0:
             raise InputError("must be in [1, 3]", field="--eta", value=args.eta)
         material = replace(material, eta=args.eta)
-    name = (material.name or Path(args.material).stem).lower()
-    out = Path(args.out) if args.out else Path(f"{name}_capture.json")
+    name = safe_file_name((material.name or Path(args.material).stem).lower())
+    return material, Path(args.out) if args.out else Path(f"{name}_capture.json")
+
+
+def run(args) -> int:
+    """Generate the capture and write the image and sidecar."""
+    from ...errors import InputError
+    from ...fitting.synthetic import Camera, default_pixel_size, dipole_capture
+
+    material, out = _material_and_sidecar(args)
     suffix = {"exr": ".exr", "png": ".png", "tiff": ".tif"}[args.format]
     _check_out(out, out.with_suffix(suffix))
     camera = Camera(peak_signal=args.peak_signal, gain=args.gain, read_noise=args.read_noise,

@@ -24,18 +24,25 @@ from pathlib import Path
 from ...errors import InputError
 
 #: The metric a bare ``--max`` applies to.
-DEFAULT_METRIC = "hdr-flip"
+DEFAULT_METRIC = "hdr_flip"
 
 
 def add_arguments(parser):
     """Add the reference, the test, the metric and its threshold, where the maps go."""
+    from ..metric_registry import canonical_metric
     from ..metric_table import METRICS
+
+    def canonical_or_given(name):
+        return canonical_metric(name) or str(name).lower()
 
     parser.add_argument("reference", help="reference OpenEXR (its variance channels, where "
                         "present, are discounted from the relative MSE)")
     parser.add_argument("test", help="test OpenEXR")
-    parser.add_argument("--metric", default=None, type=str.lower, choices=list(METRICS),
-                        help=f"the metric a threshold applies to (default {DEFAULT_METRIC})")
+    parser.add_argument("--metric", default=None, type=canonical_or_given,
+                        choices=list(METRICS), metavar="METRIC",
+                        help=f"the metric a threshold applies to: {', '.join(METRICS)} "
+                             f"(default {DEFAULT_METRIC}; earlier spellings such as relmse "
+                             "and hdr-flip are read too)")
     bound = parser.add_mutually_exclusive_group()
     bound.add_argument("--max", type=float, default=None, dest="maximum",
                        help="fail (exit 1) when the metric is above this (error metrics)")
@@ -84,28 +91,34 @@ def _table(rows) -> list[str]:
 
 def run(args) -> int:
     """Read both images, compute the metrics, write the maps, print the table."""
-    from ...atomic import check_output_folder
+    from ...atomic import check_output_folder, claim_output, note_input
     from ...image import read_exr
     from ...noise import reference_noise_warning
-    from ..error_maps import write_error_maps
+    from ..error_maps import error_map_paths, write_error_maps
     from ..metric_table import metric_rows
     from ..metrics import NOISE_MARGIN, evaluate, noise_floor
     from .record import record
 
     definition, threshold = _threshold(args)
+    note_input(args.reference, "reference")
+    note_input(args.test, "test")
     if args.maps and not args.no_maps:
         check_output_folder(args.maps, "--maps")  # before the metrics are computed
+    test_path = Path(args.test)
+    folder = Path(args.maps) if args.maps else test_path.parent
+    prefix = f"{test_path.stem}_"
+    if not args.no_maps:  # a map's name may be an input's (compare A_flip.exr A.exr)
+        for path in error_map_paths(folder, prefix):
+            claim_output(path, "--maps" if args.maps else "error map",
+                         hint="give --maps DIR or --no-maps")
     reference = read_exr(args.reference)
     test = read_exr(args.test)
     comparison = evaluate(reference, test)
     floor = noise_floor(reference)
     metrics = comparison.metrics
-    test_path = Path(args.test)
     files = {}
     if not args.no_maps:
-        folder = Path(args.maps) if args.maps else test_path.parent
-        files = write_error_maps(reference, test, folder, prefix=f"{test_path.stem}_",
-                                 comparison=comparison)
+        files = write_error_maps(reference, test, folder, prefix=prefix, comparison=comparison)
     noise = ("reference variance discounted" if metrics.noise_discounted
              else "reference has no variance: nothing discounted")
     print(f"{args.test} against {args.reference} ({test.shape[1]} x {test.shape[0]}; "

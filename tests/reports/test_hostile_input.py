@@ -1,63 +1,80 @@
 """Hostile and bad input across every command: exit 2, a message naming what is wrong, no
 traceback, and no file left behind.
 
-Each case is one kind of bad input. ``files`` are made in a fresh folder before the
-command runs; afterwards that folder holds exactly those files again (nothing written,
-nothing half-written, no temporary left), and standard error names the words of the case
-(the file, the field, the value).
+Each case is one kind of bad input (:mod:`hostile` runs it). ``files`` are made in a fresh
+folder before the command runs; afterwards that folder holds exactly those files again
+(nothing written, nothing half-written, no temporary left), and standard error names the
+words of the case (the file, the field, the value). The kinds that would destroy an input
+are in ``test_hostile_outputs.py``, those of the cache in ``test_hostile_cache.py``.
 """
 
 import json
-import os
 
 import numpy as np
 import pytest
-from translucent.image import Image
+from hostile import (
+    SPHERE,
+    TINY_SPHERE,
+    CaptureFile,
+    declaring,
+    exr_bytes,
+    nested_json,
+    npz_declaring,
+    run_case,
+    sparse,
+    sphere_text,
+    written,
+)
 from translucent.reports.cli import main
-from translucent.scenes import load_scene
 
-#: At least this many kinds are checked (issue "Nothing lost, nothing trusted blindly").
-LEAST_KINDS = 50
-
-
-def _sphere_text() -> str:
-    """The built-in sphere's scene file."""
-    from pathlib import Path
-
-    return Path(load_scene("sphere").source).read_text(encoding="utf-8")
+#: At least this many kinds are checked across the hostile-input modules (issue "Never
+#: destroy an input, never serve what was not made for the key").
+LEAST_KINDS = 90
 
 
 def _exr(size=(8, 8), value=0.5, variance=None, nan=False) -> bytes:
-    """The bytes of a small EXR (written through a temporary file)."""
-    import tempfile
-
+    """The bytes of a small EXR; with ``nan`` one pixel is NaN, as another renderer writes."""
+    if not nan:
+        return exr_bytes(size, value, variance)
     rgb = np.full(size + (3,), value, dtype=np.float32)
-    with tempfile.TemporaryDirectory() as folder:
-        path = os.path.join(folder, "image.exr")
-        if nan:  # the suite never writes one: OpenEXR directly, as another renderer would
-            import OpenEXR
-
-            rgb[0, 0, 0] = np.nan
-            with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION,
-                               "type": OpenEXR.scanlineimage}, {"RGB": rgb}) as exr:
-                exr.write(path)
-        else:
-            Image(rgb, None if variance is None else np.full_like(rgb, variance)).write(path)
-        with open(path, "rb") as handle:
-            return handle.read()
+    rgb[0, 0, 0] = np.nan
+    return exr_bytes(channels={"RGB": rgb})
 
 
-SPHERE = _sphere_text()
 GOOD_EXR = _exr()
 CAPTURE_SIDECAR = {"format": "translucent-capture", "version": 1}
 
-
-class CaptureFile(str):
-    """A file of a small synthetic capture (made once by the ``capture`` fixture)."""
-
-
 #: A valid 32 x 32 capture: its sidecar and image.
 CAPTURE = {"c.json": CaptureFile("small.json"), "small.exr": CaptureFile("small.exr")}
+
+#: The mesh table of the sphere's object, replaced by the cases that give a mesh file.
+SPHERE_MESH = ('mesh = { type = "icosphere", subdivisions = 4, radius = 1.0, '
+               'center = [0.0, 0.0, 0.0] }')
+#: The sphere's material, replaced by the SubEdit cases.
+SPHERE_MATERIAL = 'material = { type = "measured", name = "Marble", eta = 1.0 }'
+#: The sphere's scene name.
+SPHERE_NAME = 'name = "sphere"\ndescription'
+#: 400 digits: an integer no float64 holds.
+HUGE = "9" * 400
+
+
+def _subsampled() -> bytes:
+    """An EXR whose G channel has one sample per 2 x 2 pixels."""
+    import OpenEXR
+
+    full = np.full((16, 16), 0.5, np.float32)
+    # OpenEXR's writer keeps every other sample of the plane given for a subsampled channel
+    return exr_bytes(channels={"R": OpenEXR.Channel(full), "B": OpenEXR.Channel(full),
+                               "G": OpenEXR.Channel(full, 2, 2)})
+
+
+def _variance_planes(**planes) -> bytes:
+    """A 16 x 16 EXR with R, G, B of 0.5 and the given variance planes."""
+    rgb = {c: np.full((16, 16), 0.5, np.float32) for c in "RGB"}
+    return exr_bytes(channels={**rgb, **{name.replace("_", "."): np.full((16, 16), value,
+                                                                         np.float32)
+                                         for name, value in planes.items()}})
+
 
 #: kind -> (arguments, files {name: text or bytes}, words stderr must hold)
 CASES = {
@@ -206,6 +223,163 @@ CASES = {
                                                   "--pixel-size-mm", "0.1", "--out",
                                                   "{d}/c.json"], {"photo.png": b"\x89PNG"},
                                                  ["photo.png", ".png"]),
+    # ----------------------------------------------------------------- nested, huge, long
+    "scene nested 5000 deep": (["render", "{d}/s.toml"],
+                               {"s.toml": SPHERE + f"\n[extra]\nx = {nested_json(5000)}\n"},
+                               ["s.toml", "nested"]),
+    "scene integer of 400 digits": (["render", "{d}/s.toml"],
+                                    {"s.toml": sphere_text(**{"intensity = 100.0":
+                                                              f"intensity = {HUGE}"})},
+                                    ["s.toml", "lights[0].intensity", "400 digits"]),
+    "mesh count of 400 digits": (["render", "{d}/s.toml"],
+                                 {"s.toml": sphere_text(**{"subdivisions = 4":
+                                                           f"subdivisions = {HUGE}"})},
+                                 ["s.toml", "subdivisions"]),
+    "camera width of 400 digits": (["render", "{d}/s.toml"],
+                                   {"s.toml": sphere_text(**{"width = 96": f"width = {HUGE}"})},
+                                   ["s.toml", "camera.width"]),
+    "light position of 400 digits": (["render", "{d}/s.toml"],
+                                     {"s.toml": sphere_text(**{"[3.0, 4.0, 4.0]":
+                                                               f"[{HUGE}, 4.0, 4.0]"})},
+                                     ["s.toml", "position"]),
+    "scene path of 5000 characters": (["render", "{d}/" + "s" * 5000 + ".toml"], {},
+                                      ["scene", "too long"]),
+    "output path of 5000 characters": (["render", "sphere", "--out",
+                                        "{d}/" + "o" * 5000 + ".exr"], {},
+                                       ["--out", "too long"]),
+    "mesh file name of 5000 characters": (["render", "{d}/s.toml"],
+                                          {"s.toml": sphere_text(**{SPHERE_MESH: 'mesh = { file '
+                                                                    f'= "{"m" * 5000}.obj" }}'})},
+                                          ["s.toml", "file", "too long"]),
+    "scene name of 5000 characters": (["render", "{d}/s.toml", "--spp", "0"],
+                                      {"s.toml": sphere_text(**{
+                                          SPHERE_NAME: f'name = "{"n" * 5000}"\ndescription'})},
+                                      ["spp = 0"]),
+    "NUL in a mesh file name": (["render", "{d}/s.toml"],
+                                {"s.toml": sphere_text(**{SPHERE_MESH:
+                                                          'mesh = { file = "a\\u0000.obj" }'})},
+                                ["s.toml", "null byte"]),
+    "camera fov of the wrong type": (["render", "{d}/s.toml"],
+                                     {"s.toml": sphere_text(**{"fov = 30.0": "fov = [30, 40]"})},
+                                     ["s.toml", "camera.fov", "[30, 40]"]),
+    "scene that is a folder": (["render", "{d}/f.toml"], {"f.toml/keep": "x"},
+                               ["f.toml", "is a folder"]),
+    "mesh file that is a folder": (["render", "{d}/s.toml"],
+                                   {"s.toml": sphere_text(**{SPHERE_MESH: 'mesh = { file = '
+                                                             '"m.obj" }'}), "m.obj/keep": "x"},
+                                   ["m.obj", "is a folder"]),
+    "unreadable text STL": (["render", "{d}/s.toml"],
+                            {"s.toml": sphere_text(**{SPHERE_MESH: 'mesh = { file = "m.stl" }'}),
+                             "m.stl": b"solid x\n facet \xff\xfe\xfd garbage\n"},
+                            ["m.stl", "not a readable mesh", "convert it"]),
+    "sparse mesh of a gigabyte": (["render", "{d}/s.toml"],
+                                  {"s.toml": sphere_text(**{SPHERE_MESH: 'mesh = { file = '
+                                                            '"m.obj" }'}), "m.obj": sparse(2**30)},
+                                  ["m.obj", "holes"]),
+    "mesh file beyond the memory": (["render", "{d}/s.toml"],
+                                    {"s.toml": sphere_text(**{SPHERE_MESH: 'mesh = { file = '
+                                                              '"m.obj" }'}),
+                                     "m.obj": written(2**22)}, ["m.obj", "of memory"],
+                                    {"memory": 2**26}),
+    "SubEdit texture of 74 GiB": (["render", "{d}/s.toml"],
+                                  {"s.toml": sphere_text(**{SPHERE_MATERIAL: 'material = { type = '
+                                                            '"subedit", builtin = "checker", '
+                                                            'resolution = 7000 }'})},
+                                  ["s.toml", "resolution", "7000", "of memory"]),
+    "SubEdit file declaring 74 GiB": (["render", "{d}/s.toml"],
+                                      {"s.toml": sphere_text(**{SPHERE_MATERIAL: 'material = { '
+                                                                'type = "subedit", file = '
+                                                                '"t.npz" }'}),
+                                       "t.npz": npz_declaring((7000, 7000, 65, 3))},
+                                      ["s.toml", "t.npz", "of memory"]),
+    "SubEdit r_s of 1e308": (["render", "{d}/s.toml"],
+                             {"s.toml": sphere_text(**{SPHERE_MATERIAL: 'material = { type = '
+                                                       '"subedit", measured = "Marble", r_s = '
+                                                       '1e308 }'})}, ["s.toml", "r_s", "1e+308"]),
+    # ----------------------------------------------------------------- counts and settings
+    "passes beyond any render": (["render", "sphere", "--passes", "99999999999999999999",
+                                  "--out", "{d}/o.exr"], {}, ["passes", "99999999999999999999"]),
+    "seed beyond 64 bits": (["render", "sphere", "--seed", str(2**70), "--out", "{d}/o.exr"],
+                            {}, ["seed", str(2**70)]),
+    "capture: negative seed": (["capture", "skin1", "--seed", "-1", "--out", "{d}/c.json"], {},
+                               ["--seed", "-1"]),
+    "export: spp beyond 32 bits": (["export", "sphere", "--spp", "99999999999999999999",
+                                    "--out", "{d}/e"], {}, ["spp", "99999999999999999999"]),
+    "TRANSLUCENT_OPTIONS asks for help": (["scenes"], {}, ["TRANSLUCENT_OPTIONS", "--help"],
+                                          {"env": {"TRANSLUCENT_OPTIONS": "--help"}}),
+    "cache budget not a number": (["render", "{d}/s.toml", "--out", "{d}/o.exr"],
+                                  {"s.toml": TINY_SPHERE}, ["TRANSLUCENT_CACHE_MAX_BYTES", "abc"],
+                                  # the cache inside the folder: an entry stored by a render
+                                  # that ran before the refusal would show
+                                  {"env": {"TRANSLUCENT_CACHE_MAX_BYTES": "abc",
+                                           "TRANSLUCENT_CACHE": "{d}/cache"}}),
+    "cache folder of an unknown user": (["scenes"], {},
+                                        ["TRANSLUCENT_CACHE", "~no_such_user_here"],
+                                        {"env": {"TRANSLUCENT_CACHE": "~no_such_user_here/c"}}),
+    "report: output of an unknown user": (["report", "--out", "~no_such_user_here/r"], {},
+                                          ["--out", "~no_such_user_here"]),
+    # ----------------------------------------------------------------- EXR files
+    "compare: subsampled channel": (["compare", "{d}/ref.exr", "{d}/a.exr"],
+                                    {"a.exr": _subsampled(), "ref.exr": exr_bytes()},
+                                    ["a.exr", "channel G", "subsampled"]),
+    "compare: metadata a JSON list": (["compare", "{d}/ref.exr", "{d}/a.exr"],
+                                      {"a.exr": exr_bytes(header={"translucent:metadata":
+                                                                  "[1, 2]"}),
+                                       "ref.exr": exr_bytes()},
+                                      ["a.exr", "translucent:metadata", "JSON object"]),
+    "compare: metadata nested 100000 deep": (["compare", "{d}/ref.exr", "{d}/a.exr"],
+                                             {"a.exr": exr_bytes(header={
+                                                 "translucent:metadata": nested_json(100000)}),
+                                              "ref.exr": exr_bytes()},
+                                             ["a.exr", "translucent:metadata", "nested"]),
+    "compare: 16384 x 16384 declared": (["compare", "{d}/ref.exr", "{d}/a.exr"],
+                                        {"a.exr": declaring(exr_bytes(), 16384, 16384),
+                                         "ref.exr": exr_bytes()},
+                                        ["a.exr", "16384 x 16384", "of memory"]),
+    "compare: one variance channel of three": (["compare", "{d}/ref.exr", "{d}/a.exr"],
+                                               {"ref.exr": _variance_planes(variance_R=0.1),
+                                                "a.exr": exr_bytes()},
+                                               ["ref.exr", "variance.R"]),
+    "compare: NaN variance": (["compare", "{d}/ref.exr", "{d}/a.exr"],
+                              {"ref.exr": _variance_planes(variance_R=np.nan,
+                                                           variance_G=0.1, variance_B=0.1),
+                               "a.exr": exr_bytes()}, ["ref.exr", "NaN", "variance"]),
+    "compare: negative variance": (["compare", "{d}/ref.exr", "{d}/a.exr"],
+                                   {"ref.exr": _variance_planes(variance_R=-1.0,
+                                                                variance_G=0.1, variance_B=0.1),
+                                    "a.exr": exr_bytes()}, ["ref.exr", "negative"]),
+    "compare: a folder as the reference": (["compare", "{d}/ref.exr", "{d}/a.exr"],
+                                           {"ref.exr/keep": "x", "a.exr": exr_bytes()},
+                                           ["ref.exr", "is a folder"]),
+    # ----------------------------------------------------------------- fit and captures
+    "fit: sidecar nested 100000 deep": (["fit", "{d}/c.json", "--out", "{d}/fit"],
+                                        {"c.json": nested_json(100000)}, ["c.json", "nested"]),
+    "fit: sidecar a JSON list": (["fit", "{d}/c.json", "--out", "{d}/fit"],
+                                 {"c.json": "[1, 2]"}, ["c.json", "JSON object"]),
+    "fit: integer of 400 digits in the sidecar": (["fit", "{d}/c.json", "--out", "{d}/fit"],
+                                                  {"c.json": json.dumps(
+                                                      {**CAPTURE_SIDECAR, "image": "small.exr",
+                                                       "pixel_size_mm": "HUGE",
+                                                       "incident_px": [1, 2]}).replace(
+                                                      '"HUGE"', HUGE)},
+                                                  ["c.json", "pixel_size_mm"]),
+    "fit: image that is a folder": (["fit", "{d}/c.json", "--out", "{d}/fit"],
+                                    {"c.json": CAPTURE["c.json"], "small.exr/keep": "x"},
+                                    ["small.exr", "is a folder"]),
+    "fit: one walker, said as given": (["fit", "{d}/c.json", "--walkers", "1", "--out",
+                                        "{d}/fit"], CAPTURE, ["walkers = 1"]),
+    "fit: negative step budget": (["fit", "{d}/c.json", "--max-steps", "-1", "--out",
+                                   "{d}/fit"], CAPTURE, ["max_steps", "-1"]),
+    "fit: walkers beyond the memory": (["fit", "{d}/c.json", "--walkers", "99999999999999999999",
+                                        "--out", "{d}/fit"], CAPTURE,
+                                       ["walkers", "99999999999999999999", "of memory"]),
+    "fit: segments beyond any profile": (["fit", "{d}/c.json", "--model", "subedit",
+                                          "--segments", "99999999999999999999", "--out",
+                                          "{d}/fit"], CAPTURE, ["segments", "1024"]),
+    "capture-import: photo that is a folder": (["capture-import", "{d}/photo.tif",
+                                                "--pixel-size-mm", "0.1", "--out",
+                                                "{d}/c.json"], {"photo.tif/keep": "x"},
+                                               ["photo.tif", "is a folder"]),
 }
 
 
@@ -218,36 +392,73 @@ def capture(tmp_path_factory):
     return {name: (folder / name).read_bytes() for name in ("small.json", "small.exr")}
 
 
-def _tree(folder) -> dict:
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file()}
+def test_the_modules_check_at_least_ninety_kinds():
+    import test_hostile_cache
+    import test_hostile_outputs
 
-
-def test_the_module_checks_at_least_fifty_kinds():
-    assert len(CASES) >= LEAST_KINDS
+    kinds = len(CASES) + len(test_hostile_outputs.CASES) + len(test_hostile_cache.KINDS)
+    assert kinds >= LEAST_KINDS, kinds
 
 
 @pytest.mark.parametrize("kind", sorted(CASES))
 def test_bad_input_is_refused_cleanly(kind, tmp_path, capsys, monkeypatch, capture):
-    from translucent import resources
-
-    # the memory cases do not depend on the machine the tests run on
-    monkeypatch.setattr(resources, "available_memory", lambda: 8 * 2**30)
-    arguments, files, words = CASES[kind]
     folder = tmp_path / "work"
     folder.mkdir()
-    for name, content in files.items():
-        if isinstance(content, CaptureFile):
-            content = capture[str(content)]
-        path = folder / name
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(content if isinstance(content, bytes) else content.encode("utf-8"))
-    before = _tree(folder)
-    monkeypatch.chdir(folder)
-    code = main([part.replace("{d}", str(folder)) for part in arguments])
-    out, err = capsys.readouterr()
-    assert code == 2, (out, err)
-    assert "Traceback" not in err + out
-    for word in words:
-        assert word.replace("{d}", str(folder)) in err, (word, err)
-    assert _tree(folder) == before, "files were written or left behind"
+    run_case(CASES[kind], folder, monkeypatch, capsys, capture)
+
+
+class _Gaussian:
+    """A 2-d standard normal log-probability that sends its own process SIGINT at a call."""
+
+    ndim = 2
+    bounds = np.array([[-10.0, 10.0], [-10.0, 10.0]])
+    names = ["x", "y"]
+
+    def __init__(self, interrupt_at: int):
+        self.calls = self.evaluations = 0
+        self.interrupt_at = interrupt_at
+
+    def __call__(self, theta):
+        import os
+        import signal
+
+        self.calls += 1
+        self.evaluations += len(np.atleast_2d(theta))
+        if self.calls == self.interrupt_at:
+            os.kill(os.getpid(), signal.SIGINT)
+        return -0.5 * np.sum(np.atleast_2d(theta) ** 2, axis=1)
+
+
+def test_a_signal_inside_the_log_probability_ends_the_chain_without_a_traceback(monkeypatch,
+                                                                                capsys):
+    import signal
+
+    from translucent.fitting import sampler
+    from translucent.reports import cli
+
+    monkeypatch.setattr(sampler, "find_modes", lambda model, start=None: [
+        sampler.Mode(np.zeros(2), 0.0, np.eye(2))])
+    previous = signal.signal(signal.SIGINT, cli._on_sigint)  # what the command line installs
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            sampler.run_chain(_Gaussian(interrupt_at=50), walkers=8, max_steps=400)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    captured = capsys.readouterr()
+    assert "emcee" not in captured.out + captured.err
+    assert "Traceback" not in captured.out + captured.err
+
+
+def test_an_interrupted_fit_leaves_no_output_folder(tmp_path, monkeypatch, capsys, capture):
+    from translucent.fitting import fit
+
+    (tmp_path / "c.json").write_bytes(capture["small.json"])
+    (tmp_path / "small.exr").write_bytes(capture["small.exr"])
+
+    def interrupted(path, *, out_dir, **options):
+        (fit.output_folder(out_dir) / "dipole_summary.json").write_text("{}")  # half done
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fit, "fit_capture", interrupted)
+    assert main(["fit", str(tmp_path / "c.json"), "--out", str(tmp_path / "fit")]) == 130
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.json", "small.exr"]

@@ -478,7 +478,6 @@ def test_a_bad_mask_is_an_input_error(mask):
 def test_ciede2000_leaves_how_numpy_prints_arrays_alone():
     # colour-science switches numpy to its legacy 1.13 printing when imported
     import numpy
-
     from translucent.reports.metrics import ciede2000_map
 
     before = numpy.get_printoptions()
