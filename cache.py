@@ -514,10 +514,10 @@ def keep_within_budget(root=None) -> list[CacheEntry]:
 
 def _byte_progress(description: str, total: int | None):
     """Return a progress bar over bytes, shown only once the transfer has taken a second."""
-    from tqdm import tqdm
+    from .progress import progress_bar
 
-    return tqdm(total=total, desc=description, unit="B", unit_scale=True, leave=False,
-                delay=1.0, disable=None)
+    return progress_bar(total=total, description=description, unit="B", unit_scale=True,
+                        delay=1.0)
 
 
 _REPORTED: set[str] = set()
