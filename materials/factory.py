@@ -30,7 +30,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InputError
-from .catalogue import MEASURED_MEDIA, measured_medium
+from .catalogue import canonical_medium_name, measured_medium
 from .homogeneous import Dipole, Lambertian
 
 __all__ = [
@@ -311,8 +311,8 @@ def _measured(name: str, eta: float | None = None) -> Dipole:
 
 
 def _dipole_to_dict(material: Dipole) -> dict:
-    lookup = {key.lower(): key for key in MEASURED_MEDIA}
-    key = lookup.get(material.name.lower()) if material.name else None
+    # either table's media (Jensen et al. 2001, Narasimhan et al. 2006) by their own spelling
+    key = canonical_medium_name(material.name) if material.name else None
     if key is not None:
         table = measured_medium(key)
         same = (np.array_equal(material.sigma_a, table.sigma_a)

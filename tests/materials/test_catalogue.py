@@ -269,3 +269,15 @@ def test_the_prt_command_renders_one(tmp_path, capsys):
     assert main(["approx", "prt", "sphere", "--material", "Lowfat Jelly", "--out",
                  str(tmp_path / "jelly.exr")]) == 2
     assert "valid names: Apple" in capsys.readouterr().err
+
+
+def test_a_narasimhan_medium_is_saved_by_its_name():
+    from translucent.materials.factory import material_from_dict, material_to_dict
+
+    milk = measured_medium("lowfat_milk")
+    saved = material_to_dict(milk)
+    assert saved == {"type": "measured", "name": "Lowfat Milk"}
+    loaded = material_from_dict(saved)
+    for field in ("sigma_a", "sigma_s_prime"):
+        assert np.array_equal(getattr(loaded, field), getattr(milk, field))
+    assert (loaded.g, loaded.eta, loaded.name) == (milk.g, milk.eta, milk.name)
