@@ -40,11 +40,17 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["KINDS", "Knob", "KnobSpec"]
+__all__ = ["DEFAULT_PROFILE", "KINDS", "Knob", "KnobSpec", "RADIAL_AVERAGE",
+           "UNSUPPORTED_PROFILE", "directional_profile_names", "profile_knob", "radial_profile",
+           "radial_profile_names"]
 
 #: What a knob's value is.
 KINDS = ("int", "float", "bool", "choice", "any")
 
+
+#: The largest value an integer knob without a ``high`` of its own takes: counts are held
+#: in 32-bit integers by the compiled kernels.
+MAX_COUNT = 2**31 - 1
 
 @dataclass(frozen=True)
 class Knob:
@@ -78,6 +84,11 @@ class Knob:
     check : callable, optional
         ``check(value) -> value`` after the kind's own check (a power of two, ...);
         raises :class:`~translucent.errors.InputError`.
+    refused : tuple of (value, reason)
+        Values of a "choice" knob that the method knows of but cannot take, each with why
+        (a :class:`~translucent.fast.base.Refusal`): given one, :meth:`validate` raises an
+        :class:`~translucent.errors.InputError` whose message is the reason's sentence,
+        and the command line accepts it so that the sentence reaches the user.
     flags : tuple of str
         Other spellings of the command-line flag (``("--rays",)``); the first flag is
         always ``--`` and the name with dashes.
@@ -96,6 +107,7 @@ class Knob:
     keyed: bool = True
     ladder: tuple = ()
     check: Callable | None = None
+    refused: tuple = ()
     flags: tuple = ()
 
     def __post_init__(self):
@@ -103,6 +115,10 @@ class Knob:
             raise ValueError(f"knob {self.name}: kind must be one of {KINDS}, not {self.kind}")
         if self.kind == "choice" and not self.choices:
             raise ValueError(f"knob {self.name}: a choice knob needs its choices")
+        if self.refused and (self.kind != "choice" or any(
+                value in self.choices for value, _ in self.refused)):
+            raise ValueError(f"knob {self.name}: refused values belong to a choice knob and "
+                             "are not among its choices")
 
     # -- checking ----------------------------------------------------------------------
 
@@ -126,6 +142,9 @@ class Knob:
                 raise InputError("must be true or false", field=self.name, value=value)
             value = bool(value)
         elif kind == "choice" and value not in self.choices:
+            for refused, reason in self.refused:
+                if type(value) is type(refused) and value == refused:
+                    raise InputError(str(reason), field=self.name, value=value)
             raise InputError(f"must be one of {', '.join(map(repr, self.choices))}",
                              field=self.name, value=value)
         return self.check(value) if self.check is not None else value
@@ -153,6 +172,10 @@ class Knob:
             either = "None or " if self.optional else ""
             raise InputError(f"must be {either}an integer {self._bounds_text()}".rstrip(),
                              field=self.name, value=value)
+        # a count no kernel can index (they hold counts in 32 bits) is refused, not run on
+        if self.high is None and abs(int(number)) > MAX_COUNT:
+            raise InputError(f"must be at most {MAX_COUNT} (an integer knob without a bound "
+                             "of its own is a count)", field=self.name, value=value)
         return int(number)
 
     def _real(self, value) -> float:
@@ -190,7 +213,11 @@ class Knob:
             options["type"] = types[self.kind]
             options["metavar"] = self.kind.upper()
         elif self.kind == "choice":
-            options["choices"] = self.choices
+            # refused values pass argparse, so that validate() says why they are refused;
+            # the usage line shows the values taken
+            options["choices"] = self.choices + tuple(value for value, _ in self.refused)
+            if self.refused:
+                options["metavar"] = "{" + ",".join(map(str, self.choices)) + "}"
         parser.add_argument(self.flag, *self.flags, **options)
 
 
@@ -290,3 +317,89 @@ class KnobSpec:
         chosen = self.knobs if names is None else names
         return {name: getattr(args, name) for name in chosen
                 if getattr(args, name, None) is not None}
+
+
+# -- the profile knob: a radial scattering profile by name -------------------------------
+
+#: The profile a method uses unless told otherwise: the classical dipole (Jensen et al.
+#: 2001), the choice of the three papers (Wang et al. 2008, Chen et al. 2012, Sheng et al.
+#: 2014).
+DEFAULT_PROFILE = "dipole"
+
+#: The reason code of the :class:`~translucent.fast.base.Refusal` of a profile a method
+#: cannot take.
+UNSUPPORTED_PROFILE = "unsupported_profile"
+
+#: A directional profile is taken as its azimuthal (radial) average only where the name
+#: says so: the registry's name and this suffix (``"directional_dipole_average"``).
+RADIAL_AVERAGE = "_average"
+
+
+def radial_profile_names() -> tuple[str, ...]:
+    """Return the names a ``profile`` knob can take, :data:`DEFAULT_PROFILE` first.
+
+    Every radial profile of :data:`~translucent.materials.profiles.PROFILES`, then each
+    directional one's radial average (its name and :data:`RADIAL_AVERAGE`).
+    """
+    from ..materials.profiles.registry import PROFILES
+
+    radial = [name for name, entry in PROFILES.items() if not entry.directional]
+    averages = [name + RADIAL_AVERAGE for name, entry in PROFILES.items() if entry.directional]
+    return tuple(sorted(radial, key=lambda name: name != DEFAULT_PROFILE)) + tuple(averages)
+
+
+def directional_profile_names() -> tuple[str, ...]:
+    """Return the registry's directional profiles (no radial method takes them as they are)."""
+    from ..materials.profiles.registry import PROFILES
+
+    return tuple(name for name, entry in PROFILES.items() if entry.directional)
+
+
+def radial_profile(name: str, medium, **options):
+    """Return the radial profile ``name`` (a value of a ``profile`` knob) of ``medium``.
+
+    Parameters
+    ----------
+    name : str
+        One of :func:`radial_profile_names`.
+    medium : Dipole or str
+        The medium (RGB coefficients in mm^-1) or a measured medium's name.
+    **options
+        Passed to :func:`~translucent.materials.profiles.profile`.
+
+    Returns
+    -------
+    RadialProfile
+        Per unit power entering the medium (no entry Fresnel term), mm^-2.
+
+    Raises
+    ------
+    InputError
+        An unknown or directional name, or a medium the profile refuses.
+    """
+    from ..materials.profiles.base import require_radial
+    from ..materials.profiles.registry import profile
+
+    base = name.removesuffix(RADIAL_AVERAGE) if isinstance(name, str) else name
+    if base != name and base in directional_profile_names():
+        return profile(base, medium, radial=True, **options)
+    return require_radial(profile(name, medium, **options), "profile")
+
+
+def profile_knob(refused: dict, *, keyed: bool, help: str) -> Knob:
+    """Return a method's ``profile`` knob: the radial profiles it takes, the others refused.
+
+    Parameters
+    ----------
+    refused : dict
+        Profile name -> its :class:`~translucent.fast.base.Refusal` (code
+        :data:`UNSUPPORTED_PROFILE`), for each name of :func:`radial_profile_names` and
+        :func:`directional_profile_names` the method cannot take.
+    keyed : bool
+        Whether the profile changes the precomputation (and so enters its cache key).
+    help : str
+        One line for ``--help``.
+    """
+    takes = tuple(name for name in radial_profile_names() if name not in refused)
+    return Knob("profile", DEFAULT_PROFILE, help, kind="choice", choices=takes,
+                refused=tuple(refused.items()), keyed=keyed)

@@ -95,3 +95,12 @@ def test_each_builtin_method_derives_its_knobs_from_its_spec(name, capsys):
         assert ladder[-1] == {} or {} in ladder
         for point in ladder:
             module.KNOBS.resolve(point)  # every ladder point is a valid setting
+
+
+def test_an_unbounded_integer_knob_is_still_a_32_bit_count():
+    from translucent.fast.knobs import MAX_COUNT, Knob, KnobSpec
+
+    spec = KnobSpec([Knob("rays", 16, "rays per patch", kind="int", low=1)])
+    assert spec.resolve({"rays": MAX_COUNT}) == {"rays": MAX_COUNT}
+    with pytest.raises(InputError, match=r"rays = 99999999999999999999: must be at most"):
+        spec.resolve({"rays": 99999999999999999999})
