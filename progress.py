@@ -53,7 +53,8 @@ def hidden(hide: bool = True):
 
 
 def progress_bar(iterable=None, *, total=None, description: str | None = None,
-                 unit: str = "it", enabled: bool = True, leave: bool = False, **options):
+                 unit: str = "it", enabled: bool = True, leave: bool = False,
+                 terminal_only: bool = True, **options):
     """Return a tqdm bar on standard error, hidden off a terminal and inside :func:`hidden`.
 
     Parameters
@@ -70,12 +71,15 @@ def progress_bar(iterable=None, *, total=None, description: str | None = None,
         False hides this bar alone.
     leave : bool
         Keep the finished bar on the terminal.
+    terminal_only : bool
+        Hide the bar where standard error is not a terminal (False: a long step, such as a
+        reference render, also shows in a log).
     **options
         Passed to tqdm (``position``, ``dynamic_ncols``, ...).
     """
     from tqdm.auto import tqdm
 
     # disable=None: tqdm hides the bar where standard error is not a terminal
-    disable = True if not (enabled and shown()) else None
+    disable = True if not (enabled and shown()) else (None if terminal_only else False)
     return tqdm(iterable, total=total, desc=description, unit=unit, leave=leave,
                 disable=disable, **options)

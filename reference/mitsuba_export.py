@@ -7,15 +7,17 @@ BSDFs, lights and integrator) and writes ``<scene>.xml`` beside ``meshes/*.ply``
 paths relative to the XML. ``mitsuba.load_file`` renders it to the suite's reference
 (tested with the z-test against the committed references).
 
-Two plugins of the suite are Python code registered at run time, not part of Mitsuba:
-the analytic BRDFs of :mod:`translucent.reference.brdf_plugins` and the ``volpath_mnee``
-integrator. A file that uses them says so in its header comment; load it after
-:func:`register_suite_plugins` has registered them.
+Three plugins of the suite are Python code registered at run time, not part of Mitsuba:
+the analytic BRDFs of :mod:`translucent.reference.brdf_plugins`, the ``volpath_mnee``
+integrator and the ``bssrdf_path`` integrator (its profile tables are written to
+``profiles/*.npz``, which the XML names). A file that uses them says so in its header
+comment; load it after :func:`register_suite_plugins` has registered them.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import re
 import xml.etree.ElementTree as ElementTree
 from pathlib import Path
@@ -30,7 +32,8 @@ __all__ = ["SUITE_PLUGINS", "export_mitsuba", "register_suite_plugins"]
 #: Plugin type -> the XML tag of its kind, for every plugin the converter emits.
 TAGS = {
     "scene": "scene", "volpath": "integrator", "volpathmis": "integrator",
-    "volpath_mnee": "integrator", "path": "integrator", "perspective": "sensor",
+    "volpath_mnee": "integrator", "path": "integrator", "bssrdf_path": "integrator",
+    "perspective": "sensor",
     "hdrfilm": "film", "independent": "sampler", "box": "rfilter", "gaussian": "rfilter",
     "diffuse": "bsdf", "twosided": "bsdf", "dielectric": "bsdf", "null": "bsdf",
     "roughdielectric": "bsdf", "translucent_analytic_brdf": "bsdf", "homogeneous": "medium",
@@ -43,7 +46,8 @@ TAGS = {
 
 #: Plugins of the suite (Python, registered at run time) and what registers them.
 SUITE_PLUGINS = {"translucent_analytic_brdf": "translucent.reference.brdf_plugins",
-                 "volpath_mnee": "translucent.reference.manifold_nee"}
+                 "volpath_mnee": "translucent.reference.manifold_nee",
+                 "bssrdf_path": "translucent.reference.bssrdf_path"}
 
 #: Why a chromatic medium of long walks is written with ``volpathmis``: its references are
 #: rendered one channel at a time with ``volpath``, which one RGB file cannot ask for, and
@@ -62,13 +66,15 @@ POINTS = {"position", "origin", "target", "center", "centre"}
 def register_suite_plugins() -> None:
     """Register the suite's Python plugins with Mitsuba (before loading an exported file)."""
     from .brdf_plugins import register_plugin
+    from .bssrdf_path import register as register_bssrdf
     from .manifold_nee import register
 
     register_plugin()
-    try:
-        register()
-    except InputError:
-        pass  # a variant without JIT cannot run volpath_mnee; the other plugins still work
+    for register_integrator in (register, register_bssrdf):
+        try:
+            register_integrator()
+        except InputError:
+            pass  # a variant without JIT cannot run them; the other plugins still work
 
 
 class _Writer:
@@ -164,7 +170,8 @@ def _numbers(values) -> str:
     return ", ".join(repr(float(v)) for v in np.ravel(values))
 
 
-def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None) -> Path:
+def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None,
+                   profile: str | None = None) -> Path:
     """Write ``scene`` as Mitsuba 3 XML with its meshes into the folder ``out``.
 
     Parameters
@@ -181,6 +188,9 @@ def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None) 
         reference's own choice, except that a chromatic medium the references render one
         channel at a time with ``volpath`` is written with ``volpathmis``
         (:data:`RGB_VOLPATH_NOTE`).
+    profile : str, optional
+        With ``bssrdf_path``: the profile; its tables are written to ``profiles/`` beside
+        the XML, which the integrator names.
 
     Returns
     -------
@@ -204,17 +214,29 @@ def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None) 
     import shutil
     import tempfile
 
-    from ..atomic import atomic_write_text, check_output_folder, make_output_folder
+    from ..atomic import (
+        atomic_write_text,
+        check_output_folder,
+        claim_output,
+        make_output_folder,
+        safe_file_name,
+    )
     from ..errors import check_count
     from .mitsuba_scene import convert_scene
+    from .render import MAX_SAMPLES_PER_RENDER
 
-    check_count(spp, "spp")
+    spp = check_count(spp, "spp")
+    pixels = scene.camera.width * scene.camera.height
+    if spp * pixels > MAX_SAMPLES_PER_RENDER:  # what Mitsuba could not render
+        raise InputError(f"{pixels:,} pixels x {spp} spp exceed the {MAX_SAMPLES_PER_RENDER:,} "
+                         f"samples Mitsuba numbers in 32 bits: give at most "
+                         f"{MAX_SAMPLES_PER_RENDER // pixels}", field="spp", value=spp)
     out = Path(out)
-    if out.exists() and not out.is_dir():
+    if os.path.exists(out) and not out.is_dir():  # a name too long: check_output_folder
         raise InputError("must be a folder (or a path where one can be made)", field="--out",
                          value=str(out))
     check_output_folder(out, "--out")
-    conversion = convert_scene(scene, spp=spp, integrator=integrator)
+    conversion = convert_scene(scene, spp=spp, integrator=integrator, profile=profile)
     notes = []
     if integrator is None and conversion.per_channel_recommended \
             and conversion.integrator == "volpath":
@@ -231,6 +253,13 @@ def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None) 
     staging = Path(tempfile.mkdtemp(prefix=".export-", dir=out))
     try:
         writer = _Writer(staging)
+        if conversion.profile:  # bssrdf_path: the profile tables, in a file the XML names
+            from .bssrdf_tables import registered_tables
+
+            props = conversion.scene_dict["integrator"]
+            path, relative = writer._file("profiles", scene.name, ".npz")
+            registered_tables(props["tables"]).save(path)
+            conversion.scene_dict["integrator"] = {**props, "tables": relative}
         root = ElementTree.Element("scene", {"version": "3.0.0"})
         for key, item in conversion.scene_dict.items():
             if key == "type":
@@ -252,11 +281,13 @@ def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None) 
                           "translucent.reference.mitsuba_export.register_suite_plugins()")
         comments = "".join(f"<!-- {line.replace('--', '-')} -->\n" for line in header)
         text = comments + ElementTree.tostring(root, encoding="unicode") + "\n"
-        for path in writer.files:
-            target = out / path.relative_to(staging)
+        xml_path = out / f"{safe_file_name(scene.name, fallback='scene')}.xml"
+        targets = [out / path.relative_to(staging) for path in writer.files]
+        for target in targets + [xml_path]:  # none of them may be an input of the scene
+            claim_output(target, "--out")
+        for path, target in zip(writer.files, targets, strict=True):
             target.parent.mkdir(parents=True, exist_ok=True)
             path.replace(target)
-        xml_path = out / f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', scene.name)}.xml"
         atomic_write_text(xml_path, text)
     finally:
         shutil.rmtree(staging, ignore_errors=True)

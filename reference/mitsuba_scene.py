@@ -85,8 +85,9 @@ __all__ = [
 
 #: The integrators a reference may use; ``path`` ignores media, so it is refused for a
 #: scene that has one. ``volpath_mnee`` is ``volpath`` with manifold next-event
-#: estimation through a dielectric boundary (:mod:`translucent.reference.manifold_nee`).
-INTEGRATORS = ("volpath", "volpathmis", "volpath_mnee", "path")
+#: estimation through a dielectric boundary (:mod:`translucent.reference.manifold_nee`);
+#: ``bssrdf_path`` renders translucent objects by a profile (:mod:`.bssrdf_path`).
+INTEGRATORS = ("volpath", "volpathmis", "volpath_mnee", "path", "bssrdf_path")
 
 #: The lights of zero size that a path cannot hit.
 DELTA_LIGHTS = (PointLight, SpotLight, DirectionalLight)
@@ -312,6 +313,7 @@ class MitsubaConversion:
     substitutions: list[str] = field(default_factory=list)
     media: dict[str, str] = field(default_factory=dict)
     shape_props: dict[str, dict] = field(default_factory=dict)
+    profile: dict = field(default_factory=dict)
 
 
 def _shape_key(name: str, used: set) -> str:
@@ -389,15 +391,17 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
                   spp: int = 64, channel: int | None = None,
                   substitute_delta_lights: bool | None = None,
                   delta_light_size: float = delta_lights.DEFAULT_SIZE,
-                  rr_depth: int | None = None) -> MitsubaConversion:
+                  rr_depth: int | None = None, profile: str | None = None
+                  ) -> MitsubaConversion:
     """Convert ``scene`` to a Mitsuba scene dictionary and say what was substituted.
 
     Parameters
     ----------
     scene : Scene
-    integrator : {"volpath", "volpathmis", "volpath_mnee", "path"}, optional
+    integrator : {"volpath", "volpathmis", "volpath_mnee", "path", "bssrdf_path"}, optional
         Default: ``volpath_mnee`` when a delta light meets a dielectric boundary around a
         medium, else ``volpath`` when any object has a medium, ``path`` otherwise.
+        ``bssrdf_path`` renders each translucent object by ``profile`` instead of its medium.
     max_depth : int, optional
         Longest path (-1 unbounded, the default: :data:`DEFAULT_MAX_DEPTH`).
     spp : int
@@ -417,6 +421,9 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         Depth at which Russian roulette starts. Default :data:`DEFAULT_RR_DEPTH`, or none
         at all (:data:`NO_RUSSIAN_ROULETTE`) when a medium's albedo exceeds
         :data:`RR_ALBEDO_THRESHOLD`.
+    profile : str, optional
+        With ``bssrdf_path`` (and only with it): the profile's name
+        (:data:`~translucent.materials.profiles.PROFILE_NAMES`).
 
     Returns
     -------
@@ -435,6 +442,9 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
                                 or isinstance(channel, bool) or channel not in (0, 1, 2)):
         raise InputError("must be 0, 1, 2 (R, G, B) or None", field="channel", value=channel)
     check_count(spp, "spp")
+    from .bssrdf_path import bssrdf_conversion
+
+    bssrdf = bssrdf_conversion(scene, integrator, profile, channel)
     if max_depth is None:
         max_depth = DEFAULT_MAX_DEPTH
     if max_depth != -1:
@@ -456,6 +466,8 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     for index, obj in enumerate(scene.objects):
         context = ConversionContext(scene, obj.name, channel)
         parts = material_converter(obj.material, object_name=obj.name)(obj.material, context)
+        if bssrdf is not None:  # a translucent object's boundary alone: the profile is inside
+            parts = bssrdf.surface_parts(index, obj, parts)
         has_media |= parts.interior is not None
         blocks_delta |= parts.blocks_delta_lights
         if parts.blocks_delta_lights:
@@ -515,6 +527,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
             notes.append("the refraction paths the solve from the straight line misses on "
                          f"the concave boundary of {', '.join(repr(n) for n in concave)} "
                          "are found by specular manifold sampling (seeded_solutions)")
+    integrator_props = {} if bssrdf is None else bssrdf.integrator_properties(list(shapes))
     environment = delta_lights.EnvironmentParts()
     emitters: dict[str, Any] = {}
     for index, light in enumerate(scene.lights):
@@ -528,14 +541,16 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         "type": "scene",
         "integrator": {"type": integrator, "max_depth": int(max_depth),
                        "rr_depth": int(rr_depth),
-                       **({"seeded_solutions": True} if seeded_solutions else {})},
+                       **({"seeded_solutions": True} if seeded_solutions else {}),
+                       **integrator_props},
         # the sensor of the G-buffers in translucent.scenes.raycast: same pixels
         "sensor": perspective_sensor_dict(scene.camera, spp=spp),
         **shapes,
         **emitters,
     }
     return MitsubaConversion(scene_dict, integrator, int(max_depth), int(rr_depth), has_media,
-                             per_channel_recommended, notes, media, shape_props)
+                             per_channel_recommended, notes, media, shape_props,
+                             {} if bssrdf is None else bssrdf.description())
 
 
 def to_mitsuba_dict(scene: Scene, *, integrator: str | None = None,

@@ -13,14 +13,13 @@ from __future__ import annotations
 
 import contextlib
 import json
-import sys
 import time
 
 import numpy as np
 
 from .. import signals
 from ..backend import mitsuba
-from ..cache import Cache, content_hash, keep_within_budget, mark_used
+from ..cache import Cache, content_hash, keep_within_budget, mark_used, report_rejected
 from ..errors import InputError, check_count
 from ..image import Image, read_exr
 from ..scenes import Scene
@@ -28,6 +27,7 @@ from .delta_lights import DEFAULT_SIZE
 from .mitsuba_scene import convert_scene
 
 __all__ = ["render", "render_to_target", "reference_settings", "reference_key", "load_scenes",
+           "read_cached_reference",
            "render_sample", "REFERENCE_FORMAT", "PROGRESSIVE_SEED_OFFSET"]
 
 #: Bumped whenever the scene conversion or the estimator changes what a reference holds,
@@ -50,7 +50,8 @@ PROGRESSIVE_SEED_STRIDE = 2**16
 def reference_settings(*, spp: int, passes: int, seed: int, integrator: str | None,
                        max_depth: int | None, rr_depth: int | None,
                        per_channel: bool | None,
-                       substitute_delta_lights: bool | None, delta_light_size: float) -> dict:
+                       substitute_delta_lights: bool | None, delta_light_size: float,
+                       profile: str | None = None) -> dict:
     """Everything besides the scene that decides a reference image (for its hash)."""
     mi = mitsuba()  # first: it points Dr.Jit at a working libLLVM before drjit loads
     import drjit as dr
@@ -60,7 +61,8 @@ def reference_settings(*, spp: int, passes: int, seed: int, integrator: str | No
             "per_channel": "auto" if per_channel is None else bool(per_channel),
             "substitute_delta_lights": substitute_delta_lights,
             "delta_light_size": float(delta_light_size), "mitsuba": mi.__version__,
-            "drjit": dr.__version__, "variant": mi.variant()}
+            "drjit": dr.__version__, "variant": mi.variant(),
+            **({"profile": profile} if profile is not None else {})}
 
 
 def reference_key(scene: Scene, settings: dict) -> str:
@@ -78,7 +80,7 @@ def _render_pass(mitsuba_scene, spp: int, seed: int) -> np.ndarray:
 def load_scenes(scene: Scene, *, spp: int, per_channel: bool | None = None,
                 integrator: str | None = None, max_depth: int | None = None,
                 rr_depth: int | None = None, substitute_delta_lights: bool | None = None,
-                delta_light_size: float = DEFAULT_SIZE):
+                delta_light_size: float = DEFAULT_SIZE, profile: str | None = None):
     """Convert ``scene`` and load it into Mitsuba: once in RGB, or once per channel.
 
     Parameters
@@ -107,7 +109,7 @@ def load_scenes(scene: Scene, *, spp: int, per_channel: bool | None = None,
         return convert_scene(scene, integrator=integrator, max_depth=max_depth, spp=spp,
                              channel=channel, rr_depth=rr_depth,
                              substitute_delta_lights=substitute_delta_lights,
-                             delta_light_size=delta_light_size)
+                             delta_light_size=delta_light_size, profile=profile)
 
     conversions = [] if per_channel else [convert(None)]
     if per_channel is None:
@@ -177,7 +179,7 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
            max_depth: int | None = None, rr_depth: int | None = None,
            per_channel: bool | None = None,
            substitute_delta_lights: bool | None = None,
-           delta_light_size: float = DEFAULT_SIZE) -> Image:
+           delta_light_size: float = DEFAULT_SIZE, profile: str | None = None) -> Image:
     """Render a reference image of ``scene`` with Mitsuba 3 in independent passes.
 
     Parameters
@@ -194,10 +196,11 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
         Show a progress bar over passes (only once a render has lasted a second).
     cache : bool
         Look the reference up in, and store it into, the ``"reference"`` cache.
-    integrator : {"volpath", "volpathmis", "volpath_mnee", "path"}, optional
+    integrator : {"volpath", "volpathmis", "volpath_mnee", "path", "bssrdf_path"}, optional
         Default ``volpath_mnee`` where a delta light meets a dielectric boundary around a
         medium, ``volpath`` with other media, ``path`` without
-        (:func:`~translucent.reference.mitsuba_scene.convert_scene`).
+        (:func:`~translucent.reference.mitsuba_scene.convert_scene`); ``bssrdf_path``
+        renders each translucent object by ``profile`` (:mod:`.bssrdf_path`).
     max_depth, rr_depth : int, optional
         Path depth limit (-1 unbounded, the default) and the depth where Russian roulette
         starts (default: 5, or none in media of albedo near 1; see
@@ -220,6 +223,9 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
         boundary around a medium would leave the medium black).
     delta_light_size : float
         Size of those emitters (:mod:`translucent.reference.delta_lights`).
+    profile : str, optional
+        With ``bssrdf_path``: the profile's name; the header's ``profile`` names it and
+        each object's.
 
     Returns
     -------
@@ -239,6 +245,14 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
     spp = check_count(spp, "spp", 1)
     passes = check_count(passes, "passes", 1)
     seed = check_count(seed, "seed", 0)
+    if passes > PROGRESSIVE_SEED_STRIDE:
+        raise InputError(f"must be <= {PROGRESSIVE_SEED_STRIDE} (more samples a pass give the "
+                         "same image in fewer passes)", field="passes", value=passes)
+    if seed * passes + passes > PROGRESSIVE_SEED_OFFSET:
+        # Mitsuba's seeds are 32-bit, and those above are the progressive renders'
+        raise InputError(f"with {passes} passes must be < {PROGRESSIVE_SEED_OFFSET // passes}: "
+                         f"pass k is seeded seed x passes + k, below 2^31", field="seed",
+                         value=seed)
     if not isinstance(scene, Scene):
         raise InputError("expected a translucent.scenes.Scene", field="scene",
                          value=type(scene).__name__)
@@ -247,7 +261,7 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
                                   max_depth=max_depth, rr_depth=rr_depth,
                                   per_channel=per_channel,
                                   substitute_delta_lights=substitute_delta_lights,
-                                  delta_light_size=delta_light_size)
+                                  delta_light_size=delta_light_size, profile=profile)
     key = reference_key(scene, settings)
     store = Cache("reference") if cache else None
     cached = _cached(store, key, scene, passes)
@@ -280,14 +294,14 @@ def _render_passes(scene, store, key, settings, *, spp, passes, seed, progress, 
     channels, conversions, mitsuba_scenes = load_scenes(
         scene, spp=spp, per_channel=per_channel, integrator=integrator, max_depth=max_depth,
         rr_depth=rr_depth, substitute_delta_lights=substitute_delta_lights,
-        delta_light_size=delta_light_size)
+        delta_light_size=delta_light_size, profile=settings.get("profile"))
 
-    from tqdm.auto import tqdm
+    from ..progress import progress_bar
 
     passes_done = PassAccumulator((scene.camera.height, scene.camera.width, 3))
-    bar = tqdm(total=passes * len(channels), delay=PROGRESS_DELAY_SECONDS,
-               disable=not progress, desc=f"reference {scene.name}", unit="render",
-               leave=False, file=sys.stderr)
+    bar = progress_bar(total=passes * len(channels), description=f"reference {scene.name}",
+                       unit="render", enabled=progress, delay=PROGRESS_DELAY_SECONDS,
+                       terminal_only=False)
     try:
         for k in range(passes):
             passes_done.add(render_sample(channels, mitsuba_scenes, spp, seed * passes + k,
@@ -304,33 +318,59 @@ def _render_passes(scene, store, key, settings, *, spp, passes, seed, progress, 
     return image
 
 
+def read_cached_reference(path, key: str) -> Image | None:
+    """Return the reference cached at ``path`` if it was made for ``key``; else None (a miss).
+
+    An entry is served only when it is a file the suite wrote (its pixels' checksum is
+    there and holds) whose ``scene_hash`` is ``key``: an entry copied over another key's,
+    damaged, changed after writing or put there by another program is a miss, said once
+    on standard error, and is rendered again and replaced.
+    """
+    import os
+
+    if not os.path.isfile(path):
+        if os.path.lexists(path):
+            report_rejected(path, "it is not a file")
+        return None
+    try:
+        image = read_exr(path, require_checksum=True)
+    except InputError as error:
+        report_rejected(path, error.reason)
+        return None
+    if image.metadata.get("scene_hash") != key:
+        report_rejected(path, "it was made for another scene or other settings (its "
+                        "scene_hash is not this key)")
+        return None
+    mark_used(path)
+    return image
+
+
 def _cached(store, key, scene, passes) -> Image | None:
     """Return the cached reference under ``key`` if it is whole, else None (a miss).
 
     An entry that cannot be read (damaged, its pixels changed after writing: the checksum
-    tells), of another size than the scene's camera, or without the variance its passes
-    give, is rendered again and replaced, never served.
+    tells), made for another key (:func:`read_cached_reference`), of another size than the
+    scene's camera, or without the variance its passes give, is rendered again and
+    replaced, never served.
     """
     if store is None:
         return None
     path = store.path(key, ".exr")
-    if not path.is_file():
+    image = read_cached_reference(path, key)
+    if image is None:
         return None
-    try:
-        image = read_exr(path)
-    except InputError:
-        return None
-    mark_used(path)
     if image.shape != (scene.camera.height, scene.camera.width):
+        report_rejected(path, "it is not of the camera's size")
         return None
     if passes > 1 and image.variance is None:
+        report_rejected(path, "it has no variance")
         return None
     return image
 
 
 def _store_image(store, key, image) -> None:
     """Write a finished reference into the cache, then keep the cache within its budget."""
-    image.write(store.path(key, ".exr"))
+    image.write(store.make_room(store.path(key, ".exr")))
     keep_within_budget(store.root)
 
 
@@ -425,6 +465,7 @@ def _metadata(scene, key, settings, conversions, channels, mitsuba_scenes=(),
         "substitutions": list(first.substitutions),
         **({"media": dict(first.media)} if first.media else {}),
         **({"manifold_nee": manifold} if manifold is not None else {}),
+        **({"profile": dict(first.profile)} if first.profile else {}),
     }
 
 
@@ -465,7 +506,8 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
                      max_depth: int | None = None, rr_depth: int | None = None,
                      per_channel: bool | None = None,
                      substitute_delta_lights: bool | None = None,
-                     delta_light_size: float = DEFAULT_SIZE, on_pass=None) -> Image:
+                     delta_light_size: float = DEFAULT_SIZE, on_pass=None,
+                     profile: str | None = None) -> Image:
     """Render a reference of ``scene`` pass after pass until it is as quiet as asked.
 
     Independent passes of ``spp`` samples per pixel are added until the relative standard
@@ -499,7 +541,7 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
         How the metadata call ``mask``.
     progress, cache, integrator, max_depth, rr_depth, per_channel
         As :func:`render`.
-    substitute_delta_lights, delta_light_size
+    substitute_delta_lights, delta_light_size, profile
         As :func:`render`.
     on_pass : callable, optional
         Called after each pass as ``on_pass(passes, seconds, summary)``.
@@ -547,7 +589,7 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
                                   max_depth=max_depth, rr_depth=rr_depth,
                                   per_channel=per_channel,
                                   substitute_delta_lights=substitute_delta_lights,
-                                  delta_light_size=delta_light_size)
+                                  delta_light_size=delta_light_size, profile=profile)
     settings["progressive"] = {"target_rse": target_rse, "target_p99_rse": target_p99_rse,
                                "budget_seconds": budget_seconds, "min_passes": min_passes,
                                "max_passes": max_passes,
@@ -570,23 +612,15 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
         seconds_before = 0.0
         manifold_before = None
         partial = store.path(partial_key, ".partial.npz") if store is not None else None
-        if partial is not None and partial.is_file():
-            try:
-                with np.load(partial) as saved:
-                    if saved["mean"].shape == (*shape, 3):
-                        accumulator = PassAccumulator.from_state(saved)
-                        seconds_before = float(saved["seconds"])
-                        if "manifold_nee" in saved:
-                            manifold_before = json.loads(str(saved["manifold_nee"]))
-            except Exception:  # an unreadable partial state is started again
-                accumulator, seconds_before = PassAccumulator((*shape, 3)), 0.0
-                manifold_before = None
+        resumed = _load_partial(partial, partial_key, shape)
+        if resumed is not None:
+            accumulator, seconds_before, manifold_before = resumed
 
         start = time.perf_counter()
         channels, conversions, mitsuba_scenes = load_scenes(
             scene, spp=spp, per_channel=per_channel, integrator=integrator, max_depth=max_depth,
             rr_depth=rr_depth, substitute_delta_lights=substitute_delta_lights,
-            delta_light_size=delta_light_size)
+            delta_light_size=delta_light_size, profile=profile)
 
         def summary():
             if accumulator.count < 2:
@@ -597,10 +631,11 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
         def elapsed():
             return seconds_before + time.perf_counter() - start
 
-        from tqdm.auto import tqdm
+        from ..progress import progress_bar
 
-        bar = tqdm(delay=PROGRESS_DELAY_SECONDS, disable=not progress,
-                   desc=f"reference {scene.name}", unit="pass", leave=False, file=sys.stderr)
+        bar = progress_bar(description=f"reference {scene.name}", unit="pass",
+                           enabled=progress, delay=PROGRESS_DELAY_SECONDS,
+                           terminal_only=False)
         stopped = "max passes"
         try:
             while accumulator.count < max_passes:
@@ -618,7 +653,7 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
                     channels, mitsuba_scenes, spp,
                     PROGRESSIVE_SEED_OFFSET + seed * PROGRESSIVE_SEED_STRIDE + accumulator.count))
                 if partial is not None:
-                    _save_partial(partial, accumulator, elapsed(),
+                    _save_partial(store, partial, partial_key, accumulator, elapsed(),
                                   _manifold_counts(mitsuba_scenes, manifold_before))
                 reached = summary()
                 bar.update()
@@ -647,13 +682,62 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
         return image
 
 
-def _save_partial(path, accumulator: PassAccumulator, seconds: float,
+def _save_partial(store, path, key: str, accumulator: PassAccumulator, seconds: float,
                   manifold: dict | None = None) -> None:
+    """Keep the passes made so far as a checked entry of ``key`` (:mod:`translucent.entries`)."""
     from ..atomic import atomic_path
+    from ..entries import EntryError, write_entry
 
-    extra = {} if manifold is None else {"manifold_nee": np.array(json.dumps(manifold))}
+    state = {"mean": accumulator.mean, "sum_squares": accumulator.sum_squares,
+             "count": accumulator.count, "seconds": float(seconds),
+             "manifold_nee": None if manifold is None else json.dumps(manifold)}
     try:
-        with atomic_path(path) as tmp, open(tmp, "wb") as handle:
-            np.savez(handle, seconds=np.array(seconds), **accumulator.state(), **extra)
-    except (InputError, OSError):
+        with atomic_path(store.make_room(path), suffix=".npz") as tmp, \
+                open(tmp, "wb") as handle:
+            write_entry(handle, key, state)
+    except (InputError, OSError, EntryError):
         pass  # resuming is a convenience: a cache that cannot be written costs only that
+
+
+def _load_partial(path, key: str, shape):
+    """Return ``(accumulator, seconds, manifold counts)`` of a resumable render, or None.
+
+    The state is read as an entry of ``key`` (its key and checksum checked, so a state
+    edited, damaged or copied from another render is refused) and then checked for what
+    no render leaves: another size, NaN or Inf, a negative spread, a pass count outside
+    [1, :data:`PROGRESSIVE_SEED_STRIDE`] or a negative time. A refused state is said once on
+    standard error and the render starts again; it never reaches the image.
+    """
+    import os
+
+    from ..entries import EntryError, read_entry
+
+    if path is None or not os.path.lexists(path):
+        return None
+    if not os.path.isfile(path):
+        report_rejected(path, "it is not a file")
+        return None
+    try:
+        state = read_entry(path, key)
+        mean = np.asarray(state["mean"], dtype=np.float64)
+        spread = np.asarray(state["sum_squares"], dtype=np.float64)
+        count, seconds = state["count"], float(state["seconds"])
+        manifold = None if state["manifold_nee"] is None else json.loads(state["manifold_nee"])
+        problem = None
+        if mean.shape != (*shape, 3) or spread.shape != mean.shape:
+            problem = "it is not of the camera's size"
+        elif not (np.isfinite(mean).all() and np.isfinite(spread).all()) or \
+                (spread < 0).any():
+            problem = "it holds NaN, Inf or a negative spread"
+        elif isinstance(count, bool) or not isinstance(count, int) or \
+                not 1 <= count <= PROGRESSIVE_SEED_STRIDE or \
+                not 0 <= seconds < float("inf"):
+            problem = f"its pass count {count!r} or time {seconds!r} is impossible"
+    except (EntryError, KeyError, TypeError, ValueError) as error:
+        problem = str(error)
+    if problem:
+        report_rejected(path, problem)
+        return None
+    accumulator = PassAccumulator(mean.shape)
+    accumulator.mean, accumulator.sum_squares, accumulator.count = mean, spread, count
+    return accumulator, seconds, manifold

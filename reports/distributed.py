@@ -196,7 +196,8 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         function = timed_call
     if local or (scheduler is None and len(arguments) <= 1):
         results = []
-        for position, args in enumerate(progress_bar(arguments, enabled=progress)):
+        bar = progress_bar(arguments, enabled=progress, terminal_only=False)
+        for position, args in enumerate(bar):
             results.append(function(*args))
             if on_result is not None:
                 on_result(position, results[-1])
@@ -204,7 +205,7 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
     from dask.distributed import as_completed
 
     # the bar starts with the cluster, whose workers take seconds to start
-    with progress_bar(total=len(arguments), enabled=progress) as bar, \
+    with progress_bar(total=len(arguments), enabled=progress, terminal_only=False) as bar, \
             dask_client(scheduler, workers=workers) as client:
         bar.set_postfix_str("starting the workers")
         # each worker process imports Mitsuba and sets its variant once, before any task:

@@ -630,7 +630,7 @@ def _run(plan: _Plan, staging: Path, timing: dict, *, scheduler, serial: bool,
     untasked = [report for report in plan.reports if pending[report.slug] == 0
                 and not any(p.report is report for p in plan.tasks)]
     with progress_bar(total=len(untasked), description="metrics and error maps",
-                      enabled=progress) as bar:
+                      enabled=progress, terminal_only=False) as bar:
         for report in untasked:
             score(report)
             bar.update()

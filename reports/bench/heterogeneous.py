@@ -222,7 +222,7 @@ def heterogeneous_table(out, *, pair=None, contrasts=DEFAULT_CONTRASTS, cells=DE
               "rows": []}
     started = time.perf_counter()
     for sweep, t, count in progress_bar(plan, description="heterogeneous", unit="row",
-                                        enabled=progress):
+                                        enabled=progress, terminal_only=False):
         other = _mixed(first, second, t)
         base = _mixed(first, second, 0.0)
         scene = checker_scene(base, other, count, size=size, rows=rows)

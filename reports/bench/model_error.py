@@ -493,7 +493,8 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
     result = {**_context(scene, mask, size, spp, passes, methods, eta,
                          [m.name for m in chosen]), "complete": False, "rows": []}
     started = time.perf_counter()
-    bar = progress_bar(chosen, description="model error", unit="medium", enabled=progress)
+    bar = progress_bar(chosen, description="model error", unit="medium", enabled=progress,
+                       terminal_only=False)
     for medium in bar:
         bar.set_postfix_str(medium.name)
         result["rows"].append(measure_medium(scene, medium, methods, spp=spp, passes=passes,

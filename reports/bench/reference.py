@@ -28,6 +28,12 @@ ratio. ``volpath_mnee`` renders a chromatic medium one channel at a time (the re
 own choice); its RGB render is shown beside it. The verdict is on the median error
 scaled to :data:`DELTA_LIGHT_CPU_MINUTES` CPU minutes against
 :data:`DELTA_LIGHT_TARGET_RSE`.
+
+``--bssrdf PROFILE`` measures the BSSRDF path tracer (``bssrdf_path`` with that profile)
+against ``volpath_mnee`` in the same run, on the same scene (default ``sphere_dielectric``)
+at the same spp: the median relative standard error over the object's lit pixels per CPU
+minute of each, and the verdict on ``bssrdf_path``'s error scaled to
+:data:`BSSRDF_CPU_SECONDS` CPU seconds against :data:`BSSRDF_TARGET_RSE`.
 """
 
 from __future__ import annotations
@@ -65,6 +71,9 @@ def add_arguments(parser):
     parser.add_argument("--integrators", metavar="MATERIAL", default=None,
                         help="compare volpath, volpathmis and per-channel volpath on this "
                         "measured medium instead of timing the overhead")
+    parser.add_argument("--bssrdf", metavar="PROFILE", default=None,
+                        help="compare bssrdf_path with this profile against volpath_mnee "
+                        "(default scene sphere_dielectric)")
     parser.add_argument("--delta-lights", action="store_true",
                         help="compare volpath_mnee with volpath and stand-in emitters on a "
                         "scene with a dielectric boundary and a delta light (default scene "
@@ -75,7 +84,8 @@ def _scene(args):
     from ...errors import InputError
     from ...scenes import load_scene
 
-    if getattr(args, "delta_lights", False) and args.scene == "sphere":
+    if (getattr(args, "delta_lights", False) or getattr(args, "bssrdf", None)) \
+            and args.scene == "sphere":
         args.scene = "sphere_dielectric"
     scene = load_scene(args.scene)
     for name in ("spp", "passes", "repeats"):
@@ -84,7 +94,8 @@ def _scene(args):
     if args.size < 0:
         raise InputError("must be >= 0 (0: the scene's own size)", field="--size",
                          value=args.size)
-    if (args.integrators or getattr(args, "delta_lights", False)) and args.passes < 2:
+    if (args.integrators or getattr(args, "delta_lights", False)
+            or getattr(args, "bssrdf", None)) and args.passes < 2:
         raise InputError("must be >= 2 with --integrators (the spread of the passes gives "
                          "the variance compared)", field="--passes", value=args.passes)
     return at_width(scene, args.size)
@@ -299,10 +310,78 @@ def _print_delta_lights(result) -> None:
           f"as the square root of time)")
 
 
+#: ``--bssrdf``'s target: the median relative standard error over the object that
+#: ``bssrdf_path`` reaches in this many CPU seconds, at most this.
+BSSRDF_CPU_SECONDS, BSSRDF_TARGET_RSE = 60.0, 0.02
+
+
+def _bssrdf(scene, args) -> dict:
+    from ...noise import noise_summary
+    from ...reference import render
+
+    mask = _object_mask(scene)
+    estimators = {f"bssrdf_path {args.bssrdf}": {"integrator": "bssrdf_path",
+                                                 "profile": args.bssrdf},
+                  "volpath_mnee": {"integrator": "volpath_mnee"}}
+    rows = {}
+    for name, options in estimators.items():
+        render(scene, spp=1, passes=2, cache=False, progress=False, **options)  # warm-up
+        cpu = time.process_time()
+        image = render(scene, spp=args.spp, passes=args.passes, cache=False, progress=True,
+                       **options)
+        cpu_seconds = time.process_time() - cpu
+        summary = noise_summary(image.rgb, image.variance, mask, mask_name="object")
+        median = summary.median if summary.pixels and np.isfinite(summary.median) else None
+        per_minute = None if median is None else median * (cpu_seconds / 60.0) ** 0.5
+        rows[name] = {"cpu_seconds": cpu_seconds, "seconds": image.metadata["seconds"],
+                      "median_rse": median, "pixels": summary.pixels,
+                      "median_rse_per_cpu_minute": per_minute}
+    bssrdf, baseline = rows.values()
+    for row in rows.values():
+        both = row["median_rse_per_cpu_minute"] and baseline["median_rse_per_cpu_minute"]
+        row["efficiency_ratio"] = (float((baseline["median_rse_per_cpu_minute"]
+                                          / row["median_rse_per_cpu_minute"]) ** 2)
+                                   if both else None)
+    per_minute = bssrdf["median_rse_per_cpu_minute"]
+    reached = None if per_minute is None else per_minute / (BSSRDF_CPU_SECONDS / 60.0) ** 0.5
+    return {**_comparison_header("reference bssrdf_path", scene, args, mask),
+            "profile": args.bssrdf, "estimators": rows,
+            "target": {"cpu_seconds": BSSRDF_CPU_SECONDS, "median_rse": BSSRDF_TARGET_RSE,
+                       "reached": reached,
+                       "met": reached is not None and reached <= BSSRDF_TARGET_RSE}}
+
+
+def _print_bssrdf(result) -> None:
+    width, height = result["size"]
+    print(f"bssrdf_path ({result['profile']}) against volpath_mnee: {result['scene']} "
+          f"{width} x {height}, {result['spp']} spp x {result['passes']} passes "
+          f"({result['variant']})")
+    print(f"{'estimator':>28}  {'cpu s':>8}  {'median RSE':>10}  {'RSE at 1 CPU min':>16}  "
+          f"{'efficiency':>10}")
+    for name, row in result["estimators"].items():
+        rse, per_minute, ratio = (row["median_rse"], row["median_rse_per_cpu_minute"],
+                                  row["efficiency_ratio"])
+        print(f"{name:>28}  {row['cpu_seconds']:>8.1f}  "
+              f"{'none lit' if rse is None else f'{100 * rse:.2f}%':>10}  "
+              f"{'none lit' if per_minute is None else f'{100 * per_minute:.2f}%':>16}  "
+              f"{'n/a' if ratio is None else f'{ratio:.1f}':>10}")
+    print("efficiency: 1 / (RSE^2 x CPU time) as a ratio to volpath_mnee's")
+    target = result["target"]
+    shown = "none lit" if target["reached"] is None else f"{100 * target['reached']:.2f} %"
+    verdict = "meets" if target["met"] else "MISSES"
+    print(f"bssrdf_path at {target['cpu_seconds']:g} CPU seconds: median RSE {shown} "
+          f"({verdict} the target {100 * target['median_rse']:g} %; scaled from this run as "
+          f"the square root of time)")
+
+
 def run(args) -> int:
     """Run the overhead timing (or the integrator comparison), print it, write the JSON."""
     scene = _scene(args)
-    if getattr(args, "delta_lights", False):
+    if getattr(args, "bssrdf", None):
+        result = _bssrdf(scene, args)
+        _print_bssrdf(result)
+        default = "bench_reference_bssrdf.json"
+    elif getattr(args, "delta_lights", False):
         result = _delta_lights(scene, args)
         _print_delta_lights(result)
         default = "bench_reference_delta_lights.json"

@@ -24,8 +24,11 @@ def add_arguments(parser):
     parser.add_argument("--spp", type=int, default=64,
                         help="the sampler's samples per pixel written into the file")
     parser.add_argument("--integrator", default=None,
-                        help="volpath, volpathmis, volpath_mnee or path (default: the "
-                             "reference's own choice)")
+                        help="volpath, volpathmis, volpath_mnee, path or bssrdf_path "
+                             "(default: the reference's own choice)")
+    parser.add_argument("--profile", default=None, metavar="NAME",
+                        help="with --integrator bssrdf_path: the radial profile of the "
+                             "translucent objects (its tables are written beside the XML)")
 
 
 def run(args) -> int:
@@ -36,9 +39,13 @@ def run(args) -> int:
     if args.format not in FORMATS:
         raise InputError(f"unknown format; valid: {', '.join(FORMATS)}", field="--format",
                          value=args.format)
+    from ...atomic import safe_file_name
+
     scene = load_scene(args.scene)
-    out = args.out or f"{scene.name}_{args.format}"
-    path = export_mitsuba(scene, out, spp=args.spp, integrator=args.integrator)
+    # a name from the scene file: never a path out of the working folder
+    out = args.out or f"{safe_file_name(scene.name)}_{args.format}"
+    path = export_mitsuba(scene, out, spp=args.spp, integrator=args.integrator,
+                          profile=args.profile)
     text = path.read_text()
     plugins = sorted(p for p in SUITE_PLUGINS if f'type="{p}"' in text)
     print(f"wrote {path}")

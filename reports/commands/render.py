@@ -9,6 +9,10 @@ content: the same scene and settings are never rendered twice (``--no-cache`` re
 anyway). Exit code 2 on bad input (unknown scene, bad counts, bad scene file), with no
 output file left behind.
 
+``--integrator bssrdf_path --profile NAME`` renders each translucent object by a radial
+profile instead of its medium (:mod:`translucent.reference.bssrdf_path`: the profile's own
+exact image); the header names the profile and each object's.
+
 ``--target-rse R [--target-p99 P] [--budget SECONDS]`` renders progressively instead:
 independent passes of ``--spp`` samples are added until the median relative standard error
 over the lit pixels is at most R (and the 99th percentile at most P), or until the budget is
@@ -22,7 +26,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ...atomic import check_output_file, make_output_folder
+from ...atomic import check_output_file, make_output_folder, safe_file_name
 from ...errors import InputError
 
 
@@ -41,7 +45,12 @@ def add_arguments(parser):
                         help="default: volpath_mnee where a point, spot or directional "
                         "light meets a dielectric boundary around a medium (manifold "
                         "next-event estimation), volpath with other media, path without; "
-                        "volpath there replaces such lights by small emitters")
+                        "volpath there replaces such lights by small emitters; bssrdf_path "
+                        "renders translucent objects by --profile")
+    parser.add_argument("--profile", default=None, metavar="NAME",
+                        help="with --integrator bssrdf_path: the radial profile each "
+                        "translucent object is rendered with (translucent profiles lists "
+                        "them)")
     parser.add_argument("--per-channel", action=argparse.BooleanOptionalAction, default=None,
                         help="render R, G and B separately (media of one channel each); "
                         "default: where a medium is chromatic and of albedo near 1, as the "
@@ -80,7 +89,7 @@ def run(args) -> int:
         raise InputError("the output must be an OpenEXR file ending in .exr", field="--out",
                          value=args.out)
     scene = load_scene(args.scene)
-    out = check_output_file(args.out or f"{scene.name}_reference.exr", "--out",
+    out = check_output_file(args.out or f"{safe_file_name(scene.name)}_reference.exr", "--out",
                             what="a file name ending in .exr")
     # before rendering: a folder that cannot be made would lose the whole render
     created = _missing_folders(out.parent)
@@ -114,6 +123,7 @@ def _render_and_write(args, scene, out: Path, progressive: bool) -> int:
     from ...reference.render import render_to_target
 
     common = dict(spp=args.spp, seed=args.seed, integrator=args.integrator,
+                  profile=args.profile,
                   per_channel=args.per_channel, cache=not args.no_cache,
                   progress=not args.no_progress)
     if progressive:
@@ -127,6 +137,9 @@ def _render_and_write(args, scene, out: Path, progressive: bool) -> int:
     print(f"wrote {out} ({image.shape[1]} x {image.shape[0]}, {meta['spp']} spp x "
           f"{meta['passes']} passes, {meta['integrator']}; rendered in "
           f"{meta['seconds']:.3g} s)")
+    if meta.get("profile"):
+        objects = ", ".join(f"{k}: {v}" for k, v in meta["profile"]["objects"].items())
+        print(f"  profile {meta['profile']['name']} ({objects})")
     if progressive:
         from ...noise import NoiseSummary
 
@@ -158,5 +171,5 @@ def _render_and_write(args, scene, out: Path, progressive: bool) -> int:
            reference_warning=warning or None,
            header={key: meta.get(key) for key in (
                "spp", "passes", "seconds", "integrator", "variant", "mitsuba", "per_channel",
-               "stopped", "substitutions", "manifold_nee", "scene_hash")})
+               "stopped", "substitutions", "manifold_nee", "scene_hash", "profile")})
     return 0

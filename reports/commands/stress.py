@@ -32,7 +32,8 @@ def run(args) -> int:
             raise InputError(f"no kernel matches; kernels: {', '.join(all_kernels())}",
                              field="--only", value=args.only)
     results = {}
-    for name, kernel in progress_bar(kernels.items(), description="stress"):
+    for name, kernel in progress_bar(kernels.items(), description="stress",
+                                     terminal_only=False):
         results[name] = kernel()
     width = max(len(n) for n in results)
     print(f"{'kernel':<{width}}  {'evals':>9} {'NaN':>5} {'Inf':>5} {'neg':>5} "

@@ -1,0 +1,192 @@
+r"""The profile tables of ``bssrdf_path`` on the device: lookups, radius sampling, densities.
+
+:class:`ProfileLookup` holds :class:`~translucent.reference.bssrdf_tables.ProfileTables` as
+Dr.Jit arrays (float32) and reads them per lane: the node of a radius in O(1) from its
+logarithm (the nodes past the first are geometric), the density :math:`p_c(r)` linear
+between nodes, the radius of a uniform number by a binary search in the cumulative and the
+closed-form inverse of the segment's quadratic (as
+:meth:`~translucent.materials.profiles.sampling.RadialSampler.sample`). The directional
+dipole (Frisvad et al. 2014) is evaluated in closed form with each lane's incident
+direction (:meth:`ProfileLookup.directional_reflectance`).
+
+Imported once the suite's backend has chosen a variant (it imports Mitsuba at module level).
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..backend import mitsuba
+
+mi = mitsuba()
+
+import drjit as dr  # noqa: E402  (after mitsuba(): it points Dr.Jit at a working libLLVM)
+
+__all__ = ["ProfileLookup"]
+
+#: Radii below this (mm) are taken as this where the disk density divides by 2 pi r.
+SMALLEST_RADIUS = 1e-30
+
+
+def _floats(values):
+    import numpy as np
+
+    return mi.Float(np.ascontiguousarray(values, dtype=np.float32).ravel())
+
+
+class ProfileLookup:
+    """The tables as Dr.Jit arrays; row ``3 o + c`` is object o's channel c.
+
+    Parameters
+    ----------
+    tables : ProfileTables
+    """
+
+    def __init__(self, tables):
+        self.nodes = int(tables.nodes)
+        self.radius = _floats(tables.radius)
+        self.density = _floats(tables.density)
+        self.cumulative = _floats(tables.cumulative)
+        self.energy = _floats(tables.energy)
+        self.max_radius = _floats(tables.max_radius)
+        self.channel_probability = _floats(tables.channel_probability)
+        self.first_node = _floats(tables.first_node)
+        self.inverse_log_step = _floats(tables.inverse_log_step)
+        self.cut_radius = _floats(tables.max_radius.reshape(-1, 3).max(axis=1))
+        self.any_directional = bool((tables.directional > 0).any())
+        self.directional = _floats(tables.directional)
+        self.dd_diffusion = _floats(tables.dd_diffusion)
+        self.dd_sigma_tr = _floats(tables.dd_sigma_tr)
+        self.dd_extrapolation = _floats(tables.dd_extrapolation)
+        self.dd_boundary = _floats(tables.dd_boundary)
+        self.dd_c_phi = _floats(tables.dd_c_phi)
+        self.dd_c_e = _floats(tables.dd_c_e)
+
+    # ------------------------------------------------------------ one row
+    def segment(self, row, r, active):
+        """Return the node index k and the nodes r_k, r_{k+1} around ``r`` (mm) of ``row``."""
+        last = self.nodes - 2
+        base = row * self.nodes
+        first = dr.gather(mi.Float, self.first_node, row, active)
+        position = dr.log(dr.maximum(r, SMALLEST_RADIUS) / first) \
+            * dr.gather(mi.Float, self.inverse_log_step, row, active)
+        k = dr.select(r < first, 0, mi.Int32(dr.floor(position)) + 1)
+        k = dr.clip(k, 0, last)
+        left = dr.gather(mi.Float, self.radius, base + mi.UInt32(k), active)
+        right = dr.gather(mi.Float, self.radius, base + mi.UInt32(k) + 1, active)
+        # the float32 logarithm may land one node off at a node: step back or on once
+        down = (r < left) & (k > 0)
+        up = (r >= right) & (k < last)
+        k = k - dr.select(down, 1, 0) + dr.select(up, 1, 0)
+        moved = active & (down | up)
+        left[moved] = dr.gather(mi.Float, self.radius, base + mi.UInt32(k), moved)
+        right[moved] = dr.gather(mi.Float, self.radius, base + mi.UInt32(k) + 1, moved)
+        return mi.UInt32(k), left, right
+
+    def density_at(self, row, r, active):
+        r"""Return :math:`p_c(r)` (mm^-1) of ``row`` at ``r`` (mm); 0 beyond the last node."""
+        k, left, right = self.segment(row, r, active)
+        index = row * self.nodes + k
+        t = dr.clip((r - left) / (right - left), 0.0, 1.0)
+        low = dr.gather(mi.Float, self.density, index, active)
+        high = dr.gather(mi.Float, self.density, index + 1, active)
+        inside = active & (r >= 0.0) & (r <= right)
+        return dr.select(inside, dr.fma(t, high - low, low), 0.0)
+
+    def disk_pdf(self, row, r, active):
+        r"""Return :math:`q_c(r) = p_c(r) / (2\pi r E_c)` (mm^-2), the disk density."""
+        energy = dr.gather(mi.Float, self.energy, row, active)
+        value = self.density_at(row, r, active) \
+            / (2.0 * math.pi * dr.maximum(r, SMALLEST_RADIUS) * energy)
+        return dr.select(active & (energy > 0.0), value, 0.0)
+
+    def sample_radius(self, row, u, active):
+        """Return a radius (mm) of density :math:`p_c / E_c` from the uniform number ``u``."""
+        base = row * self.nodes
+        target = u * dr.gather(mi.Float, self.energy, row, active)
+
+        def below(i):
+            return dr.gather(mi.Float, self.cumulative, base + i, active) <= target
+
+        k = dr.binary_search(0, self.nodes - 1, below)
+        k = mi.UInt32(dr.clip(mi.Int32(k) - 1, 0, self.nodes - 2))
+        index = base + k
+        left = dr.gather(mi.Float, self.radius, index, active)
+        width = dr.gather(mi.Float, self.radius, index + 1, active) - left
+        low = dr.gather(mi.Float, self.density, index, active)
+        high = dr.gather(mi.Float, self.density, index + 1, active)
+        remaining = dr.maximum(target - dr.gather(mi.Float, self.cumulative, index, active),
+                               0.0)
+        # width (low t + (high - low) t^2 / 2) = remaining, solved without cancellation
+        quadratic = 0.5 * width * (high - low)
+        linear = width * low
+        root = dr.safe_sqrt(dr.square(linear) + 4.0 * quadratic * remaining)
+        denominator = linear + root
+        t = dr.select(denominator > 0.0, 2.0 * remaining / denominator, 0.0)
+        return left + dr.clip(t, 0.0, 1.0) * width
+
+    # ------------------------------------------------------------ the profile
+    def reflectance(self, obj, r, active):
+        r"""Return :math:`R_c(r) = p_c(r) / (2\pi r)` per channel (mm^-2); 0 past every ball."""
+        cut = dr.gather(mi.Float, self.cut_radius, obj, active)
+        active = active & (r <= cut)
+        scale = 1.0 / (2.0 * math.pi * dr.maximum(r, SMALLEST_RADIUS))
+        values = [self.density_at(3 * obj + c, r, active) * scale for c in range(3)]
+        return dr.select(active, mi.Spectrum(*values), 0.0)
+
+    def is_directional(self, obj, active):
+        """Whether object ``obj`` evaluates the directional dipole."""
+        return dr.gather(mi.Float, self.directional, obj, active) > 0.0
+
+    def directional_reflectance(self, obj, d, normal, wi, eta, active):
+        r"""Return the directional dipole's :math:`R` (mm^-2) for light arriving from ``wi``.
+
+        Frisvad, Hachisuka and Kjeldsen 2014, Sect. 4-5, as
+        :meth:`~translucent.materials.profiles.DirectionalDipoleProfile.evaluate` on a
+        plane: ``d`` is the displacement from the entry point to the exit point (mm),
+        ``normal`` the normal at the entry point, ``wi`` the direction towards the light.
+        The incident angle is each lane's own; :math:`x\cdot\omega_{12}` is the 3D
+        displacement's, the squared distance its full length's.
+        """
+        cos_i = dr.clip(dr.dot(wi, normal), 0.0, 1.0)
+        tangential = wi - normal * cos_i
+        sin_t = dr.norm(tangential) / eta
+        mu0 = dr.safe_sqrt(1.0 - dr.square(sin_t))
+        along = dr.normalize(-tangential)
+        along = dr.select(dr.all(dr.isfinite(along)), along, 0.0)
+        x_dot_w = dr.dot(d, along) * sin_t
+        r2 = dr.squared_norm(d)
+        boundary = dr.gather(mi.Float, self.dd_boundary, obj, active)
+        c_phi = dr.gather(mi.Float, self.dd_c_phi, obj, active)
+        c_e = dr.gather(mi.Float, self.dd_c_e, obj, active)
+        values = []
+        for c in range(3):
+            row = 3 * obj + c
+            diffusion = dr.gather(mi.Float, self.dd_diffusion, row, active)
+            sigma_tr = dr.gather(mi.Float, self.dd_sigma_tr, row, active)
+            extrapolation = dr.gather(mi.Float, self.dd_extrapolation, row, active)
+            cos_beta = -dr.safe_sqrt((r2 - dr.square(x_dot_w))
+                                     / (r2 + dr.square(extrapolation)))
+            d_r = dr.safe_sqrt(r2 + diffusion * mu0 * (diffusion * mu0
+                                                       - 2.0 * extrapolation * cos_beta))
+            real = _source_term(x_dot_w, -mu0, 0.0, d_r, diffusion, sigma_tr, c_phi, c_e)
+            height = 2.0 * boundary * extrapolation
+            d_v = dr.sqrt(r2 + dr.square(height))
+            image = _source_term(x_dot_w - height * mu0, mu0, -height, d_v, diffusion,
+                                 sigma_tr, c_phi, c_e)
+            value = dr.maximum(real - image, 0.0) / (4.0 * math.pi)
+            present = active & (diffusion > 0.0)
+            values.append(dr.select(present & dr.isfinite(value), value, 0.0))
+        return mi.Spectrum(*values)
+
+
+def _source_term(x_dot_w, w_dot_n, x_dot_n, d, diffusion, sigma_tr, c_phi, c_e):
+    """Frisvad et al.'s S'_d (without 1/(4 pi)), as the numpy ``_source_term``."""
+    sd = sigma_tr * d
+    one = 1.0 + sd
+    d2 = dr.square(d)
+    return dr.exp(-sd) / (d2 * d) * (
+        c_phi * (d2 / diffusion + 3.0 * one * x_dot_w)
+        - c_e * (3.0 * diffusion * one * w_dot_n
+                 - (one + 3.0 * diffusion * (3.0 * one + dr.square(sd)) / d2 * x_dot_w)
+                 * x_dot_n))
