@@ -148,7 +148,7 @@ def compare(reference, test, *, mask=None) -> list[dict]:
         rmse, psnr, ssim, ciede2000):
         ``metric``, ``value``, ``noise_floor``, ``verdict`` ("resolved", "within reference
         noise", or None without a variance), ``lower_is_better``, ``about``
-        (:func:`translucent.reports.metric_table.metric_rows`).
+        (:func:`translucent.reports.metrics.table.metric_rows`).
 
     Examples
     --------
@@ -160,9 +160,9 @@ def compare(reference, test, *, mask=None) -> list[dict]:
     >>> round(rows["rmse"]["value"], 3), rows["rmse"]["verdict"]
     (0.1, 'resolved')
     """
-    from .reports.metric_table import metric_rows
-    from .reports.metrics import compare as scores
-    from .reports.metrics import noise_floor
+    from .reports.metrics.compute import compare as scores
+    from .reports.metrics.compute import noise_floor
+    from .reports.metrics.table import metric_rows
 
     reference, test = _image(reference, "reference"), _image(test, "test")
     floor = noise_floor(reference, mask=mask) if mask is not None else noise_floor(reference)

@@ -3,7 +3,8 @@
 A kernel with ``numba.prange`` loops is compiled with ``parallel=True`` where the process
 has more than one numba thread, and as a serial kernel (``prange`` is then ``range``)
 where it has one: the report's and the benchmarks' worker processes run with one thread
-each (:func:`translucent.reports.distributed.worker_environment`), and there the parallel
+each (:func:`translucent.reports.report.distributed.worker_environment`), and there the
+parallel
 kernel gains nothing at run time while its compilation takes about twice as long (the
 parallel lowering; docs/report.md, "The workers' compiled kernels").
 

@@ -6,13 +6,13 @@ project's tests need no conftest. It offers:
 ``assert_image_close(test, reference, metric="hdr_flip", max=...)``
     Fails when a metric of :mod:`translucent.reports.metrics` is beyond its bound
     (``max`` for errors, ``min`` for psnr and ssim) and writes the error maps
-    (:func:`~translucent.reports.error_maps.write_error_maps`) into a folder the
+    (:func:`~translucent.reports.metrics.maps.write_error_maps`) into a folder the
     message names. Where the reference carries its variance, the message gives the
     metric's noise floor and verdict, and a bound tighter than the floor warns
     (:class:`ReferenceNoiseWarning`).
 ``assert_render_consistent(test, reference_mean, reference_variance, spp=...)``
     Mitsuba 3's per-pixel z-test with Šidák correction
-    (:func:`~translucent.reports.statistics.z_test`); on failure writes the p-value
+    (:func:`~translucent.reports.metrics.statistics.z_test`); on failure writes the p-value
     image, the rejected pixels, both images and their difference.
 
 Both are importable functions (``from translucent.reports.pytest_plugin import
@@ -166,7 +166,7 @@ def assert_image_close(test, reference, metric: str = "hdr_flip", max: float | N
         The image judged and the reference (linear radiance; a reference's variance is
         discounted from relmse).
     metric : str
-        A name of :data:`translucent.reports.metric_table.METRICS` (hdr_flip, ldr_flip,
+        A name of :data:`translucent.reports.metrics.table.METRICS` (hdr_flip, ldr_flip,
         relative_mse, relative_mse_raw, rmse, psnr, ssim, ciede2000) or an earlier spelling
         (flip, hdr-flip, relmse).
     max : float, optional
@@ -204,8 +204,8 @@ def assert_image_close(test, reference, metric: str = "hdr_flip", max: float | N
         A missing bound, or a bound on the wrong side for the metric.
     """
     __tracebackhide__ = True
-    from .metric_table import metric as metric_definition
-    from .metrics import error_scale, evaluate, noise_floor, noise_verdict
+    from .metrics.compute import error_scale, evaluate, noise_floor, noise_verdict
+    from .metrics.table import metric as metric_definition
 
     definition = metric_definition(metric)
     bound_name, bound = ("max", max) if definition.lower_is_better else ("min", min)
@@ -235,7 +235,7 @@ def assert_image_close(test, reference, metric: str = "hdr_flip", max: float | N
                 "reference with more passes"), stacklevel=2)
     if definition.within(value, bound):
         return value
-    from .error_maps import write_error_maps
+    from .metrics.maps import write_error_maps
 
     parent = Path(artifacts) if artifacts is not None else artifacts_root() / _current_test()
     folder = _new_folder(parent, name or definition.name)
@@ -254,7 +254,7 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
     """Assert that a Monte Carlo render is consistent with a reference mean and variance.
 
     Mitsuba 3's per-pixel z-test with Šidák correction
-    (:func:`translucent.reports.statistics.z_test`).
+    (:func:`translucent.reports.metrics.statistics.z_test`).
 
     Parameters
     ----------
@@ -268,11 +268,12 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
         ``reference_mean`` itself, a reference written by the suite (``translucent
         render``, a committed reference): its stored variance of the mean times its
         samples per pixel (``spp x passes`` of its metadata), and its own noise counts
-        too (Student's t over its passes: :func:`translucent.reports.statistics.z_test`,
+        too (Student's t over its passes: :func:`translucent.reports.metrics.statistics.z_test`,
         each pixel's variance pooled over its 3 x 3 neighbourhood), so that an honest
         render is not failed for the reference's noise; and the image's 8 x 8 pixel
-        block means must agree as well (:func:`~translucent.reports.statistics.z_test_blocks`),
-        which a render too bright or too dark as a whole cannot pass.
+        block means must agree as well
+        (:func:`~translucent.reports.metrics.statistics.z_test_blocks`), which a render too
+        bright or too dark as a whole cannot pass.
     spp : int, optional
         Samples per pixel of ``test``; default ``test.metadata["spp"]``.
     significance, required_fraction : float, optional
@@ -295,7 +296,7 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
         p-value image.
     """
     __tracebackhide__ = True
-    from .statistics import TEST_BLOCK, z_test, z_test_blocks
+    from .metrics.statistics import TEST_BLOCK, z_test, z_test_blocks
 
     test_image = _as_image(test, "test")
     if spp is None:
@@ -315,7 +316,7 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
         if passes < RECOMMENDED_REFERENCE_PASSES:
             from scipy.stats import t
 
-            from .statistics import sidak_alpha
+            from .metrics.statistics import sidak_alpha
 
             pixels = reference_image.shape[0] * reference_image.shape[1]
             bound = t.isf(sidak_alpha(pixels) / 2, passes - 1)
@@ -333,7 +334,7 @@ def assert_render_consistent(test, reference_mean, reference_variance=None,
                                **({"significance": significance} if significance else {}))
     if result.passed and (blocks is None or blocks.passed):
         return result
-    from .error_maps import write_z_test_maps
+    from .metrics.maps import write_z_test_maps
 
     parent = Path(artifacts) if artifacts is not None else artifacts_root() / _current_test()
     folder = _new_folder(parent, name or "z-test")

@@ -6,6 +6,7 @@ import importlib
 import pytest
 import translucent
 
+
 # Every other module's Examples run in tests/test_doctests.py.
 def test_the_examples_run():
     module = importlib.import_module("translucent.api")

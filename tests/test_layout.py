@@ -185,16 +185,30 @@ def test_the_contract_tables_of_the_docs_are_made_from_the_contract():
     assert contract_table(required=False) in page
 
 
-#: The report's orchestrator is called, not drawn from: only these import it (the command
-#: and the package's functions); the data model, tasks and formatting have modules of
-#: their own that everything else imports.
-REPORT_CALLERS = {"translucent.reports.commands.report", "translucent.api"}
+#: The report's orchestrator is called, not drawn from: only these import it (the command,
+#: the package's functions and the report package, which offers make_report); the data
+#: model, tasks and formatting have modules of their own that everything else imports.
+REPORT_CALLERS = {"translucent.reports.commands.report", "translucent.api",
+                  "translucent.reports.report"}
 
 
 def test_only_the_reports_callers_import_the_orchestrator():
     importers = {importer for importer, imported, _ in IMPORTS
-                 if imported == "translucent.reports.report"}
+                 if imported == "translucent.reports.report.pipeline"}
     assert importers <= REPORT_CALLERS, sorted(importers - REPORT_CALLERS)
+
+
+#: reports/ by concept: the metrics, the report, the benches, the stress sweeps, the
+#: commands, each a subpackage; beside them only the command line and the pytest plugin.
+REPORTS_MODULES = {"__init__", "cli", "pytest_plugin"}
+REPORTS_PACKAGES = {"metrics", "report", "bench", "stress", "commands"}
+
+
+def test_reports_is_split_by_concept():
+    folder = ROOT / "reports"
+    assert {p.stem for p in folder.glob("*.py")} == REPORTS_MODULES
+    assert REPORTS_PACKAGES <= {p.name for p in folder.iterdir()
+                                if (p / "__init__.py").is_file()}
 
 
 #: The tables a metric's identity used to be spread over: each is made once, in the
@@ -203,7 +217,7 @@ METRIC_TABLES = {"METRIC_LABELS", "NOISE_FLOOR_FIELDS", "REPORTED_METRICS", "TOL
 
 
 def test_each_metric_is_defined_once():
-    from translucent.reports.metric_registry import REGISTRY
+    from translucent.reports.metrics.registry import REGISTRY
 
     assigned = sorted((name, target.id) for name, path in MODULES.items()
                       for node in ast.parse(path.read_text()).body
@@ -211,7 +225,7 @@ def test_each_metric_is_defined_once():
                       for target in (node.targets if isinstance(node, ast.Assign)
                                      else [node.target])
                       if isinstance(target, ast.Name) and target.id in METRIC_TABLES)
-    assert {module for module, _ in assigned} == {"translucent.reports.metric_registry"}, \
+    assert {module for module, _ in assigned} == {"translucent.reports.metrics.registry"}, \
         assigned
     names = [spec.name for spec in REGISTRY]
     aliases = [alias for spec in REGISTRY for alias in spec.aliases]

@@ -41,8 +41,8 @@ def measure(scene_name: str, counts, frames: int) -> dict:
     from ...fast.base import applicability
     from ...reference.committed import committed_reference
     from ...scenes import load_scene
-    from ..metrics import evaluate, noise_floor
-    from ..scoring import scored_pixels
+    from ..metrics.compute import evaluate, noise_floor
+    from ..report.scoring import scored_pixels
 
     scene = load_scene(scene_name)
     reason = applicability(splatting.applies_to, scene)

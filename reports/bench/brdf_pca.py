@@ -255,8 +255,8 @@ def _validate(args, folder: Path) -> dict:
     from ...image import Image
     from ...reference import render
     from ...reference.brdf_plugins import render_lambertian_gather
-    from ..error_maps import write_error_maps
-    from ..metrics import evaluate, relative_mse
+    from ..metrics.compute import evaluate, relative_mse
+    from ..metrics.maps import write_error_maps
 
     base = load_scene("glossy")
     aspect = base.camera.height / base.camera.width

@@ -122,7 +122,7 @@ def measure_checker(scene, *, spp: int = DEFAULT_SPP, passes: int = DEFAULT_PASS
                     methods=METHODS, mask=None) -> dict:
     """Return one row: the reference's noise and each method's error on ``scene``."""
     from ...reference import render
-    from ..runs import run_method
+    from ..report.runs import run_method
 
     mask = object_mask(scene, OBJECT) if mask is None else mask
     started = time.perf_counter()
@@ -191,7 +191,7 @@ def heterogeneous_table(out, *, pair=None, contrasts=DEFAULT_CONTRASTS, cells=DE
         length, contrast, and :func:`measure_checker`'s row) and ``complete``.
     """
     from ...progress import progress_bar
-    from ..runs import backend_versions
+    from ..report.runs import backend_versions
 
     methods = tuple(methods)
     contrasts, cells = [float(t) for t in contrasts], [int(c) for c in cells]

@@ -178,7 +178,7 @@ def reference_noise(reference, mask: np.ndarray) -> dict:
         (seed :data:`NOISE_FLIP_SEED`), about the FLIP the reference's noise alone causes
         (heavy-tailed path-tracing noise is not Gaussian: an indication, not a bound).
     """
-    from ..metrics import RELMSE_EPSILON, flip_map
+    from ..metrics.compute import RELMSE_EPSILON, flip_map
 
     rgb = reference.rgb.astype(np.float64)
     variance = reference.variance.astype(np.float64)
@@ -225,7 +225,7 @@ def object_metrics(reference, test, mask: np.ndarray) -> dict:
     InputError
         Images of different sizes, NaN pixels, an all-black reference.
     """
-    from ..metrics import evaluate, luminance, relative_mse
+    from ..metrics.compute import evaluate, luminance, relative_mse
 
     comparison = evaluate(reference, test)  # checks sizes, NaN and a black reference
     ref, tst = reference.rgb.astype(np.float64), test.rgb.astype(np.float64)
@@ -246,7 +246,7 @@ def object_metrics(reference, test, mask: np.ndarray) -> dict:
 def _reference(scene, spp: int, passes: int):
     """Render (or load from the cache) the reference; return it and whether it was cached."""
     from ...reference import render
-    from ..runs import reference_path
+    from ..report.runs import reference_path
 
     cached = reference_path(scene, spp, passes).is_file()
     return render(scene, spp=spp, passes=passes, progress=False), cached
@@ -254,8 +254,8 @@ def _reference(scene, spp: int, passes: int):
 
 def _side_by_side(folder: Path, name: str, reference, images: dict) -> str:
     """Write the reference and each method's image in one PNG at the reference's exposure."""
-    from ..error_maps import srgb8, write_png
-    from ..metrics import display_white
+    from ..metrics.compute import display_white
+    from ..metrics.maps import srgb8, write_png
 
     white = display_white(reference.rgb)
     gap = np.full((reference.shape[0], 2, 3), 255, dtype=np.uint8)
@@ -302,7 +302,7 @@ def measure_medium(scene, medium: Dipole, methods=METHODS, *, spp: int = DEFAULT
         :func:`reference_noise`), ``methods`` (per method: status, reason, seconds and
         :func:`object_metrics`, ``dominated_by`` "model" or "noise"), ``image``.
     """
-    from ..runs import run_method
+    from ..report.runs import run_method
 
     method_medium = medium if method_medium is None else method_medium
     mask = object_mask(scene) if mask is None else mask
@@ -358,7 +358,7 @@ def _check(size: int, spp: int, passes: int, methods, eta: float) -> tuple:
 
 
 def _context(scene, mask, size, spp, passes, methods, eta, media) -> dict:
-    from ..runs import backend_versions
+    from ..report.runs import backend_versions
 
     boundary = ("index-matched (eta = 1): the boundary neither refracts nor reflects, in the "
                 "reference and in the dipole" if eta == 1.0 else

@@ -261,7 +261,7 @@ def _materials(small, small_common, names) -> dict:
     On the whole small frame: relative L1 error and HDR-FLIP (brute force the reference).
     """
     from ...materials.subedit import builtin_subedit
-    from ..metrics import flip_map
+    from ..metrics.compute import flip_map
 
     out = {}
     for name in names:

@@ -14,7 +14,7 @@ timed in full, then renders its first frame and :data:`RELIGHT_FRAMES` relit one
 scene's lights given again: the interactive relighting path); the frame time is their
 median, the first image's time the precomputation plus the first frame. Mitsuba's
 volumetric path tracer renders the same scene at 1, 2, 4, ... ``--max-spp`` samples per
-pixel (:data:`~translucent.reports.speedup.PATH_TRACING_REPEATS` timed renders each, after
+pixel (:data:`~translucent.reports.report.speedup.PATH_TRACING_REPEATS` timed renders each, after
 an untimed one that compiles its kernels: the median time, the mean error). Every image is
 compared with a converged reference (``--reference-spp`` x ``--reference-passes``, from
 the reference cache); the error is the relative MSE with the reference's noise discounted (see
@@ -26,7 +26,7 @@ interpolated on its log-log curve (extrapolated along the fitted power law beyon
 spp, and flagged so), giving the speedup at equal error: per frame (the interactive path,
 ``state.render``) and for the first image (precomputation + frame).
 
-Every sweep point is an independent task (:func:`translucent.reports.distributed.run_tasks`):
+Every sweep point is an independent task (:func:`translucent.reports.report.distributed.run_tasks`):
 local processes by default, ``--scheduler`` for a Dask cluster, ``--serial`` in this process.
 Writes the figures as JSON (``--json``, default ``bench_tradeoff.json``) and the curves as
 one log-log PNG beside it (``--plot``, default the JSON's name with ``.png``).
@@ -43,7 +43,7 @@ import numpy as np
 
 from ...atomic import atomic_save_figure, check_output_file
 from ...errors import InputError, check_count
-from ..speedup import equal_error_seconds, path_tracing_point
+from ..report.speedup import equal_error_seconds, path_tracing_point
 from . import at_width, steps_bar, write_figures
 
 __all__ = ["DEFAULT_SCENES", "add_arguments", "declared_ladders", "run", "sweep",
@@ -101,7 +101,7 @@ def add_arguments(parser):
 
 def _task(kind: str, scene, *arguments):
     """Run one sweep point: the converged reference, a path-traced render or a method run."""
-    from ..runs import render_reference, run_method
+    from ..report.runs import render_reference, run_method
 
     if kind == "reference":
         return render_reference(scene, *arguments)
@@ -163,7 +163,7 @@ def _ladders(module, name: str) -> tuple[dict[str, list[dict]], list[str]]:
 
 
 def _metrics(reference, image) -> dict:
-    from ..metrics import evaluate
+    from ..metrics.compute import evaluate
 
     try:
         metrics = evaluate(reference, image).metrics
@@ -217,8 +217,8 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
     from ...fast.base import METHODS, applicability, method
     from ...fast.registry import MethodContractError, check_known
     from ...scenes import Scene, load_scene
-    from ..distributed import run_tasks
-    from ..runs import backend_versions
+    from ..report.distributed import run_tasks
+    from ..report.runs import backend_versions
 
     for value, name in ((max_spp, "--max-spp"), (reference_spp, "--reference-spp"),
                         (reference_passes, "--reference-passes")):

@@ -29,8 +29,8 @@ DEFAULT_METRIC = "hdr_flip"
 
 def add_arguments(parser):
     """Add the reference, the test, the metric and its threshold, where the maps go."""
-    from ..metric_registry import canonical_metric
-    from ..metric_table import METRICS
+    from ..metrics.registry import canonical_metric
+    from ..metrics.table import METRICS
 
     def canonical_or_given(name):
         return canonical_metric(name) or str(name).lower()
@@ -56,7 +56,7 @@ def add_arguments(parser):
 
 def _threshold(args):
     """Return the chosen metric and bound, checked against the metric's direction."""
-    from ..metric_table import metric
+    from ..metrics.table import metric
 
     threshold = args.maximum if args.maximum is not None else args.minimum
     definition = metric(args.metric or DEFAULT_METRIC)
@@ -74,7 +74,7 @@ def _threshold(args):
 
 
 def _table(rows) -> list[str]:
-    """Return the printed table of :func:`~translucent.reports.metric_table.metric_rows`."""
+    """Return the printed table of :func:`~translucent.reports.metrics.table.metric_rows`."""
     lines = [f"{'metric':<10} {'value':>12}  {'noise floor':>12}  {'verdict':<22}  about"]
     for row in rows:
         mark = ""
@@ -94,9 +94,9 @@ def run(args) -> int:
     from ...atomic import check_output_folder, claim_output, note_input
     from ...image import read_exr
     from ...noise import reference_noise_warning
-    from ..error_maps import error_map_paths, write_error_maps
-    from ..metric_table import metric_rows
-    from ..metrics import NOISE_MARGIN, evaluate, noise_floor
+    from ..metrics.compute import NOISE_MARGIN, evaluate, noise_floor
+    from ..metrics.maps import error_map_paths, write_error_maps
+    from ..metrics.table import metric_rows
     from .record import record
 
     definition, threshold = _threshold(args)

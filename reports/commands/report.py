@@ -16,7 +16,7 @@ from __future__ import annotations
 
 def add_arguments(parser):
     """Scenes, output folder, methods, baseline, where tasks run, reference samples."""
-    from ..report import (
+    from ..report.pipeline import (
         DEFAULT_PASSES,
         DEFAULT_REFERENCE_BUDGET,
         DEFAULT_TARGET_RSE,
@@ -70,7 +70,7 @@ def add_arguments(parser):
 def run(args) -> int:
     """Run the report; the exit code says whether a metric regressed."""
     from ...errors import InputError
-    from ..report import DEFAULT_PASSES, make_report
+    from ..report.pipeline import DEFAULT_PASSES, make_report
 
     if args.spp is None and args.passes != DEFAULT_PASSES:
         raise InputError("goes with --spp (without it the references are committed or "

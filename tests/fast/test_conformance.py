@@ -340,7 +340,7 @@ def test_an_outside_methods_own_files_key_the_report_cache(registered, tmp_path,
 @pytest.mark.parametrize("name", sorted(registry.BUILTIN_METHODS))
 def test_applies_to_is_asked_once_per_run_and_not_again_when_passed_on(name, monkeypatch):
     """The report asks when it plans a run; the run and the precomputation do not ask again."""
-    from translucent.reports.runs import run_method
+    from translucent.reports.report.runs import run_method
 
     module = registry.method(name)
     calls = []

@@ -52,8 +52,8 @@ def _artifacts(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(REFERENCE_GATES))
 def test_against_volumetric_path_tracing(name, tmp_path):
-    from translucent.reports.error_maps import write_error_maps
-    from translucent.reports.metrics import evaluate
+    from translucent.reports.metrics.compute import evaluate
+    from translucent.reports.metrics.maps import write_error_maps
     from translucent.scenes import load_scene
 
     scene = _index_matched(load_scene(name))

@@ -209,7 +209,7 @@ def test_7_lambertian_gather_is_the_path_tracer_on_diffuse_scenes():
     must agree with Mitsuba's path tracer of the same depth (bounces + 3 segments)."""
     from translucent.reference import render
     from translucent.reference.brdf_plugins import render_lambertian_gather
-    from translucent.reports.statistics import z_test_known_variance
+    from translucent.reports.metrics.statistics import z_test_known_variance
 
     scene = _small_glossy_scene(diffuse=True)
     limit = render_lambertian_gather(scene, bounces=1, spp=64, passes=4)

@@ -212,7 +212,7 @@ def _sphere_scene(material, size, subdivisions=4):
 
 def _sphere_check(mi, name, size, spp, passes, subdivide, supersample):
     from translucent.image import Image
-    from translucent.reports.statistics import z_test_known_variance
+    from translucent.reports.metrics.statistics import z_test_known_variance
 
     scene = _sphere_scene(MEDIUM, size)
     conversion = convert_scene(scene, integrator="bssrdf_path", profile=name)
@@ -283,7 +283,7 @@ def _disk_lit_slab(mi, integrator, profile_name, size, extent, radius=2.0):
 
 def _walk_check(mi, size, spp_bssrdf, spp_volpath, passes, resolution=0.05):
     from translucent.image import Image
-    from translucent.reports.statistics import z_test_known_variance
+    from translucent.reports.metrics.statistics import z_test_known_variance
 
     first = _passes(mi, _disk_lit_slab(mi, "bssrdf_path", "random_walk", size, 4.0),
                     spp_bssrdf, passes)
@@ -320,7 +320,7 @@ def test_with_the_walk_table_it_gives_what_volpath_gives_converged(mi):
 def _uniform_light_check(mi, light, expected_factor, spp=64, passes=8, size=8):
     """A slab under light uniform over its top, seen straight down: a closed-form radiance."""
     from translucent.image import Image
-    from translucent.reports.statistics import z_test_known_variance
+    from translucent.reports.metrics.statistics import z_test_known_variance
 
     conversion = convert_scene(_slab_scene(MEDIUM, [light]), integrator="bssrdf_path",
                                profile="better_dipole")

@@ -3,7 +3,7 @@
 The consistency check renders each scene afresh at a few samples per pixel (other seeds)
 and asks the suite's own two-sample z-test (Welch's t for estimated variances, Sidak
 correction, 99.75 % of channels accepted) whether both estimate the same image, on 8 x 8
-pixel blocks (:func:`~translucent.reports.statistics.block_means`): per pixel, the heavy
+pixel blocks (:func:`~translucent.reports.metrics.statistics.block_means`): per pixel, the heavy
 tails of a few-spp render of a high-albedo medium fail honest renders. Blocks are judged
 where at least half their pixels are lit (:func:`~translucent.noise.lit_mask`): in a dark
 block a few-spp render often sees no light path at all, so its variance estimate is 0 and
@@ -34,7 +34,7 @@ from translucent.reference.committed import (
 )
 from translucent.reference.render import render
 from translucent.reports.cli import main
-from translucent.reports.statistics import block_means, z_test_known_variance
+from translucent.reports.metrics.statistics import block_means, z_test_known_variance
 from translucent.scenes import load_scene
 
 NAMES = list(PLANS)
@@ -209,7 +209,7 @@ def test_references_command_bad_usage(capsys, arguments, field):
 
 
 def test_report_refuses_a_stale_committed_reference(reference_folder, tmp_path):
-    from translucent.reports.report import make_report
+    from translucent.reports.report.pipeline import make_report
 
     image = _good_image("glossy")
     Image(image.rgb, image.variance, {**image.metadata, "scene_content_hash": "0" * 64}

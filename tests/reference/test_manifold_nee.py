@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from translucent.errors import InputError
 from translucent.image import Image
-from translucent.reports.statistics import z_test_known_variance
+from translucent.reports.metrics.statistics import z_test_known_variance
 
 mi_module = pytest.importorskip("mitsuba")
 

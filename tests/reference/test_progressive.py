@@ -13,7 +13,7 @@ from translucent.reference.render import (
     render_to_target,
 )
 from translucent.reports.cli import main
-from translucent.reports.statistics import z_test_known_variance
+from translucent.reports.metrics.statistics import z_test_known_variance
 from translucent.scenes import (
     Camera,
     Scene,

@@ -1,7 +1,7 @@
 """Reference renders: furnace tests judged statistically, passes and variance, cache, metadata.
 
 The furnace tests compare a render with a value known in closed form, pixel by pixel, with
-the per-pixel z-test of :mod:`translucent.reports.statistics` (Mitsuba 3's own rule:
+the per-pixel z-test of :mod:`translucent.reports.metrics.statistics` (Mitsuba 3's own rule:
 Sidak-corrected significance, at least 99.75 % of pixel channels accepted). The render's
 own variance stands in for the reference's: ``reference_variance`` is the per-sample
 variance ``(spp x passes) x Image.variance`` and the test's sample count ``spp x passes``,
@@ -25,7 +25,7 @@ from translucent.errors import InputError
 from translucent.image import read_exr
 from translucent.materials import Dipole, Lambertian
 from translucent.reference import render
-from translucent.reports.statistics import VARIANCE_FLOOR, z_test
+from translucent.reports.metrics.statistics import VARIANCE_FLOOR, z_test
 from translucent.scenes import (
     Camera,
     ConstantEnvironment,

@@ -9,7 +9,7 @@ from translucent.materials.solid import checker_solid, uniform_solid, veined_sol
 from translucent.reference.mitsuba_scene import ConversionContext
 from translucent.reference.render import render
 from translucent.reference.solid_medium import solid_medium_dict
-from translucent.reports.statistics import z_test_known_variance
+from translucent.reports.metrics.statistics import z_test_known_variance
 from translucent.scenes import load_scene
 from translucent.scenes.scene import Camera
 

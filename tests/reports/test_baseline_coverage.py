@@ -11,9 +11,9 @@ import pytest
 from translucent.cache import content_hash
 from translucent.fast.base import METHODS, applicability, method
 from translucent.reference.committed import committed_reference
-from translucent.reports.baselines import DEFAULT_BASELINE, load_baseline
-from translucent.reports.metric_registry import TOLERANCES
-from translucent.reports.report import default_scenes
+from translucent.reports.metrics.registry import TOLERANCES
+from translucent.reports.report.baselines import DEFAULT_BASELINE, load_baseline
+from translucent.reports.report.pipeline import default_scenes
 from translucent.scenes import load_scene
 
 BASELINE = load_baseline(DEFAULT_BASELINE, required=True)
@@ -47,7 +47,7 @@ def test_every_default_scene_and_method_has_a_current_baseline_entry(name):
 
 
 def test_a_known_failure_is_seen_again_and_a_fixed_one_is_an_improvement():
-    from translucent.reports.baselines import check_against_baseline, updated_baseline
+    from translucent.reports.report.baselines import check_against_baseline, updated_baseline
 
     results = [{"name": "s", "scene_hash": "h", "reference": {"spp": 4, "passes": 2},
                 "metrics": {}, "methods_run": ["radiosity"],

@@ -18,7 +18,7 @@ from translucent.reports.bench.model_error import (
     reference_noise,
 )
 from translucent.reports.cli import main
-from translucent.reports.metrics import RELMSE_EPSILON
+from translucent.reports.metrics.compute import RELMSE_EPSILON
 
 #: The tiny table: two media whose references are rendered in RGB (their albedo is below
 #: the per-channel threshold) at 16 x 16 pixels, 4 spp x 2 passes: a few seconds.

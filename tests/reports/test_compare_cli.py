@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from translucent.image import Image, write_exr
 from translucent.reports.cli import main
-from translucent.reports.metrics import compare
+from translucent.reports.metrics.compute import compare
 
 MAP_FILES = {f"test_{name}.{ext}" for name in ("flip", "relative_error", "ciede2000", "ssim")
              for ext in ("exr", "png")}
@@ -154,8 +154,8 @@ def test_bad_reference_exits_2(pair, capsys):
 
 def test_map_files_hold_the_maps(pair, tmp_path):
     from matplotlib.image import imread
-    from translucent.reports.error_maps import write_error_maps
-    from translucent.reports.metrics import evaluate
+    from translucent.reports.metrics.compute import evaluate
+    from translucent.reports.metrics.maps import write_error_maps
 
     reference, test = Image.read(pair[0]), Image.read(pair[1])
     comparison = evaluate(reference, test)
@@ -169,7 +169,7 @@ def test_map_files_hold_the_maps(pair, tmp_path):
 
 def test_linear_png_is_srgb_encoded(tmp_path):
     from matplotlib.image import imread
-    from translucent.reports.error_maps import write_linear_png
+    from translucent.reports.metrics.maps import write_linear_png
 
     rgb = np.zeros((2, 3, 3), np.float32)
     rgb[0, 0], rgb[0, 1], rgb[0, 2] = 4.0, 2.0, 8.0  # white, half, beyond white
@@ -180,7 +180,7 @@ def test_linear_png_is_srgb_encoded(tmp_path):
 
 
 def test_a_failure_while_writing_leaves_no_maps(pair, tmp_path, monkeypatch):
-    from translucent.reports import error_maps
+    from translucent.reports.metrics import maps as error_maps
 
     calls = []
     original = error_maps.write_png
@@ -199,7 +199,7 @@ def test_a_failure_while_writing_leaves_no_maps(pair, tmp_path, monkeypatch):
 
 def test_unknown_map_name_lists_the_valid_ones(tmp_path):
     from translucent.errors import InputError
-    from translucent.reports.error_maps import write_map
+    from translucent.reports.metrics.maps import write_map
 
     with pytest.raises(InputError, match="name = 'blur': unknown map; valid: flip, "
                                          "relative_error, ciede2000, ssim, p_value"):

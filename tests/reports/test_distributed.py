@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from translucent.errors import InputError
 from translucent.materials import total_diffuse_reflectance
-from translucent.reports.distributed import dask_client, run_tasks
+from translucent.reports.report.distributed import dask_client, run_tasks
 
 # the workers import the task by name: it must live in the package, not in this file
 _sweep_point = total_diffuse_reflectance
@@ -54,7 +54,7 @@ def test_a_local_cluster_leaves_this_process_environment_as_it_was(monkeypatch):
 def test_a_workers_freed_memory_is_reused_without_faulting_its_pages_again(monkeypatch):
     import platform
 
-    from translucent.reports.distributed import WORKER_MALLOC_TUNABLES, worker_environment
+    from translucent.reports.report.distributed import WORKER_MALLOC_TUNABLES, worker_environment
 
     if platform.libc_ver()[0] != "glibc":
         pytest.skip("GLIBC_TUNABLES is glibc's")

@@ -9,8 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from translucent.errors import InputError
 from translucent.image import Image
-from translucent.reports.metric_table import METRICS, metric
-from translucent.reports.metrics import (
+from translucent.reports.metrics.compute import (
     RELMSE_EPSILON,
     ciede2000_map,
     compare,
@@ -28,6 +27,7 @@ from translucent.reports.metrics import (
     ssim_map,
     to_display,
 )
+from translucent.reports.metrics.table import METRICS, metric
 
 #: Sums of a few thousand float64 squares: agreement to 1e-12 relative is rounding only.
 FLOAT64_RTOL = 1e-12
@@ -384,8 +384,8 @@ def test_noise_floor_matches_the_exact_noise_only_score(relative_noise):
     carries the reference's noise as well as its own, which SSIM's contrast term counts
     (measured 16 % low; the noise_floor docstring says so), so 25 % there.
     """
-    from translucent.reports.metric_registry import NOISE_FLOOR_FIELDS
-    from translucent.reports.metrics import error_scale, evaluate, noise_floor
+    from translucent.reports.metrics.compute import error_scale, evaluate, noise_floor
+    from translucent.reports.metrics.registry import NOISE_FLOOR_FIELDS
 
     rng = np.random.default_rng(7)
     truth = _smooth_truth()
@@ -408,7 +408,7 @@ def test_noise_floor_matches_the_exact_noise_only_score(relative_noise):
 
 
 def test_noise_floor_grows_with_the_noise_and_needs_a_variance():
-    from translucent.reports.metrics import noise_floor
+    from translucent.reports.metrics.compute import noise_floor
 
     rng = np.random.default_rng(3)
     truth = _smooth_truth(24)
@@ -426,7 +426,7 @@ def test_noise_floor_grows_with_the_noise_and_needs_a_variance():
 
 
 def test_noise_floor_is_deterministic():
-    from translucent.reports.metrics import noise_floor
+    from translucent.reports.metrics.compute import noise_floor
 
     truth = _smooth_truth(16)
     reference = Image(truth, (0.02 * truth) ** 2)
@@ -434,7 +434,7 @@ def test_noise_floor_is_deterministic():
 
 
 def test_noise_verdict():
-    from translucent.reports.metrics import RESOLVED, WITHIN_NOISE, noise_verdict
+    from translucent.reports.metrics.compute import RESOLVED, WITHIN_NOISE, noise_verdict
 
     assert noise_verdict("hdr_flip", 0.17, 0.04) == RESOLVED
     assert noise_verdict("hdr_flip", 0.15, 0.04) == WITHIN_NOISE
@@ -448,7 +448,7 @@ def test_noise_verdict():
 
 
 def test_a_mask_scores_only_its_pixels():
-    from translucent.reports.metrics import evaluate
+    from translucent.reports.metrics.compute import evaluate
 
     truth = _smooth_truth(32)
     test = truth.copy()
@@ -468,7 +468,7 @@ def test_a_mask_scores_only_its_pixels():
 @pytest.mark.parametrize("mask", [np.zeros((32, 32), bool), np.ones((8, 8), bool),
                                   np.ones((32, 32))])
 def test_a_bad_mask_is_an_input_error(mask):
-    from translucent.reports.metrics import evaluate
+    from translucent.reports.metrics.compute import evaluate
 
     truth = _smooth_truth(32)
     with pytest.raises(InputError, match="mask"):
@@ -478,7 +478,7 @@ def test_a_bad_mask_is_an_input_error(mask):
 def test_ciede2000_leaves_how_numpy_prints_arrays_alone():
     # colour-science switches numpy to its legacy 1.13 printing when imported
     import numpy
-    from translucent.reports.metrics import ciede2000_map
+    from translucent.reports.metrics.compute import ciede2000_map
 
     before = numpy.get_printoptions()
     ciede2000_map(numpy.full((2, 2, 3), 0.5), numpy.full((2, 2, 3), 0.25))

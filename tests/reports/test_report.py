@@ -13,9 +13,9 @@ import pytest
 from translucent.errors import InputError
 from translucent.fast import base as fast_base
 from translucent.fast.conformance import tiny_sphere_text
-from translucent.reports import report as report_module
 from translucent.reports.cli import main
-from translucent.reports.report import (
+from translucent.reports.report import pipeline as report_module
+from translucent.reports.report.pipeline import (
     DEFAULT_BASELINE,
     TOLERANCES,
     Tolerance,
@@ -199,7 +199,7 @@ def test_ladder_knobs_take_the_cheap_end_of_the_first_ladder():
     from types import SimpleNamespace
 
     from translucent.fast import splatting
-    from translucent.reports.report import ladder_knobs
+    from translucent.reports.report.pipeline import ladder_knobs
 
     assert ladder_knobs(splatting, "splatting") == [{"irradiance_resolution": 64}]
     own = SimpleNamespace(DEFAULT_KNOBS={"n": 8}, LADDERS={"n": [{"n": 8}, {"n": 2}, {}]})
@@ -229,8 +229,8 @@ def test_tiny_report_shows_every_image_it_wrote(tiny):
 
 
 def test_every_error_map_has_its_colour_bar_with_range_and_unit(tiny):
-    from translucent.reports.error_maps import MAP_STYLES, colour_map
-    from translucent.reports.report_page import colour_bar
+    from translucent.reports.metrics.maps import MAP_STYLES, colour_map
+    from translucent.reports.report.page import colour_bar
 
     page = (tiny["out"] / "index.html").read_text()
     for name in ("flip", "relative_error", "ciede2000", "ssim"):
@@ -250,8 +250,8 @@ def test_every_error_map_has_its_colour_bar_with_range_and_unit(tiny):
 
 
 def test_every_metric_comes_with_its_noise_floor_and_verdict(tiny):
-    from translucent.reports.metric_registry import NOISE_FLOOR_FIELDS
-    from translucent.reports.metrics import noise_floor, noise_verdict
+    from translucent.reports.metrics.compute import noise_floor, noise_verdict
+    from translucent.reports.metrics.registry import NOISE_FLOOR_FIELDS
 
     scene = _data(tiny["out"])
     reference = scene["reference"]
@@ -283,7 +283,7 @@ def test_every_metric_comes_with_its_noise_floor_and_verdict(tiny):
 
 
 def test_each_method_has_its_speedup_over_path_tracing_or_the_reason(tiny):
-    from translucent.reports.speedup import PATH_TRACING_SPP
+    from translucent.reports.report.speedup import PATH_TRACING_SPP
 
     scene = _data(tiny["out"])
     curve = scene["path_tracing"]
@@ -340,7 +340,7 @@ SPHERE_ONLY_METHOD = textwrap.dedent('''
 
 def test_a_method_is_scored_on_the_objects_it_renders(tmp_path, monkeypatch):
     from translucent.image import read_exr
-    from translucent.reports.metrics import noise_floor
+    from translucent.reports.metrics.compute import noise_floor
     from translucent.scenes import gbuffer, load_scene
 
     (tmp_path / "report_sphere_only.py").write_text(SPHERE_ONLY_METHOD)

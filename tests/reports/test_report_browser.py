@@ -7,7 +7,7 @@ import shutil
 import subprocess
 
 import pytest
-from translucent.reports.report import make_report
+from translucent.reports.report.pipeline import make_report
 from translucent.scenes import Camera, load_scene
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
@@ -103,7 +103,7 @@ window.addEventListener("load", () => {
 
 def test_the_first_screen_shows_how_wrong_and_how_fast_on_every_default_scene(chromium,
                                                                                tmp_path):
-    from translucent.reports.report import default_scenes
+    from translucent.reports.report.pipeline import default_scenes
 
     out = tmp_path / "report"
     make_report(None, out, baseline=tmp_path / "baseline.json", update_baseline=True,

@@ -88,8 +88,8 @@ def test_error_maps_hatch_the_pixels_the_numbers_do_not_count(tmp_path):
     # a map and the numbers beside it count the same pixels: the others are hatched grey
     import numpy as np
     from translucent.image import Image, read_exr
-    from translucent.reports.error_maps import NOT_SCORED_GREYS, write_error_maps
-    from translucent.reports.metrics import evaluate_on
+    from translucent.reports.metrics.compute import evaluate_on
+    from translucent.reports.metrics.maps import NOT_SCORED_GREYS, write_error_maps
 
     rng = np.random.default_rng(3)
     reference = Image(rng.random((12, 16, 3)).astype(np.float32) + 0.5)

@@ -7,7 +7,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from translucent.image import Image
-from translucent.reports.speedup import PathTracingCurve, scored_curve, speedup, tradeoff_plot
+from translucent.reports.report.speedup import (
+    PathTracingCurve,
+    scored_curve,
+    speedup,
+    tradeoff_plot,
+)
 
 
 def _power_law(c=1.0, t1=0.25, spp=(1, 4, 16)):
@@ -79,7 +84,7 @@ def test_the_plot_is_written_or_nothing_when_there_is_nothing_to_draw(tmp_path):
 
 
 def test_relit_frames_move_every_light_a_little():
-    from translucent.reports.runs import LIGHT_NUDGE, nudged_lights
+    from translucent.reports.report.runs import LIGHT_NUDGE, nudged_lights
     from translucent.scenes import (
         ConstantEnvironment,
         DirectionalLight,
@@ -114,7 +119,7 @@ def test_the_ladder_loads_and_compiles_once_and_times_every_spp(monkeypatch):
     compiled every kernel again (the loaded sample count is part of them)."""
     import importlib
 
-    from translucent.reports.speedup import path_tracing_ladder
+    from translucent.reports.report.speedup import path_tracing_ladder
     from translucent.scenes import load_scene
 
     render_module = importlib.import_module("translucent.reference.render")

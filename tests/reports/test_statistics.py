@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from translucent.errors import InputError
 from translucent.image import Image
-from translucent.reports.statistics import (
+from translucent.reports.metrics.statistics import (
     REQUIRED_FRACTION,
     SIGNIFICANCE,
     sidak_alpha,
@@ -244,7 +244,7 @@ def test_pass_counts_must_be_at_least_two():
 
 
 def test_block_means_average_pixels_and_their_variances():
-    from translucent.reports.statistics import block_means
+    from translucent.reports.metrics.statistics import block_means
 
     rgb = np.arange(8 * 6 * 3, dtype=float).reshape(8, 6, 3)
     variance = np.full((8, 6, 3), 4.0)
@@ -319,7 +319,7 @@ def _rare_path_render(rng, samples, shape=(32, 32, 3)):
 
 
 def test_pooling_the_variance_keeps_rare_paths_from_failing_honest_renders():
-    from translucent.reports.statistics import z_test
+    from translucent.reports.metrics.statistics import z_test
 
     rng = np.random.default_rng(0)
     rejected = {"own": 0, "pooled": 0}
@@ -339,7 +339,7 @@ def test_pooling_the_variance_keeps_rare_paths_from_failing_honest_renders():
 
 def _block_test_trials(make_render, trials: int, seed: int) -> dict[str, int]:
     """Honest and 1.2x renders of 16 spp against 8 passes of 16: how many fail each test."""
-    from translucent.reports.statistics import z_test, z_test_blocks
+    from translucent.reports.metrics.statistics import z_test, z_test_blocks
 
     rng = np.random.default_rng(seed)
     failures = {"honest": 0, "bright": 0, "bright_pixel": 0}
@@ -365,7 +365,7 @@ def test_block_means_catch_a_render_a_fifth_too_bright_and_pass_honest_ones():
 
 def test_one_firefly_the_reference_never_met_does_not_reject_its_block():
     """A 16-spp render with one rare bright path, against 8 passes that all missed it."""
-    from translucent.reports.statistics import z_test_blocks
+    from translucent.reports.metrics.statistics import z_test_blocks
 
     rng = np.random.default_rng(2)
     passes = 0.1 + 0.01 * rng.standard_normal((8, 16, 16, 3))
@@ -401,7 +401,7 @@ def test_block_means_pass_honest_renders_with_fireflies_and_catch_a_fifth_too_br
 
 
 def test_block_means_need_two_blocks_and_check_their_input():
-    from translucent.reports.statistics import z_test_blocks
+    from translucent.reports.metrics.statistics import z_test_blocks
 
     small = np.ones((8, 12, 3))
     assert z_test_blocks(small, small, small, 4, reference_samples=8,

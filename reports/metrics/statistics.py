@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from ..image import Image
+from ...errors import InputError
+from ...image import Image
 
 __all__ = ["ZTestResult", "block_means", "z_test", "z_test_blocks", "z_test_known_variance",
            "sidak_alpha"]

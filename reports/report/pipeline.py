@@ -17,7 +17,7 @@ an interrupted or failed run leaves no half-written report (a previous report in
 is replaced only then).
 
 Reference renders and method runs are independent tasks
-(:func:`translucent.reports.distributed.run_tasks`): a local Dask process cluster by
+(:func:`translucent.reports.report.distributed.run_tasks`): a local Dask process cluster by
 default, a Dask scheduler with ``scheduler=``, or this process with ``serial=True``.
 A method run is kept in the ``"report"`` cache, keyed by the scene, the method, its knobs,
 the versions and a hash of the source of the packages it depends on; a second report with
@@ -47,10 +47,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..atomic import atomic_write_text, check_output_folder, note_input
-from ..errors import InputError, check_count
-from ..image import Image
-from ..progress import progress_bar
+from ...atomic import atomic_write_text, check_output_folder, note_input
+from ...errors import InputError, check_count
+from ...image import Image
+from ...progress import progress_bar
 from .baselines import (
     BASELINE_FORMAT,
     DEFAULT_BASELINE,
@@ -64,10 +64,10 @@ from .baselines import (
     updated_baseline,
 )
 from .renderer_images import renderer_images, renderers_in
-from .report_model import LADDER, PATH_TRACING, ReportResult, SceneReport, keep_run
-from .report_page import html_page
-from .report_summary import print_summary, speedup_fields, summary_rows
-from .report_tasks import MethodTask, PathTracingTask, ReferenceTask, run_task, task_entry
+from .model import LADDER, PATH_TRACING, ReportResult, SceneReport, keep_run
+from .page import html_page
+from .summary import print_summary, speedup_fields, summary_rows
+from .tasks import MethodTask, PathTracingTask, ReferenceTask, run_task, task_entry
 from .runs import (
     MethodRun,
     backend_versions,
@@ -150,7 +150,7 @@ def ladder_knobs(module, name: str, points: int = REPORT_LADDER_POINTS) -> list[
     The first ``points`` settings of the method's first quality ladder that differ from its
     defaults; [] for a method with none.
     """
-    from .bench.tradeoff import declared_ladders
+    from ..bench.tradeoff import declared_ladders
 
     ladders = declared_ladders(module, name) or {}
     defaults = getattr(module, "DEFAULT_KNOBS", {}) or {}
@@ -199,7 +199,7 @@ def default_scenes() -> tuple[list[str], dict[str, str]]:
     excluded : dict of str to str
         Scene name -> the reason it is left out.
     """
-    from ..scenes import builtin_scene_names
+    from ...scenes import builtin_scene_names
 
     names = builtin_scene_names()
     excluded = {name: reason for name, reason in EXCLUDED_SCENES.items() if name in names}
@@ -208,7 +208,7 @@ def default_scenes() -> tuple[list[str], dict[str, str]]:
 
 def _source_fingerprint() -> str:
     """SHA-256 of the source files a method's image depends on."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     digest = hashlib.sha256()
     paths = [root / name for name in SOURCE_FILES]
     for folder in SOURCE_FOLDERS:
@@ -221,7 +221,7 @@ def _source_fingerprint() -> str:
 
 
 def _run_key(method_name: str, scene, knobs: dict, fingerprint: str, versions: dict) -> str:
-    from ..cache import content_hash
+    from ...cache import content_hash
 
     return content_hash("report-run", RUN_FORMAT, method_name, scene, knobs, fingerprint,
                         versions)
@@ -229,7 +229,7 @@ def _run_key(method_name: str, scene, knobs: dict, fingerprint: str, versions: d
 
 def _unconvertible(scene) -> str:
     """Return why Mitsuba cannot take ``scene`` (no render needed to know), or ""."""
-    from ..reference import convert_scene
+    from ...reference import convert_scene
 
     try:
         convert_scene(scene)
@@ -239,7 +239,7 @@ def _unconvertible(scene) -> str:
 
 
 def _cached_reference(scene, spp: int, passes: int) -> Image | None:
-    from ..reference.render import read_cached_reference
+    from ...reference.render import read_cached_reference
 
     path = reference_path(scene, spp, passes)
     # served only if made for this key (the file's name); else rendered again
@@ -268,8 +268,8 @@ def _check_out(out) -> Path:
 
 
 def _methods(methods) -> list[str]:
-    from ..fast.base import METHODS
-    from ..fast.registry import check_known
+    from ...fast.base import METHODS
+    from ...fast.registry import check_known
 
     if methods is None:
         return list(METHODS)
@@ -452,8 +452,8 @@ class _Plan:
 
 def _plan(scenes, chosen, renderers, images, spp, passes, *, local_workers: bool) -> _Plan:
     """Load the scenes, find what is cached (references, runs, ladders), list the rest."""
-    from ..cache import Cache, content_hash
-    from ..scenes import Scene, load_scene
+    from ...cache import Cache, content_hash
+    from ...scenes import Scene, load_scene
 
     excluded: dict[str, str] = {}
     names = list(scenes) if scenes else None
@@ -520,9 +520,9 @@ def _plan_method(plan: _Plan, report: SceneReport, name: str, portable,
 
     Or say why not: no reference, not installed, not applicable, a broken contract.
     """
-    from ..fast.base import applicability
-    from ..fast.base import method as method_module
-    from ..fast.registry import MethodContractError, method_fingerprint
+    from ...fast.base import applicability
+    from ...fast.base import method as method_module
+    from ...fast.registry import MethodContractError, method_fingerprint
 
     def refused(status: str, reason: str, **extra) -> None:
         report.runs[name] = MethodRun(name, report.name, status, reason, **extra)
@@ -557,7 +557,7 @@ def _plan_method(plan: _Plan, report: SceneReport, name: str, portable,
 
 def _plan_path_tracing(plan: _Plan, report: SceneReport, portable, chosen) -> None:
     """Find or plan the path-tracing ladder, for the speed-ups of the methods to be scored."""
-    from ..cache import content_hash
+    from ...cache import content_hash
 
     if report.reference_error or not any(
             report.runs.get(n) is None or report.runs[n].status == "ok"
@@ -590,7 +590,7 @@ def _run(plan: _Plan, staging: Path, timing: dict, *, scheduler, serial: bool,
 
     Returns the tasks' timing entries (:func:`~.report_tasks.task_entry`).
     """
-    from ..cache import limited_entries
+    from ...cache import limited_entries
     from .distributed import run_tasks
 
     pending = {report.slug: 0 for report in plan.reports}
@@ -709,14 +709,14 @@ def metric_verdict(noise_verdict: str, check, key: str) -> str:
 
     Examples
     --------
-    >>> from translucent.reports.baselines import BaselineCheck
+    >>> from translucent.reports.report.baselines import BaselineCheck
     >>> check = BaselineCheck("regression", "worse", {"hdr_flip": {"verdict": "worse"}})
     >>> metric_verdict("resolved", check, "hdr_flip"), metric_verdict("resolved", check, "ssim")
     ('regression', 'no baseline')
     >>> metric_verdict("within reference noise", check, "hdr_flip")
     'within reference noise'
     """
-    from .metrics import WITHIN_NOISE
+    from ..metrics.compute import WITHIN_NOISE
 
     if noise_verdict == WITHIN_NOISE:
         return WITHIN_NOISE
@@ -733,7 +733,7 @@ def _made_with(report: SceneReport) -> dict:
 
 
 def _staging_folder(out: Path) -> Path:
-    from ..atomic import sweep_orphans
+    from ...atomic import sweep_orphans
 
     parent = out.absolute().parent
     parent.mkdir(parents=True, exist_ok=True)

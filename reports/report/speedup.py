@@ -80,7 +80,7 @@ def scored_curve(points, reference, mask=None) -> PathTracingCurve:
     mask : array_like of bool, shape (H, W), optional
         The scored pixels (those of the objects).
     """
-    from ..errors import InputError
+    from ...errors import InputError
 
     if not isinstance(points, list):
         return PathTracingCurve(error=str(points))
@@ -106,11 +106,11 @@ def scored_relative_mse(reference, image, mask) -> float:
     """Relative MSE over the scored pixels, the reference's noise discounted, as the methods'."""
     import numpy as np
 
-    from .metrics import relative_mse
+    from ..metrics.compute import relative_mse
 
     ref, test, variance = reference.rgb, image.rgb, reference.variance
     if ref.shape != test.shape:
-        from ..errors import InputError
+        from ...errors import InputError
 
         raise InputError(f"the render is {test.shape}, the reference {ref.shape}",
                          field="shape", value=test.shape)
@@ -142,7 +142,7 @@ def speedup(curve: PathTracingCurve | None, relative_mse, frame_seconds,
         (path tracing's time at that error), ``extrapolated`` and ``reason`` (why it is
         None, or what qualifies it).
     """
-    from .metrics import WITHIN_NOISE
+    from ..metrics.compute import WITHIN_NOISE
 
     empty = {"speedup_vs_path_tracing": None, "path_tracing_seconds": None,
              "extrapolated": False}
@@ -202,7 +202,7 @@ def tradeoff_plot(path, curves: dict, methods: dict, noise_floor: float | None,
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
-    from ..atomic import atomic_save_figure
+    from ...atomic import atomic_save_figure
 
     usable = {name: (t, e) for name, (t, e) in methods.items()
               if t and e and t > 0 and e > 0 and math.isfinite(t) and math.isfinite(e)}
@@ -293,7 +293,7 @@ def overview_plot(path, points: list[tuple], title: str = "every scene") -> Path
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
-    from ..atomic import atomic_save_figure
+    from ...atomic import atomic_save_figure
 
     usable = [p for p in points if p[2] and p[3] and p[2] > 0 and p[3] > 0
               and math.isfinite(p[2]) and math.isfinite(p[3])]
@@ -376,8 +376,8 @@ def path_tracing_points(scene, spp_values, seed: int = 1,
     list of dict
         Per spp as :func:`path_tracing_point`.
     """
-    from ..image import Image
-    from ..reference.render import load_scenes, render_sample
+    from ...image import Image
+    from ...reference.render import load_scenes, render_sample
 
     spp_values = [int(spp) for spp in spp_values]
     try:

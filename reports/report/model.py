@@ -1,6 +1,6 @@
 """The report's data model: what is known of each scene as the report plans, runs and judges.
 
-The orchestrator (:mod:`translucent.reports.report`) fills a :class:`SceneReport` per
+The orchestrator (:mod:`translucent.reports.report.pipeline`) fills a :class:`SceneReport` per
 scene; the scoring (:mod:`.scoring`), the page (:mod:`.report_page`) and the summary
 (:mod:`.report_summary`) read it. Nothing here computes.
 """
@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..image import Image
+from ...image import Image
 from .baselines import BaselineCheck
 from .runs import MethodRun
 
@@ -53,12 +53,12 @@ class SceneReport:
     checks: dict[str, BaselineCheck] = field(default_factory=dict)
     files: dict[str, dict[str, str]] = field(default_factory=dict)
     #: what the path-tracing ladder task returned, its scored curve, each method's speed-up
-    #: (:mod:`translucent.reports.speedup`)
+    #: (:mod:`translucent.reports.report.speedup`)
     path_tracing: Any = None
     curve: Any = None
     speedups: dict[str, dict] = field(default_factory=dict)
     #: per method, the objects it is scored on; where fewer than the scene's, its pixels
-    #: and noise floor (:mod:`translucent.reports.scoring`), kept per set of objects
+    #: and noise floor (:mod:`translucent.reports.report.scoring`), kept per set of objects
     scored_objects: dict[str, list[str]] = field(default_factory=dict)
     method_masks: dict[str, Any] = field(default_factory=dict)
     method_floors: dict[str, dict | None] = field(default_factory=dict)

@@ -27,7 +27,7 @@ __all__ = ["MethodTask", "PathTracingTask", "ReferenceTask", "run_task", "task_e
 
 def _scene(scene):
     if isinstance(scene, str):
-        from ..scenes import load_scene
+        from ...scenes import load_scene
 
         return load_scene(scene)
     return scene

@@ -1,7 +1,7 @@
 """Another renderer's images, read to be scored like a fast method's (``report --images``).
 
 ``DIR/<renderer>/<scene name>.exr``: one folder per renderer, named as the report shows it
-(:func:`renderers_in`); each image becomes a :class:`~translucent.reports.runs.MethodRun`
+(:func:`renderers_in`); each image becomes a :class:`~translucent.reports.report.runs.MethodRun`
 with the times its header holds (:func:`renderer_images`).
 """
 
@@ -11,7 +11,7 @@ import math
 import re
 from pathlib import Path
 
-from ..errors import InputError
+from ...errors import InputError
 from .runs import MethodRun, timestamp
 
 __all__ = ["HEADER_SECONDS", "RENDERER_NAME", "renderer_images", "renderers_in"]
@@ -66,7 +66,7 @@ def renderer_images(images, renderers: list[str], scene) -> dict:
         An unreadable image, or one of another size than the scene's camera (naming the
         file).
     """
-    from ..image import header_number, read_exr
+    from ...image import header_number, read_exr
 
     runs = {}
     for name in renderers:

@@ -38,8 +38,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
-from ..image import LUMINANCE_WEIGHTS, Image
+from ...errors import InputError
+from ...image import LUMINANCE_WEIGHTS, Image
 
 __all__ = [
     "Metrics",

@@ -7,8 +7,8 @@ from pathlib import Path
 
 from .baselines import BaselineCheck
 from .formatting import format_seconds, format_speedup, format_value
-from .metric_registry import METRIC_LABELS, REPORTED_METRICS, TOLERANCES
-from .report_model import SceneReport
+from ..metrics.registry import METRIC_LABELS, REPORTED_METRICS, TOLERANCES
+from .model import SceneReport
 from .runs import MethodRun
 
 __all__ = ["html_page"]
@@ -23,7 +23,7 @@ def _reference_text(settings: dict) -> str:
 
 
 def _stylesheet() -> str:
-    path = Path(__file__).resolve().parent / "templates" / "report.css"
+    path = Path(__file__).resolve().parents[1] / "templates" / "report.css"
     return path.read_text(encoding="utf-8") if path.is_file() else ""
 
 
@@ -46,7 +46,7 @@ def colour_bar(style) -> str:
     Parameters
     ----------
     style : MapStyle
-        The map's colour map and range (:data:`~translucent.reports.error_maps.MAP_STYLES`).
+        The map's colour map and range (:data:`~translucent.reports.metrics.maps.MAP_STYLES`).
 
     Returns
     -------
@@ -56,7 +56,7 @@ def colour_bar(style) -> str:
     """
     import numpy as np
 
-    from .error_maps import colour_map
+    from ..metrics.maps import colour_map
 
     values = np.linspace(style.vmin, style.vmax, COLOUR_BAR_STOPS)[None, :]
     stops = ", ".join(f"rgb({r},{g},{b}) {100 * i / (COLOUR_BAR_STOPS - 1):.4g}%"
@@ -74,7 +74,7 @@ def _verdict_class(status: str) -> str:
 
 def html_page(reports: list[SceneReport], chosen: list[str], context: dict) -> str:
     """Return the report's ``index.html``: summary, legend, one section per scene."""
-    from .error_maps import MAP_STYLES
+    from ..metrics.maps import MAP_STYLES
 
     versions = context["versions"]
     parts = [
@@ -286,7 +286,7 @@ def _reference_origin(report: SceneReport) -> str:
 
 
 def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
-    from .error_maps import MAP_STYLES
+    from ..metrics.maps import MAP_STYLES
 
     check = report.checks.get(name)
     anchor = f"{report.slug}-{name}"
@@ -406,7 +406,7 @@ def _speedup_sentence(report: SceneReport, name: str) -> str:
 
 def _solid_note(method_name: str, conversions: dict) -> str:
     """Say what a method assumed of a solid medium and what reading it at the surface cost."""
-    from ..fast.solid_inputs import SURFACE_ASSUMPTIONS
+    from ...fast.solid_inputs import SURFACE_ASSUMPTIONS
 
     assumption = SURFACE_ASSUMPTIONS.get(method_name, "the medium is read at the surface")
     items = "".join(
@@ -420,7 +420,7 @@ def _solid_note(method_name: str, conversions: dict) -> str:
 
 def _metrics_table(metrics: dict, check: BaselineCheck | None, floors: dict | None = None,
                    verdicts: dict | None = None) -> str:
-    from .metrics import NOISE_MARGIN
+    from ..metrics.compute import NOISE_MARGIN
 
     gated = check.metrics if check is not None else {}
     floors, verdicts = floors or {}, verdicts or {}

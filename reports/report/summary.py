@@ -1,6 +1,6 @@
 """What the report prints, and the rows it prints them from.
 
-The summary table of :func:`~translucent.reports.report.make_report` (a row per scene and
+The summary table of :func:`~translucent.reports.report.pipeline.make_report` (a row per scene and
 method: the gated metrics beside their noise floors, the times, the speed-up over path
 tracing and the baseline's verdict) and the line that says where the report's time went.
 """

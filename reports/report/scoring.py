@@ -6,7 +6,7 @@ objects and leave the others black), those objects' pixels only
 (:func:`~translucent.fast.base.scored_object_names`); object ids come from the camera's
 G-buffer. Each set of pixels has its own noise floor (what the reference's noise alone
 gives there, :func:`~translucent.reports.metrics.noise_floor`), its own verdicts and its
-own path-tracing curve for the speed-up at equal error (:mod:`translucent.reports.speedup`).
+own path-tracing curve for the speed-up at equal error (:mod:`translucent.reports.report.speedup`).
 Whole-image scores are kept beside them.
 """
 
@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from .report_model import SceneReport
+from ...errors import InputError
+from .model import SceneReport
 from .speedup import scored_curve, scored_relative_mse, speedup, tradeoff_plot
 
 __all__ = ["score_scene", "scored_pixels"]
@@ -25,8 +25,8 @@ __all__ = ["score_scene", "scored_pixels"]
 
 def score_scene(report: SceneReport, folder: Path) -> None:
     """Write the scene's images and error maps; score each method on its own pixels."""
-    from .error_maps import write_error_maps, write_linear_png
-    from .metrics import display_white, evaluate_on
+    from ..metrics.maps import write_error_maps, write_linear_png
+    from ..metrics.compute import display_white, evaluate_on
 
     scene_folder = folder / report.slug
     scene_folder.mkdir(parents=True, exist_ok=True)
@@ -81,7 +81,7 @@ def scored_pixels(scene, objects=None):
     image and the reference's, so it would only dilute the averages; None (the whole image)
     when no pixel sees such an object.
     """
-    from ..scenes import gbuffer
+    from ...scenes import gbuffer
 
     buffer = gbuffer(scene)
     if objects is None:
@@ -94,7 +94,7 @@ def scored_pixels(scene, objects=None):
 
 def _object_scoring(report: SceneReport, name: str) -> None:
     """Record which objects ``name`` is scored on and, where fewer than all, their pixels."""
-    from ..fast.base import method, scored_object_names
+    from ...fast.base import method, scored_object_names
 
     try:
         objects = scored_object_names(method(name), report.scene)
@@ -115,7 +115,7 @@ def _floors(report: SceneReport) -> None:
     One set of noise draws serves every pixel set (:func:`~translucent.reports.metrics.
     noise_floors`); a floor is None without a usable variance.
     """
-    from .metrics import noise_floors
+    from ..metrics.compute import noise_floors
 
     keys = list(report.object_masks)
     masks = [report.scored_mask] + [report.object_masks[key][0] for key in keys]
@@ -133,8 +133,8 @@ def _floors(report: SceneReport) -> None:
 
 
 def _verdicts(metrics: dict, floors: dict | None) -> dict[str, str]:
-    from .metric_registry import NOISE_FLOOR_FIELDS
-    from .metrics import noise_verdict
+    from ..metrics.registry import NOISE_FLOOR_FIELDS
+    from ..metrics.compute import noise_verdict
 
     floors = floors or {}
     return {key: noise_verdict(key, metrics[key], floors.get(key))
@@ -191,7 +191,7 @@ def _ladder_points(report: SceneReport, name: str) -> None:
 
 def _reference_noise(report: SceneReport) -> None:
     """Summarise the reference's own noise; warn when it is too noisy to judge by."""
-    from ..noise import noise_summary, noise_warning
+    from ...noise import noise_summary, noise_warning
 
     reference = report.reference
     if reference.variance is None:

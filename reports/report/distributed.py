@@ -13,7 +13,7 @@ import os
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
-from ..errors import InputError
+from ...errors import InputError
 
 __all__ = ["WORKER_MALLOC_TUNABLES", "run_tasks", "dask_client", "prepare_worker", "timed_call",
            "worker_environment"]
@@ -82,7 +82,7 @@ def prepare_worker() -> str:
     run (``TRANSLUCENT_VARIANT`` naming a CUDA one on a machine without a GPU) raises the
     :class:`~translucent.errors.InputError` there, and the run stops before any task.
     """
-    from ..backend import variant
+    from ...backend import variant
 
     return variant()
 
@@ -186,7 +186,7 @@ def run_tasks(function: Callable[..., Any], arguments: Iterable[Sequence[Any]], 
         result arrives (in order of completion; serially, in order), while the other
         tasks run on: work on finished results then fills the workers' idle time.
     """
-    from ..progress import progress_bar
+    from ...progress import progress_bar
 
     arguments = [tuple(args) for args in arguments]
     if groups is not None and len(groups) != len(arguments):

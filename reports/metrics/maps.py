@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_path
-from ..errors import InputError
-from ..image import Image
-from .metrics import Comparison, display_white, evaluate, to_display
+from ...atomic import atomic_path
+from ...errors import InputError
+from ...image import Image
+from .compute import Comparison, display_white, evaluate, to_display
 
 __all__ = ["ERROR_MAPS", "error_map_paths", "MAP_STYLES", "MapStyle", "ErrorMapFiles",
            "NOT_SCORED_GREYS", "colour_map", "hatch_not_scored", "srgb8", "write_png",
@@ -327,7 +327,7 @@ def write_z_test_maps(result, folder, *, prefix: str = "", test=None,
     Parameters
     ----------
     result : ZTestResult
-        From :func:`translucent.reports.statistics.z_test`.
+        From :func:`translucent.reports.metrics.statistics.z_test`.
     folder : str or PathLike
         Where (created if missing).
     prefix : str

@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from ..cache import private_cache
-from ..errors import InputError
-from ..image import Image
-from ..progress import hidden
+from ...cache import private_cache
+from ...errors import InputError
+from ...image import Image
+from ...progress import hidden
 
 __all__ = ["MethodRun", "backend_versions", "committed_reference_for", "json_safe",
            "portable_scene", "reference_path", "render_reference", "run_method", "timestamp"]
@@ -159,8 +159,8 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
         Status "ok" with the image, "not installed", "not applicable" (with the method's
         reason) or "failed" (with the error and its traceback).
     """
-    from ..fast.base import applicability, method
-    from ..fast.registry import MethodContractError
+    from ...fast.base import applicability, method
+    from ...fast.registry import MethodContractError
 
     knobs = dict(knobs or {})
     base = {"method": method_name, "scene": scene.name, "knobs": knobs,
@@ -213,10 +213,10 @@ def render_reference(scene, spp: int, passes: int | None, target_rse: float | No
 
     ``passes`` fixed passes of ``spp`` samples; or, with ``passes`` None, passes added until
     the median relative standard error is ``target_rse`` or ``budget_seconds`` are spent.
-    A task for :func:`~translucent.reports.distributed.run_tasks`: a failure comes back as
+    A task for :func:`~translucent.reports.report.distributed.run_tasks`: a failure comes back as
     the string ``"Type: message"`` so that one scene's failure does not stop the others.
     """
-    from ..reference.render import render, render_to_target
+    from ...reference.render import render, render_to_target
 
     try:
         if passes is None:
@@ -236,8 +236,8 @@ def reference_path(scene, spp: int, passes: int) -> Path:
     """
     import inspect
 
-    from ..cache import Cache
-    from ..reference.render import reference_key, reference_settings, render
+    from ...cache import Cache
+    from ...reference.render import reference_key, reference_settings, render
 
     defaults = {name: parameter.default
                 for name, parameter in inspect.signature(render).parameters.items()
@@ -258,8 +258,8 @@ def committed_reference_for(scene):
         unreadable, of another size): the message names the file, the scene and the
         command that renders it again. Never silently re-used, never silently replaced.
     """
-    from ..reference.committed import PLANS, committed_reference
-    from ..scenes.scene_file import builtin_scene_path
+    from ...reference.committed import PLANS, committed_reference
+    from ...scenes.scene_file import builtin_scene_path
 
     if scene.name not in PLANS or not scene.source:
         return None
@@ -282,15 +282,15 @@ def nudged_lights(lights, step: int) -> list:
     Positions and centres move along x, directions turn about the axis they are least
     aligned with; environments stay as they are (nothing to move).
     """
-    from ..scenes.scene import moved_lights
+    from ...scenes.scene import moved_lights
 
     return moved_lights(lights, step * LIGHT_NUDGE)
 
 
 def portable_scene(scene, scene_hash: str, local_workers: bool):
     """Return the scene file's path when a local worker loads the same scene from it."""
-    from ..cache import content_hash
-    from ..scenes import load_scene
+    from ...cache import content_hash
+    from ...scenes import load_scene
 
     source = getattr(scene, "source", None)
     if not local_workers or not source or not Path(source).is_file():
@@ -305,7 +305,7 @@ def portable_scene(scene, scene_hash: str, local_workers: bool):
 
 def backend_versions() -> dict:
     """Return the Mitsuba, Dr.Jit and numpy versions and the variant (they decide images)."""
-    from ..backend import mitsuba
+    from ...backend import mitsuba
 
     mi = mitsuba()
     import drjit as dr

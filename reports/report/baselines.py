@@ -1,7 +1,7 @@
 """Baselines: the stored results a run is checked against, read, judged and written.
 
 A result is a regression when a gated metric (:data:`TOLERANCES`, from
-:mod:`translucent.reports.metric_registry`) is worse than its baseline entry beyond the
+:mod:`translucent.reports.metrics.registry`) is worse than its baseline entry beyond the
 metric's tolerance, or when a baseline entry now has no result.
 :func:`load_baseline` reads and validates a baseline file, :func:`check_against_baseline`
 judges one result, :func:`updated_baseline` writes a run's results into it.
@@ -14,8 +14,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import InputError
-from .metric_registry import (
+from ...errors import InputError
+from ..metrics.registry import (
     METRIC_LABELS,
     REPORTED_METRICS,
     TOLERANCES,
@@ -29,7 +29,7 @@ __all__ = ["BASELINE_FORMAT", "DEFAULT_BASELINE", "METRIC_LABELS", "REPORTED_MET
            "load_baseline", "updated_baseline"]
 
 #: The committed baseline of the default scenes.
-DEFAULT_BASELINE = Path(__file__).resolve().parent / "baseline" / "default.json"
+DEFAULT_BASELINE = Path(__file__).resolve().parents[1] / "baseline" / "default.json"
 
 #: Bumped when the baseline layout changes.
 BASELINE_FORMAT = 1

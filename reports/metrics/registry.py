@@ -4,7 +4,7 @@ One :class:`MetricSpec` per metric. Everything else is derived from :data:`REGIS
 metrics that get a noise floor (:data:`NOISE_FLOOR_FIELDS`), the ones stored and shown
 (:data:`REPORTED_METRICS`), their labels (:data:`METRIC_LABELS`), the gated ones and their
 tolerances (:data:`TOLERANCES`), and the names ``--metric`` takes
-(:mod:`translucent.reports.metric_table`). A metric's name is its
+(:mod:`translucent.reports.metrics.table`). A metric's name is its
 :class:`~translucent.reports.metrics.Metrics` field and its JSON key; the spellings of
 earlier versions (``relmse``, ``hdr-flip``, ``flip``) are read as aliases
 (:func:`canonical_metric`), so old baselines and command lines still work.
@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..errors import InputError
+from ...errors import InputError
 
 __all__ = ["METRIC_LABELS", "NOISE_FLOOR_FIELDS", "REGISTRY", "REPORTED_METRICS", "TOLERANCES",
            "MetricSpec", "Tolerance", "canonical_metric", "metric_spec"]

@@ -11,9 +11,8 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
-from ..image import Image
-from .metric_registry import REGISTRY, MetricSpec, metric_spec
-from .metrics import (
+from ...image import Image
+from .compute import (
     Metrics,
     check_image,
     ciede2000_map,
@@ -24,6 +23,7 @@ from .metrics import (
     rmse,
     ssim_map,
 )
+from .registry import REGISTRY, MetricSpec, metric_spec
 
 __all__ = ["METRICS", "MetricDefinition", "metric", "metric_rows"]
 
