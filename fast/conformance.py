@@ -35,6 +35,13 @@ The checks, and why each matters to a user of the report:
     ``state.render(material=edited)`` equals a fresh precomputation of the scene with
     the edited material (Dipole: another measured medium; analytic BRDF: another
     gamma; Lambertian: half the albedo).
+``profiles``
+    Where the method declares a ``profile`` knob
+    (:func:`~translucent.fast.knobs.profile_knob`): every radial profile it takes renders
+    a finite image, and one that differs from the default profile's wherever the profile
+    differs on the scene's Dipole materials (the knob is really used); every profile it
+    refuses is an :class:`~translucent.errors.InputError` naming the profile
+    (:func:`check_profile` checks one).
 """
 
 from __future__ import annotations
@@ -49,8 +56,8 @@ from .base import Refusal, applicability, scored_object_names
 from .registry import contract_problems, method
 
 __all__ = ["CHECKS", "ConformanceFailure", "IMAGE_RTOL", "NotChecked", "TINY_SPHERE",
-           "check_method", "conformance_scene", "edited_material", "run_check",
-           "tiny_sphere_text"]
+           "check_method", "check_profile", "conformance_scene", "edited_material",
+           "profile_knob_of", "run_check", "run_profile_check", "tiny_sphere_text"]
 
 def tiny_sphere_text(name: str = "conformance_sphere", size: int = 16) -> str:
     """Return a scene file: a 320-face skin sphere under a point light, ``size`` pixels square.
@@ -326,11 +333,96 @@ def check_editing(module, scene, knobs) -> str:
                      + (" (" + "; ".join(refused) + ")" if refused else ""))
 
 
+#: Two profiles whose values differ by less than this, relative to the larger, at every
+#: probed radius are the same profile (the image must then stay the same).
+SAME_PROFILE_RTOL = 1e-9
+
+
+def profile_knob_of(module):
+    """Return the method's ``profile`` knob (a :class:`~translucent.fast.knobs.Knob`) or None."""
+    spec = getattr(module, "KNOBS", None)
+    try:
+        return spec["profile"] if spec is not None and "profile" in spec else None
+    except (KeyError, TypeError):
+        return None
+
+
+def _profile_differs(scene, name: str, default: str) -> bool:
+    """Whether profile ``name`` differs from ``default`` on some Dipole material of the scene."""
+    from ..materials import Dipole
+    from .knobs import radial_profile
+
+    radii = np.geomspace(1e-3, 1e2, 61)
+    for obj in scene.objects:
+        if isinstance(obj.material, Dipole):
+            chosen = radial_profile(name, obj.material).reflection(radii)
+            usual = radial_profile(default, obj.material).reflection(radii)
+            if np.any(np.abs(chosen - usual) > SAME_PROFILE_RTOL * np.maximum(chosen, usual)):
+                return True
+    return False
+
+
+def check_profile(module, scene, knobs, name: str) -> str:
+    """Check one value of the method's ``profile`` knob: taken and used, or refused by name.
+
+    Raises
+    ------
+    NotChecked
+        The method declares no ``profile`` knob.
+    ConformanceFailure
+        A profile it takes renders a bad image, or the default profile's image where the
+        profile differs; one it refuses is taken, or refused without being named.
+    """
+    from ..cache import private_cache
+
+    knob = profile_knob_of(module)
+    if knob is None:
+        raise NotChecked("the method declares no profile knob")
+    refused = dict(knob.refused)
+    if name in refused:
+        try:
+            _precompute(module, scene, {**knobs, "profile": name})
+        except InputError as error:
+            if name not in str(error):
+                raise ConformanceFailure(f"profile {name!r} is refused without being named: "
+                                         f"{error}") from None
+            return f"profile {name!r} is refused: {error.reason}"
+        raise ConformanceFailure(f"profile {name!r} is declared refused ({refused[name]}), "
+                                 "but precompute took it")
+    if name not in knob.choices:
+        raise ConformanceFailure(f"profile {name!r} is neither taken nor refused by the knob")
+    with private_cache():
+        pixels = _pixels(module.precompute(scene, **{**knobs, "profile": name}).render(),
+                         scene, f"render() with profile {name!r}")
+        if name == knob.default:
+            return f"the default profile {name!r} renders"
+        usual = _pixels(module.precompute(scene, **knobs).render(), scene, "render()")
+    if not pixels.any():
+        raise ConformanceFailure(f"render() with profile {name!r} is black")
+    difference = _relative_difference(pixels, usual)
+    if _profile_differs(scene, name, knob.default) and not difference > IMAGE_RTOL:
+        raise ConformanceFailure(f"profile {name!r} renders the default profile's image "
+                                 f"(relative L2 difference {difference:.2g}): not used")
+    return f"profile {name!r} renders, {difference:.2g} from the default's"
+
+
+def check_profiles(module, scene, knobs) -> str:
+    """Check every value of the ``profile`` knob (:func:`check_profile`), taken or refused."""
+    knob = profile_knob_of(module)
+    if knob is None:
+        raise NotChecked("the method declares no profile knob")
+    names = list(knob.choices) + [name for name, _ in knob.refused]
+    for name in names:
+        check_profile(module, scene, knobs, name)
+    return (f"{len(knob.choices)} profiles taken and used, {len(knob.refused)} refused by "
+            "name")
+
+
 #: The checks by name, in the order :func:`check_method` runs them.
 CHECKS = {"contract": check_contract, "refusal": check_refusal, "knobs": check_knobs,
           "render": check_render,
           "determinism": check_determinism, "relighting": check_relighting,
-          "editing": check_editing}
+          "editing": check_editing, "profiles": check_profiles}
 
 
 def run_check(name: str, check: str, scene=None, knobs: dict | None = None) -> str:
@@ -344,6 +436,11 @@ def run_check(name: str, check: str, scene=None, knobs: dict | None = None) -> s
         The check has nothing to test on this scene.
     """
     return CHECKS[check](*_prepared(name, scene, knobs))
+
+
+def run_profile_check(name: str, profile: str, scene=None, knobs: dict | None = None) -> str:
+    """Run :func:`check_profile` for one profile on method ``name`` (as :func:`run_check`)."""
+    return check_profile(*_prepared(name, scene, knobs), profile)
 
 
 def _prepared(name: str, scene, knobs):

@@ -57,6 +57,7 @@ __all__ = [
     "ProfileSampling",
     "DipolePCABasis",
     "dipole_pca_basis",
+    "decompose_family",
     "truncated_diffuse_reflectance",
     "singular_value_roots",
     "leading_basis_functions",
@@ -453,27 +454,59 @@ def truncated_diffuse_reflectance(sigma_a, sigma_s_prime, eta, radius) -> np.nda
 
 
 def _sampled_profiles(sampling: ProfileSampling, eta: float, sigma_s_prime, sigma_a,
-                      radii, weights) -> np.ndarray:
+                      radii, weights, family=None) -> np.ndarray:
     """Rows of weighted (and, if asked, unit-norm) sampled profiles for a block of the grid."""
-    profiles = dipole_reflectance_profile(radii, sigma_a[:, None], sigma_s_prime[:, None],
-                                          eta) * weights
+    if family is None:
+        profiles = dipole_reflectance_profile(radii, sigma_a[:, None], sigma_s_prime[:, None],
+                                              eta) * weights
+    else:
+        profiles = family(radii, sigma_a, sigma_s_prime, eta) * weights
     if sampling.normalise:
         norms = np.linalg.norm(profiles, axis=1, keepdims=True)
         profiles = np.divide(profiles, norms, out=np.zeros_like(profiles), where=norms > 0)
     return profiles
 
 
-def _profile_blocks(sampling: ProfileSampling, eta: float, radii, weights):
+def _profile_blocks(sampling: ProfileSampling, eta: float, radii, weights, family=None):
     """Yield the sampled matrix's rows (profiles), block by block over the grid."""
     sigma_s_prime_axis, sigma_a_axis = sampling.sigma_grids()
     rows_per_block = max(1, PROFILES_PER_BLOCK // sigma_a_axis.size)
     for start in range(0, sigma_s_prime_axis.size, rows_per_block):
         block_s = sigma_s_prime_axis[start:start + rows_per_block]
         grid_s, grid_a = np.meshgrid(block_s, sigma_a_axis, indexing="ij")
-        yield _sampled_profiles(sampling, eta, grid_s.ravel(), grid_a.ravel(), radii, weights)
+        yield _sampled_profiles(sampling, eta, grid_s.ravel(), grid_a.ravel(), radii, weights,
+                                family)
 
 
-def _decompose(sampling: ProfileSampling, eta: float):
+def decompose_family(sampling: ProfileSampling, eta: float, family):
+    r"""Sect. 3.1 of Wang et al. 2008 over another family of profiles than the dipole.
+
+    The same sampling (distances, weights, coefficient grid) and decomposition as
+    :func:`dipole_pca_basis`; only the sampled profiles differ.
+
+    Parameters
+    ----------
+    sampling : ProfileSampling
+    eta : float
+        Relative index of refraction of the sampled profiles, in [1, 3].
+    family : callable
+        ``family(radii, sigma_a, sigma_s_prime, eta) -> (m, n)``: the profiles (mm^-2) of
+        the m media (coefficients in mm^-1, shape (m,)) at the n distances (mm).
+
+    Returns
+    -------
+    radii, weights, vectors, singular_values : ndarray
+        As the arguments of :class:`DipolePCABasis`.
+    """
+    from threadpoolctl import threadpool_limits
+
+    # one BLAS thread, as materials.brdf_pca's SVD: threaded LAPACK on 650 x 650 gains
+    # little and stalls on a loaded machine
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _decompose(_sampling(sampling), float(_check_eta(eta)), family)
+
+
+def _decompose(sampling: ProfileSampling, eta: float, family=None):
     """Left singular vectors and singular values of the sampled matrix (distances x profiles).
 
     The matrix (650 x sigma_samples^2) is streamed in blocks. Its Gram matrix gives the
@@ -486,11 +519,12 @@ def _decompose(sampling: ProfileSampling, eta: float):
     """
     radii, weights = sampling.radii_and_weights()
     total = sampling.sigma_samples ** 2 * radii.size * 8
-    kept = list(_profile_blocks(sampling, eta, radii, weights)) \
+    kept = list(_profile_blocks(sampling, eta, radii, weights, family)) \
         if total <= PROFILE_MEMORY_BYTES else None
 
     def blocks():
-        return iter(kept) if kept is not None else _profile_blocks(sampling, eta, radii, weights)
+        return iter(kept) if kept is not None else _profile_blocks(sampling, eta, radii,
+                                                                   weights, family)
 
     gram = sum(block.T @ block for block in blocks())
     _, rotation = np.linalg.eigh(gram)

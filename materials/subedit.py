@@ -36,11 +36,14 @@ from ..atomic import atomic_path
 from ..errors import InputError, check_count, check_finite
 from .catalogue import measured_medium
 from .homogeneous import Dipole
+from .profiles.base import require_radial
+from .profiles.classical_dipole import DipoleProfile
 
 __all__ = [
     "SubEditProfiles",
     "DipoleConversion",
     "subedit_from_dipole",
+    "subedit_from_profile",
     "convert_media",
     "builtin_subedit",
     "BUILTIN_SUBEDIT",
@@ -446,11 +449,11 @@ class SubEditProfiles:
 
 # -------------------------------------------------------------------- dipole conversion
 class DipoleConversion(NamedTuple):
-    r"""A dipole converted to a SubEdit profile, and how far the profile is from it.
+    r"""A radial profile (the dipole's, or any) converted to SubEdit, and the error made.
 
     ``relative_error`` per channel: energy-weighted L1 distance
-    :math:`(\int_0^{r_s}|P - R_d|r\,dr + \int_{r_s}^\infty R_d r\,dr) /
-    \int_0^\infty R_d r\,dr`; ``truncated_energy``: the second term alone.
+    :math:`(\int_0^{r_s}|P - R|r\,dr + \int_{r_s}^\infty R r\,dr) /
+    \int_0^\infty R r\,dr`; ``truncated_energy``: the second term alone.
     """
 
     profiles: SubEditProfiles
@@ -458,19 +461,24 @@ class DipoleConversion(NamedTuple):
     truncated_energy: np.ndarray
 
 
-def _dipole_energy_radius(dipole: Dipole, fraction: float) -> float:
-    """Radius (mm) within which every channel of the dipole keeps ``fraction`` of its energy."""
-    total = dipole.total_diffuse_reflectance() / (2.0 * np.pi)
-    radius = 4.0 * float(np.max(dipole.mean_free_path[np.isfinite(dipole.mean_free_path)],
-                                initial=1.0))
+def _entering(dipole: Dipole) -> DipoleProfile:
+    """Return the dipole's R_d per unit power entering (Chen et al. 2012: F_t at entry)."""
+    return DipoleProfile(dipole, entry_fresnel=False)
+
+
+def _energy_radius(profile, fraction: float) -> float:
+    """Radius (mm) within which every channel of ``profile`` keeps ``fraction`` of its energy."""
+    total = profile.total() / (2.0 * np.pi)
+    scale = profile.length_scale()
+    radius = 4.0 * float(np.max(scale[np.isfinite(scale)], initial=1.0))
     while True:
         grid = np.linspace(0.0, radius, 4001)
-        energy = np.trapezoid(dipole.profile(grid) * grid[:, None], grid, axis=0)
+        energy = np.trapezoid(profile.reflection(grid) * grid[:, None], grid, axis=0)
         if np.all(energy >= fraction * total) or radius >= MAX_DEFAULT_RADIUS:
             break
         radius = min(1.5 * radius, MAX_DEFAULT_RADIUS)
     cumulative = np.concatenate([np.zeros((1, 3)), np.cumsum(
-        0.5 * (dipole.profile(grid[1:]) * grid[1:, None] + dipole.profile(grid[:-1])
+        0.5 * (profile.reflection(grid[1:]) * grid[1:, None] + profile.reflection(grid[:-1])
                * grid[:-1, None]) * np.diff(grid)[:, None], axis=0)])
     return float(max(np.interp(fraction * total[c], cumulative[:, c], grid) for c in range(3)))
 
@@ -487,11 +495,8 @@ def subedit_from_dipole(dipole: Dipole, *, segments: int = DEFAULT_SEGMENTS,
                         r_s: float | None = None) -> DipoleConversion:
     r"""Convert a dipole medium to a homogeneous SubEdit profile, with the error made.
 
-    The knots :math:`\hat P^k` minimise :math:`\sum_j w_j(\ln P(r_j) - \ln R_d(r_j))^2`
-    with energy weights :math:`w_j = r_j R_d(r_j)\Delta r_j` (a relative error weighted by
-    where the energy is), then all knots shift so that :math:`\int_0^{r_s}P r\,dr` equals the
-    dipole's. For a homogeneous material Eq. 8 of Chen et al. 2012 gives
-    :math:`R_d = \sqrt{P P} = P`.
+    :func:`subedit_from_profile` of the dipole's :math:`R_d` (Jensen et al. 2001) per
+    unit power entering.
 
     Parameters
     ----------
@@ -509,15 +514,57 @@ def subedit_from_dipole(dipole: Dipole, *, segments: int = DEFAULT_SEGMENTS,
     """
     if not isinstance(dipole, Dipole):
         raise InputError("expected a Dipole", field="dipole", value=type(dipole).__name__)
+    return subedit_from_profile(_entering(dipole), dipole.eta, segments=segments, r_s=r_s,
+                                name=dipole.name)
+
+
+def subedit_from_profile(profile, eta: float, *, segments: int = DEFAULT_SEGMENTS,
+                         r_s: float | None = None, name: str = "") -> DipoleConversion:
+    r"""Convert a radial profile to a homogeneous SubEdit profile, with the error made.
+
+    The knots :math:`\hat P^k` minimise :math:`\sum_j w_j(\ln P(r_j) - \ln R(r_j))^2`
+    with energy weights :math:`w_j = r_j R(r_j)\Delta r_j` (a relative error weighted by
+    where the energy is), then all knots shift so that :math:`\int_0^{r_s}P r\,dr` equals the
+    profile's. For a homogeneous material Eq. 8 of Chen et al. 2012 gives
+    :math:`R = \sqrt{P P} = P`.
+
+    Parameters
+    ----------
+    profile : RadialProfile
+        :math:`R(r)` in mm^-2 per unit power entering
+        (:mod:`translucent.materials.profiles`; the dipole's in
+        :func:`subedit_from_dipole`).
+    eta : float
+        Relative index of refraction of the boundary, for the Fresnel terms of Eq. 5-7.
+    segments : int
+        ``n`` of Eq. 9, >= 1.
+    r_s : float, optional
+        Maximum scattering radius in mm; default: the radius keeping 99.9 % of the energy
+        in every channel.
+    name : str
+        The texture's name.
+
+    Returns
+    -------
+    DipoleConversion
+        ``relative_error`` measured against ``profile``.
+    """
+    require_radial(profile)
     if int(segments) != segments or not 1 <= int(segments) <= 1024:
         raise InputError("must be an integer in [1, 1024]", field="segments", value=segments)
     segments = int(segments)
-    if r_s is None:
-        r_s = _dipole_energy_radius(dipole, DEFAULT_RADIUS_ENERGY)
+    if r_s is None and isinstance(profile, DipoleProfile):
+        r_s = _energy_radius(profile, DEFAULT_RADIUS_ENERGY)
+    elif r_s is None:
+        # the profile's own inverse CDF: a uniform trapezoid misses the energy of a profile
+        # that peaks (or diverges, as 1/r) at r = 0 and walks r_s out to its cap
+        r_s = min(float(np.max(profile.radius_containing(DEFAULT_RADIUS_ENERGY))),
+                  MAX_DEFAULT_RADIUS)
     r_s = _checked_radius(r_s)
-    finite_depths = dipole.mean_free_path[np.isfinite(dipole.mean_free_path)]
-    grid = _quadrature_grid(r_s, segments, 0.01 * float(np.min(finite_depths, initial=1.0)))
-    target = dipole.profile(grid)  # (m, 3)
+    scale = profile.length_scale()
+    grid = _quadrature_grid(r_s, segments,
+                            0.01 * float(np.min(scale[np.isfinite(scale)], initial=1.0)))
+    target = profile.reflection(grid)  # (m, 3)
     weights = np.gradient(grid)[:, None] * grid[:, None] * target
     weights = weights + TAIL_WEIGHT * weights.max(axis=0, keepdims=True) * \
         np.gradient(grid)[:, None] / r_s
@@ -536,18 +583,18 @@ def subedit_from_dipole(dipole: Dipole, *, segments: int = DEFAULT_SEGMENTS,
         log_target = np.log(np.maximum(target[:, channel], np.exp(LOG_FLOOR)))
         solution, *_ = np.linalg.lstsq(basis * root, log_target * root[:, 0], rcond=None)
         knots[:, channel] = solution
-    profiles = SubEditProfiles(knots, r_s, dipole.eta, dipole.name)
+    profiles = SubEditProfiles(knots, r_s, eta, name)
     fitted = profiles.profile(grid)
-    dipole_inside = np.trapezoid(target * grid[:, None], grid, axis=0)
+    target_inside = np.trapezoid(target * grid[:, None], grid, axis=0)
     fitted_inside = np.trapezoid(fitted * grid[:, None], grid, axis=0)
     with np.errstate(divide="ignore"):
-        shift = np.where((fitted_inside > 0) & (dipole_inside > 0),
-                         np.log(dipole_inside / fitted_inside), 0.0)
+        shift = np.where((fitted_inside > 0) & (target_inside > 0),
+                         np.log(target_inside / fitted_inside), 0.0)
     knots = np.maximum(knots + shift, LOG_FLOOR)
-    profiles = SubEditProfiles(knots, r_s, dipole.eta, dipole.name)
+    profiles = SubEditProfiles(knots, r_s, eta, name)
     fitted = profiles.profile(grid)
-    total = dipole.total_diffuse_reflectance() / (2.0 * np.pi)
-    truncated = np.clip(total - dipole_inside, 0.0, None)
+    total = profile.total() / (2.0 * np.pi)
+    truncated = np.clip(total - target_inside, 0.0, None)
     difference = np.trapezoid(np.abs(fitted - target) * grid[:, None], grid, axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         error = np.where(total > 0, (difference + truncated) / total, 0.0)
@@ -581,7 +628,7 @@ def convert_media(media, *, segments: int = DEFAULT_SEGMENTS) -> list[DipoleConv
     media = list(media)
     if not media:
         raise InputError("needs at least one medium", field="media", value=[])
-    r_s = max(_dipole_energy_radius(medium, DEFAULT_RADIUS_ENERGY) for medium in media)
+    r_s = max(_energy_radius(_entering(medium), DEFAULT_RADIUS_ENERGY) for medium in media)
     return [subedit_from_dipole(medium, segments=segments, r_s=r_s) for medium in media]
 
 

@@ -40,8 +40,13 @@ Interactive path (``state.render(lights=None, material=None)``):
   then :math:`F_t(\eta, \omega_o)/\pi` per pixel through the camera G-buffer. Changing
   :math:`\eta` changes :math:`F_t(\eta, \omega_i)` inside :math:`E`, so it relights.
 
+The knob ``profile`` expands another registered radial profile than the dipole: its basis
+is built by the same procedure over that profile's family and cached
+(:mod:`.profile_basis`); the default is the dipole's shipped basis.
+
 The method is split by concept: :mod:`.knobs`, :mod:`.transfer` (samples and the two
-passes), :mod:`.lighting`, :mod:`.state` and :mod:`.method`.
+passes), :mod:`.profile_basis` (the basis over another profile), :mod:`.lighting`,
+:mod:`.state` and :mod:`.method`.
 
 References
 ----------

@@ -6,11 +6,22 @@ import math
 
 from ...errors import InputError
 from ...materials.dipole_pca import (
+    DEFAULT_SIGMA_SAMPLES,
     PARAMETERISATIONS,
     DipolePCABasis,
     dipole_pca_basis,
 )
-from ..knobs import Knob, KnobSpec
+from ..base import Refusal
+from ..knobs import (
+    DEFAULT_PROFILE,
+    RADIAL_AVERAGE,
+    UNSUPPORTED_PROFILE,
+    Knob,
+    KnobSpec,
+    directional_profile_names,
+    profile_knob,
+)
+from .profile_basis import family_basis
 
 
 def _quadtree(knobs: dict) -> None:
@@ -23,6 +34,23 @@ def _power_of_two(value: int) -> int:
     return value
 
 
+#: The profiles PRT cannot take, and why. A directional profile is not a function of the
+#: distance (Eq. 2 of Wang et al. 2008). A profile's basis is built from one profile per
+#: medium of the basis's grid; PRT takes the profiles whose basis at the default grid
+#: builds within the bound docs/prt.md states (its measured build times), and quantized
+#: diffusion, several times slower to make than any other, is refused.
+PROFILE_REFUSALS = {
+    **{name: Refusal(UNSUPPORTED_PROFILE, f"prt cannot take profile {name!r}: it depends on "
+                     "the incident direction, and the PCA basis of Wang et al. 2008 (Eq. 4) "
+                     f"expands a function of the distance alone; {name + RADIAL_AVERAGE!r} is "
+                     "its radial average") for name in directional_profile_names()},
+    "quantized_diffusion": Refusal(
+        UNSUPPORTED_PROFILE, "prt cannot take profile 'quantized_diffusion': its PCA basis "
+        "(Wang et al. 2008, Sect. 3.1: one profile per medium of a 256 x 256 grid, each 200 "
+        "time-quantized Gaussians a channel) takes several times longer to build than any "
+        "profile prt takes, beyond the bound of docs/prt.md"),
+}
+
 #: The knobs of :func:`precompute` (Wang et al. 2008): validation, cache key,
 #: ``translucent approx prt`` flags and the quality ladder all come from here.
 KNOBS = KnobSpec([
@@ -34,6 +62,12 @@ KNOBS = KnobSpec([
          kind="choice", choices=tuple(PARAMETERISATIONS)),
     Knob("basis_terms", 12, "K, PCA terms of R_d", kind="int", low=1, high=32),
     Knob("basis_eta", 1.3, "the eta the basis samples", kind="float", low=1.0, high=3.0),
+    Knob("basis_samples", DEFAULT_SIGMA_SAMPLES, "samples per axis of the basis's "
+         "(sigma_s', sigma_a) grid (the shipped dipole bases: 256)", kind="int", low=2,
+         high=1024),
+    # the transfer is made of the basis functions: another profile is another precomputation
+    profile_knob(PROFILE_REFUSALS, keyed=True, help="radial profile whose family the PCA "
+                 "basis expands (Sect. 3.1), made from each Dipole material"),
     # pass 1: Haar coefficients kept per transfer row
     Knob("energy", 0.9999, "energy fraction kept per transfer row", kind="float",
          positive=True, high=1.0),
@@ -88,8 +122,9 @@ DEFAULT_KNOBS: dict = KNOBS.defaults
 LADDERS: dict = KNOBS.ladders
 
 #: Cheap knobs for smoke runs and the conformance checks (fast.conformance): 256
-#: illumination samples (4 parts x 8 x 8) on one core.
-QUICK_KNOBS: dict = {"samples": 256, "workers": 1}
+#: illumination samples (4 parts x 8 x 8) on one core, and a basis over a 16 x 16 grid
+#: of media (another profile's basis then builds in about a second).
+QUICK_KNOBS: dict = {"samples": 256, "workers": 1, "basis_samples": 16}
 
 #: Knobs read when rendering, or that change how and not what is computed: left out of
 #: the cache key.
@@ -175,5 +210,21 @@ def quadtree_level(count: int, parts: int) -> int:
 
 
 def pca_basis_for(knobs: dict) -> DipolePCABasis:
-    """Return the dipole PCA basis the knobs name (parameterisation, eta, terms)."""
-    return dipole_pca_basis(knobs["basis"], eta=knobs["basis_eta"], terms=knobs["basis_terms"])
+    """Return the PCA basis the knobs name: profile, parameterisation, eta, grid, terms."""
+    return basis_and_facts(knobs)[0]
+
+
+def basis_and_facts(knobs: dict) -> tuple[DipolePCABasis, dict]:
+    """Return the PCA basis the knobs name and how it was had (empty for the dipole's).
+
+    The dipole's basis ships with the suite at the default grid
+    (:func:`~translucent.materials.dipole_pca.dipole_pca_basis`); another profile's is
+    built over its own family on the same sampling, and cached
+    (:func:`~translucent.fast.prt.profile_basis.family_basis`).
+    """
+    if knobs["profile"] == DEFAULT_PROFILE:
+        return dipole_pca_basis(knobs["basis"], eta=knobs["basis_eta"],
+                                terms=knobs["basis_terms"],
+                                sigma_samples=knobs["basis_samples"]), {}
+    return family_basis(knobs["profile"], knobs["basis"], knobs["basis_eta"],
+                        knobs["basis_samples"], knobs["basis_terms"])

@@ -18,7 +18,8 @@ from ..base import (
     load_or_precompute,
     refuse_inapplicable,
 )
-from .knobs import KNOBS, check_knobs
+from .knobs import KNOBS, basis_and_facts, check_knobs
+from .profile_basis import basis_error_notes
 from .state import PRTState
 from .transfer import ObjectTransfer, precompute_object, spatial_decision, transfer_key
 
@@ -66,6 +67,11 @@ def precompute(scene, **knobs) -> PRTState:
 
     Cached on disk (namespace ``prt``) by the object's geometry, ``mm_per_unit`` and the
     knobs (not the lights, not the material): a second call with the same inputs loads it.
+    The knob ``profile`` picks the family the PCA basis expands (Sect. 3.1; the classical
+    dipole's by default, shipped); another profile's basis is built on first use and
+    cached too. The basis's relative errors on the measured media and on the scene's
+    materials go to ``state.log.notes["profile basis"]``
+    (:func:`~translucent.fast.prt.profile_basis.basis_error_notes`).
 
     Parameters
     ----------
@@ -88,6 +94,10 @@ def precompute(scene, **knobs) -> PRTState:
     log = StageLog()
     transfers = []
     start = time.perf_counter()
+    basis, facts = basis_and_facts(knobs)
+    log.notes["profile basis"] = {**basis_error_notes(basis, knobs["profile"], {
+        scene.objects[i].name: scene.objects[i].material for i in _translucent_objects(scene)}),
+        **facts}
     others = _other_objects_in_view(scene)
     if others:
         kinds = ", ".join(f"'{name}' ({type(scene.object(name).material).__name__})"

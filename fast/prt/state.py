@@ -23,6 +23,7 @@ from ...scenes.scene import (
     ImageEnvironment,
 )
 from ..base import StageLog
+from ..knobs import DEFAULT_PROFILE
 from ..wavelets import (
     SpatialWavelet,
 )
@@ -39,18 +40,20 @@ from .knobs import (
     pca_basis_for,
 )
 from .lighting import EnvironmentTransfer, precompute_environment, sample_irradiance
+from .profile_basis import ProfileFamily, project_profile_with_energy
 from .transfer import ObjectTransfer
 
 # ----------------------------------------------------------------- the state
 
 
 def brute_force_radiance(transfer: ObjectTransfer, vertices, irradiance, material: Dipole,
-                         *, mm_per_unit: float = 1.0, vertex_indices=None) -> np.ndarray:
+                         *, mm_per_unit: float = 1.0, vertex_indices=None,
+                         profile=None) -> np.ndarray:
     r"""Eq. 1-2 evaluated directly on the same samples: :math:`\sum_i R_d(r_{vi}) A_i E_i`.
 
     No basis, no wavelets, no quantisation: the exact dipole :math:`R_d` (all distances,
-    also beyond 65 mm). Omits :math:`F_t(\omega_o)/\pi`, like the vertex values of
-    :meth:`PRTState.vertex_radiance`.
+    also beyond 65 mm), or the exact ``profile``. Omits :math:`F_t(\omega_o)/\pi`, like the
+    vertex values of :meth:`PRTState.vertex_radiance`.
 
     Parameters
     ----------
@@ -64,6 +67,9 @@ def brute_force_radiance(transfer: ObjectTransfer, vertices, irradiance, materia
     mm_per_unit : float
     vertex_indices : array_like of int, optional
         Evaluate only these vertices (cost V x N).
+    profile : RadialProfile, optional
+        The material's profile of another family (the knob ``profile``) instead of the
+        dipole's :math:`R_d`.
 
     Returns
     -------
@@ -79,9 +85,10 @@ def brute_force_radiance(transfer: ObjectTransfer, vertices, irradiance, materia
         chunk = vertices[start:start + block]
         distance = np.linalg.norm(chunk[:, None, :] - samples.positions[None, :, :],
                                   axis=-1) * mm_per_unit
-        profile = dipole_reflectance_profile(distance[..., None], material.sigma_a,
-                                             material.sigma_s_prime, material.eta)
-        out[start:start + block] = np.einsum("vnc,nc->vc", profile, irradiance) * samples.area
+        values = dipole_reflectance_profile(distance[..., None], material.sigma_a,
+                                            material.sigma_s_prime, material.eta) \
+            if profile is None else profile.reflection(distance)
+        out[start:start + block] = np.einsum("vnc,nc->vc", values, irradiance) * samples.area
     return out
 
 
@@ -101,6 +108,9 @@ class _PixelMap:
     barycentrics: np.ndarray
     cosine: np.ndarray
 
+
+#: Materials whose profiles (the knob ``profile``) a state keeps, the oldest dropped first.
+KEPT_PROFILES = 32
 
 #: E^w counts as one colour when its second singular value is below this fraction of the
 #: first (float32 round-off of the Haar transform is ~1e-7).
@@ -138,7 +148,7 @@ def _ramp(value, start, end):
 
 
 def projection_blend(basis: DipolePCABasis, sigma_a, sigma_s_prime, eta,
-                     sample_spacing: float | None = None):
+                     sample_spacing: float | None = None, profile=None):
     r"""Coefficients :math:`s_k(\sigma)` and the weight :math:`\beta` of the local vector.
 
     Sect. 3.3 (step 3) of Wang et al. 2008 projects the profile onto the basis of Eq. 4;
@@ -175,6 +185,11 @@ def projection_blend(basis: DipolePCABasis, sigma_a, sigma_s_prime, eta,
     sample_spacing : float, optional
         Spacing of the illumination samples, mm; None leaves the last weight out (the
         projection alone).
+    profile : RadialProfile, optional
+        The medium's profile of another family than the dipole's (the knob ``profile``),
+        sampled for the projection, its residual and energies
+        (:func:`~translucent.fast.prt.profile_basis.project_profile_with_energy`) and
+        its energy within h (its :meth:`total` to h); None: the dipole in closed form.
 
     Returns
     -------
@@ -182,8 +197,12 @@ def projection_blend(basis: DipolePCABasis, sigma_a, sigma_s_prime, eta,
     blend : ndarray, broadcast shape
         :math:`\beta`, dimensionless.
     """
-    coefficients, residual, energy, exact_energy = basis.project_with_energy(
-        sigma_a, sigma_s_prime, eta)
+    if profile is None:
+        coefficients, residual, energy, exact_energy = basis.project_with_energy(
+            sigma_a, sigma_s_prime, eta)
+    else:
+        coefficients, residual, energy, exact_energy = project_profile_with_energy(basis,
+                                                                                  profile)
     energy_error = np.abs(energy - exact_energy) / np.where(exact_energy > 0, exact_energy, 1.0)
     spacing = float(basis.radii[1] - basis.radii[0])
     sigma_t_prime = np.asarray(sigma_a, np.float64) + np.asarray(sigma_s_prime, np.float64)
@@ -193,7 +212,8 @@ def projection_blend(basis: DipolePCABasis, sigma_a, sigma_s_prime, eta,
                _ramp(energy_error, ENERGY_BLEND_START, ENERGY_BLEND_END),
                _ramp(octaves, 0.0, RESOLUTION_BLEND_OCTAVES)]
     if sample_spacing is not None:
-        within = truncated_diffuse_reflectance(sigma_a, sigma_s_prime, eta, sample_spacing)
+        within = truncated_diffuse_reflectance(sigma_a, sigma_s_prime, eta, sample_spacing) \
+            if profile is None else profile.total(max_radius=sample_spacing)
         fraction = within / np.where(exact_energy > 0, exact_energy, 1.0)
         weights.append(_ramp(fraction, SAMPLING_BLEND_START, SAMPLING_BLEND_END))
     blend = np.maximum.reduce(weights)
@@ -216,6 +236,10 @@ class PRTState:
 
     def __post_init__(self):
         self.basis = pca_basis_for(self.knobs)
+        # another profile than the dipole's: a material is projected by sampling its profile
+        self.family = None if self.knobs["profile"] == DEFAULT_PROFILE else \
+            ProfileFamily(self.knobs["profile"])
+        self._profiles: dict = {}
         self._lighting: dict = {}
         self._vertex_vectors: dict = {}
         self._product_buffers: dict = {}
@@ -350,15 +374,33 @@ class PRTState:
         around each vertex) times the total diffuse reflectance :math:`R_d` (closed form), so
         that in the opaque limit the object is a Lambertian surface of albedo :math:`R_d`,
         the limit of the dipole. For the measured media inside the basis's grid
-        :math:`\beta = 0`: the paper's method unchanged.
+        :math:`\beta = 0`: the paper's method unchanged. With another profile than the
+        dipole's (the knob ``profile``) the projection samples the material's profile of
+        that family and the local vector carries its total.
         """
+        profile = self.profile_of(material)
         coefficients, blend = projection_blend(self.basis, material.sigma_a,
                                                material.sigma_s_prime, material.eta,
-                                               sample_spacing)
-        local = blend * total_diffuse_reflectance(material.sigma_a, material.sigma_s_prime,
-                                                  material.eta)
+                                               sample_spacing, profile)
+        total = total_diffuse_reflectance(material.sigma_a, material.sigma_s_prime,
+                                          material.eta) if profile is None else profile.total()
+        local = blend * total
         kept = (1.0 - blend)[:, None] * coefficients
         return np.concatenate([kept, local[:, None]], axis=1).astype(np.float32)
+
+    def profile_of(self, material: Dipole):
+        """Return the material's profile of the knob ``profile`` (None: the dipole's).
+
+        Kept per material: editing back and forth makes each profile once.
+        """
+        if self.family is None:
+            return None
+        key = (material.sigma_a.tobytes(), material.sigma_s_prime.tobytes(), material.eta)
+        if key not in self._profiles:
+            if len(self._profiles) >= KEPT_PROFILES:
+                self._profiles.pop(next(iter(self._profiles)))
+            self._profiles[key] = self.family.profile(material)
+        return self._profiles[key]
 
     def _pixel_maps(self) -> dict:
         if self._pixels is None:

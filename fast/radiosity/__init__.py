@@ -18,7 +18,8 @@ Scattering factors (Eq. 8, Sect. 5.2). With the exit point at the centroid :math
 .. math:: S_{ji} = \frac{1}{A_j}\int_{A_i}\int_{A_j} s\,dA_j\,dA_i
           \approx \int_{A_i} s(d(x, c_j))\,dA_x,
 
-where :math:`s(r)` is a 1D profile (:mod:`translucent.materials.profiles`) of the
+where :math:`s(r)` is a 1D profile (:mod:`translucent.materials.profiles`; the dipole, or
+another registered one by the knob ``profile``) of the
 shortest optical distance :math:`d` (:mod:`translucent.fast.radiosity.optical_distance`). The
 normalisation by :math:`A_j` (the paper prints :math:`A_i`; the two agree for equal
 patches) makes :math:`B_j = \sum_i S_{ji} E_i` an exitance for patches of any size, and the

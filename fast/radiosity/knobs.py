@@ -4,7 +4,15 @@ from __future__ import annotations
 
 from ...errors import InputError
 from ...scenes.raycast import RAY_ENGINES
-from ..knobs import Knob, KnobSpec
+from ..base import Refusal
+from ..knobs import (
+    RADIAL_AVERAGE,
+    UNSUPPORTED_PROFILE,
+    Knob,
+    KnobSpec,
+    directional_profile_names,
+    profile_knob,
+)
 
 FORMAT_VERSION = 6
 
@@ -18,6 +26,15 @@ def _no_more_than_a_byte(value):
                          field="mix_points", value=value)
     return value
 
+
+#: The profiles radiosity cannot take, and why: S holds a function of the distance alone
+#: (Sheng et al. 2014, Eq. 8), so a directional profile stands in only as its radial average.
+PROFILE_REFUSALS = {
+    name: Refusal(UNSUPPORTED_PROFILE, f"radiosity cannot take profile {name!r}: it depends on "
+                  "the incident direction, and the scattering factors of Eq. 8 (Sheng et al. "
+                  f"2014) are a function of the distance alone; {name + RADIAL_AVERAGE!r} is "
+                  "its radial average")
+    for name in directional_profile_names()}
 
 #: The knobs of :func:`precompute` (Sheng et al. 2014, Sect. 5): validation, cache key,
 #: ``translucent approx radiosity`` flags and the quality ladder all come from here.
@@ -41,6 +58,10 @@ KNOBS = KnobSpec([
          kind="float", positive=True),
     Knob("centroid_beyond", 8.0, "centroid only beyond this many patch radii", kind="float",
          positive=True),
+    # S is filled from the materials at every translucency change, never cached: only the
+    # cut-off max_d derived from the profile enters the key (as max_distance_mm)
+    profile_knob(PROFILE_REFUSALS, keyed=False, help="radial profile S is filled from, made "
+                 "from each Dipole material (times its diffuse entry transmittance)"),
     Knob("self_term", "polar", "the self term: exact profile integral or samples",
          kind="choice", choices=("polar", "samples")),
     Knob("voxels_per_axis", 48, "voxel grid of a concave object, along its longest side",

@@ -26,6 +26,7 @@ from ..solid_inputs import mixed_profiles_from_solid, surface_scene
 from .form_factors import build_patches, form_factors, needs_form_factors
 from .geometry import scattering_geometry
 from .knobs import COMPONENTS, FORMAT_VERSION, KNOBS
+from .scattering import scattering_profile
 from .state import RadiosityState, materials_of
 
 #: The reason code of a scene with no translucent object: still solved (classical radiosity)
@@ -61,7 +62,7 @@ def _resolve_knobs(scene, knobs: dict) -> dict:
     if resolved["max_distance_mm"] is None:
         radii = []
         for obj in scene.objects:
-            profile = profile_for(obj.material)
+            profile = scattering_profile(obj.material, resolved["profile"])
             profiles = profile.profiles if isinstance(profile, MixedProfiles) else \
                 ((profile,) if profile is not None else ())
             radii += [p.support_radius(resolved["profile_energy_cutoff"]) for p in profiles]
@@ -116,6 +117,10 @@ def precompute(scene, **knobs) -> RadiosityState:
     translucent (and the labels of heterogeneous ones) and the knobs -- never the lights or
     the homogeneous materials, so relighting and translucency changes reuse it. With
     ``max_distance_mm=None`` the cut-off comes from the scene's profiles (part of the key).
+    The knob ``profile`` (the classical dipole by default) picks the radial profile made
+    from each Dipole material (:func:`~translucent.fast.radiosity.scattering.scattering_profile`);
+    S is filled from it when the state is made, so it enters the key only through that
+    cut-off.
     A precomputation larger than the cache's entry limit
     (:func:`~translucent.cache.entry_limit`, set by the report) is not stored, and the log
     says so.

@@ -9,15 +9,18 @@ from scipy import sparse
 
 from ...errors import InputError
 from ...materials.dipole import dipole_depths
+from ...materials.homogeneous import Dipole
 from ...materials.profiles import (
     DipoleProfile,
     MixedProfiles,
     RadialGrid,
     RadialProfile,
+    ScaledProfile,
     SlabProfile,
     profile_for,
     radial_cumulative_integral,
 )
+from ..knobs import DEFAULT_PROFILE, radial_profile
 from .diffusion_escape import (
     finite_object_gain,
     source_escape_probability,
@@ -81,13 +84,54 @@ class ScatteringMatrix:
         return int(self.data.nbytes + self.indices.nbytes + self.indptr.nbytes)
 
 
+def scattering_profile(material, profile: str = DEFAULT_PROFILE):
+    r"""Return the radial profile S is filled from for ``material`` (None: opaque, S = P).
+
+    With the knob ``profile`` at its default, :func:`~translucent.materials.profiles.profile_for`
+    as the paper fills S: the classical dipole times the diffuse entry transmittance
+    :math:`T_{in}(\eta)` (Sheng et al. 2014, Sect. 6.1). Another ``profile`` (a value of
+    the knob, :func:`~translucent.fast.knobs.radial_profile`) is made from each Dipole
+    medium instead -- a Dipole material, or the Dipoles of a heterogeneous object -- times
+    the same :math:`T_{in}`: E is the irradiance outside the boundary and every registered
+    profile is per unit power entering. Tabulated and slab profiles are the material's
+    own and are kept.
+
+    Parameters
+    ----------
+    material : Dipole, RadialProfile, MixedProfiles or Lambertian
+    profile : str
+        A value of the ``profile`` knob.
+
+    Returns
+    -------
+    RadialProfile, MixedProfiles or None
+    """
+    found = profile_for(material)
+    if profile == DEFAULT_PROFILE or found is None:
+        return found
+    if isinstance(found, DipoleProfile):
+        return _from_dipole(found, profile)
+    if isinstance(found, MixedProfiles):
+        return MixedProfiles([_from_dipole(p, profile) if isinstance(p, DipoleProfile) else p
+                              for p in found.profiles], found.face_labels, name=found.name,
+                             volume_labels=found.volume_labels, volume_key=found.volume_key)
+    return found
+
+
+def _from_dipole(dipole_profile: DipoleProfile, profile: str) -> RadialProfile:
+    """Return the profile ``profile`` of a dipole profile's medium, times its entry term."""
+    made = radial_profile(profile, dipole_profile.dipole)
+    return made if dipole_profile.entry == 1.0 else ScaledProfile(made, dipole_profile.entry)
+
+
 def _object_profile_tables(profile: RadialProfile, grid: RadialGrid, kind: str = "reflection"):
     table = profile.tabulate(grid, kind)
     return table, radial_cumulative_integral(grid.radius, table)
 
 
 def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
-                      materials: dict | None = None) -> ScatteringMatrix:
+                      materials: dict | None = None, *,
+                      profile: str = DEFAULT_PROFILE) -> ScatteringMatrix:
     """Build S from the cached geometry and the materials: one sparse product per object.
 
     Sheng et al. 2014, Sect. 4-5.2: "the subsurface scattering matrix is then computed by
@@ -101,6 +145,9 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
     patches : Patches
     materials : dict of str to material, optional
         Overrides of the scene's materials by object name.
+    profile : str
+        The knob ``profile``: the radial profile made from Dipole media
+        (:func:`scattering_profile`).
 
     Returns
     -------
@@ -114,11 +161,13 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
         a profile with NaN / negative values.
     """
     materials = materials or {}
+    chosen = profile
     grid = geometry.grid
     data = np.zeros((geometry.nnz, 3))
     for index, obj in enumerate(scene.objects):
         material = materials.get(obj.name, obj.material)
-        profile = _sheet_profile(profile_for(material), index, geometry, obj.name)
+        profile = _sheet_profile(scattering_profile(material, chosen), index, geometry,
+                                 obj.name, chosen if isinstance(material, Dipole) else None)
         members = patches.of_object(index)
         if profile is None:
             data[geometry.diagonal_position[members]] = material.albedo
@@ -219,8 +268,20 @@ def _carry_finite_object_energy(data, geometry: ScatteringGeometry, patches: Pat
 
 
 
-def _sheet_profile(profile, index: int, geometry: ScatteringGeometry, name: str):
-    """Turn a Dipole's profile on a thin sheet into the slab's reflection and transmission."""
+def _sheet_profile(profile, index: int, geometry: ScatteringGeometry, name: str,
+                   made_from: str | None = None):
+    """Turn a Dipole's profile on a thin sheet into the slab's reflection and transmission.
+
+    Only the dipole has a slab form here (:class:`SlabProfile`, the multipole): another
+    profile made from a Dipole (``made_from``, the knob's value) on a sheet would lose the
+    light the sheet transmits, and is refused.
+    """
+    if index in geometry.sheets and made_from not in (None, DEFAULT_PROFILE) and \
+            not profile.has_transmission:
+        raise InputError(f"object '{name}' is a thin (open) sheet, lit from both sides: "
+                         f"profile {made_from!r} has no transmission (only the dipole has a "
+                         "slab form, SlabProfile); use profile 'dipole'", field="profile",
+                         value=made_from)
     if index not in geometry.sheets or not isinstance(profile, DipoleProfile):
         return profile
     if geometry.sheet_thickness_mm is None:

@@ -16,10 +16,11 @@ from ...materials.profiles import (
     profile_for,
 )
 from ...materials.solid import SolidMedium
+from ..knobs import DEFAULT_PROFILE
 from ..solid_inputs import mixed_profiles_from_solid
 from .knobs import COMPONENTS, WARM_START_FRAMES
 from .lighting import AreaLightShadows, direct_irradiance, emitters_seen
-from .scattering import ScatteringMatrix, scattering_matrix
+from .scattering import ScatteringMatrix, scattering_matrix, scattering_profile
 from .solve import (
     check_convergence,
     form_factor_bounds,
@@ -102,7 +103,9 @@ class RadiosityState:
         started = time.perf_counter()
         overrides = materials_of(self.scene, material)
         self.materials = {**self.materials, **overrides}
-        self.S = scattering_matrix(self.geometry, self.scene, self.patches, self.materials)
+        self.S = scattering_matrix(self.geometry, self.scene, self.patches, self.materials,
+                                   profile=self.knobs["profile"])
+        self._say_profile()
         self.convergence = check_convergence(self.S, self.form_factors, self.patches,
                                              form_factor_facts=self._form_factor_facts)
         self._energy_beyond_cutoff()
@@ -112,12 +115,24 @@ class RadiosityState:
         self._solve_seconds = 0.0  # spent solving for these materials (T's rental)
         return time.perf_counter() - started
 
+    def _say_profile(self) -> None:
+        """Note the profile S is filled from; say where the finite-object gain is left out."""
+        chosen = self.knobs["profile"]
+        self.log.notes["profile"] = chosen
+        sentence = (f"finite_object_energy: the diffusion escape of the object's own shape "
+                    f"corrects the dipole only; profile {chosen!r} fills S as the "
+                    "semi-infinite profile it is")
+        if chosen != DEFAULT_PROFILE and self.knobs["finite_object_energy"] and \
+                sentence not in self.log.skipped:
+            self.log.skip(sentence)
+
     def _energy_beyond_cutoff(self):
         max_d = self.geometry.grid.max_radius
         lost = {}
         for index in self.geometry.objects:
             obj = self.scene.objects[index]
-            profile = profile_for(self.materials.get(obj.name, obj.material))
+            profile = scattering_profile(self.materials.get(obj.name, obj.material),
+                                         self.knobs["profile"])
             profiles = profile.profiles if isinstance(profile, MixedProfiles) else (profile,)
             for item in profiles:
                 total = item.total()

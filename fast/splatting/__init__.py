@@ -47,6 +47,9 @@ Departures from the paper, each a knob or documented where it is made:
   splatting level may take irradiance samples as sparse as its own pixels. The paper
   selects once for all levels, though it mentions running the selection "several times
   ... to generate splatting kernels for each scale".
+* The knob ``profile`` (the dipole by default, the paper's) converts another registered
+  radial profile of each Dipole material to SubEdit
+  (:func:`~translucent.materials.subedit.subedit_from_profile`).
 * On by default (``profile_upsampling``, :func:`upsampling_profile_factors`; off gives
   Eq. 17 as published): Eq. 17 upsamples the coarse exitance divided by a per-texel
   profile factor and multiplies the fine pixel's own back in, so that material boundaries

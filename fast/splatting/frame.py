@@ -12,8 +12,9 @@ from ...cache import content_hash
 from ...errors import InputError
 from ...materials.homogeneous import Dipole
 from ...materials.solid import SolidMedium
-from ...materials.subedit import SubEditProfiles, subedit_from_dipole
+from ...materials.subedit import SubEditProfiles, subedit_from_dipole, subedit_from_profile
 from ..base import StageLog
+from ..knobs import DEFAULT_PROFILE, radial_profile
 from ..solid_inputs import subedit_from_solid
 from .accumulation import bilateral_upsample, upsampling_profile_factors
 from .buffers import CameraModel, SurfaceBuffer, irradiance_mipmap, median_depth_mipmap
@@ -239,16 +240,17 @@ def _exitant_radiance(exitance, buffer: SurfaceBuffer, camera: CameraModel, eta:
                             buffer.valid, np.asarray(camera.origin, np.float64), float(eta))
 
 
-def as_subedit(material, mesh=None) -> SubEditProfiles:
+def as_subedit(material, mesh=None, profile: str = DEFAULT_PROFILE) -> SubEditProfiles:
     """Return the SubEdit profiles of a material.
 
-    Itself, a converted :class:`Dipole`, or the texture derived from a solid medium on
-    ``mesh`` (:mod:`.solid_inputs`).
+    Itself, a converted :class:`Dipole` (its radial profile ``profile``, a value of the
+    knob, :func:`~translucent.fast.knobs.radial_profile`; the classical dipole by default),
+    or the texture derived from a solid medium on ``mesh`` (:mod:`.solid_inputs`).
     """
     if isinstance(material, SubEditProfiles):
         return material
     if isinstance(material, Dipole):
-        return _converted(material)
+        return _converted(material, profile)
     if isinstance(material, SolidMedium):
         if mesh is None:
             raise InputError("a solid medium becomes a SubEdit texture on its object's mesh",
@@ -261,10 +263,17 @@ def as_subedit(material, mesh=None) -> SubEditProfiles:
 _CONVERTED: dict[str, SubEditProfiles] = {}
 
 
-def _converted(material: Dipole) -> SubEditProfiles:
-    key = content_hash(material)
+def _converted(material: Dipole, profile: str = DEFAULT_PROFILE) -> SubEditProfiles:
+    key = content_hash(material, profile)
     if key not in _CONVERTED:
-        _CONVERTED[key] = subedit_from_dipole(material).profiles
+        if profile == DEFAULT_PROFILE:
+            conversion = subedit_from_dipole(material)
+        else:
+            # every registered profile is per unit power entering, as the dipole's R_d:
+            # F_t at entry and exit stay Eq. 5-7's
+            conversion = subedit_from_profile(radial_profile(profile, material), material.eta,
+                                              name=material.name)
+        _CONVERTED[key] = conversion.profiles
     return _CONVERTED[key]
 
 

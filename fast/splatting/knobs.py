@@ -2,7 +2,15 @@
 
 from __future__ import annotations
 
-from ..knobs import Knob, KnobSpec
+from ..base import Refusal
+from ..knobs import (
+    RADIAL_AVERAGE,
+    UNSUPPORTED_PROFILE,
+    Knob,
+    KnobSpec,
+    directional_profile_names,
+    profile_knob,
+)
 
 #: The splatting kernels: compiled loops (numba, the default: measured fastest on the CPU,
 #: see reports/bench/splatting.py), CUDA (numba.cuda, :mod:`.backend_cuda`: the same tiles
@@ -20,6 +28,15 @@ MAX_AREA_LIGHT_POINTS = 256
 #: alone adds no error with "shortest", about 5 % more relative error with "luminance"
 #: (35 % fewer samples) and 30 % more with "longest" (60 % fewer samples).
 SAMPLING_RANGES = ("shortest", "luminance", "longest")
+
+#: The profiles splatting cannot take, and why: SubEdit profiles are radial (Eq. 8-9 of
+#: Chen et al. 2012), so a directional profile stands in only as its radial average.
+PROFILE_REFUSALS = {
+    name: Refusal(UNSUPPORTED_PROFILE, f"splatting cannot take profile {name!r}: it depends on "
+                  "the incident direction, and the SubEdit profiles it splats (Chen et al. "
+                  f"2012, Eq. 8-9) are functions of the distance alone; {name + RADIAL_AVERAGE!r} "
+                  "is its radial average")
+    for name in directional_profile_names()}
 
 #: The knobs of the method (Chen et al. 2012, Sect. 4 and 5): validation, the
 #: ``translucent approx splatting`` flags and the quality ladders all come from here.
@@ -53,6 +70,8 @@ KNOBS = KnobSpec([
          "profile factor (off: Eq. 17 as published)", kind="bool"),
     Knob("area_light_points", 4, "point emitters an area light becomes (emitters.py)",
          kind="int", low=1, high=MAX_AREA_LIGHT_POINTS),
+    profile_knob(PROFILE_REFUSALS, keyed=False, help="radial profile a Dipole material is "
+                 "converted to SubEdit from (SubEdit and solid materials keep theirs)"),
 ], ladders={
     "levels": [{"levels": 5}, {"levels": 4}, {}, {"levels": 2}],
     # coarse levels splatted from irradiance samples as sparse as their pixels (the

@@ -16,6 +16,7 @@ from ...materials.solid import SolidMedium
 from ...materials.subedit import SubEditProfiles
 from ...scenes.scene import DirectionalLight
 from ..base import StageLog
+from ..knobs import DEFAULT_PROFILE
 from ..solid_inputs import subedit_from_solid
 from .buffers import CameraModel, SurfaceBuffer
 from .emitters import PointEmitter, point_emitters
@@ -178,6 +179,7 @@ class SplattingState:
         if self.check_scene is not None:
             self.check_scene(scene)
         log = StageLog()
+        log.notes["profile"] = self.knobs["profile"]
         start = time.perf_counter()
         camera_view = self._camera_view(scene)
         camera = CameraModel.from_camera(scene.camera)
@@ -222,7 +224,7 @@ class SplattingState:
 
     def _object_buffers(self, scene, index, camera_view):
         item = scene.objects[index]
-        material = as_subedit(item.material, item.mesh)
+        material = as_subedit(item.material, item.mesh, self.knobs["profile"])
         mesh = item.mesh
         if mesh.uv is None and not material.is_homogeneous:
             raise InputError("a textured SubEdit material needs a mesh with uv coordinates",
@@ -247,6 +249,10 @@ class SplattingState:
                                                                       camera_view)
         log.seconds["buffer generation"] += time.perf_counter() - start
         item = scene.objects[index]
+        if self.knobs["profile"] != DEFAULT_PROFILE and not isinstance(item.material, Dipole):
+            log.skip(f"profile {self.knobs['profile']!r}: object '{item.name}' keeps the "
+                     f"profiles of its {type(item.material).__name__} material (the knob "
+                     "converts Dipole materials)")
         if isinstance(item.material, SolidMedium):
             log.notes.setdefault("solid medium", {})[item.name] = \
                 subedit_from_solid(item.material, item.mesh).note()

@@ -41,7 +41,25 @@ BUILTIN = ("prt", "radiosity", "splatting", "brdf_pca")
 # ------------------------------------------------------------------ every registered method
 
 
-@pytest.mark.parametrize("check", list(CHECKS))
+#: The profile check runs once per profile below (seconds apiece), not as one long test.
+PER_PROFILE = "profiles"
+
+
+def _declared_profiles() -> list[tuple[str, str]]:
+    """(method, profile) for every profile a registered method takes or refuses."""
+    cases = []
+    for name in METHODS:
+        try:
+            knob = conformance.profile_knob_of(method(name))
+        except InputError:  # not installed: the check of every method says why
+            continue
+        if knob is not None:
+            cases += [(name, profile) for profile in knob.choices]
+            cases += [(name, profile) for profile, _ in knob.refused]
+    return cases
+
+
+@pytest.mark.parametrize("check", [c for c in CHECKS if c != PER_PROFILE])
 @pytest.mark.parametrize("name", list(METHODS))
 def test_every_registered_method_passes_every_check(name, check):
     try:
@@ -51,6 +69,22 @@ def test_every_registered_method_passes_every_check(name, check):
             pytest.fail(f"{name}: {check} checked nothing: {why}")
         pytest.skip(str(why))
     assert isinstance(found, str) and found
+
+
+@pytest.mark.parametrize("name, profile", _declared_profiles())
+def test_every_declared_profile_is_taken_and_used_or_refused_by_name(name, profile):
+    found = conformance.run_profile_check(name, profile)
+    assert profile in found
+
+
+def test_the_builtin_methods_declare_the_profiles_they_take():
+    for name in ("prt", "radiosity", "splatting"):
+        knob = conformance.profile_knob_of(method(name))
+        assert knob.default == "dipole" and knob.kind == "choice"
+        assert "directional_dipole" in dict(knob.refused)  # as its radial average only
+        assert "directional_dipole_average" in knob.choices
+    with pytest.raises(NotChecked, match="no profile knob"):
+        run_check("brdf_pca", PER_PROFILE)
 
 
 def test_the_builtin_methods_are_found_through_their_entry_points():
@@ -151,6 +185,48 @@ def test_each_check_fails_on_a_method_that_breaks_it(registered, check, broken, 
     name = registered(f"broken_{check}", broken())
     with pytest.raises(ConformanceFailure, match=words):
         run_check(name, check)
+
+
+def _profiled(used=True, validated=True):
+    """A stand-in with a ``profile`` knob whose frame depends on it (unless not ``used``)."""
+    from translucent.fast.knobs import KnobSpec, profile_knob
+
+    spec = KnobSpec([profile_knob({"better_dipole": Refusal("unsupported_profile",
+                                                            "better_dipole is not taken")},
+                                  keyed=True, help="a profile")])
+    choices = spec["profile"].choices
+    given = {}
+
+    def render(scene, lights, material, calls):
+        level = 0.1 + 0.01 * (choices.index(given["profile"]) if used else 0)
+        return np.full((scene.camera.height, scene.camera.width, 3), level)
+
+    stand_in = _stand_in(render, defaults=spec.defaults, KNOBS=spec)
+    precompute = stand_in.precompute
+
+    def checked(scene, **knobs):
+        given.update(spec.resolve(knobs) if validated else spec.defaults | knobs)
+        return precompute(scene, **knobs)
+
+    stand_in.precompute = checked
+    return stand_in
+
+
+def test_the_profile_check_passes_a_method_that_uses_its_profiles(registered):
+    name = registered("profiled", _profiled())
+    assert "from the default's" in conformance.run_profile_check(name, "random_walk")
+    assert "is refused: better_dipole is not taken" in conformance.run_profile_check(
+        name, "better_dipole")
+
+
+@pytest.mark.parametrize("broken, profile, words", [
+    (lambda: _profiled(used=False), "random_walk", "renders the default profile's image"),
+    (lambda: _profiled(validated=False), "better_dipole", "declared refused.*took it"),
+])
+def test_the_profile_check_fails_a_method_that_breaks_it(registered, broken, profile, words):
+    name = registered("broken_profiles", broken())
+    with pytest.raises(ConformanceFailure, match=words):
+        conformance.run_profile_check(name, profile)
 
 
 def test_moving_lights_that_change_nothing_is_not_checked(registered):
@@ -316,7 +392,8 @@ def test_an_installed_method_passes_the_conformance_checks(installed_example, tm
                                text=True, timeout=300, env=_with_example(installed_example),
                                cwd=tmp_path)
     assert completed.returncode == 0, completed.stderr[-3000:]
-    assert completed.stdout.strip() == str(sorted(CHECKS))
+    # every check but the profiles' (the example declares no profile knob)
+    assert completed.stdout.strip() == str(sorted(set(CHECKS) - {PER_PROFILE}))
 
 
 def test_an_outside_methods_own_files_key_the_report_cache(registered, tmp_path, monkeypatch):

@@ -3,6 +3,7 @@
 import argparse
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -104,3 +105,47 @@ def test_an_unbounded_integer_knob_is_still_a_32_bit_count():
     assert spec.resolve({"rays": MAX_COUNT}) == {"rays": MAX_COUNT}
     with pytest.raises(InputError, match=r"rays = 99999999999999999999: must be at most"):
         spec.resolve({"rays": 99999999999999999999})
+
+
+# ------------------------------------------------------------------ refused values, profiles
+
+
+def test_a_refused_value_is_an_input_error_with_its_reason_and_passes_the_flag():
+    spec = KnobSpec([Knob("mode", "fast", "how", kind="choice", choices=("fast", "exact"),
+                          refused=(("magic", "mode 'magic' is not taken: it does not exist"),))])
+    with pytest.raises(InputError, match="mode = 'magic': mode 'magic' is not taken"):
+        spec.resolve({"mode": "magic"})
+    with pytest.raises(InputError, match="must be one of 'fast', 'exact'"):
+        spec.resolve({"mode": "other"})
+    parser = argparse.ArgumentParser()
+    spec.add_arguments(parser)
+    assert "{fast,exact}" in parser.format_help() and "magic" not in parser.format_help()
+    # the command line lets it through, so that resolve() says why it is refused
+    assert spec.from_arguments(parser.parse_args(["--mode", "magic"])) == {"mode": "magic"}
+    with pytest.raises(ValueError, match="refused values"):
+        Knob("mode", "fast", "how", kind="choice", choices=("fast",), refused=(("fast", "no"),))
+    with pytest.raises(ValueError, match="refused values"):
+        Knob("count", 1, "how many", kind="int", refused=((2, "no"),))
+
+
+def test_profile_names_are_the_registrys_radial_ones_then_the_averages():
+    from translucent.fast.knobs import (
+        directional_profile_names,
+        radial_profile,
+        radial_profile_names,
+    )
+    from translucent.materials.profiles import PROFILES, RadialProfile, profile
+
+    names = radial_profile_names()
+    assert names[0] == "dipole"
+    assert set(names) == {n for n, e in PROFILES.items() if not e.directional} | {
+        n + "_average" for n in directional_profile_names()}
+    assert directional_profile_names() == ("directional_dipole",)
+    average = radial_profile("directional_dipole_average", "Skin1")
+    assert isinstance(average, RadialProfile)
+    assert np.array_equal(average.total(),
+                          profile("directional_dipole", "Skin1", radial=True).total())
+    with pytest.raises(InputError, match="radial_average"):
+        radial_profile("directional_dipole", "Skin1")
+    with pytest.raises(InputError, match="unknown profile"):
+        radial_profile("dipole_average", "Skin1")

@@ -8,6 +8,8 @@ from scipy.integrate import quad
 from translucent.errors import InputError
 from translucent.materials import measured_medium, measured_medium_names
 from translucent.materials.factory import material_from_dict, material_to_dict
+from translucent.materials.profiles import DipoleProfile
+from translucent.materials.profiles import profile as registry_profile
 from translucent.materials.subedit import (
     BUILTIN_SUBEDIT,
     LOG_FLOOR,
@@ -17,6 +19,7 @@ from translucent.materials.subedit import (
     save_subedit,
     segment_moment,
     subedit_from_dipole,
+    subedit_from_profile,
     subedit_from_spec,
 )
 
@@ -185,6 +188,34 @@ def test_dipole_conversion_rejects_bad_input():
         subedit_from_dipole(measured_medium("Marble"), segments=0)
     with pytest.raises(InputError, match="r_s = -1.0: must be > 0 mm"):
         subedit_from_dipole(measured_medium("Marble"), r_s=-1.0)
+
+
+def test_a_dipole_converts_as_its_profile_does():
+    medium = measured_medium("Skin1")
+    through_profile = subedit_from_profile(DipoleProfile(medium, entry_fresnel=False),
+                                           medium.eta, name=medium.name)
+    direct = subedit_from_dipole(medium)
+    assert np.array_equal(through_profile.profiles.log_profile, direct.profiles.log_profile)
+    assert np.array_equal(through_profile.relative_error, direct.relative_error)
+
+
+@pytest.mark.parametrize("name", ["burley_searchlight", "quantized_diffusion"])
+def test_a_profile_peaked_at_the_origin_keeps_its_energy(name):
+    # r R(r) of these is finite but R is not (Burley: 1/r at 0); r_s comes from the
+    # profile's inverse CDF, not from a quadrature that misses the peak
+    medium = measured_medium("Skin1")
+    made = registry_profile(name, medium)
+    conversion = subedit_from_profile(made, medium.eta)
+    assert conversion.profiles.r_s == pytest.approx(np.max(made.radius_containing(0.999)))
+    total = made.total()
+    kept = conversion.profiles.total_diffuse_reflectance()[0, 0]
+    assert np.all(np.abs(kept - total) <= conversion.relative_error * total)
+    assert np.all(np.abs(kept / total - 1.0) < 0.01)
+
+
+def test_a_directional_profile_is_refused():
+    with pytest.raises(InputError, match="radial_average"):
+        subedit_from_profile(registry_profile("directional_dipole", "Skin1"), 1.3)
 
 
 # ---------------------------------------------------------------------------- textures
