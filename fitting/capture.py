@@ -264,13 +264,22 @@ def read_sidecar(path) -> CaptureSpec:
         Missing file, invalid JSON, an unknown or missing key, or any value outside its
         accepted range; the message names the file, the field, the value and the range.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("no such capture sidecar", file=path, field="path", value=str(path))
+    from ..atomic import check_input_file
+    from ..errors import json_object
+
+    path = check_input_file(path, "path", what="capture sidecar")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
         raise InputError(f"not a readable JSON file ({error})", file=path) from error
+    try:  # nested too deep, integers beyond 64 bits: refused here, named
+        # each number is checked by its own key (an integer beyond float64 is infinite)
+        data = json_object(text, file=path, what="JSON file", integers=False)
+    except InputError as error:
+        if error.field is not None or error.value is ...:
+            raise
+        raise InputError("a sidecar must be a JSON object", file=path, field="(top level)",
+                         value=error.value) from None
     return sidecar_from_dict(data, path=path)
 
 
@@ -347,9 +356,10 @@ def sidecar_from_dict(data, *, path=None) -> CaptureSpec:
 
 
 def _read_image(path: Path) -> np.ndarray:
+    from ..atomic import check_input_file
+
     suffix = path.suffix.lower()
-    if not path.is_file():
-        raise InputError("no such image file", file=path, field="image", value=str(path))
+    check_input_file(path, "image", what="image file")
     if suffix == ".exr":
         return _read_exr_pixels(path)
     if suffix == ".png":
@@ -366,13 +376,19 @@ def _read_image(path: Path) -> np.ndarray:
 def _read_exr_pixels(path: Path) -> np.ndarray:
     import OpenEXR
 
+    from ..image import check_planes, read_exr_header
+
+    # declared size and subsampling refused from the header, before any pixel is read
+    wanted = ("R", "G", "B", "Y")
+    path, header = read_exr_header(path, wanted, field="image", bytes_per_sample=24)
     try:
         with OpenEXR.File(str(path), separate_channels=True) as exr:
             planes = {name: np.array(ch.pixels, dtype=np.float64)
-                      for name, ch in exr.channels().items()}
+                      for name, ch in exr.channels().items() if name in wanted}
     except Exception as error:  # OpenEXR raises bare exceptions on corrupt files
         raise InputError(f"not a readable OpenEXR file ({error})", file=path,
                          field="image") from error
+    check_planes(path, planes, header["size"])
     if all(c in planes for c in "RGB"):
         return np.stack([planes[c] for c in "RGB"], axis=-1)
     if "Y" in planes:
@@ -457,9 +473,13 @@ def read_capture(path) -> Capture:
         ``incident_px`` outside the image; a ``beam_radius_mm`` beyond the image's diagonal;
         an image with no finite pixel.
     """
+    from ..atomic import note_input
+
     path = Path(path)
     spec = read_sidecar(path)
     image_path = path.parent / spec.image
+    note_input(path, "capture")  # what no output of the command may replace
+    note_input(image_path, "image")
     pixels = _read_image(image_path)
     height, width = pixels.shape[:2]
     if min(height, width) < 8:
@@ -474,6 +494,7 @@ def read_capture(path) -> Capture:
         from .measured_beam import measure_beam
 
         beam_path = path.parent / spec.beam_image
+        note_input(beam_path, "beam_image")
         try:
             beam_pixels = _read_image(beam_path)
         except InputError as error:

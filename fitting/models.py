@@ -29,6 +29,7 @@ SubEdit ln P knots        uniform box + smoothness         :data:`KNOT_BOX_NATS`
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,6 +81,17 @@ GRID_POINTS = 32
 #: own best exposure / e^3 to their largest x e^3.
 SCALE_SEARCH_NATS = 3.0
 SCALE_SEARCH_POINTS = 121
+#: Relative error added in quadrature to every annulus in the starting-point search.
+#: Neighbouring grid points predict profiles tens of per cent apart; against annuli known
+#: to 1e-4 (a capture that saturates) every grid point is thousands of standard errors
+#: off, and their ranking rests on the few worst annuli: such a capture's search started
+#: in a wrong basin of one channel (sigma_s' 12 times the truth; 1 of 30 captures with 30 %
+#: of the pixels saturated). At 5 % the grid sees the profile's shape; the polishing that
+#: follows uses the standard errors themselves.
+START_SEARCH_RELATIVE_ERROR = 0.05
+#: Grid points per channel polished at each shared exposure tried
+#: (:meth:`DipoleModel._shared_exposure_start`).
+SHARED_GRID_STARTS = 2
 #: Grid basins per channel polished on their own before the joint MAP search.
 CHANNEL_CANDIDATES = 4
 #: A channel's second basin becomes a start of its own when its log-likelihood is within
@@ -144,6 +156,10 @@ class ProfileModel:
         self.profile = profile
         self.spec = spec
         self._observations = [profile.observations(c) for c in range(3)]
+        # the annuli whose prediction scales with the exposure (not the saturated ones,
+        # predicted as clipped means): what a search over unit-exposure profiles compares
+        self._linear = [profile.operator.linear_rows(c, self._observations[c][0].size)
+                        for c in range(3)]
         self.evaluations = 0
         self.calls = 0
 
@@ -348,15 +364,15 @@ class DipoleModel(ProfileModel):
         etas = np.array([1.1, 1.3, 1.5]) if self.fit_eta else np.array([fixed_eta])
         grid_a, grid_s, grid_eta = (g.ravel() for g in np.meshgrid(log_a, log_s, etas,
                                                                     indexing="ij"))
-        predicted = [np.empty((grid_a.size, self._observations[c][0].size)) for c in range(3)]
+        predicted = [np.empty((grid_a.size, int(self._linear[c].sum()))) for c in range(3)]
         # in blocks: a slab's pole count is set by the block's least absorbing point
         for start in range(0, grid_a.size, GRID_BLOCK):
             block = slice(start, start + GRID_BLOCK)
             unit = self.unit_profiles(np.repeat(np.exp(grid_a[block])[:, None], 3, axis=1),
                                       np.repeat(np.exp(grid_s[block])[:, None], 3, axis=1),
                                       grid_eta[block])
-            for c, values in enumerate(self.profile.operator.predict(unit)):
-                predicted[c][block] = values
+            for c, values in enumerate(self.profile.operator.predict(unit, clipped=False)):
+                predicted[c][block] = values[:, self._linear[c]]
         # each channel on its own: the weighted least-squares exposure of every grid point
         profiled = {c: self._profiled_exposure(c, predicted[c]) for c in self.channels}
         own = {}
@@ -368,7 +384,7 @@ class DipoleModel(ProfileModel):
         own_scale = float(np.exp(np.mean(np.log(scales)))) if scales.size else 1.0
         guesses = [self._grid_theta(grid_a, grid_s, grid_eta, {c: own[c][0] for c in own},
                                     own_scale)]
-        guesses += self._refined_channel_starts(profiled, grid_a, grid_s, grid_eta)
+        guesses += self._refined_channel_starts(profiled, grid_a, grid_s, grid_eta, predicted)
         # one exposure (and eta) for all channels, as the model has it
         if self.fit_exposure and scales.size:
             trial_scales = np.exp(np.linspace(np.log(scales.min()) - SCALE_SEARCH_NATS,
@@ -382,7 +398,7 @@ class DipoleModel(ProfileModel):
             totals = np.zeros(trial_scales.size)
             picks = {}
             for c in self.channels:
-                mean, stderr, dof = self._observations[c]
+                mean, stderr, dof = self._search_observations(c)
                 loglike = student_t_log_likelihood(
                     mean - trial_scales[:, None, None] * predicted[c][subset][None], stderr, dof)
                 loglike = np.where(np.isfinite(loglike), loglike, -np.inf)
@@ -396,13 +412,26 @@ class DipoleModel(ProfileModel):
             guesses.insert(0, self._grid_theta(grid_a, grid_s, grid_eta, *shared))
         return guesses
 
+    def _search_observations(self, c, *, grid: bool = True):
+        """``(mean, stderr, dof)`` of channel ``c`` for the starting-point search.
+
+        Only the annuli whose prediction scales with the exposure. For the grid
+        (``grid=True``) their standard errors are widened by
+        :data:`START_SEARCH_RELATIVE_ERROR` of the mean, so that grid points are ranked by
+        the profile's shape at the grid's own resolution; polishing uses them as they are.
+        """
+        mean, stderr, dof = (part[self._linear[c]] for part in self._observations[c])
+        if grid:
+            stderr = np.hypot(stderr, START_SEARCH_RELATIVE_ERROR * mean)
+        return mean, stderr, dof
+
     def _profiled_exposure(self, c, unit_predictions):
         """Best exposure of each grid point for channel ``c`` alone, and its log-likelihood.
 
         The exposure is the weighted least-squares scale of the unit-exposure predictions
         (the sidecar's, when known); points where it is not positive get -inf.
         """
-        mean, stderr, dof = self._observations[c]
+        mean, stderr, dof = self._search_observations(c)
         u = unit_predictions
         weights = 1.0 / stderr ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -415,21 +444,27 @@ class DipoleModel(ProfileModel):
         return scale, np.where(good & np.isfinite(loglike), loglike, -np.inf)
 
     def _channel_log_likelihood(self, c, points, eta) -> np.ndarray:
-        """Log-likelihood of channel ``c`` alone at ``(ln sigma_a, ln sigma_s', ln scale)``."""
+        """Log-likelihood of channel ``c`` alone at ``(ln sigma_a, ln sigma_s', ln scale)``.
+
+        Every annulus of the channel, the saturated ones as clipped means: where the centre
+        saturates, where the ceiling is crossed pins the profile as no tail annulus does.
+        """
         points = np.atleast_2d(points)
         sigma_a = np.repeat(np.exp(points[:, :1]), 3, axis=1)
         sigma_s = np.repeat(np.exp(points[:, 1:2]), 3, axis=1)
         unit = self.unit_profiles(sigma_a, sigma_s, np.full(points.shape[0], eta))
-        predicted = self.profile.operator.predict(unit, channels=(c,))[c]
+        predicted = self.profile.operator.predict(np.exp(points[:, 2])[:, None, None] * unit,
+                                                  channels=(c,))[c]
         mean, stderr, dof = self._observations[c]
-        value = student_t_log_likelihood(mean - np.exp(points[:, 2:3]) * predicted, stderr, dof)
+        value = student_t_log_likelihood(mean - predicted, stderr, dof)
         return np.where(np.isfinite(value), value, -1e300)
 
-    def _refined_channel_starts(self, profiled, grid_a, grid_s, grid_eta) -> list:
+    def _refined_channel_starts(self, profiled, grid_a, grid_s, grid_eta, predicted) -> list:
         """Refine each channel's best grid basins on their own, then join the channels.
 
         ``profiled`` maps each channel to its grid points' exposures and log-likelihoods
-        (:meth:`_profiled_exposure`).
+        (:meth:`_profiled_exposure`); ``predicted`` holds the grid points' unit-exposure
+        predictions per channel.
 
         The :data:`CHANNEL_CANDIDATES` best grid points of each channel (at least two grid
         cells apart) are polished by L-BFGS-B in (ln sigma_a, ln sigma_s', ln exposure) of
@@ -438,7 +473,8 @@ class DipoleModel(ProfileModel):
         :data:`ALTERNATIVE_BASIN_NATS` of the best: a capture that sees part of the profile
         can leave a channel with two explanations, and the sampler needs both
         (:func:`~translucent.fitting.sampler.find_modes`). The exposures are combined
-        geometrically.
+        geometrically. Where channels have two basins, the mix of basins with the best joint
+        log-probability (one exposure for all) comes first.
         """
         from scipy import optimize
 
@@ -484,7 +520,65 @@ class DipoleModel(ProfileModel):
         if any(len(points) > 1 for points in ranked.values()):
             starts.append(self._channel_theta({c: points[-1] for c, points in ranked.items()},
                                               eta))
+            # a channel alone may not tell its basins apart (its exposure is free), the
+            # shared exposure can: the mix of basins the joint posterior likes best first
+            mixes = np.array([self._channel_theta(dict(zip(ranked, choice, strict=True)), eta)
+                              for choice in itertools.product(*ranked.values())])
+            best = mixes[int(np.argmax(self.log_probability(mixes)))]
+            if not any(np.array_equal(best, start) for start in starts):
+                starts.insert(0, best)
+        if self.fit_exposure and len(ranked) > 1:
+            on_eta = np.flatnonzero(grid_eta == eta) if np.any(grid_eta == eta) \
+                else np.arange(grid_eta.size)
+            grid = (grid_a[on_eta], grid_s[on_eta],
+                    {c: predicted[c][on_eta] for c in ranked})
+            starts.insert(0, self._shared_exposure_start(ranked, eta, bounds[:2], grid))
         return starts
+
+    def _shared_exposure_start(self, ranked, eta, bounds, grid) -> np.ndarray:
+        """Join the channels at one exposure: the start of the best joint log-probability.
+
+        Seen only in its tail (the centre saturated, or cut off), a channel alone fixes its
+        diffusion length but hardly where it lies along its sigma_a - sigma_s' - exposure
+        valley, so its own basin may sit at an exposure far from the other channels'. At a
+        fixed exposure the valley is a narrow pit instead. For each exposure of a channel's
+        basin (and their geometric mean) every channel's (sigma_a, sigma_s') is polished at
+        that exposure from its basins and from its :data:`SHARED_GRID_STARTS` best grid
+        points at that exposure (ranked by the standard errors themselves); the candidate
+        the joint posterior likes best is returned.
+
+        ``grid`` is ``(ln sigma_a, ln sigma_s', {channel: unit-exposure predictions})`` of
+        the grid points at the search's eta.
+        """
+        from scipy import optimize
+
+        grid_a, grid_s, unit = grid
+        exposures = sorted({round(float(point[2]), 3) for points in ranked.values()
+                            for point in points})
+        exposures.append(float(np.mean([points[0][2] for points in ranked.values()])))
+        candidates = []
+        for exposure in exposures:
+            picks = {}
+            for c, points in ranked.items():
+                mean, stderr, dof = self._search_observations(c, grid=False)
+                loglike = student_t_log_likelihood(mean - np.exp(exposure) * unit[c], stderr,
+                                                   dof)
+                best_grid = np.argsort(np.where(np.isfinite(loglike), loglike, -np.inf))
+                starts = [point[:2] for point in points] + [
+                    np.array([grid_a[k], grid_s[k]]) for k in best_grid[::-1][:SHARED_GRID_STARTS]]
+
+                def objective(x, c=c, exposure=exposure):
+                    return -float(self._channel_log_likelihood(c, [x[0], x[1], exposure],
+                                                               eta)[0])
+
+                results = [optimize.minimize(objective, start, method="L-BFGS-B",
+                                             bounds=bounds, options={"maxiter": 200})
+                           for start in starts]
+                best = min(results, key=lambda result: result.fun)
+                picks[c] = np.array([best.x[0], best.x[1], exposure])
+            candidates.append(self._channel_theta(picks, eta))
+        candidates = np.array(candidates)
+        return candidates[int(np.argmax(self.log_probability(candidates)))]
 
     def _channel_theta(self, picks, eta) -> np.ndarray:
         """Return a parameter vector from per-channel (ln sigma_a, ln sigma_s', ln exposure)."""
@@ -549,7 +643,7 @@ class WalkModel(DipoleModel):
     """
 
     def __init__(self, profile: RadialProfile, spec: CaptureSpec, *, fit_eta: bool | None = None):
-        from .walk_table import load_table
+        from ..materials.profiles.random_walk import load_table
 
         if spec.side != "reflection":
             raise InputError("the walk model tabulates reflection only; fit a transmission "
@@ -606,6 +700,11 @@ class WalkModel(DipoleModel):
         return (0.5 * (edges[:-1] + edges[1:]))[self.profile.used[:, channel]]
 
 
+#: The most segments a fitted SubEdit profile may have (as a converted one,
+#: :func:`translucent.materials.subedit.subedit_from_dipole`).
+MAX_SEGMENTS = 1024
+
+
 class SubEditModel(ProfileModel):
     r"""SubEdit profile: ``n + 1`` knots of :math:`\ln P` per channel (Chen et al. 2012, Eq. 9).
 
@@ -633,8 +732,9 @@ class SubEditModel(ProfileModel):
                  r_s_mm: float | None = None, smoothness: float = SUBEDIT_SMOOTHNESS,
                  channels=(0, 1, 2)):
         super().__init__(profile, spec)
-        if int(segments) < 2:
-            raise InputError("must be >= 2", field="segments", value=segments)
+        if not 2 <= int(segments) <= MAX_SEGMENTS:  # SubEdit profiles' own bound
+            raise InputError(f"must be in [2, {MAX_SEGMENTS}]", field="segments",
+                             value=segments)
         if not (np.isfinite(smoothness) and smoothness > 0):
             raise InputError("must be > 0 and finite, nats", field="smoothness",
                              value=smoothness)
@@ -709,8 +809,9 @@ class SubEditModel(ProfileModel):
         theta = []
         for c in self.channels:
             use = self.profile.used[:, c]
-            radius = self.profile.radius_mm[use, c]
-            mean = self.profile.mean[use, c]
+            # saturated annuli hold clipped means, below the profile: left out of the start
+            radius = self.profile.radius_mm[use, c][self._linear[c]]
+            mean = self.profile.mean[use, c][self._linear[c]]
             positive = mean > 0
             log_mean = np.log(mean[positive] / self.exposure)
             radius = radius[positive]

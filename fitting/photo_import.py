@@ -6,15 +6,19 @@ sidecar, and a preview PNG (the image in log scale, the found incident point and
 annuli the fitter will average) for a person to check.
 
 * **Photo.** A 16-bit (or 8-bit, or float) TIFF (tifffile) or an OpenEXR, linear: no gamma,
-  no auto-brightening (a camera RAW must be developed to a linear TIFF first: RAW files
-  are refused, since no RAW decoder is part of the suite). Greyscale photos are used as
-  three equal channels.
+  no auto-brightening; or a camera RAW, read linearly by LibRaw
+  (:mod:`translucent.fitting.capture_raw`: each colour at its own photosites, the others
+  NaN, black and white levels from the file). Greyscale photos are used as three equal
+  channels.
 * **Black and white levels.** A dark frame (the same camera settings with the beam off, or
-  the lens capped) is subtracted pixel by pixel; otherwise ``black_level`` (default 0) is
-  the stored value of no light. ``white_level`` is the raw value at and above which a
-  pixel is clipped (default: the integer type's top code; none for float photos). Pixels
-  at or above it in the photo are written at the sidecar's saturation level, so the fitter
-  masks them.
+  the lens capped) is subtracted pixel by pixel; otherwise ``black_level`` (default 0; a
+  RAW's own) is the stored value of no light. ``white_level`` is the raw value at and
+  above which a pixel is clipped (default: the integer type's top code, a RAW's own; none
+  for float photos). A channel at or above it is written at the sidecar's saturation
+  level, a level every clipped pixel's own ceiling reaches (with a dark frame the white
+  level minus the dark frame's 99.9th percentile; a clipped pixel whose dark value lies
+  above that is written NaN), so the fitter reads it as censored from above: its
+  signal is at least that level.
 * **Pixel size.** Given in mm, or measured from two points on a ruler in the photo and
   their distance.
 * **Incident point.** The brightest spot of the luminance smoothed over a few pixels,
@@ -35,16 +39,18 @@ import numpy as np
 from ..atomic import atomic_path, check_output_file
 from ..errors import InputError
 from .capture import CaptureSpec, read_capture, write_capture, write_exr_pixels
+from .capture_raw import RAW_SUFFIXES, read_raw
 from .incident_point import refine_incident_point
 from .profile import annulus_edges
 
 __all__ = ["ImportedCapture", "MIN_SPOT_CONTRAST", "RAW_SUFFIXES", "import_photo",
            "ruler_pixel_size"]
 
-#: Camera RAW suffixes, refused with the way out.
-RAW_SUFFIXES = (".dng", ".cr2", ".cr3", ".nef", ".arw", ".raf", ".orf", ".rw2", ".pef",
-                ".srw", ".raw")
 PHOTO_SUFFIXES = (".tif", ".tiff", ".exr")
+#: With a dark frame every pixel clips at its own level, ``white - dark``: the sidecar's
+#: saturation level is this percentile of those levels (the dark frame's hot pixels left
+#: out), and a clipped pixel whose own level lies below it is written NaN.
+CEILING_PERCENTILE = 0.1
 #: The spot must stand this many noise standard deviations (from the median absolute
 #: deviation of the smoothed luminance) above the image's median.
 MIN_SPOT_CONTRAST = 20.0
@@ -63,6 +69,7 @@ class ImportedCapture:
     pixel_size_mm: float
     saturated_pixels: int
     spot_contrast: float
+    raw_layout: str = ""
 
 
 def ruler_pixel_size(x1, y1, x2, y2, distance_mm) -> float:
@@ -82,13 +89,10 @@ def ruler_pixel_size(x1, y1, x2, y2, distance_mm) -> float:
 def _read_photo(path: Path, field: str) -> tuple[np.ndarray, float]:
     """Pixels (H, W, 3) float64 and the white level the file's type implies (inf: float)."""
     suffix = path.suffix.lower()
-    if suffix in RAW_SUFFIXES:
-        raise InputError("camera RAW files are not read: develop it to a linear 16-bit TIFF "
-                         "(no gamma, no auto-brightening, no white balance) and import that",
-                         file=path, field=field, value=suffix)
     if suffix not in PHOTO_SUFFIXES:
-        raise InputError(f"unsupported photo format; valid: {', '.join(PHOTO_SUFFIXES)}",
-                         file=path, field=field, value=suffix)
+        raise InputError(f"unsupported photo format; valid: {', '.join(PHOTO_SUFFIXES)} and "
+                         f"camera RAW ({', '.join(RAW_SUFFIXES)})", file=path, field=field,
+                         value=suffix)
     if not path.is_file():
         raise InputError("no such file", file=path, field=field)
     if suffix == ".exr":
@@ -121,6 +125,13 @@ def _read_photo(path: Path, field: str) -> tuple[np.ndarray, float]:
     return pixels[..., :3], top
 
 
+def _saturation_level(ceiling, shape) -> float:
+    """Return the sidecar's saturation level from every pixel's own clip level (stored units)."""
+    ceiling = np.broadcast_to(np.asarray(ceiling, dtype=np.float64), shape)
+    finite = ceiling[np.isfinite(ceiling)]
+    return float(np.percentile(finite, CEILING_PERCENTILE)) if finite.size else math.inf
+
+
 def _spot(luminance: np.ndarray, path: Path) -> tuple[tuple[float, float], float]:
     """Return the brightest smoothed spot (x, y) in pixels and its contrast over the noise."""
     from scipy import ndimage
@@ -150,7 +161,7 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
     Parameters
     ----------
     photo : path
-        TIFF or OpenEXR, linear.
+        TIFF or OpenEXR, linear; or a camera RAW (:func:`~.capture_raw.read_raw`).
     sidecar : path
         The capture's JSON sidecar to write; the image goes beside it as
         ``<stem>.exr`` and the preview as ``<stem>_preview.png``.
@@ -159,10 +170,11 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
     dark : path, optional
         A dark frame of the same size (subtracted; then ``black_level`` must not be given).
     black_level : float, optional
-        Raw value of no light without a dark frame (default 0).
+        Raw value of no light without a dark frame (default 0; a RAW's own, which this
+        replaces).
     white_level : float, optional
         Raw value at and above which a pixel is clipped (default: the integer type's top
-        code; none for a float photo).
+        code; a RAW's own; none for a float photo).
     incident_px : (float, float), optional
         Where to look for the spot (default: the brightest spot of the photo).
     eta, side, thickness_mm, beam_radius_mm, beam_profile
@@ -192,43 +204,70 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
         check_output_file(path, "--out")
     if not sidecar.parent.is_dir():
         raise InputError("no such folder", file=sidecar.parent, field="--out")
-    pixels, top = _read_photo(photo, "photo")
-    white = top if white_level is None else float(white_level)
-    if not (math.isfinite(white) or white == math.inf) or white <= 0:
-        raise InputError("must be > 0", field="white_level (--white-level)", value=white_level)
-    clipped = np.any(pixels >= white, axis=2) if math.isfinite(white) else \
-        np.zeros(pixels.shape[:2], bool)
+    raw = photo.suffix.lower() in RAW_SUFFIXES
+    layout = ""
+    if raw:
+        if dark is not None and black_level is not None:
+            raise InputError("give a dark frame or a black level, not both",
+                             field="black_level (--black-level)", value=black_level)
+        mosaic = read_raw(photo, "photo", black_level=black_level, white_level=white_level)
+        pixels, white = mosaic.values, mosaic.white[..., None]
+        layout = f"{mosaic.layout}, black level from the {mosaic.black_source}"
+    else:
+        pixels, top = _read_photo(photo, "photo")
+        white = top if white_level is None else float(white_level)
+        if not (math.isfinite(white) or white == math.inf) or white <= 0:
+            raise InputError("must be > 0", field="white_level (--white-level)",
+                             value=white_level)
+    with np.errstate(invalid="ignore"):
+        clipped = pixels >= white  # per channel: a channel clips on its own
     if dark is not None:
         if black_level is not None:
             raise InputError("give a dark frame or a black level, not both",
                              field="black_level (--black-level)", value=black_level)
-        dark_pixels, _ = _read_photo(Path(dark), "dark")
-        if dark_pixels.shape != pixels.shape:
+        if raw:
+            dark_pixels = read_raw(Path(dark), "dark", white_level=white_level).values
+        else:
+            dark_pixels, _ = _read_photo(Path(dark), "dark")
+        if dark_pixels.shape != pixels.shape or \
+                not np.array_equal(np.isnan(dark_pixels), np.isnan(pixels)):
             raise InputError(f"the dark frame is {dark_pixels.shape[1]} x "
                              f"{dark_pixels.shape[0]} pixels, the photo "
-                             f"{pixels.shape[1]} x {pixels.shape[0]}", file=Path(dark),
+                             f"{pixels.shape[1]} x {pixels.shape[0]} (a RAW dark frame needs "
+                             "the photo's colour filter layout)", file=Path(dark),
                              field="dark (--dark)", value=list(dark_pixels.shape[:2]))
         stored = pixels - dark_pixels
         black = 0.0
-        saturation = (white - float(dark_pixels.min())) if math.isfinite(white) else math.inf
+        ceiling = white - dark_pixels
+    elif raw:  # the file's black level of every photosite, subtracted
+        stored = pixels - mosaic.black[..., None]
+        black = 0.0
+        ceiling = white - mosaic.black[..., None]
     else:
         black = 0.0 if black_level is None else float(black_level)
         if not (math.isfinite(black) and black >= 0):
             raise InputError("must be a finite number >= 0", field="black_level (--black-level)",
                              value=black_level)
         stored = pixels
-        saturation = white
+        ceiling = white
+    saturation = _saturation_level(ceiling, pixels.shape)
     if not saturation > black:
         raise InputError("the white level must lie above the black level",
-                         field="white_level (--white-level)", value=white)
+                         field="white_level (--white-level)",
+                         value=white_level if white_level is not None else saturation)
     if math.isfinite(saturation):
-        stored = np.where(clipped[..., None], saturation, stored)
-    luminance = (stored - black).sum(axis=2)
+        # a clipped channel says only "at least its own ceiling": written at a level every
+        # such ceiling reaches, or NaN where its own lies below it (a hot dark pixel)
+        unknown = clipped & (np.broadcast_to(ceiling, pixels.shape) < saturation)
+        stored = np.where(clipped, saturation, stored)
+        stored[unknown] = np.nan
+    clipped_any = clipped.any(axis=2)
+    luminance = np.nansum(stored - black, axis=2)
     if incident_px is None:
         start, contrast = _spot(luminance, photo)
     else:
         start, contrast = (float(incident_px[0]), float(incident_px[1])), math.nan
-    centre = refine_incident_point(luminance, start, saturated=clipped)
+    centre = refine_incident_point(luminance, start, saturated=clipped_any)
     beam_pixels = None
     if beam_image is not None:
         beam_pixels, _ = _read_photo(Path(beam_image), "beam_image (--beam-image)")
@@ -243,7 +282,7 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
                        exposure=None, synthetic={})
     written = []
     try:
-        _write_preview(preview_path, luminance, centre, clipped)
+        _write_preview(preview_path, luminance, centre, clipped_any)
         written.append(preview_path)
         if beam_pixels is not None:
             write_exr_pixels(beam_path, beam_pixels)
@@ -256,7 +295,7 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
             path.unlink(missing_ok=True)
         raise
     return ImportedCapture(sidecar, image_path, preview_path, centre, float(pixel_size_mm),
-                           int(clipped.sum()), contrast)
+                           int(clipped_any.sum()), contrast, layout)
 
 
 def _write_preview(path: Path, luminance, centre, clipped) -> None:

@@ -212,21 +212,22 @@ def read_material(name_or_path):
     """
     from pathlib import Path
 
+    from ..atomic import check_input_file, note_input
     from ..errors import InputError
     from ..materials import Dipole, measured_medium
     from ..materials.factory import material_from_dict
-    from ..tomlio import tomllib
+    from ..tomlio import parse_toml
 
     path = Path(str(name_or_path))
     if path.suffix.lower() != ".toml":
         return measured_medium(str(name_or_path))
-    if not path.is_file():
-        raise InputError("no such material file", file=path, field="material",
-                         value=str(path))
+    check_input_file(path, "material", what="material file")
+    note_input(path, "material")
     try:
-        table = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
         raise InputError(f"not a readable TOML file ({error})", file=path) from error
+    table = parse_toml(text, file=path)
     table = table.get("material", table)
     material = material_from_dict(table, file=path)
     if not isinstance(material, Dipole):

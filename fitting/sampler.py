@@ -28,7 +28,8 @@ import emcee
 import numpy as np
 from scipy import optimize
 
-from ..errors import InputError
+from .. import signals
+from ..errors import InputError, check_count
 
 __all__ = ["ChainResult", "Mode", "ModeJumpMove", "find_map", "find_modes", "laplace_covariance",
            "mode_labels", "run_chain", "walkers_per_mode"]
@@ -543,13 +544,21 @@ def run_chain(model, *, walkers: int | None = None, max_steps: int = 20000,
     ndim = model.ndim
     if walkers is None:
         walkers = max(4 * ndim, 32)
-    walkers = int(walkers) + int(walkers) % 2
+    given = walkers
+    walkers = check_count(walkers, "walkers", 1)
+    walkers += walkers % 2  # the stretch move splits the ensemble in halves
     if walkers < 2 * ndim:
         raise InputError(f"must be at least 2 x ndim = {2 * ndim}", field="walkers",
-                         value=walkers)
+                         value=given)
     if max_steps < check_every:
         raise InputError(f"must be >= check_every ({check_every})", field="max_steps",
                          value=max_steps)
+    from ..resources import check_memory
+
+    # emcee keeps every step of every walker: the chain, its log-probabilities, acceptance
+    check_memory(float(walkers) * max_steps * (ndim + 2) * 8,
+                 what=f"a chain of {walkers} walkers x {max_steps} steps",
+                 field="walkers x max_steps", value=f"{given} x {max_steps}")
     calls0, evaluations0 = model.calls, model.evaluations
     modes = find_modes(model, start)
     rng = np.random.default_rng(seed)
@@ -572,9 +581,13 @@ def run_chain(model, *, walkers: int | None = None, max_steps: int = 20000,
     try:
         while sampler.iteration < max_steps:
             steps = min(check_every, max_steps - sampler.iteration)
-            for _ in sampler.sample(state, iterations=steps):
-                if bar is not None:
-                    bar.update(1)
+            # a signal inside the log-probability would have emcee print a traceback: it
+            # is held and raised here, between steps
+            with signals.deferred():
+                for _ in sampler.sample(state, iterations=steps):
+                    signals.check()
+                    if bar is not None:
+                        bar.update(1)
             state = sampler.get_last_sample()
             tau = sampler.get_autocorr_time(tol=0)
             if np.all(np.isfinite(tau)) and previous_tau is not None:

@@ -1,7 +1,8 @@
 """Turn a photo of a lit slab into a capture: ``translucent capture import PHOTO``.
 
-Reads a linear photo (16-bit or float TIFF, OpenEXR; a camera RAW must first be developed
-to a linear TIFF), subtracts a dark frame (``--dark``) or a black level, takes the pixel
+Reads a linear photo (16-bit or float TIFF, OpenEXR, or a camera RAW read linearly by
+LibRaw: each colour at its own photosites, black and white levels from the file), subtracts
+a dark frame (``--dark``) or a black level, takes the pixel
 size in mm (``--pixel-size-mm``, or ``--ruler X1 Y1 X2 Y2 MM``: two points on a ruler in
 the photo and their distance), finds the incident point (the brightest spot, refined to
 sub-pixel precision), and writes the capture: ``OUT.json`` (the sidecar), ``OUT.exr``
@@ -17,7 +18,8 @@ from pathlib import Path
 
 def add_arguments(parser):
     """Options of ``translucent capture import``."""
-    parser.add_argument("photo", help="linear photo: .tif/.tiff (16-bit or float) or .exr")
+    parser.add_argument("photo", help="linear photo: .tif/.tiff (16-bit or float), .exr, or a "
+                                      "camera RAW (.dng, .cr2, .nef, .arw, ...)")
     size = parser.add_mutually_exclusive_group(required=True)
     size.add_argument("--pixel-size-mm", type=float, default=None,
                       help="size of one pixel on the slab, mm")
@@ -30,10 +32,11 @@ def add_arguments(parser):
     parser.add_argument("--dark", default=None,
                         help="dark frame of the same size (beam off), subtracted")
     parser.add_argument("--black-level", type=float, default=None,
-                        help="raw value of no light, without a dark frame (default 0)")
+                        help="raw value of no light, without a dark frame (default 0; a "
+                             "RAW's own, which this replaces)")
     parser.add_argument("--white-level", type=float, default=None,
                         help="raw value at and above which a pixel is clipped (default: the "
-                             "integer type's top code; none for float photos)")
+                             "integer type's top code, a RAW's own; none for float photos)")
     parser.add_argument("--incident", type=float, nargs=2, default=None, metavar=("X", "Y"),
                         help="where the beam enters, pixels (default: the brightest spot)")
     parser.add_argument("--eta", type=float, default=1.3,
@@ -57,9 +60,17 @@ def add_arguments(parser):
 
 def run(args) -> int:
     """Import the photo, print what was found, 0 on success."""
+    from ...atomic import check_input_file, note_input
     from ...fitting.photo_import import import_photo, ruler_pixel_size
 
     photo = Path(args.photo)
+    # before the outputs are named: none of them may replace a photo (-o photo.json next
+    # to photo.exr would write the capture's image over it)
+    for field, path in (("photo", args.photo), ("--dark", args.dark),
+                        ("--beam-image", args.beam_image)):
+        if path is not None:
+            check_input_file(path, field, what="photo")
+            note_input(path, field)
     pixel = args.pixel_size_mm if args.ruler is None else ruler_pixel_size(*args.ruler)
     out = Path(args.out) if args.out else photo.with_name(f"{photo.stem}_capture.json")
     result = import_photo(photo, out, pixel_size_mm=pixel, dark=args.dark,
@@ -74,6 +85,8 @@ def run(args) -> int:
     print(f"incident point {result.incident_px[0]:.2f}, {result.incident_px[1]:.2f} px"
           f"{contrast}; pixel size {result.pixel_size_mm:.5g} mm; "
           f"{result.saturated_pixels} clipped pixels")
+    if result.raw_layout:
+        print(f"camera RAW: {result.raw_layout}; each colour at its own photosites")
     print(f"wrote {result.sidecar}, {result.image.name} and {result.preview.name}: check the "
           f"preview, then `translucent fit {result.sidecar}`")
     from .record import record

@@ -101,7 +101,7 @@ def test_subedit_smoothness_prior_prefers_straight_lines(small_capture):
 
 def test_subedit_bad_options(small_capture):
     capture, profile, _ = small_capture
-    with pytest.raises(InputError, match="must be >= 2"):
+    with pytest.raises(InputError, match=r"must be in \[2, 1024\]"):
         SubEditModel(profile, capture.spec, segments=1)
     with pytest.raises(InputError, match="must be > 0"):
         SubEditModel(profile, capture.spec, smoothness=0.0)

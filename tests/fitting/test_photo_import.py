@@ -93,7 +93,7 @@ def test_the_command_line_spelling_and_its_output(tmp_path, capsys):
     ("zero pixel size", "--pixel-size-mm"),
     ("dark of another size", "dark frame is 20 x 20"),
     ("no spot", "no incident spot found"),
-    ("raw", "camera RAW files are not read"),
+    ("raw", "LibRaw cannot read this RAW file"),
     ("dark and black level", "not both"),
 ])
 def test_bad_input_is_refused_with_nothing_written(tmp_path, capsys, case, message):
