@@ -104,7 +104,8 @@ class QuantizedDiffusionProfile(LookupProfile):
         a = sigma_a[:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
             # the integral of e^{-sigma_a tau} over each interval (its length at sigma_a = 0)
-            absorbed = np.where(a > 0, (np.exp(-a * start) - np.exp(-a * end)) / a,
+            # (written with expm1: the plain difference cancels for sigma_a ~ 1e-14 mm^-1)
+            absorbed = np.where(a > 0, -np.exp(-a * start) * np.expm1(-a * (end - start)) / a,
                                 end - start)
         v = diffusion[:, None] * (start + end)
         st, al = sigma_t[:, None], albedo[:, None]
