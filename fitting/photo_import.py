@@ -210,9 +210,12 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
         if dark is not None and black_level is not None:
             raise InputError("give a dark frame or a black level, not both",
                              field="black_level (--black-level)", value=black_level)
-        mosaic = read_raw(photo, "photo", black_level=black_level, white_level=white_level)
+        # with a dark frame the file's black level is not used (nor needed)
+        mosaic = read_raw(photo, "photo", white_level=white_level,
+                          black_level=0.0 if dark is not None else black_level)
         pixels, white = mosaic.values, mosaic.white[..., None]
-        layout = f"{mosaic.layout}, black level from the {mosaic.black_source}"
+        layout = f"{mosaic.layout}, " + ("the dark frame subtracted" if dark is not None
+                                          else f"black level from the {mosaic.black_source}")
     else:
         pixels, top = _read_photo(photo, "photo")
         white = top if white_level is None else float(white_level)
@@ -226,7 +229,8 @@ def import_photo(photo, sidecar, *, pixel_size_mm: float, dark=None,
             raise InputError("give a dark frame or a black level, not both",
                              field="black_level (--black-level)", value=black_level)
         if raw:
-            dark_pixels = read_raw(Path(dark), "dark", white_level=white_level).values
+            dark_pixels = read_raw(Path(dark), "dark", white_level=white_level,
+                                   black_level=0.0).values
         else:
             dark_pixels, _ = _read_photo(Path(dark), "dark")
         if dark_pixels.shape != pixels.shape or \

@@ -107,6 +107,19 @@ def test_a_black_level_given_replaces_a_missing_one(tmp_path):
     assert raw.black_source == "given" and np.all(raw.black == BLACK)
 
 
+def test_a_raw_dark_frame_is_subtracted_photosite_by_photosite(tmp_path):
+    # neither file states a black level: with a dark frame none is needed
+    path, mosaic, channel = raw_photo(tmp_path, black_tag=False)
+    dark = np.rint(BLACK + np.random.default_rng(9).normal(0.0, 3.0, mosaic.shape))
+    write_dng(tmp_path / "dark.dng", dark, black_tag=False)
+    result = import_photo(path, tmp_path / "slab.json", pixel_size_mm=PIXEL_MM,
+                          dark=tmp_path / "dark.dng")
+    assert "dark frame subtracted" in result.raw_layout
+    signal = read_capture(result.sidecar).linear_signal()
+    rows, cols = np.indices(channel.shape)
+    np.testing.assert_allclose(signal[rows, cols, channel], mosaic - dark)
+
+
 @pytest.mark.parametrize("case, message, field", [
     ("no black level", "states no black level", "black level"),
     ("not a raw", "LibRaw cannot read this RAW file", "photo"),
