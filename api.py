@@ -256,7 +256,7 @@ def fit(capture, *, models=("dipole",), out_dir=None, seed: int | None = None,
     >>> from translucent.fitting.synthetic import dipole_capture
     >>> from translucent.materials import measured_medium
     >>> folder = pathlib.Path(tempfile.mkdtemp())
-    >>> image, spec = dipole_capture(measured_medium("Skin1"), size=48, seed=1,
+    >>> image, spec = dipole_capture(measured_medium("Skin1"), size=32, seed=1,
     ...                              image_name="skin1.exr")
     >>> _ = write_capture(folder / "skin1.json", image, spec)
     >>> result = translucent.fit(folder / "skin1.json", seed=1)["dipole"]

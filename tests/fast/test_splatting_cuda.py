@@ -66,6 +66,8 @@ def simulated():
     return json.loads(result.stdout.strip().splitlines()[-1])
 
 
+# the simulator takes about 25 s: slow tier (the refusals below stay in the fast tier)
+@pytest.mark.slow
 @pytest.mark.parametrize("setting", ["{}", "{'multiresolution': False}"])
 def test_cuda_frame_equals_the_cpu_kernel(simulated, setting):
     frame = simulated[setting]
@@ -76,6 +78,7 @@ def test_cuda_frame_equals_the_cpu_kernel(simulated, setting):
     assert frame["pairs"][0] == frame["pairs"][1]
 
 
+@pytest.mark.slow
 def test_cuda_brute_force_equals_the_cpu_gather(simulated):
     gather = simulated["gather"]
     assert gather["largest"] > 0

@@ -31,7 +31,7 @@ def _bin_means(table, edges, albedo, eta):
 
 
 @needs_drjit
-@pytest.mark.parametrize("eta", [1.0, 1.4])
+@pytest.mark.parametrize("eta", [1.0, pytest.param(1.4, marks=pytest.mark.slow)])
 def test_single_scattering_matches_the_walks_first_exits(eta):
     photons = 100_000
     arrays, _ = walk_exits(11, photons, 0.0, 1.0, 0.0, eta, None, 0.0, 160.0,

@@ -238,6 +238,7 @@ def test_the_closed_mesh_check_counts_open_and_flipped_edges():
     assert manifold_nee.boundary_edge_count(sphere.vertices, flipped) == 3  # its 3 edges
 
 
+@pytest.mark.slow  # about 28 s: three channels of volpath_mnee compiled twice
 def test_its_counts_are_in_the_header_and_a_resumed_render_counts_every_pass(
         mi, tmp_path, monkeypatch):
     import dataclasses
