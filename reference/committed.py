@@ -7,8 +7,16 @@ stored as ``reference/data/<scene>.exr``: the mean, the variance of the mean and
 provenance (scene content hash, integrator, spp, passes, seconds, variant, Mitsuba version,
 the noise reached and why the render stopped).
 
+Beside them, the *model references* of the scenes whose translucent objects are homogeneous
+(:data:`MODEL_PLANS`): the same scene rendered by the BSSRDF path tracer
+(:mod:`~translucent.reference.bssrdf_path`) with a radial profile, the default one
+(:data:`MODEL_PROFILES`), stored as ``reference/data/model/<scene>.<profile>.exr``. Against
+the volumetric reference it is the profile's own error; against a fast method of that
+profile, the method's.
+
 A committed reference is used only while its scene is the one it was rendered from: the
-header's ``scene_content_hash`` must equal the hash of the scene as it loads now. A stale,
+header's ``scene_content_hash`` must equal the hash of the scene as it loads now (and a
+model reference's header must name the integrator and the profile it stands for). A stale,
 unreadable, wrong-sized or non-finite file is an error that names the file and the command
 that renders it again (``translucent references render NAME``); it is never silently re-used
 and never silently replaced.
@@ -23,9 +31,10 @@ from pathlib import Path
 from ..errors import InputError
 from ..image import Image, read_exr
 
-__all__ = ["REFERENCE_FOLDER", "PLANS", "ReferencePlan", "CommittedReference",
-           "committed_path", "committed_reference", "committed_scene_names",
-           "render_committed", "rerender_command"]
+__all__ = ["REFERENCE_FOLDER", "PLANS", "MODEL_PLANS", "MODEL_PROFILES", "ReferencePlan",
+           "CommittedReference", "committed_path", "committed_reference",
+           "committed_scene_names", "committed_model_scene_names", "render_committed",
+           "rerender_command"]
 
 #: Where the committed references live.
 REFERENCE_FOLDER = Path(__file__).resolve().parent / "data"
@@ -85,27 +94,69 @@ PLANS: dict[str, ReferencePlan] = {
 }
 
 
+#: The integrator of a model reference (the BSSRDF path tracer).
+MODEL_INTEGRATOR = "bssrdf_path"
+
+#: The profiles whose model references are committed: the one every method uses unless
+#: told otherwise (:data:`translucent.fast.knobs.DEFAULT_PROFILE`, the classical dipole).
+MODEL_PROFILES = ("dipole",)
+
+#: The built-in scenes whose model references are committed, and how each is rendered:
+#: every default scene whose translucent objects are homogeneous (a heterogeneous medium
+#: has no radial profile). The BSSRDF path tracer needs no manifold search behind a
+#: dielectric and no per-channel walks: a pass costs a fraction of the volumetric one.
+MODEL_PLANS: dict[str, ReferencePlan] = {
+    "sphere": ReferencePlan(spp=256, budget_seconds=1200.0, integrator=MODEL_INTEGRATOR),
+    "bowl": ReferencePlan(spp=256, budget_seconds=1200.0, integrator=MODEL_INTEGRATOR),
+    "cornell_block": ReferencePlan(spp=64, budget_seconds=1200.0,
+                                   integrator=MODEL_INTEGRATOR),
+    "sphere_dielectric": ReferencePlan(spp=256, budget_seconds=1200.0,
+                                       integrator=MODEL_INTEGRATOR),
+    "dielectric_on_floor": ReferencePlan(spp=256, budget_seconds=1200.0,
+                                         integrator=MODEL_INTEGRATOR),
+}
+
+
 def committed_scene_names() -> list[str]:
     """Return the built-in scenes that have a reference plan, in the order of :data:`PLANS`."""
     return list(PLANS)
 
 
-def _plan(name: str) -> ReferencePlan:
-    """Return the plan of ``name``, or :class:`InputError` naming the planned scenes."""
-    if name not in PLANS:
-        raise InputError(f"no committed reference is planned for this scene (planned: "
-                         f"{', '.join(PLANS)})", field="scene", value=name)
-    return PLANS[name]
+def committed_model_scene_names() -> list[str]:
+    """Return the built-in scenes whose model references are committed (:data:`MODEL_PLANS`)."""
+    return list(MODEL_PLANS)
 
 
-def committed_path(name: str) -> Path:
-    """Return where the committed reference of built-in scene ``name`` lives."""
-    return REFERENCE_FOLDER / f"{name}.exr"
+def _plan(name: str, profile: str | None = None) -> ReferencePlan:
+    """Return the plan of ``name`` (a model reference's with ``profile``), or an InputError."""
+    if profile is None:
+        if name not in PLANS:
+            raise InputError(f"no committed reference is planned for this scene (planned: "
+                             f"{', '.join(PLANS)})", field="scene", value=name)
+        return PLANS[name]
+    if profile not in MODEL_PROFILES:
+        raise InputError(f"no model reference is committed for this profile (committed: "
+                         f"{', '.join(MODEL_PROFILES)})", field="profile", value=profile)
+    if name not in MODEL_PLANS:
+        raise InputError(f"no committed model reference is planned for this scene (planned: "
+                         f"{', '.join(MODEL_PLANS)})", field="scene", value=name)
+    return MODEL_PLANS[name]
 
 
-def rerender_command(name: str) -> str:
+def committed_path(name: str, profile: str | None = None) -> Path:
+    """Return where the committed reference of built-in scene ``name`` lives.
+
+    With ``profile``: its model reference, ``model/<name>.<profile>.exr``.
+    """
+    if profile is None:
+        return REFERENCE_FOLDER / f"{name}.exr"
+    return REFERENCE_FOLDER / "model" / f"{name}.{profile}.exr"
+
+
+def rerender_command(name: str, profile: str | None = None) -> str:
     """Return the command that renders the committed reference of ``name`` again."""
-    return f"translucent references render {name}"
+    return f"translucent references render {name}" + \
+        (f" --profile {profile}" if profile is not None else "")
 
 
 @dataclass(frozen=True)
@@ -117,6 +168,8 @@ class CommittedReference:
     name : str
         The built-in scene.
     path : Path
+    profile : str or None
+        A model reference's profile; None: the volumetric reference.
     image : Image or None
         None when the file is missing or cannot be used (``problem`` says why).
     current : bool
@@ -131,25 +184,30 @@ class CommittedReference:
     image: Image | None
     current: bool
     problem: str = ""
+    profile: str | None = None
 
     def require(self) -> Image:
         """Return the image, or raise :class:`InputError` naming the file and the fix."""
         if not self.current:
             raise InputError(f"{self.problem}; render it again with "
-                             f"`{rerender_command(self.name)}`", file=self.path,
+                             f"`{rerender_command(self.name, self.profile)}`", file=self.path,
                              field="scene", value=self.name)
         return self.image
 
 
-def committed_reference(name: str, scene=None) -> CommittedReference:
+def committed_reference(name: str, scene=None, profile: str | None = None
+                        ) -> CommittedReference:
     """Look up and check the committed reference of built-in scene ``name``.
 
     Parameters
     ----------
     name : str
-        A key of :data:`PLANS`.
+        A key of :data:`PLANS` (of :data:`MODEL_PLANS` with ``profile``).
     scene : Scene, optional
         The scene as loaded now (default: the built-in scene ``name``).
+    profile : str, optional
+        The model reference of this profile (:data:`MODEL_PROFILES`) instead of the
+        volumetric one; its header must name ``bssrdf_path`` and the profile.
 
     Returns
     -------
@@ -161,15 +219,17 @@ def committed_reference(name: str, scene=None) -> CommittedReference:
 
     from ..cache import content_hash
 
-    _plan(name)
-    path = committed_path(name)
+    _plan(name, profile)
+    path = committed_path(name, profile)
     if scene is None:
         from ..scenes import load_scene
 
         scene = load_scene(name)
+    what = "the committed reference" if profile is None else "the committed model reference"
 
     def unusable(problem, image=None):
-        return CommittedReference(name, path, image, False, problem)
+        return CommittedReference(name, path, image, False, problem.replace(
+            "the committed reference", what, 1), profile)
 
     if not path.is_file():
         return unusable("the committed reference is missing")
@@ -188,17 +248,27 @@ def committed_reference(name: str, scene=None) -> CommittedReference:
         return unusable(f"the committed reference is stale: it was rendered from another "
                         f"version of scene {name!r} (scene hash {str(recorded)[:12]}, now "
                         f"{content_hash(scene)[:12]})", image)
-    return CommittedReference(name, path, image, True)
+    if profile is not None:
+        meta = image.metadata
+        made = (meta.get("profile") or {}).get("name") if isinstance(
+            meta.get("profile"), dict) else None
+        if meta.get("integrator") != MODEL_INTEGRATOR or made != profile:
+            return unusable(f"the committed reference is not the {MODEL_INTEGRATOR} render of "
+                            f"profile {profile!r} (integrator {meta.get('integrator')!r}, "
+                            f"profile {made!r})", image)
+    return CommittedReference(name, path, image, True, profile=profile)
 
 
 def render_committed(name: str, *, budget_seconds: float | None = None,
-                     progress: bool = True, on_pass=None) -> Image:
+                     progress: bool = True, on_pass=None, profile: str | None = None) -> Image:
     """Render the committed reference of ``name`` to its plan and write it in place.
 
     Parameters
     ----------
     name : str
-        A key of :data:`PLANS`.
+        A key of :data:`PLANS` (of :data:`MODEL_PLANS` with ``profile``).
+    profile : str, optional
+        Render the model reference of this profile (:data:`MODEL_PROFILES`).
     budget_seconds : float, optional
         Overrides the plan's budget.
     progress : bool
@@ -214,15 +284,16 @@ def render_committed(name: str, *, budget_seconds: float | None = None,
     from ..scenes import load_scene
     from .render import render_to_target
 
-    plan = _plan(name)
+    plan = _plan(name, profile)
     budget = plan.budget_seconds if budget_seconds is None else budget_seconds
     if not (isinstance(budget, int | float) and math.isfinite(budget) and budget > 0):
         raise InputError("must be > 0 seconds", field="--budget", value=budget_seconds)
     image = render_to_target(load_scene(name), target_rse=plan.target_rse,
                              target_p99_rse=plan.target_p99_rse, budget_seconds=budget,
                              spp=plan.spp, min_passes=plan.min_passes, progress=progress,
-                             integrator=plan.integrator, on_pass=on_pass)
+                             integrator=plan.integrator, on_pass=on_pass, profile=profile)
     image = image.with_metadata(committed=True)
-    REFERENCE_FOLDER.mkdir(parents=True, exist_ok=True)
-    image.write(committed_path(name))
+    path = committed_path(name, profile)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    image.write(path)
     return image

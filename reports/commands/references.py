@@ -10,7 +10,10 @@ missing or stale.
 ``translucent references render NAME ...`` renders the named references again (``all`` for
 every one): passes are added until the noise target of the scene's plan is met or its budget
 is spent (``--budget SECONDS`` overrides it), and the file is replaced only when the render
-is complete.
+is complete. With ``--profile P`` it renders the scenes' *model references* instead: the
+BSSRDF path tracer's render of profile P (``reference/data/model/<scene>.<P>.exr``), which
+the report sets beside the volumetric reference to split a method's error. The list shows
+both kinds.
 """
 
 from __future__ import annotations
@@ -25,19 +28,24 @@ def add_arguments(parser):
                         help="list the committed references (default) or render them again")
     parser.add_argument("names", nargs="*", metavar="NAME",
                         help="with render: the scenes to render again, or 'all'")
+    parser.add_argument("--profile", default=None, metavar="NAME",
+                        help="with render: the model references of this profile (the BSSRDF "
+                        "path tracer) instead of the volumetric references")
     parser.add_argument("--budget", type=float, default=None, metavar="SECONDS",
                         help="with render: rendering time at most per scene (default: the "
                         "scene's plan)")
 
 
-def _row(name: str) -> dict:
+def _row(name: str, profile: str | None = None) -> dict:
     from ...noise import noise_summary
-    from ...reference.committed import PLANS, committed_reference, rerender_command
+    from ...reference.committed import MODEL_PLANS, PLANS, committed_reference, rerender_command
 
-    entry = committed_reference(name)
-    row = {"scene": name, "path": str(entry.path), "current": entry.current,
-           "problem": entry.problem or None, "command": rerender_command(name),
-           "target": {"median": PLANS[name].target_rse, "p99": PLANS[name].target_p99_rse}}
+    plan = (PLANS if profile is None else MODEL_PLANS)[name]
+    entry = committed_reference(name, profile=profile)
+    row = {"scene": name, "profile": profile, "path": str(entry.path),
+           "current": entry.current, "problem": entry.problem or None,
+           "command": rerender_command(name, profile),
+           "target": {"median": plan.target_rse, "p99": plan.target_p99_rse}}
     image = entry.image
     if image is not None:
         meta = image.metadata
@@ -56,7 +64,8 @@ def _row(name: str) -> dict:
 def _print_rows(rows) -> None:
     for row in rows:
         state = "current" if row["current"] else f"NOT CURRENT: {row['problem']}"
-        print(f"{row['scene']}: {state}")
+        kind = f" (model reference, profile {row['profile']})" if row["profile"] else ""
+        print(f"{row['scene']}{kind}: {state}")
         print(f"  file: {row['path']}")
         noise = row.get("noise")
         if noise and noise.get("pixels"):
@@ -74,20 +83,32 @@ def _print_rows(rows) -> None:
 
 def run(args) -> int:
     """List the committed references, or render the named ones again."""
-    from ...reference.committed import committed_scene_names, render_committed
+    from ...reference.committed import (
+        MODEL_PROFILES,
+        committed_model_scene_names,
+        committed_scene_names,
+        render_committed,
+    )
 
-    names = committed_scene_names()
+    profile = args.profile
+    names = committed_scene_names() if profile is None else committed_model_scene_names()
     if args.action == "list":
         if args.names:
             raise InputError("names go with 'render'; 'translucent references' lists all",
                              field="NAME", value=args.names)
-        if args.budget is not None:
-            raise InputError("goes with 'render'", field="--budget", value=args.budget)
-        rows = [_row(name) for name in names]
+        for value, flag in ((args.budget, "--budget"), (profile, "--profile")):
+            if value is not None:
+                raise InputError("goes with 'render'", field=flag, value=value)
+        rows = [_row(name) for name in names] + [
+            _row(name, model) for model in MODEL_PROFILES
+            for name in committed_model_scene_names()]
         _print_rows(rows)
         record(args, references=rows)
         return 0 if all(row["current"] for row in rows) else 1
 
+    if profile is not None and profile not in MODEL_PROFILES:
+        raise InputError(f"no model reference is committed for this profile (committed: "
+                         f"{', '.join(MODEL_PROFILES)})", field="--profile", value=profile)
     wanted = names if args.names == ["all"] else list(args.names)
     if not wanted:
         raise InputError(f"name the scenes to render, or 'all' (planned: {', '.join(names)})",
@@ -101,14 +122,15 @@ def run(args) -> int:
     rendered = []
     for name in wanted:
         image = render_committed(name, budget_seconds=args.budget,
-                                 progress=not args.no_progress)
+                                 progress=not args.no_progress, profile=profile)
         meta = image.metadata
         noise = meta["noise"]
-        rendered.append({"scene": name, "spp": meta["spp"], "passes": meta["passes"],
-                         "seconds": meta["seconds"], "stopped": meta["stopped"],
-                         "noise": noise})
+        rendered.append({"scene": name, "profile": profile, "spp": meta["spp"],
+                         "passes": meta["passes"], "seconds": meta["seconds"],
+                         "stopped": meta["stopped"], "noise": noise})
         record(args, rendered=rendered)
-        print(f"wrote {name}: {meta['spp']} spp x {meta['passes']} passes in "
+        kind = f" (model reference, profile {profile})" if profile else ""
+        print(f"wrote {name}{kind}: {meta['spp']} spp x {meta['passes']} passes in "
               f"{meta['seconds']:.0f} s ({meta['stopped']}); relative standard error median "
               f"{100 * noise['median']:.3g} %, 99th percentile {100 * noise['p99']:.3g} %")
     return 0

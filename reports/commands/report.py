@@ -2,10 +2,11 @@
 
 ``translucent report [SCENE ...] [--out DIR] [--methods m1,m2] [--update-baseline]
 [--baseline FILE] [--scheduler ADDRESS | --serial] [--spp N --passes K]
-[--keep-precomputations]``
+[--keep-precomputations] [--profiles all|P1,P2]``
 
 Writes ``DIR/index.html`` (images side by side, error maps, metrics, precomputation and
-frame times, what each method skipped and why) and ``DIR/metrics.json``. Exits 0 when no
+frame times, what each method skipped and why, every subsurface method's error split into
+its profile's and its own against the model reference) and ``DIR/metrics.json``. Exits 0 when no
 gated metric is worse than the baseline beyond its tolerance, 1 when one is (or a result
 the baseline expects is missing), 2 on bad input (an unknown scene or method, an ``--out``
 that cannot hold a report), leaving nothing half-written.
@@ -64,6 +65,11 @@ def add_arguments(parser):
                         help="score another renderer's images too: DIR/<renderer>/<scene>.exr "
                              "(times from the EXR header's 'seconds'); without --methods, only "
                              "them")
+    parser.add_argument("--profiles", default=None, metavar="all|P1,P2",
+                        help="also run every method that has a profile knob with these radial "
+                             "profiles (or all), each split into its profile's error and "
+                             "its own against that profile's model reference (rendered by "
+                             "the BSSRDF path tracer; default: the default profile only)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -85,7 +91,7 @@ def run(args) -> int:
                          serial=args.serial, spp=args.spp, passes=args.passes,
                          progress=not args.no_progress,
                          keep_precomputations=args.keep_precomputations,
-                         images=args.images)
+                         images=args.images, profiles=args.profiles)
     from .record import record
 
     record(args, out=str(result.out), metrics=str(result.out / "metrics.json"),

@@ -54,6 +54,7 @@ __all__ = [
     "noise_floor",
     "noise_floors",
     "noise_verdict",
+    "noise_verdicts",
     "evaluate",
     "evaluate_on",
     "relative_mse",
@@ -765,6 +766,18 @@ def noise_floors(reference: Image, masks, *, draws: int = NOISE_FLOOR_DRAWS, see
                        if key not in ("noise_discounted", "pixels_scored")},
                     noise_discounted=False, pixels_scored=found[0]["pixels_scored"])
             for found in values]
+
+
+def noise_verdicts(metrics: dict, floors: dict | None) -> dict[str, str]:
+    """Return :func:`noise_verdict` of every gated metric of ``metrics`` against ``floors``.
+
+    A metric without a floor says so (the reference has no variance).
+    """
+    from .registry import NOISE_FLOOR_FIELDS
+
+    floors = floors or {}
+    return {key: noise_verdict(key, metrics[key], floors.get(key))
+            or "no floor (the reference has no variance)" for key in NOISE_FLOOR_FIELDS}
 
 
 def error_scale(field: str, value: float) -> float:

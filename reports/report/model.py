@@ -68,6 +68,13 @@ class SceneReport:
     #: and their (frame seconds, relative MSE on its scored pixels)
     ladders: dict[str, list[MethodRun]] = field(default_factory=dict)
     ladder_points: dict[str, list[dict]] = field(default_factory=dict)
+    #: per profile, the model reference (the BSSRDF path tracer's render of the scene with
+    #: it), or why there is none, and where it came from (:mod:`.split`)
+    model_references: dict[str, Image] = field(default_factory=dict)
+    model_reference_errors: dict[str, str] = field(default_factory=dict)
+    model_reference_info: dict[str, dict] = field(default_factory=dict)
+    #: per scored entry, its error split into the profile's and its own
+    splits: dict[str, Any] = field(default_factory=dict)
 
     def mask_of(self, name: str):
         """Return the pixels method ``name`` is scored on (None: the whole image)."""

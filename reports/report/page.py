@@ -5,9 +5,9 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
+from ..metrics.registry import METRIC_LABELS, REPORTED_METRICS, TOLERANCES
 from .baselines import BaselineCheck
 from .formatting import format_seconds, format_speedup, format_value
-from ..metrics.registry import METRIC_LABELS, REPORTED_METRICS, TOLERANCES
 from .model import SceneReport
 from .runs import MethodRun
 
@@ -148,6 +148,7 @@ def _summary_table(reports: list[SceneReport], chosen: list[str]) -> str:
                 text = (f'<a href="#{_e(report.slug)}-{_e(name)}">'
                         f"{_score_line(report, name, 'hdr_flip', 'FLIP', 3)}</a><br>"
                         f"{_score_line(report, name, 'relative_mse', 'relMSE', 2)}<br>"
+                        f"{_split_line(report, name)}"
                         f"{_times_line(report, name, run)} "
                         f'<span class="tag">{_e(check.status)}</span>')
             elif run is not None and run.status in ("not applicable", "not installed", "not run"):
@@ -177,7 +178,11 @@ def _summary_note() -> str:
             "first frame, which can include compiling kernels, is in the scene's section) "
             "and the speed-up over Mitsuba path tracing at the same relative MSE (~: "
             "extrapolated beyond the path-tracing ladder); the verdict against the "
-            "baseline.</p>")
+            "baseline. For a method of a radial profile, its error split: <i>model</i>, the "
+            "profile rendered exactly by the BSSRDF path tracer against the reference; "
+            "<i>method</i>, the method against that render; and which part dominates (one "
+            "at least twice the other and clear of its noise). <code>METHOD@PROFILE</code>: "
+            "the method run with another profile.</p>")
 
 
 def _score_line(report: SceneReport, name: str, key: str, label: str, digits: int) -> str:
@@ -188,6 +193,54 @@ def _score_line(report: SceneReport, name: str, key: str, label: str, digits: in
     floor_text = f" <small>(noise {format_value(floor, 2)})</small>" if floor is not None else ""
     mark = " <small class=fail>within noise</small>" if noisy else ""
     return f"{label} {_e(format_value(value, digits))}{floor_text}{mark}"
+
+
+#: How a summary cell names the part of the error that dominates (:mod:`.split`).
+DOMINANT_TEXT = {"model": "the profile's error dominates",
+                 "approximation": "the method's own error dominates",
+                 "both": "profile and method share it",
+                 "within noise": "neither part clears its noise"}
+
+
+def _split_line(report: SceneReport, name: str) -> str:
+    """Return a summary cell's split: model and approximation relative MSE, which dominates."""
+    split = report.splits.get(name)
+    if split is None or split.reason:
+        return ""
+    model = format_value(split.model.get("relative_mse"), 2)
+    approximation = format_value(split.approximation.get("relative_mse"), 2)
+    return (f"<small>model {_e(model)}, method {_e(approximation)}: "
+            f"<b>{_e(DOMINANT_TEXT.get(split.dominant, split.dominant))}</b></small><br>")
+
+
+def _split_block(report: SceneReport, name: str) -> str:
+    """Return a method's split: total, model and approximation error, floors and verdicts."""
+    split = report.splits.get(name)
+    if split is None:
+        return ""
+    if split.reason:
+        return f"<p class=meta>{_e(split.sentence())}</p>"
+    rows = []
+    parts = [("total (method against transport)", report.metrics[name],
+              report.floor_of(name), report.verdicts.get(name, {})),
+             (f"model (profile {split.profile} rendered exactly, against transport)",
+              split.model, split.model_floor, split.model_verdicts),
+             ("approximation (method against its profile rendered exactly)",
+              split.approximation, split.approximation_floor, split.approximation_verdicts)]
+    noisy = " <small class=fail>within noise</small>"
+    for label, metrics, floor, verdicts in parts:
+        cells = "".join(
+            f"<td>{_e(format_value(metrics.get(key), 3))} <small>(noise "
+            f"{_e(format_value((floor or {}).get(key), 2))})</small>"
+            f"{noisy if verdicts.get(key) == 'within reference noise' else ''}"
+            "</td>" for key in ("relative_mse", "hdr_flip"))
+        rows.append(f"<tr><th>{_e(label)}</th>{cells}</tr>")
+    info = split.model_reference
+    origin = (f"Model reference: {_e(info.get('source', ''))}, BSSRDF path tracer, "
+              f"{_e(info.get('spp'))} spp x {_e(info.get('passes'))} passes.")
+    return ("<h4>Why: the error split</h4><table class=small><tr><th></th><th>relative MSE"
+            "</th><th>HDR-FLIP</th></tr>" + "".join(rows) + "</table>"
+            f"<p>{_e(split.sentence())} <span class=meta>{origin}</span></p>")
 
 
 def _times_line(report: SceneReport, name: str, run) -> str:
@@ -325,6 +378,7 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
     if metrics is not None:
         parts.append(_metrics_table(metrics, check, report.floor_of(name),
                                     report.verdicts.get(name, {})))
+        parts.append(_split_block(report, name))
     if run.status == "ok":
         cached = (f" Image and times from the run of {_e(run.measured_at)} (cached: nothing "
                   "it depends on has changed since)." if run.cached else "")

@@ -63,11 +63,10 @@ from .baselines import (
     load_baseline,
     updated_baseline,
 )
-from .renderer_images import renderer_images, renderers_in
+from .metrics_json import made_with, metrics_json
 from .model import LADDER, PATH_TRACING, ReportResult, SceneReport, keep_run
 from .page import html_page
-from .summary import print_summary, speedup_fields, summary_rows
-from .tasks import MethodTask, PathTracingTask, ReferenceTask, run_task, task_entry
+from .renderer_images import renderer_images, renderers_in
 from .runs import (
     MethodRun,
     backend_versions,
@@ -81,6 +80,19 @@ from .runs import (
 )
 from .scoring import score_scene
 from .speedup import PATH_TRACING_SPP
+from .split import (
+    MODEL,
+    entry_name,
+    entry_parts,
+    model_reference_info,
+    model_reference_refusal,
+    profile_knob_of,
+    refused_profile,
+    requested_profiles,
+    split_profile,
+)
+from .summary import print_summary, summary_rows
+from .tasks import MethodTask, PathTracingTask, ReferenceTask, run_task, task_entry
 
 __all__ = [
     "METRIC_LABELS",
@@ -312,7 +324,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 update_baseline: bool = False, scheduler: str | None = None,
                 serial: bool = False, spp: int | None = None, passes: int = DEFAULT_PASSES,
                 progress: bool = True, stream=None,
-                keep_precomputations: bool = False, images=None) -> ReportResult:
+                keep_precomputations: bool = False, images=None,
+                profiles=None) -> ReportResult:
     """Run the report: references, fast methods, metrics, error maps, baseline, HTML.
 
     Parameters
@@ -355,6 +368,12 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         instead of) the fast methods: one subfolder per renderer, named as it is to be
         shown, holding ``<scene name>.exr`` for each scene it rendered
         (:func:`renderer_images`).
+    profiles : "all" or list of str, optional
+        Besides its default profile, run every method that has a ``profile`` knob with
+        each of these radial profiles (``"all"``: every one), as the entries
+        ``METHOD@PROFILE``. Every entry's error is split into its profile's and its own
+        against the scene's model reference of that profile (:mod:`.split`): committed
+        for the default profile of a built-in scene, rendered otherwise.
 
     Returns
     -------
@@ -373,12 +392,14 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     passes = check_count(passes, "--passes")
     chosen = _methods(methods) if methods is not None or images is None else []
     renderers = renderers_in(images, chosen)
+    asked_profiles = requested_profiles(profiles)
     note_input(images, "--images")
     out = _check_out(out)
     baseline_path = Path(baseline) if baseline is not None else DEFAULT_BASELINE
     stored_baseline = load_baseline(baseline_path,
                                     required=baseline is not None and not update_baseline)
-    plan = _plan(scenes, chosen, renderers, images, spp, passes, local_workers=scheduler is None)
+    plan = _plan(scenes, chosen, renderers, images, spp, passes, asked_profiles,
+                 local_workers=scheduler is None)
     _announce(plan.tasks, stream)
     timing: dict[str, Any] = {"planning": time.perf_counter() - started, "tasks": 0.0,
                               "scoring": 0.0, "scoring_during_tasks": 0.0}
@@ -450,7 +471,8 @@ class _Plan:
     run_cache: Any
 
 
-def _plan(scenes, chosen, renderers, images, spp, passes, *, local_workers: bool) -> _Plan:
+def _plan(scenes, chosen, renderers, images, spp, passes, profiles, *,
+          local_workers: bool) -> _Plan:
     """Load the scenes, find what is cached (references, runs, ladders), list the rest."""
     from ...cache import Cache, content_hash
     from ...scenes import Scene, load_scene
@@ -487,11 +509,15 @@ def _plan(scenes, chosen, renderers, images, spp, passes, *, local_workers: bool
         return portables[report.slug]
 
     method_sources: dict[str, str] = {}
+    variants = [entry_name(name, profile) for name in chosen for profile in profiles
+                if profile_knob_of(name) is not None]
+    plan.scored = chosen + variants + renderers
     for report in reports:
         _plan_reference(plan, report, portable, spp, passes)
-        for name in chosen:
+        for name in chosen + variants:
             _plan_method(plan, report, name, portable, method_sources)
-        _plan_path_tracing(plan, report, portable, chosen)
+        _plan_model_references(plan, report, portable, spp, passes)
+        _plan_path_tracing(plan, report, portable, chosen + variants)
     return plan
 
 
@@ -529,8 +555,9 @@ def _plan_method(plan: _Plan, report: SceneReport, name: str, portable,
 
     if report.reference_error:
         return refused("not run", "the scene has no reference to compare with")
+    name_of_method, profile = entry_parts(name)
     try:
-        module = method_module(name)
+        module = method_module(name_of_method)
     except MethodContractError as error:
         return refused("failed", error.reason)
     except InputError as error:
@@ -539,20 +566,58 @@ def _plan_method(plan: _Plan, report: SceneReport, name: str, portable,
         reason = applicability(module.applies_to, report.scene)
     except Exception as error:  # the method's own check failed: show it
         return refused("failed", f"applies_to: {type(error).__name__}: {error}")
+    if reason is None and profile is not None:
+        reason = refused_profile(module, profile)
     if reason is not None:
         return refused("not applicable", reason.sentence, reason_code=reason.code)
-    if name not in method_sources:  # its own files, read once a run
-        method_sources[name] = plan.fingerprint + method_fingerprint(name)
-    for knobs in [{}] + ladder_knobs(module, name):
-        key = _run_key(name, report.scene, knobs, method_sources[name], plan.versions)
-        owner = name if not knobs else (LADDER, name)
+    if name_of_method not in method_sources:  # its own files, read once a run
+        method_sources[name_of_method] = plan.fingerprint + method_fingerprint(name_of_method)
+    runs = ([{}] + ladder_knobs(module, name) if profile is None
+            else [{"profile": profile}])  # a profile's run: its defaults, no ladder
+    for knobs in runs:
+        key = _run_key(name_of_method, report.scene, knobs, method_sources[name_of_method],
+                       plan.versions)
+        owner = name if not knobs or profile is not None else (LADDER, name)
         stored = plan.run_cache.load_object(key)
         if isinstance(stored, MethodRun) and stored.status == "ok":
             stored.cached = True
             keep_run(report, owner, stored)
             continue
-        task = MethodTask(portable(report), name, knobs, REPORT_RELIGHT_FRAMES)
+        task = MethodTask(portable(report), name_of_method, knobs, REPORT_RELIGHT_FRAMES)
         plan.tasks.append(_Planned(task, report, owner, key))
+
+
+def _plan_model_references(plan: _Plan, report: SceneReport, portable, spp, passes) -> None:
+    """Find or plan the scene's model reference of each profile its entries render.
+
+    A built-in scene's committed one (the default profile), the cache's, or a render as
+    the volumetric reference's (fixed passes with ``spp``, else progressive); or why none
+    can be made (a heterogeneous medium).
+    """
+    from ...fast.knobs import DEFAULT_PROFILE
+
+    if report.reference_error:
+        return
+    wanted = {split_profile(name, run)[0] for name, run in report.runs.items()
+              if run.status == "ok"}
+    wanted |= {entry_parts(p.owner)[1] or DEFAULT_PROFILE for p in plan.tasks
+               if p.report is report and isinstance(p.owner, str) and p.owner != PATH_TRACING
+               and profile_knob_of(entry_parts(p.owner)[0]) is not None}
+    refusal = model_reference_refusal(report.scene)
+    for profile in sorted(wanted - {None}):
+        if refusal:
+            report.model_reference_errors[profile] = refusal
+            continue
+        committed = committed_reference_for(report.scene, profile) if spp is None else None
+        if committed is not None:
+            report.model_references[profile] = committed
+            report.model_reference_info[profile] = model_reference_info(committed, "committed")
+            continue
+        task = (ReferenceTask(portable(report), spp, passes, profile=profile)
+                if spp is not None else
+                ReferenceTask(portable(report), PROGRESSIVE_SPP, None, DEFAULT_TARGET_RSE,
+                              DEFAULT_REFERENCE_BUDGET, profile=profile))
+        plan.tasks.append(_Planned(task, report, (MODEL, profile), None))
 
 
 def _plan_path_tracing(plan: _Plan, report: SceneReport, portable, chosen) -> None:
@@ -576,7 +641,11 @@ def _announce(tasks: list[_Planned], stream) -> None:
         return
     count = {kind: sum(1 for p in tasks if p.task.kind == kind)
              for kind in ("reference", "method", "path tracing")}
+    models = sum(1 for p in tasks if p.task.kind == "reference" and p.task.profile)
+    count["reference"] -= models
+    model_text = f"{models} model reference render(s), " if models else ""
     print(f"running {len(tasks)} task(s): {count['reference']} reference render(s), "
+          f"{model_text}"
           f"{count['method']} method run(s), {count['path tracing']} path-tracing ladder(s)",
           file=stream, flush=True)
 
@@ -649,6 +718,14 @@ def _keep_result(plan: _Plan, planned: _Planned, result) -> None:
             report.reference = result
         else:
             report.reference_error = str(result)
+    elif isinstance(planned.owner, tuple) and planned.owner[0] == MODEL:
+        profile = planned.owner[1]
+        if isinstance(result, Image):
+            report.model_references[profile] = result
+            report.model_reference_info[profile] = model_reference_info(
+                result, "fixed passes" if planned.task.passes else "progressive")
+        else:
+            report.model_reference_errors[profile] = str(result)
     else:
         keep_run(report, planned.owner, result)
         if result.status == "ok":
@@ -662,7 +739,7 @@ def _judge(plan: _Plan, stored_baseline: dict) -> list[str]:
     """Check every scored result against the baseline; return the regressions."""
     regressions = []
     for report in plan.reports:
-        reference = _made_with(report)
+        reference = made_with(report)
         for name in plan.scored:
             run = report.runs.get(name)
             metrics = report.metrics.get(name)
@@ -679,57 +756,20 @@ def _judge(plan: _Plan, stored_baseline: dict) -> list[str]:
 def _write(plan: _Plan, staging: Path, context: dict) -> None:
     """Write ``metrics.json`` and the page into the staging folder."""
     atomic_write_text(staging / "metrics.json",
-                      json.dumps(_metrics_json(plan.reports, plan.scored, context), indent=2,
+                      json.dumps(metrics_json(plan.reports, plan.scored, context), indent=2,
                                  sort_keys=False, allow_nan=False))
     context["overview"] = _overview(plan.reports, staging)
     atomic_write_text(staging / "index.html", html_page(plan.reports, plan.scored, context))
 
 
 def _update_baseline(plan: _Plan, stored_baseline: dict, baseline_path: Path) -> None:
-    results = [{"name": r.name, "scene_hash": r.scene_hash, "reference": _made_with(r),
+    results = [{"name": r.name, "scene_hash": r.scene_hash, "reference": made_with(r),
                 "metrics": r.metrics, "methods_run": plan.scored,
                 "failures": {name: run.reason for name, run in r.runs.items()
                              if run.status == "failed"}}
                for r in plan.reports if r.reference is not None]
     new = updated_baseline(stored_baseline, results, plan.versions)
     atomic_write_text(baseline_path, json.dumps(new, indent=2, allow_nan=False) + "\n")
-
-
-#: The verdicts of one metric in ``metrics.json``.
-METRIC_VERDICTS = ("ok", "regression", "within reference noise", "no baseline")
-
-
-def metric_verdict(noise_verdict: str, check, key: str) -> str:
-    """Return one metric's verdict: noise first, then the baseline (:data:`METRIC_VERDICTS`).
-
-    A value that does not clear the reference's own noise is "within reference noise",
-    whatever the baseline says (a difference the reference cannot resolve is not a
-    result); otherwise "regression" where the baseline check found it worse, "no
-    baseline" where there is no entry for it (or the metric is not gated), else "ok".
-
-    Examples
-    --------
-    >>> from translucent.reports.report.baselines import BaselineCheck
-    >>> check = BaselineCheck("regression", "worse", {"hdr_flip": {"verdict": "worse"}})
-    >>> metric_verdict("resolved", check, "hdr_flip"), metric_verdict("resolved", check, "ssim")
-    ('regression', 'no baseline')
-    >>> metric_verdict("within reference noise", check, "hdr_flip")
-    'within reference noise'
-    """
-    from ..metrics.compute import WITHIN_NOISE
-
-    if noise_verdict == WITHIN_NOISE:
-        return WITHIN_NOISE
-    gated = (check.metrics.get(key) if check is not None else None) or {}
-    if not gated:
-        return "no baseline"
-    return "regression" if gated.get("verdict") == "worse" else "ok"
-
-
-def _made_with(report: SceneReport) -> dict:
-    """Return the reference's spp and passes (what a baseline entry records it was made with)."""
-    meta = report.reference.metadata if report.reference is not None else {}
-    return {"spp": meta.get("spp", report.spp), "passes": meta.get("passes")}
 
 
 def _staging_folder(out: Path) -> Path:
@@ -764,58 +804,3 @@ def _overview(reports: list[SceneReport], folder: Path) -> str | None:
                report.verdicts.get(name, {}).get("relative_mse") == "within reference noise")
               for report in reports for name, metrics in report.metrics.items()]
     return "overview.png" if overview_plot(folder / "overview.png", points) else None
-
-
-def _metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) -> dict:
-    scenes = {}
-    for report in reports:
-        reference = None
-        if report.reference is not None:
-            meta = report.reference.metadata
-            reference = {key: json_safe(meta.get(key)) for key in (
-                "spp", "passes", "seconds", "integrator", "variant", "mitsuba",
-                "substitutions", "scene_hash", "scene_content_hash", "stopped")}
-            reference["cached"] = report.reference_cached
-            reference["source"] = report.reference_source
-            reference["noise"] = (report.reference_noise.as_dict()
-                                  if report.reference_noise is not None else None)
-            reference["noise_warning"] = report.noise_warning or None
-            reference["noise_floor"] = json_safe(report.noise_floor)
-            reference["files"] = report.files.get("reference", {})
-        methods = {}
-        for name in chosen:
-            run = report.runs.get(name)
-            entry = run.as_dict() if run else {"status": "not run"}
-            entry["metrics"] = json_safe(report.metrics.get(name))
-            entry["pixels_scored"] = ("object" if report.mask_of(name) is not None else "image")
-            entry["objects_scored"] = report.scored_objects.get(name)
-            entry["image_metrics"] = json_safe(report.image_metrics.get(name))
-            metrics = report.metrics.get(name)
-            check = report.checks.get(name)
-            entry["noise"] = None if metrics is None else {
-                key: {"value": json_safe(metrics[key]),
-                      "noise_floor": json_safe((report.floor_of(name) or {}).get(key)),
-                      "noise_verdict": report.verdicts[name][key],
-                      "verdict": metric_verdict(report.verdicts[name][key], check, key)}
-                for key in report.verdicts.get(name, {})}
-            entry["metrics_error"] = report.metric_errors.get(name, "")
-            entry["ladder"] = json_safe(report.ladder_points.get(name, []))
-            entry["files"] = report.files.get(name, {})
-            entry["baseline"] = check.as_dict() if check else None
-            entry.update(speedup_fields(report, name))
-            methods[name] = entry
-        scenes[report.name] = {"source": str(report.scene.source or ""),
-                               "description": report.scene.description,
-                               "scene_hash": report.scene_hash, "folder": report.slug,
-                               "reference": reference, "reference_error": report.reference_error,
-                               "path_tracing": (json_safe(report.curve.as_dict())
-                                                if report.curve is not None else None),
-                               "path_tracing_on_objects": {
-                                   ", ".join(key): json_safe(curve.as_dict())
-                                   for key, curve in report.object_curves.items()},
-                               "methods": methods}
-    tolerances = {name: {"absolute": t.absolute, "relative": t.relative,
-                         "lower_is_better": t.lower_is_better} for name, t in TOLERANCES.items()}
-    return {"format": 1, **json_safe(context), "tolerances": tolerances, "scenes": scenes}
-
-

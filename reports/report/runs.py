@@ -208,21 +208,26 @@ def run_method(method_name: str, scene, knobs: dict | None = None, *,
 
 
 def render_reference(scene, spp: int, passes: int | None, target_rse: float | None = None,
-                     budget_seconds: float | None = None):
+                     budget_seconds: float | None = None, profile: str | None = None):
     """Render (or load from the cache) the reference of ``scene``; an exception is returned.
 
     ``passes`` fixed passes of ``spp`` samples; or, with ``passes`` None, passes added until
     the median relative standard error is ``target_rse`` or ``budget_seconds`` are spent.
+    With ``profile``: the model reference, the BSSRDF path tracer's render of that profile
+    (:mod:`translucent.reference.bssrdf_path`).
     A task for :func:`~translucent.reports.report.distributed.run_tasks`: a failure comes back as
     the string ``"Type: message"`` so that one scene's failure does not stop the others.
     """
+    from ...reference.committed import MODEL_INTEGRATOR
     from ...reference.render import render, render_to_target
 
+    model = {} if profile is None else {"integrator": MODEL_INTEGRATOR, "profile": profile}
     try:
         if passes is None:
             return render_to_target(scene, target_rse=target_rse,
-                                    budget_seconds=budget_seconds, spp=spp, progress=False)
-        return render(scene, spp=spp, passes=passes, progress=False)
+                                    budget_seconds=budget_seconds, spp=spp, progress=False,
+                                    **model)
+        return render(scene, spp=spp, passes=passes, progress=False, **model)
     except Exception as error:  # shown in the page; the other scenes go on
         return f"{type(error).__name__}: {error}"
 
@@ -248,8 +253,11 @@ def reference_path(scene, spp: int, passes: int) -> Path:
     return Cache("reference").path(reference_key(scene, settings), ".exr")
 
 
-def committed_reference_for(scene):
+def committed_reference_for(scene, profile: str | None = None):
     """Return the committed reference of a built-in scene loaded from the catalogue, or None.
+
+    With ``profile``: its committed model reference of that profile, or None where none is
+    committed.
 
     Raises
     ------
@@ -258,10 +266,12 @@ def committed_reference_for(scene):
         unreadable, of another size): the message names the file, the scene and the
         command that renders it again. Never silently re-used, never silently replaced.
     """
-    from ...reference.committed import PLANS, committed_reference
+    from ...reference.committed import MODEL_PLANS, MODEL_PROFILES, PLANS, committed_reference
     from ...scenes.scene_file import builtin_scene_path
 
-    if scene.name not in PLANS or not scene.source:
+    if profile is not None and profile not in MODEL_PROFILES:
+        return None
+    if scene.name not in (PLANS if profile is None else MODEL_PLANS) or not scene.source:
         return None
     try:
         builtin = builtin_scene_path(scene.name)
@@ -269,7 +279,7 @@ def committed_reference_for(scene):
         return None
     if Path(scene.source).resolve() != Path(builtin).resolve():
         return None  # a scene file of its own that happens to share the name
-    return committed_reference(scene.name, scene).require()
+    return committed_reference(scene.name, scene, profile).require()
 
 
 #: How far :func:`nudged_lights` moves a light per frame, scene units (a direction: radians).

@@ -19,14 +19,15 @@ import numpy as np
 from ...errors import InputError
 from .model import SceneReport
 from .speedup import scored_curve, scored_relative_mse, speedup, tradeoff_plot
+from .split import entry_parts, score_splits
 
 __all__ = ["score_scene", "scored_pixels"]
 
 
 def score_scene(report: SceneReport, folder: Path) -> None:
     """Write the scene's images and error maps; score each method on its own pixels."""
+    from ..metrics.compute import display_white, evaluate_on, noise_verdicts
     from ..metrics.maps import write_error_maps, write_linear_png
-    from ..metrics.compute import display_white, evaluate_on
 
     scene_folder = folder / report.slug
     scene_folder.mkdir(parents=True, exist_ok=True)
@@ -68,9 +69,14 @@ def score_scene(report: SceneReport, folder: Path) -> None:
             continue
         report.metrics[name] = on_pixels.metrics.as_dict()
         report.image_metrics[name] = comparison.metrics.as_dict()
-        report.verdicts[name] = _verdicts(report.metrics[name], report.floor_of(name))
+        report.verdicts[name] = noise_verdicts(report.metrics[name], report.floor_of(name))
         for map_name, map_files in maps.items():
             files[f"map_{map_name}"] = f"{report.slug}/{map_files.png.name}"
+    if report.reference is not None:
+        for profile, image in report.model_references.items():
+            image.write(scene_folder / f"model.{profile}.exr")
+            report.model_reference_info[profile]["exr"] = f"{report.slug}/model.{profile}.exr"
+        score_splits(report)
     _speedups(report, scene_folder)
 
 
@@ -97,7 +103,7 @@ def _object_scoring(report: SceneReport, name: str) -> None:
     from ...fast.base import method, scored_object_names
 
     try:
-        objects = scored_object_names(method(name), report.scene)
+        objects = scored_object_names(method(entry_parts(name)[0]), report.scene)
     except InputError:  # not a registered method: scored as one that renders everything
         objects = [item.name for item in report.scene.objects]
     report.scored_objects[name] = objects
@@ -130,15 +136,6 @@ def _floors(report: SceneReport) -> None:
     for name in report.method_masks:
         key = tuple(sorted(report.scored_objects[name]))
         report.method_floors[name] = report.object_masks[key][1]
-
-
-def _verdicts(metrics: dict, floors: dict | None) -> dict[str, str]:
-    from ..metrics.registry import NOISE_FLOOR_FIELDS
-    from ..metrics.compute import noise_verdict
-
-    floors = floors or {}
-    return {key: noise_verdict(key, metrics[key], floors.get(key))
-            or "no floor (the reference has no variance)" for key in NOISE_FLOOR_FIELDS}
 
 
 def _speedups(report: SceneReport, scene_folder: Path) -> None:

@@ -2,7 +2,8 @@
 
 The summary table of :func:`~translucent.reports.report.pipeline.make_report` (a row per scene and
 method: the gated metrics beside their noise floors, the times, the speed-up over path
-tracing and the baseline's verdict) and the line that says where the report's time went.
+tracing, the relative MSE of the model and of the method against it and which dominates
+(:mod:`.split`), and the baseline's verdict) and the line that says where the report's time went.
 """
 
 from __future__ import annotations
@@ -38,8 +39,19 @@ def summary_rows(reports: list, chosen: list[str]) -> list[dict]:
                 **speedup_fields(report, name),
                 "cached": bool(run and run.cached),
                 "baseline": check.status if check else "",
+                **_split_fields(report.splits.get(name)),
             })
     return rows
+
+
+def _split_fields(split) -> dict:
+    """Return a row's error split: the model's and the approximation's relative MSE."""
+    if split is None or split.reason:
+        return {"model_relative_mse": None, "approximation_relative_mse": None,
+                "dominant": None}
+    return {"model_relative_mse": split.model.get("relative_mse"),
+            "approximation_relative_mse": split.approximation.get("relative_mse"),
+            "dominant": split.dominant}
 
 
 def speedup_fields(report, name: str) -> dict:
@@ -78,28 +90,31 @@ def print_summary(summary, regressions, out, seconds, updated, baseline_path, st
                   timing=None, task_times=()):
     """Print the summary table, the regressions, the time line and where the page is."""
     width = max((len(r["scene"]) for r in summary), default=5)
-    print(f"{'scene':<{width}}  {'method':<10} {'HDR-FLIP':>8} {'(noise)':>7} {'relMSE':>9} "
+    named = max([6] + [len(r["method"]) for r in summary])
+    print(f"{'scene':<{width}}  {'method':<{named}} {'HDR-FLIP':>8} {'(noise)':>7} {'relMSE':>9} "
           f"{'(noise)':>9} {'dE2000':>7} {'SSIM':>6} {'precomp':>8} {'frame':>8} "
-          f"{'vs PT':>7}  verdict",
+          f"{'vs PT':>7} {'model':>8} {'method':>8} {'dominant':<12}  verdict",
           file=stream)
     for row in summary:
         if row["status"] != "ok":
-            print(f"{row['scene']:<{width}}  {row['method']:<10} {row['status']}: "
+            print(f"{row['scene']:<{width}}  {row['method']:<{named}} {row['status']}: "
                   f"{row['reason'][:90]}", file=stream)
             continue
         cached = " (cached)" if row["cached"] else ""
         floor = row["noise_floor"]
         noisy = (f"; within reference noise: {', '.join(row['within_noise'])}"
                  if row["within_noise"] else "")
-        print(f"{row['scene']:<{width}}  {row['method']:<10} "
+        print(f"{row['scene']:<{width}}  {row['method']:<{named}} "
               f"{format_value(row['hdr_flip'], 3):>8} {format_value(floor['hdr_flip'], 2):>7} "
               f"{format_value(row['relative_mse'], 3):>9} "
               f"{format_value(floor['relative_mse'], 2):>9} "
               f"{format_value(row['ciede2000'], 3):>7} "
               f"{format_value(row['ssim'], 3):>6} {format_seconds(row['precompute_seconds']):>8} "
               f"{format_seconds(row['frame_seconds']):>8} "
-              f"{format_speedup(row['speedup_vs_path_tracing'], row['speedup_extrapolated']):>7}  "
-              f"{row['baseline']}{cached}{noisy}",
+              f"{format_speedup(row['speedup_vs_path_tracing'], row['speedup_extrapolated']):>7} "
+              f"{format_value(row['model_relative_mse'], 2):>8} "
+              f"{format_value(row['approximation_relative_mse'], 2):>8} "
+              f"{row['dominant'] or '-':<12}  {row['baseline']}{cached}{noisy}",
               file=stream)
     for line in regressions:
         print(f"REGRESSION {line}", file=stream)

@@ -48,6 +48,9 @@ class ReferenceTask:
         Median relative standard error the progressive render stops at.
     budget_seconds : float, optional
         Seconds the progressive render may spend.
+    profile : str, optional
+        The model reference of this radial profile (the BSSRDF path tracer) instead of the
+        volumetric reference.
     """
 
     kind: ClassVar[str] = "reference"
@@ -56,6 +59,7 @@ class ReferenceTask:
     passes: int | None = None
     target_rse: float | None = None
     budget_seconds: float | None = None
+    profile: str | None = None
 
     @property
     def group(self) -> None:
@@ -65,7 +69,7 @@ class ReferenceTask:
     def run(self):
         """Return the reference :class:`~translucent.image.Image`, or why there is none."""
         return render_reference(_scene(self.scene), self.spp, self.passes, self.target_rse,
-                                self.budget_seconds)
+                                self.budget_seconds, self.profile)
 
 
 @dataclass(frozen=True)
@@ -140,4 +144,6 @@ def task_entry(task, scene_name: str, seconds: float, worker: int) -> dict:
     entry = {"scene": scene_name, "kind": task.kind, "seconds": seconds, "worker": worker}
     if isinstance(task, MethodTask):
         entry["method"], entry["knobs"] = task.method, json_safe(task.knobs)
+    elif isinstance(task, ReferenceTask) and task.profile is not None:
+        entry["profile"] = task.profile
     return entry

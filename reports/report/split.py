@@ -1,0 +1,349 @@
+r"""Why a method is wrong: its error split into its profile's (the model) and its own.
+
+A subsurface method renders a radial profile (its ``profile`` knob, the classical dipole by
+default) by an approximation. Three images of the same scene say where its error comes
+from:
+
+- the volumetric reference :math:`V` (Mitsuba's path tracing of the medium itself);
+- the *model reference* :math:`M_p`: the BSSRDF path tracer's render of the scene with
+  profile :math:`p` (:mod:`translucent.reference.bssrdf_path`): the profile integrated
+  exactly over every light, shadow and inter-reflection;
+- the method's image :math:`A`.
+
+The *total error* is :math:`m(V, A)` (the report's metrics), the *model error*
+:math:`m(V, M_p)`, what the profile alone costs, and the *approximation error*
+:math:`m(M_p, A)`, what the method adds to its profile. Each is scored on the method's own
+pixels, with its own noise floor: the approximation error's is the model reference's
+noise (:func:`~translucent.reports.metrics.noise_floor`); the model error compares two
+independent renders, so its floor, and the variance its relative MSE discounts, is that
+of one image carrying both variances.
+
+The errors are not additive (relative MSE of a sum is not a sum of relative MSEs), but
+they say which part dominates, in relative MSE: the one that clears its noise floor when
+the other does not; when both do, the larger if it is at least :data:`DOMINANCE_RATIO`
+times the other, else "both"; "within noise" when neither does.
+
+A method without a profile (BRDF editing), another renderer's image, and a scene whose
+translucent objects are heterogeneous (no radial profile) have no split; each says why.
+
+Examples
+--------
+>>> dominant_part(0.010, 0.0004, resolved=(True, True))
+'model'
+>>> dominant_part(0.002, 0.003, resolved=(True, True))
+'both'
+>>> dominant_part(0.0001, 0.0002, resolved=(False, False))
+'within noise'
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ...errors import InputError
+from ...image import Image
+
+__all__ = ["DOMINANCE_RATIO", "ENTRY_SEPARATOR", "MODEL", "ErrorSplit", "dominant_part",
+           "entry_name", "entry_parts", "model_reference_info", "model_reference_refusal",
+           "profile_knob_of", "refused_profile", "requested_profiles", "score_splits",
+           "split_profile"]
+
+#: One part dominates when its relative MSE is at least this factor times the other's.
+DOMINANCE_RATIO = 2.0
+
+#: Between a method and a profile in the name of a run of that profile (``prt@better_dipole``);
+#: the default profile's run is named by the method alone.
+ENTRY_SEPARATOR = "@"
+
+
+#: The owner of a model reference among a report's tasks: ``(MODEL, profile)``.
+MODEL = "model"
+
+
+def requested_profiles(profiles) -> list[str]:
+    """Return the profiles a report runs besides the default (``--profiles``).
+
+    Parameters
+    ----------
+    profiles : None, "all", str or list of str
+        None: none; ``"all"``: every radial profile; a comma-separated string or a list.
+
+    Raises
+    ------
+    InputError
+        An unknown profile, naming ``--profiles`` and the valid ones.
+
+    Examples
+    --------
+    >>> requested_profiles("better_dipole,dipole"), requested_profiles(None)
+    (['better_dipole'], [])
+    """
+    from ...fast.knobs import DEFAULT_PROFILE, radial_profile_names
+
+    if profiles is None:
+        return []
+    names = list(radial_profile_names()) if profiles == "all" else (
+        [part.strip() for part in profiles.split(",")] if isinstance(profiles, str)
+        else list(profiles))
+    valid = radial_profile_names()
+    for name in names:
+        if name not in valid:
+            raise InputError(f"unknown radial profile; valid: all, {', '.join(valid)}",
+                             field="--profiles", value=name)
+    return [name for name in dict.fromkeys(names) if name != DEFAULT_PROFILE]
+
+
+def profile_knob_of(method_name: str):
+    """Return the ``profile`` knob of a registered method, or None (none, or not a method)."""
+    from ...fast.base import method
+
+    try:
+        knobs = getattr(method(method_name), "KNOBS", None)
+    except InputError:
+        return None
+    return knobs["profile"] if knobs is not None and "profile" in knobs else None
+
+
+def refused_profile(module, profile: str):
+    """Return the :class:`~translucent.fast.base.Refusal` of ``profile`` by a method, or None."""
+    from ...fast.base import Refusal
+    from ...fast.knobs import UNSUPPORTED_PROFILE
+
+    knob = module.KNOBS["profile"]
+    try:
+        knob.validate(profile)
+    except InputError as error:
+        return Refusal(UNSUPPORTED_PROFILE, error.reason)
+    return None
+
+
+def model_reference_info(image: Image, source: str) -> dict:
+    """Return where a model reference came from: source, spp, passes, seconds, noise."""
+    meta = image.metadata
+    noise = meta.get("noise") if isinstance(meta.get("noise"), dict) else {}
+    return {"source": source, "spp": meta.get("spp"), "passes": meta.get("passes"),
+            "seconds": meta.get("seconds"), "integrator": meta.get("integrator"),
+            "noise_median": noise.get("median"), "noise_p99": noise.get("p99")}
+
+
+def entry_name(method: str, profile: str | None) -> str:
+    """Return the report's name for ``method`` run with ``profile`` (None: its default).
+
+    Examples
+    --------
+    >>> entry_name("prt", None), entry_name("prt", "better_dipole")
+    ('prt', 'prt@better_dipole')
+    """
+    return method if profile is None else f"{method}{ENTRY_SEPARATOR}{profile}"
+
+
+def entry_parts(name: str) -> tuple[str, str | None]:
+    """Return the method and the profile asked of it (None: the default) of a report entry.
+
+    Examples
+    --------
+    >>> entry_parts("splatting@burley_dmfp"), entry_parts("radiosity")
+    (('splatting', 'burley_dmfp'), ('radiosity', None))
+    """
+    method, _, profile = name.partition(ENTRY_SEPARATOR)
+    return method, profile or None
+
+
+def dominant_part(model: float | None, approximation: float | None, *,
+                  resolved: tuple[bool, bool]) -> str:
+    """Return which part holds the error: "model", "approximation", "both" or "within noise".
+
+    Parameters
+    ----------
+    model, approximation : float or None
+        The two relative MSEs.
+    resolved : (bool, bool)
+        Whether each clears its noise floor.
+    """
+    if model is None or approximation is None:
+        return "unknown"
+    if resolved == (False, False):
+        return "within noise"
+    # a part that does not clear its floor cannot be told from none: the other holds it
+    if resolved == (True, False) or (all(resolved) and model >= DOMINANCE_RATIO * approximation):
+        return "model"
+    if resolved == (False, True) or approximation >= DOMINANCE_RATIO * model:
+        return "approximation"
+    return "both"
+
+
+@dataclass
+class ErrorSplit:
+    """A method's error on a scene, split into its profile's and its own.
+
+    Attributes
+    ----------
+    profile : str or None
+        The profile the method rendered (None: it has none).
+    reason : str
+        Why there is no split ("" when there is).
+    model, approximation : dict or None
+        Every metric of :math:`m(V, M_p)` and :math:`m(M_p, A)` over the method's pixels.
+    model_floor, approximation_floor : dict or None
+        Their noise floors.
+    model_verdicts, approximation_verdicts : dict
+        Each metric's noise verdict.
+    model_reference : dict
+        Where the model reference came from (source, spp, passes, noise).
+    """
+
+    profile: str | None
+    reason: str = ""
+    model: dict | None = None
+    approximation: dict | None = None
+    model_floor: dict | None = None
+    approximation_floor: dict | None = None
+    model_verdicts: dict = field(default_factory=dict)
+    approximation_verdicts: dict = field(default_factory=dict)
+    model_reference: dict = field(default_factory=dict)
+
+    @property
+    def dominant(self) -> str:
+        """Which part holds the error (:func:`dominant_part`, on relative MSE)."""
+        from ..metrics.compute import RESOLVED
+
+        if self.model is None or self.approximation is None:
+            return "unknown"
+        return dominant_part(
+            self.model.get("relative_mse"), self.approximation.get("relative_mse"),
+            resolved=(self.model_verdicts.get("relative_mse") == RESOLVED,
+                      self.approximation_verdicts.get("relative_mse") == RESOLVED))
+
+    def sentence(self) -> str:
+        """Say, in words, which part holds the error and by how much."""
+        from .formatting import format_value
+
+        if self.reason:
+            return f"No split into model and approximation: {self.reason}."
+        model = format_value(self.model.get("relative_mse"), 3)
+        approximation = format_value(self.approximation.get("relative_mse"), 3)
+        numbers = (f"relative MSE of the profile {self.profile!r} against transport (model) "
+                   f"{model}, of the method against its profile rendered exactly "
+                   f"(approximation) {approximation}")
+        return {
+            "model": f"The profile's error dominates: {numbers}. A better method of this "
+                     "profile cannot do much better; another profile may.",
+            "approximation": f"The method's own error dominates: {numbers}. Its knobs, not "
+                             "the profile, hold it there.",
+            "both": f"Profile and method share the error: {numbers}.",
+            "within noise": f"Neither part clears its noise floor: {numbers}.",
+        }.get(self.dominant, numbers + ".")
+
+    def as_dict(self) -> dict:
+        """Return the ``model_error`` and ``approximation_error`` blocks of ``metrics.json``."""
+        from .runs import json_safe
+
+        def block(metrics, floor, verdicts):
+            if metrics is None:
+                return None
+            return {"metrics": json_safe(metrics), "noise": {
+                key: {"value": json_safe(metrics.get(key)),
+                      "noise_floor": json_safe((floor or {}).get(key)),
+                      "noise_verdict": verdict} for key, verdict in verdicts.items()}}
+
+        return {"profile": self.profile, "reason": self.reason or None,
+                "dominant": None if self.reason else self.dominant,
+                "sentence": self.sentence(), "model_reference": json_safe(self.model_reference),
+                "model_error": block(self.model, self.model_floor, self.model_verdicts),
+                "approximation_error": block(self.approximation, self.approximation_floor,
+                                             self.approximation_verdicts)}
+
+
+def model_reference_refusal(scene) -> str:
+    """Return why ``scene`` can have no model reference ("" when it can).
+
+    The BSSRDF path tracer renders homogeneous translucent objects
+    (:class:`~translucent.materials.Dipole` materials) by their radial profile; a
+    heterogeneous medium has none.
+    """
+    from ...materials import Dipole
+    from ...materials.solid import SolidMedium
+
+    heterogeneous = [item.name for item in scene.objects
+                     if isinstance(item.material, SolidMedium)]
+    if heterogeneous:
+        return (f"the translucent object {', '.join(heterogeneous)} is a heterogeneous "
+                "medium, which has no radial profile (the BSSRDF path tracer renders "
+                "homogeneous media)")
+    if not any(isinstance(item.material, Dipole) for item in scene.objects):
+        return "the scene has no homogeneous translucent object: no profile is rendered"
+    return ""
+
+
+def split_profile(name: str, run) -> tuple[str | None, str]:
+    """Return the profile a report entry rendered, or why it has none.
+
+    Parameters
+    ----------
+    name : str
+        The entry (:func:`entry_name`).
+    run : MethodRun
+    """
+    from ...fast.base import method
+    from ...fast.knobs import DEFAULT_PROFILE
+
+    method_name, asked = entry_parts(name)
+    try:
+        method(method_name)
+    except InputError:
+        return None, "another renderer's image: the model it renders is not known"
+    if profile_knob_of(method_name) is None:
+        return None, (f"{method_name} renders no radial profile; its model has no exact "
+                      "reference in the suite")
+    return (run.knobs or {}).get("profile", asked or DEFAULT_PROFILE), ""
+
+
+def score_splits(report) -> None:
+    """Split every scored entry's error of ``report`` (fills ``report.splits``)."""
+    cache: dict = {}
+    for name in report.metrics:
+        report.splits[name] = _split(report, name, cache)
+
+
+def _split(report, name: str, cache: dict) -> ErrorSplit:
+    from ..metrics.compute import evaluate_on, noise_verdicts
+
+    profile, reason = split_profile(name, report.runs[name])
+    if reason:
+        return ErrorSplit(profile, reason)
+    model = report.model_references.get(profile)
+    if model is None:
+        why = report.model_reference_errors.get(profile) or "no model reference was made"
+        return ErrorSplit(profile, f"no model reference of {profile!r}: {why}")
+    mask = report.mask_of(name)
+    key = (profile, tuple(sorted(report.scored_objects.get(name, ()))))
+    try:
+        if key not in cache:  # one per profile and set of pixels, whatever the method
+            cache[key] = (*_model_error(report.reference, model, mask), _floor(model, mask))
+        model_metrics, model_floor, approximation_floor = cache[key]
+        approximation = evaluate_on(model, report.runs[name].image, [mask])[0].metrics.as_dict()
+    except InputError as error:
+        return ErrorSplit(profile, f"the model reference cannot be compared: {error.reason}")
+    return ErrorSplit(
+        profile, "", model_metrics, approximation, model_floor, approximation_floor,
+        noise_verdicts(model_metrics, model_floor),
+        noise_verdicts(approximation, approximation_floor),
+        report.model_reference_info.get(profile, {}))
+
+
+def _model_error(reference: Image, model: Image, mask) -> tuple[dict, dict | None]:
+    """Return the profile's error over ``mask`` and its floor (the two variances summed)."""
+    from ..metrics.compute import evaluate_on
+
+    both = reference
+    if reference.variance is not None and model.variance is not None:
+        both = Image(reference.rgb, reference.variance + model.variance)
+    metrics = evaluate_on(both, model, [mask])[0].metrics.as_dict()
+    return metrics, _floor(both, mask)
+
+
+def _floor(image: Image, mask) -> dict | None:
+    from ..metrics.compute import noise_floors
+
+    found = noise_floors(image, [mask])[0]
+    return None if found is None else found.as_dict()

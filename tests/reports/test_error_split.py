@@ -1,0 +1,238 @@
+"""The error split: a method's error against transport, its profile's part and its own.
+
+Checked on images of known error (the relative MSE written out here with numpy, not the
+suite's function), on which part dominates (a property over random errors), and end to
+end: a report of a stand-in method that has a profile knob, run with a second profile,
+whose metrics.json carries both blocks with floors and verdicts for both entries, computed
+against the model reference the report wrote beside them.
+"""
+
+import json
+import textwrap
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from translucent.fast import base as fast_base
+from translucent.fast.conformance import tiny_sphere_text
+from translucent.image import Image, read_exr
+from translucent.reports.cli import main
+from translucent.reports.metrics.registry import NOISE_FLOOR_FIELDS
+from translucent.reports.report import pipeline as report_module
+from translucent.reports.report.model import SceneReport
+from translucent.reports.report.runs import MethodRun
+from translucent.reports.report.scoring import scored_pixels
+from translucent.reports.report.split import (
+    DOMINANCE_RATIO,
+    dominant_part,
+    entry_parts,
+    model_reference_refusal,
+    requested_profiles,
+    score_splits,
+)
+from translucent.scenes import load_scene
+
+EPSILON = 1e-2
+
+
+def numpy_relative_mse(reference, test):
+    """Eq. of the relative MSE, raw (no variance discounted), written independently."""
+    reference, test = np.asarray(reference, float), np.asarray(test, float)
+    return float(np.mean((test - reference) ** 2 / (reference ** 2 + EPSILON)))
+
+
+def _report_of(volumetric, model, method_image, method="radiosity"):
+    report = SceneReport("synthetic", "synthetic", None, "hash", 16)
+    report.reference = volumetric
+    report.model_references["dipole"] = model
+    report.model_reference_info["dipole"] = {"source": "test"}
+    report.runs[method] = MethodRun(method, "synthetic", "ok", image=method_image)
+    report.metrics[method] = {}
+    return report
+
+
+def _images(model_scale, method_scale, seed=0):
+    rng = np.random.default_rng(seed)
+    truth = rng.uniform(0.3, 1.0, (24, 24, 3))
+    variance = np.full_like(truth, 1e-8)
+    volumetric = Image(truth, variance)
+    model = Image(model_scale * truth, variance)
+    method = Image(method_scale * model_scale * truth)
+    return volumetric, model, method
+
+
+def test_a_profile_too_bright_is_the_models_error_and_the_method_adds_little():
+    volumetric, model, method = _images(1.2, 1.01)
+    report = _report_of(volumetric, model, method)
+    score_splits(report)
+    split = report.splits["radiosity"]
+    assert split.profile == "dipole" and not split.reason
+    assert split.model["relative_mse_raw"] == pytest.approx(
+        numpy_relative_mse(volumetric.rgb, model.rgb), rel=1e-9)
+    assert split.approximation["relative_mse_raw"] == pytest.approx(
+        numpy_relative_mse(model.rgb, method.rgb), rel=1e-9)
+    assert split.model_verdicts["relative_mse"] == "resolved"
+    assert split.dominant == "model"
+    assert "profile's error dominates" in split.sentence()
+    blocks = split.as_dict()
+    for block in ("model_error", "approximation_error"):
+        assert set(blocks[block]["noise"]) == set(NOISE_FLOOR_FIELDS)
+        for entry in blocks[block]["noise"].values():
+            assert entry["noise_floor"] is not None and entry["noise_verdict"]
+
+
+def test_a_method_far_from_its_exact_profile_is_the_approximations_error():
+    volumetric, model, method = _images(1.0 + 1e-3, 0.7)
+    report = _report_of(volumetric, model, method)
+    score_splits(report)
+    split = report.splits["radiosity"]
+    assert split.dominant == "approximation"
+    assert split.approximation["relative_mse_raw"] == pytest.approx(
+        numpy_relative_mse(model.rgb, method.rgb), rel=1e-9)
+
+
+def test_the_models_floor_carries_both_renders_noise():
+    # a model reference as noisy as the volumetric one: the floor of their difference is
+    # about twice the floor of either (the relative MSE's floor is its variance's mean)
+    rng = np.random.default_rng(3)
+    truth = rng.uniform(0.5, 1.0, (32, 32, 3))
+    variance = (0.02 * truth) ** 2
+    volumetric = Image(truth + rng.normal(0, 1, truth.shape) * np.sqrt(variance), variance)
+    model = Image(truth + rng.normal(0, 1, truth.shape) * np.sqrt(variance), variance)
+    report = _report_of(volumetric, model, model)
+    score_splits(report)
+    split = report.splits["radiosity"]
+    ratio = split.model_floor["relative_mse_raw"] / split.approximation_floor["relative_mse_raw"]
+    assert 1.6 < ratio < 2.5
+    # the same image twice is no error at all, beyond the noise
+    assert split.dominant == "within noise"
+
+
+def test_a_method_without_a_profile_and_another_renderer_say_why_there_is_no_split():
+    volumetric, model, method = _images(1.1, 1.0)
+    report = _report_of(volumetric, model, method, method="brdf_pca")
+    report.runs["other"] = MethodRun("other", "synthetic", "ok", image=method)
+    report.metrics["other"] = {}
+    score_splits(report)
+    assert "renders no radial profile" in report.splits["brdf_pca"].reason
+    assert "another renderer" in report.splits["other"].reason
+    assert report.splits["brdf_pca"].sentence().startswith("No split")
+
+
+def test_a_heterogeneous_scene_has_no_model_reference_and_says_why():
+    assert "heterogeneous" in model_reference_refusal(load_scene("solid_checker"))
+    assert "no homogeneous translucent" in model_reference_refusal(load_scene("glossy"))
+    assert model_reference_refusal(load_scene("sphere")) == ""
+
+
+@given(st.floats(1e-6, 1.0), st.floats(1e-6, 1.0), st.booleans(), st.booleans())
+def test_which_part_dominates_is_symmetric(model, approximation, model_resolved,
+                                           approximation_resolved):
+    found = dominant_part(model, approximation, resolved=(model_resolved,
+                                                          approximation_resolved))
+    swapped = dominant_part(approximation, model, resolved=(approximation_resolved,
+                                                            model_resolved))
+    exchange = {"model": "approximation", "approximation": "model"}
+    assert swapped == exchange.get(found, found)
+    if found == "model":
+        assert model_resolved and (not approximation_resolved
+                                   or model >= DOMINANCE_RATIO * approximation)
+    if found == "both":
+        assert model_resolved and approximation_resolved
+        assert max(model, approximation) < DOMINANCE_RATIO * min(model, approximation)
+    if not (model_resolved or approximation_resolved):
+        assert found == "within noise"
+
+
+def test_profiles_are_read_by_name_or_all_and_an_unknown_one_is_refused():
+    from translucent.errors import InputError
+    from translucent.fast.knobs import radial_profile_names
+
+    assert requested_profiles("all") == [n for n in radial_profile_names() if n != "dipole"]
+    assert requested_profiles(["burley_dmfp", "burley_dmfp"]) == ["burley_dmfp"]
+    assert entry_parts("prt@burley_dmfp") == ("prt", "burley_dmfp")
+    with pytest.raises(InputError, match="unknown radial profile") as error:
+        requested_profiles("dipole,no_such_profile")
+    assert error.value.field == "--profiles"
+
+
+PROFILE_METHOD = textwrap.dedent('''
+    """A stand-in method with a profile knob: a flat image as bright as its profile."""
+    import numpy as np
+
+    from translucent.fast.base import StageLog
+    from translucent.fast.knobs import KnobSpec, profile_knob
+    from translucent.image import Image
+    from translucent.materials import Dipole
+    from translucent.materials.profiles import profile
+
+    KNOBS = KnobSpec([profile_knob({}, keyed=True, help="the profile")])
+    DEFAULT_KNOBS = KNOBS.defaults
+
+
+    def applies_to(scene):
+        return None
+
+
+    class State:
+        def __init__(self, scene, name):
+            self.scene, self.name = scene, name
+            self.log = StageLog()
+
+        def render(self, lights=None, material=None):
+            medium = next(o.material for o in self.scene.objects
+                          if isinstance(o.material, Dipole))
+            total = profile(self.name, medium).total()
+            camera = self.scene.camera
+            return Image(np.broadcast_to(0.1 * total, (camera.height, camera.width, 3))
+                         .astype(np.float32).copy(), metadata={"producer": "flat profile"})
+
+
+    def precompute(scene, **knobs):
+        return State(scene, KNOBS.resolve(knobs)["profile"])
+''')
+
+
+def test_a_report_splits_each_profiles_error_against_its_model_reference(tmp_path,
+                                                                         monkeypatch):
+    (tmp_path / "report_profile_method.py").write_text(PROFILE_METHOD)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setitem(fast_base.METHODS, "flatprofile", "report_profile_method")
+    monkeypatch.setattr(report_module, "_source_fingerprint", lambda: "fixed for the tests")
+    # its own cache: the report tests count the tasks of a tiny scene of the same name
+    monkeypatch.setenv("TRANSLUCENT_CACHE", str(tmp_path / "cache"))
+    scene = tmp_path / "tiny_sphere.toml"
+    scene.write_text(tiny_sphere_text("tiny_sphere", 24))
+    out = tmp_path / "report"
+    code = main(["report", str(scene), "--out", str(out), "--baseline",
+                 str(tmp_path / "baseline.json"), "--update-baseline", "--methods",
+                 "flatprofile", "--profiles", "better_dipole", "--serial", "--no-progress",
+                 "--spp", "16", "--passes", "2"])
+    assert code == 0
+    data = json.loads((out / "metrics.json").read_text())["scenes"]["tiny_sphere"]
+    reference = read_exr(out / "tiny_sphere" / "reference.exr")
+    mask = scored_pixels(load_scene(str(scene)))
+    for name, profile in (("flatprofile", "dipole"), ("flatprofile@better_dipole",
+                                                      "better_dipole")):
+        entry = data["methods"][name]
+        assert entry["status"] == "ok", entry
+        split = entry["error_split"]
+        assert split["profile"] == profile and split["reason"] is None
+        assert split["dominant"] in ("model", "approximation", "both", "within noise")
+        info = split["model_reference"]
+        assert info["source"] == "fixed passes" and info["integrator"] == "bssrdf_path"
+        model = read_exr(out / info["exr"])
+        assert model.metadata["profile"]["name"] == profile
+        method = read_exr(out / entry["files"]["exr"])
+        for block in ("model_error", "approximation_error"):
+            assert set(entry[block]["noise"]) == set(NOISE_FLOOR_FIELDS), block
+        # recomputed from the images the report wrote, over the pixels it scored
+        assert entry["metrics"]["pixels_scored"] == int(mask.sum())
+        assert entry["approximation_error"]["metrics"]["relative_mse_raw"] == pytest.approx(
+            numpy_relative_mse(model.rgb[mask], method.rgb[mask]), rel=1e-5)
+        assert entry["model_error"]["metrics"]["relative_mse_raw"] == pytest.approx(
+            numpy_relative_mse(reference.rgb[mask], model.rgb[mask]), rel=1e-5)
+    page = (out / "index.html").read_text()
+    assert page.count("Why: the error split") == 2
+    assert "flatprofile@better_dipole" in page
