@@ -9,6 +9,7 @@ per channel for SubEdit),
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from dataclasses import dataclass, field, replace
@@ -24,6 +25,7 @@ from ..materials.subedit import save_subedit
 from .capture import Capture, read_capture
 from .goodness import DiscrepancyModel, GoodnessOfFit, best_sample, goodness_of_fit
 from .models import DipoleModel, SubEditModel, WalkModel
+from .named_models import NAMED_MODELS, NamedProfileModel
 from .profile import RadialProfile, measure_profile
 from .results import ParameterSummary, summaries_to_json, summarise_posterior, write_material
 from .sampler import ChainResult, run_chain
@@ -31,10 +33,13 @@ from .sampler import ChainResult, run_chain
 __all__ = ["FitResult", "default_moves", "fit_capture", "fit_dipole", "fit_subedit",
            "output_folder", "write_outputs", "MODELS"]
 
-#: Fits ``translucent fit --model`` offers.
-MODELS = ("dipole", "walk", "subedit")
+#: Fits ``translucent fit --model`` offers: the dipole (and slab multipole), the walk's
+#: table, SubEdit, and every other radial profile by name (:mod:`.named_models`).
+MODELS = ("dipole", "walk", "subedit", *NAMED_MODELS)
 #: The coefficient models (sigma_a, sigma_s' per channel) and their forward profiles.
-COEFFICIENT_MODELS = {"dipole": DipoleModel, "walk": WalkModel}
+COEFFICIENT_MODELS = {"dipole": DipoleModel, "walk": WalkModel,
+                      **{name: functools.partial(NamedProfileModel, name=name)
+                         for name in NAMED_MODELS}}
 #: Step budgets: a three-channel dipole converges in ~2000 steps, a SubEdit channel with
 #: 9 knots in ~4000; the budgets leave room for hard captures.
 DIPOLE_MAX_STEPS = 20000
@@ -243,9 +248,11 @@ def fit_dipole(capture, *, fit_eta: bool | None = None, walkers: int | None = No
         Progress bar on stderr.
     profile : RadialProfile, optional
         A profile already measured from this capture.
-    forward : {"dipole", "walk"}
-        The forward profile: the dipole (or slab multipole), :class:`DipoleModel`; or the
-        tabulated photon random walk, :class:`WalkModel`.
+    forward : str
+        The forward profile: ``"dipole"`` (or slab multipole), :class:`DipoleModel`;
+        ``"walk"``, the tabulated photon random walk, :class:`WalkModel`; or any other
+        radial profile by name (:data:`~.named_models.NAMED_MODELS`),
+        :class:`~.named_models.NamedProfileModel`.
 
     Returns
     -------
@@ -265,6 +272,10 @@ def fit_dipole(capture, *, fit_eta: bool | None = None, walkers: int | None = No
     notes += _mode_notes(model, chain, summaries)
     notes += [f"channel {'RGB'[c]} has no usable annulus: its parameters are the prior's"
               for c in range(3) if c not in model.channels]
+    if forward in NAMED_MODELS:
+        notes.append(f"the coefficients of profile {forward!r}: a renderer of another profile "
+                     f"(the dipole material file's own) gives another image; render with "
+                     f"--profile {forward}")
     values = _medians(summaries)
     if any(s.status == "multimodal" for s in summaries):
         # a median between two modes explains the profile worse than either mode
@@ -498,8 +509,9 @@ def fit_capture(path, *, models=("dipole",), out_dir=None, seed: int | None = No
             SubEditModel(profile, capture.spec,
                          **{k: options[k] for k in ("segments", "r_s_mm", "smoothness")
                             if options.get(k) is not None})
-        if "walk" in models:  # a capture the table does not cover is refused before writing
-            WalkModel(profile, capture.spec, fit_eta=options.get("fit_eta"))
+        for kind in models:  # a capture a table does not cover is refused before writing
+            if kind not in ("dipole", "subedit"):
+                COEFFICIENT_MODELS[kind](profile, capture.spec, fit_eta=options.get("fit_eta"))
         if out_dir is not None:  # before the chains run, not after; not for a refused capture
             out_dir = output_folder(out_dir)
         results = {}

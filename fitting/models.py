@@ -43,6 +43,8 @@ from .profile import RadialProfile
 
 __all__ = [
     "DipoleModel",
+    "ReducedTableModel",
+    "check_semi_infinite_reflection",
     "ETA_FIT_RANGE",
     "EXPOSURE_RANGE",
     "ProfileModel",
@@ -619,7 +621,43 @@ class DipoleModel(ProfileModel):
                 "eta": eta, "g": 0.0}
 
 
-class WalkModel(DipoleModel):
+def check_semi_infinite_reflection(spec: CaptureSpec, model: str) -> None:
+    """Refuse a capture a semi-infinite reflection table cannot predict (naming ``model``)."""
+    if spec.side != "reflection":
+        raise InputError(f"the {model} model tabulates reflection only; fit a transmission "
+                         "capture with --model dipole (the slab multipole)", field="side",
+                         value=spec.side)
+    if spec.thickness_mm is not None:
+        raise InputError(f"the {model} model tabulates a semi-infinite slab; fit a slab of "
+                         "finite thickness with --model dipole (the slab multipole)",
+                         field="thickness_mm", value=spec.thickness_mm)
+
+
+class ReducedTableModel(DipoleModel):
+    r"""A profile read from a table in reduced units, with the dipole's parameters.
+
+    :math:`R(r) = \sigma'^2_t \hat R(\sigma'_t r; \alpha', \eta)`, the table (``self.table``,
+    set by the subclass before this class's ``__init__``) giving :math:`\hat R` and the
+    exitance within a reduced radius. The node at r = 0, where a profile may diverge like
+    1/r, gets the value that gives the first grid interval its exact share of the exitance.
+    """
+
+    def unit_profiles(self, sigma_a, sigma_s_prime, eta) -> np.ndarray:
+        """Return the exitance per unit entering power at the nodes, mm^-2, (n, nodes, 3)."""
+        nodes = self.profile.operator.grid.nodes
+        sigma_t = sigma_a + sigma_s_prime  # (n, 3)
+        albedo = sigma_s_prime / sigma_t
+        eta = np.broadcast_to(np.asarray(eta, dtype=np.float64)[:, None], albedo.shape)
+        reduced = sigma_t[..., None] * nodes[1:]  # (n, 3, nodes - 1)
+        values = self.table.reduced_profile(reduced, albedo, eta) * sigma_t[..., None] ** 2
+        # node 0: the linear interpolant's integral over [0, r1] equals the exitance there
+        r1 = nodes[1]
+        inside = self.table.reduced_cumulative(sigma_t * r1, albedo, eta) / (2.0 * np.pi)
+        first = 6.0 * (inside / r1 ** 2 - values[..., 0] / 3.0)
+        return np.moveaxis(np.concatenate([first[..., None], values], axis=-1), 1, -1)
+
+
+class WalkModel(ReducedTableModel):
     r"""The photon random walk's own profile, tabulated, with per-channel coefficients.
 
     The parameters, priors, starting points and material file are the dipole's
@@ -645,34 +683,12 @@ class WalkModel(DipoleModel):
     def __init__(self, profile: RadialProfile, spec: CaptureSpec, *, fit_eta: bool | None = None):
         from ..materials.profiles.random_walk import load_table
 
-        if spec.side != "reflection":
-            raise InputError("the walk model tabulates reflection only; fit a transmission "
-                             "capture with --model dipole (the slab multipole)", field="side",
-                             value=spec.side)
-        if spec.thickness_mm is not None:
-            raise InputError("the walk model tabulates a semi-infinite slab; fit a slab of "
-                             "finite thickness with --model dipole (the slab multipole)",
-                             field="thickness_mm", value=spec.thickness_mm)
+        check_semi_infinite_reflection(spec, "walk")
         self.table = load_table()
         if spec.eta is not None:
             self.table.check_eta(spec.eta)
         # the table spans ETA_FIT_RANGE (a test checks it), so the dipole's eta prior holds
         super().__init__(profile, spec, fit_eta=fit_eta)
-
-    def unit_profiles(self, sigma_a, sigma_s_prime, eta) -> np.ndarray:
-        """Return the walk's exitance per unit entering power at the nodes, mm^-2, (n, nodes, 3)."""
-        nodes = self.profile.operator.grid.nodes
-        sigma_t = sigma_a + sigma_s_prime  # (n, 3)
-        albedo = sigma_s_prime / sigma_t
-        eta = np.broadcast_to(np.asarray(eta, dtype=np.float64)[:, None], albedo.shape)
-        reduced = sigma_t[..., None] * nodes[1:]  # (n, 3, nodes - 1)
-        values = self.table.reduced_profile(reduced, albedo, eta) * sigma_t[..., None] ** 2
-        # node 0: the linear interpolant's integral over [0, r1] equals the exitance there
-        r1 = nodes[1]
-        inside = self.table.reduced_cumulative(sigma_t * r1, albedo, eta) / (2.0 * np.pi)
-        first = 6.0 * (inside / r1 ** 2 - values[..., 0] / 3.0)
-        return np.moveaxis(np.concatenate([first[..., None], values], axis=-1), 1, -1)
-
 
     def residual_scale(self, channel: int, stderr, predicted, theta) -> np.ndarray:
         r"""Return the standard errors with the table's own noise added, per annulus.

@@ -231,8 +231,9 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
     beam_radius_fraction : float, optional
         Beam 1/e^2 radius as a fraction of the field width (volpath; default
         :data:`~translucent.fitting.volpath_capture.DEFAULT_BEAM_FRACTION`).
-    forward : {"dipole", "walk"}
-        The fitted profile (see :func:`~translucent.fitting.fit.fit_dipole`).
+    forward : str
+        The fitted profile: a coefficient model of :data:`~translucent.fitting.fit.MODELS`
+        (see :func:`~translucent.fitting.fit.fit_dipole`).
 
     Returns
     -------

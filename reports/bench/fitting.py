@@ -61,10 +61,16 @@ def add_arguments(parser):
     bias.add_argument("--photons", type=float, default=1e5, help="photons per channel (walk)")
     bias.add_argument("--r-min", type=float, nargs="+", default=[0.0],
                       help="fit outside these many transport lengths (one row each)")
-    bias.add_argument("--forward", choices=("dipole", "walk"), default="dipole",
-                      help="the fitted profile: the dipole (default) or the tabulated walk")
+    from ...materials.profiles.registry import PROFILES
+
+    named = [name for name, entry in PROFILES.items()
+             if not entry.directional and name not in ("dipole", "random_walk")]
+    bias.add_argument("--forward", choices=("dipole", "walk", *named), default="dipole",
+                      metavar="MODEL",
+                      help="the fitted profile: the dipole (default), the tabulated walk, or "
+                           f"any other radial profile ({', '.join(named)})")
     bias.add_argument("--out", default=".",
-                      help="folder for bias_<generator>[_walk].json / .md")
+                      help="folder for bias_<generator>[_<forward>].json / .md")
 
 
 def _point_fit_seconds(model) -> tuple[float, np.ndarray]:

@@ -27,12 +27,19 @@ from pathlib import Path
 def add_arguments(parser):
     """Options of ``translucent fit``."""
     parser.add_argument("capture", help="the capture's JSON sidecar (docs/capture-format.md)")
-    parser.add_argument("--model", choices=("dipole", "walk", "subedit", "both"),
-                        default="dipole",
+    from ...materials.profiles.registry import PROFILES
+
+    # the names of fitting.fit.MODELS (a test keeps them equal), without importing emcee
+    named = [name for name, entry in PROFILES.items()
+             if not entry.directional and name not in ("dipole", "random_walk")]
+    models = ("dipole", "walk", "subedit", *named)
+    parser.add_argument("--model", choices=(*models, "both"), default="dipole",
+                        metavar="MODEL",
                         help="profile model to fit: dipole (or slab multipole), walk (the "
                              "photon random walk's own profile, tabulated: semi-infinite "
-                             "reflection), subedit, or both dipole and subedit "
-                             "(default: dipole)")
+                             "reflection), subedit, both (dipole and subedit), or any other "
+                             "radial profile by name (semi-infinite reflection): "
+                             f"{', '.join(named)} (default: dipole)")
     parser.add_argument("--out", "-o", default=None,
                         help="output folder (default: <capture>_fit beside the sidecar)")
     parser.add_argument("--r-min", type=float, default=0.0,

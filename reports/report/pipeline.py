@@ -90,6 +90,7 @@ from .split import (
     refused_profile,
     requested_profiles,
     split_profile,
+    unrendered_profile,
 )
 from .summary import print_summary, summary_rows
 from .tasks import MethodTask, PathTracingTask, ReferenceTask, run_task, task_entry
@@ -605,8 +606,8 @@ def _plan_model_references(plan: _Plan, report: SceneReport, portable, spp, pass
                and profile_knob_of(entry_parts(p.owner)[0]) is not None}
     refusal = model_reference_refusal(report.scene)
     for profile in sorted(wanted - {None}):
-        if refusal:
-            report.model_reference_errors[profile] = refusal
+        if refusal or unrendered_profile(profile):
+            report.model_reference_errors[profile] = refusal or unrendered_profile(profile)
             continue
         committed = committed_reference_for(report.scene, profile) if spp is None else None
         if committed is not None:

@@ -46,7 +46,7 @@ from ...image import Image
 __all__ = ["DOMINANCE_RATIO", "ENTRY_SEPARATOR", "MODEL", "ErrorSplit", "dominant_part",
            "entry_name", "entry_parts", "model_reference_info", "model_reference_refusal",
            "profile_knob_of", "refused_profile", "requested_profiles", "score_splits",
-           "split_profile"]
+           "split_profile", "unrendered_profile"]
 
 #: One part dominates when its relative MSE is at least this factor times the other's.
 DOMINANCE_RATIO = 2.0
@@ -273,6 +273,27 @@ def model_reference_refusal(scene) -> str:
     if not any(isinstance(item.material, Dipole) for item in scene.objects):
         return "the scene has no homogeneous translucent object: no profile is rendered"
     return ""
+
+
+def unrendered_profile(profile: str) -> str:
+    """Return why the BSSRDF path tracer renders no model reference of ``profile`` ("": it does).
+
+    A method's profile knob also takes the radial average of a directional profile
+    (``directional_dipole_average``); the tracer renders the directional profile itself,
+    with each sample's own incident direction, and not its average.
+
+    Examples
+    --------
+    >>> unrendered_profile("better_dipole")
+    ''
+    """
+    from ...materials.profiles import PROFILE_NAMES
+
+    if profile in PROFILE_NAMES:
+        return ""
+    return (f"{profile!r} is the radial average of a directional profile; the BSSRDF path "
+            "tracer renders the directional profile itself (each sample with its own "
+            "incident direction), not its average")
 
 
 def split_profile(name: str, run) -> tuple[str | None, str]:
