@@ -26,6 +26,7 @@ import sys
 
 from .. import signals
 from ..errors import InputError
+from ..extras import missing_extra
 from ..signals import Terminated
 from .commands.record import add_common_options, json_target, quiet, write_record
 
@@ -58,12 +59,21 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def _build_parser() -> argparse.ArgumentParser:
+def _build_parser(chosen: str | None = None, *, every: bool = False) -> argparse.ArgumentParser:
+    """Return the parser; only the ``chosen`` command's module is imported and given its options.
+
+    The others are listed by name and help line: a command's module may import what only
+    an extra of the install brings (:mod:`translucent.extras`), and ``compare`` must run
+    without it. ``every``: every command with its options (for the tests of them all).
+    """
     parser = _Parser(prog="translucent", description=__doc__.split("\n\n")[0])
     parser.add_argument("--version", action="version",
                         version=f"translucent {importlib.import_module('translucent').__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, (module_name, help_text) in COMMANDS.items():
+        if name != chosen and not every:
+            sub.add_parser(name, help=help_text)
+            continue
         try:
             module = importlib.import_module(f"translucent.reports.commands.{module_name}")
         except ModuleNotFoundError as error:
@@ -75,6 +85,11 @@ def _build_parser() -> argparse.ArgumentParser:
         command.set_defaults(run=module.run)
     _add_common_options(parser)
     return parser
+
+
+def _chosen_command(argv: list[str]) -> str | None:
+    """Return the command ``argv`` names (its first word that is one), or None."""
+    return next((token for token in argv if token in COMMANDS), None)
 
 
 def _add_common_options(parser: argparse.ArgumentParser) -> None:
@@ -277,7 +292,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"translucent: error: TRANSLUCENT_OPTIONS = {text!r}: {asked[0]} is asked for on "
               "the command line, not set for every command", file=sys.stderr)
         return 2
-    parser = _build_parser()
+    chosen = _chosen_command(argv)
+    try:
+        parser = _build_parser(chosen)
+    except ModuleNotFoundError as error:
+        missing = missing_extra(error)
+        if missing is None:
+            raise
+        print(f"translucent {chosen}: error: {missing}", file=sys.stderr)
+        return 2
     end, command_parser = _command_end(parser, argv)
     if end and options:
         options, ignored = _accepted_options(command_parser, options)
@@ -324,6 +347,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"translucent {args.command}: error: {error}", file=sys.stderr)
         return 2
     except BaseException as error:
+        missing = missing_extra(error)
+        if missing is not None:
+            print(f"translucent {args.command}: error: {missing}", file=sys.stderr)
+            return 2
         signal_error = _signal_behind(error)
         if isinstance(signal_error, KeyboardInterrupt):
             print(f"translucent {args.command}: interrupted", file=sys.stderr)

@@ -39,7 +39,7 @@ def test_options_a_command_does_not_take_are_left_out_with_a_note(monkeypatch, c
 def test_an_accepted_option_keeps_its_values_even_a_dash(monkeypatch):
     from translucent.reports.cli import _accepted_options, _build_parser, _command_end
 
-    parser = _build_parser()
+    parser = _build_parser(every=True)
     _, references = _command_end(parser, ["references", "list"])
     kept, ignored = _accepted_options(references, ["--json", "-", "--bogus=1", "--budget",
                                                    "-1", "--no-progress"])
@@ -165,7 +165,7 @@ def test_every_command_prints_its_help(capsys):
     """A '%' in a help text is a format directive to argparse: --help must never crash."""
     from translucent.reports.cli import _build_parser
 
-    paths = list(_command_paths(_build_parser()))
+    paths = list(_command_paths(_build_parser(every=True)))
     assert ("report",) in paths and ("bench", "prt") in paths and ("approx", "prt") in paths
     for path in paths:
         assert main([*path, "--help"]) == 0, path
@@ -185,7 +185,7 @@ def test_every_command_takes_no_progress_and_it_hides_every_bar(monkeypatch, cap
             for name, sub in action.choices.items():
                 yield from leaves(sub, (*prefix, name))
 
-    found = list(leaves(_build_parser()))
+    found = list(leaves(_build_parser(every=True)))
     assert len(found) > 10
     for path, parser in found:
         assert "--no-progress" in parser._option_string_actions, path
