@@ -31,7 +31,7 @@ from .results import ParameterSummary, summaries_to_json, summarise_posterior, w
 from .sampler import ChainResult, run_chain
 
 __all__ = ["FitResult", "default_moves", "fit_capture", "fit_dipole", "fit_subedit",
-           "output_folder", "write_outputs", "MODELS"]
+           "output_folder", "output_names", "write_outputs", "MODELS"]
 
 #: Fits ``translucent fit --model`` offers: the dipole (and slab multipole), the walk's
 #: table, SubEdit, and every other radial profile by name (:mod:`.named_models`).
@@ -403,6 +403,21 @@ def output_folder(out_dir) -> Path:
         raise InputError("the output folder is not writable", field="out_dir",
                          value=str(out_dir))
     return out_dir
+
+
+def output_names(kind: str) -> list[str]:
+    """Return the names of the files :func:`write_outputs` writes for a fit of ``kind``.
+
+    Examples
+    --------
+    >>> output_names("dipole")[:2]
+    ['dipole_summary.json', 'dipole_material.toml']
+    """
+    names = [f"{kind}_summary.json", f"{kind}_material.toml", f"{kind}_profile.png",
+             f"{kind}_samples.npz"]
+    if kind == "subedit":
+        return names + [f"{kind}_profile.npz"] + [f"{kind}_corner_{c}.png" for c in "RGB"]
+    return names + [f"{kind}_corner.png"]
 
 
 def write_outputs(result: FitResult, out_dir) -> dict[str, Path]:

@@ -96,8 +96,8 @@ def _staged(out_dir: Path):
 
 def run(args) -> int:
     """Fit, write the outputs, print the summary; 1 if a chain did not converge or misfit."""
-    from ...atomic import check_output_folder
-    from ...fitting.fit import fit_capture
+    from ...atomic import check_output_folder, claim_output
+    from ...fitting.fit import fit_capture, output_names
     from .record import json_target, record
 
     capture = Path(args.capture)
@@ -112,6 +112,11 @@ def run(args) -> int:
         options["walkers"] = args.walkers
     if args.max_steps is not None:
         options["max_steps"] = args.max_steps
+    # every file it will write is named before any work: one that would replace an input
+    # (the capture itself, say) is refused before the chains run, not after
+    for kind in models:
+        for name in output_names(kind):
+            claim_output(out_dir / name, "out_dir (--out)")
     # written into a staging folder beside it, moved in when every model is done: a
     # refused, failed or interrupted fit leaves no empty or half-filled --out
     with _staged(out_dir) as staging:

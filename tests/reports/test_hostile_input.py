@@ -462,3 +462,39 @@ def test_an_interrupted_fit_leaves_no_output_folder(tmp_path, monkeypatch, capsy
     monkeypatch.setattr(fit, "fit_capture", interrupted)
     assert main(["fit", str(tmp_path / "c.json"), "--out", str(tmp_path / "fit")]) == 130
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.json", "small.exr"]
+
+
+@pytest.mark.parametrize("model, name", [("dipole", "dipole_summary.json"),
+                                         ("subedit", "subedit_profile.npz")])
+def test_a_fit_output_that_is_its_input_is_refused_before_any_chain(
+        tmp_path, monkeypatch, capsys, capture, model, name):
+    from translucent.fitting import fit, sampler
+
+    folder = tmp_path / "out"
+    folder.mkdir()
+    (folder / name).write_bytes(capture["small.json"])  # the capture, named as an output
+    (folder / "small.exr").write_bytes(capture["small.exr"])
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+
+    def no_chain(*args, **kwargs):
+        raise AssertionError("a chain ran before the outputs were checked")
+
+    monkeypatch.setattr(sampler, "run_chain", no_chain)
+    monkeypatch.setattr(fit, "run_chain", no_chain)
+    assert main(["fit", str(folder / name), "--model", model, "--out", str(folder)]) == 2
+    err = capsys.readouterr().err
+    assert "is the input capture" in err and "Traceback" not in err
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+def test_the_fit_writes_exactly_the_files_it_names_beforehand(tmp_path):
+    from translucent.fitting.capture import read_capture, write_capture
+    from translucent.fitting.fit import fit_dipole, output_names, write_outputs
+    from translucent.fitting.synthetic import dipole_capture
+    from translucent.materials import measured_medium
+
+    pixels, spec = dipole_capture(measured_medium("Skin1"), size=24, seed=1)
+    data = read_capture(write_capture(tmp_path / "c.json", pixels, spec))
+    result = fit_dipole(data, seed=1, walkers=16, max_steps=200)
+    written = write_outputs(result, tmp_path / "fit")
+    assert sorted(p.name for p in written.values()) == sorted(output_names("dipole"))
