@@ -91,6 +91,14 @@ CONTRACT: tuple[ContractPart, ...] = (
         "the objects the method renders (others left black): the report scores it on "
         "their pixels only and says so."),
     ContractPart(
+        "model_name", "function", False, "model_name(knobs)",
+        "a function model_name(knobs) -> the name of the model the method approximates",
+        "the model the method approximates at these knobs, as the reference renders it "
+        "exactly: the report splits the method's error into the model's and the method's "
+        "own against that render (docs/report.md). Without it a method with a `profile` "
+        "knob stands on its profile (a radial profile, rendered by the BSSRDF path "
+        "tracer); BRDF editing returns `brdf_pca_kK`, its K-term PCA BRDF."),
+    ContractPart(
         "KNOBS", "knob spec", False, "KNOBS",
         "a translucent.fast.knobs.KnobSpec declaring the knobs (validation, flags, cache "
         "key, ladders)",

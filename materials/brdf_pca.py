@@ -41,6 +41,9 @@ from .brdfs import (
 )
 
 __all__ = [
+    "PCA_MODEL_PREFIX",
+    "pca_model_name",
+    "pca_model_basis",
     "DEFAULT_BASIS_SIZE",
     "DEFAULT_DELTA_SAMPLES",
     "DEFAULT_GAMMA_SAMPLES",
@@ -61,6 +64,32 @@ DEFAULT_GAMMA_SAMPLES = 1000
 #: h, the number of delta samples: the narrowest lobes (Blinn-Phong gamma = 300, width
 #: ~0.08 rad; Ward gamma = 0.05, width ~0.05 rad) get 30 to 50 samples across.
 DEFAULT_DELTA_SAMPLES = 1024
+
+
+#: The name of the K-term PCA BRDF as a model the reference renders: ``brdf_pca_k6``.
+PCA_MODEL_PREFIX = "brdf_pca_k"
+
+
+def pca_model_name(n_basis: int) -> str:
+    """Return the model name of the K-term PCA BRDF (``pca_model_name(6) == "brdf_pca_k6"``)."""
+    return f"{PCA_MODEL_PREFIX}{int(n_basis)}"
+
+
+def pca_model_basis(name) -> int | None:
+    """Return K of a PCA BRDF model name, or None when ``name`` is not one.
+
+    Examples
+    --------
+    >>> pca_model_basis("brdf_pca_k6"), pca_model_basis("dipole"), pca_model_basis(None)
+    (6, None, None)
+    """
+    if not isinstance(name, str) or not name.startswith(PCA_MODEL_PREFIX):
+        return None
+    digits = name[len(PCA_MODEL_PREFIX):]
+    if not digits.isdigit() or not 1 <= int(digits) <= 64:
+        raise InputError(f"a PCA BRDF model is {PCA_MODEL_PREFIX}K with K in [1, 64]",
+                         field="profile", value=name)
+    return int(digits)
 
 
 def _check_count(value, field_name: str, minimum: int, maximum: int) -> int:

@@ -17,7 +17,20 @@ parameter       type    default      meaning
 ``f0``          float   0.04         Schlick F0 of CT and AS
 ``c_xy``        float   -1           Lafortune C_x = C_y
 ``c_z``         float   1            Lafortune C_z
+``pca_basis``   int     0            K > 0: the edited term is its K-term PCA
+                                     reconstruction (the fast method's model), not the
+                                     exact one
 ==============  ======  ===========  ====================================================
+
+With ``pca_basis = K`` the plugin renders the model of the BRDF-editing method exactly
+(Nguyen et al. 2010, Eq. 10): the edited term :math:`f_E(\gamma, \delta)` is replaced by
+:math:`b_0(\delta) + \sum_{j \le K} c_j(\gamma) b_j(\delta)`
+(:class:`~translucent.materials.brdf_pca.PCABasis`, built as the method builds it),
+interpolated linearly in :math:`\delta` on the basis's grid, negative lobes included (the
+reconstruction is not clamped: that is the model). Sampling stays the exact lobe's, whose
+density covers the reconstruction's support (the whole hemisphere for the half-angle
+models; Lafortune's lobe cosine > 0, where both are nonzero). Against the exact
+reference it is the model error; the method against it, the approximation error.
 
 Sampling is a one-sample mixture of a cosine-weighted diffuse lobe and a glossy lobe
 chosen with probability proportional to the mean of ``rho_s`` (``rho_d``):
@@ -44,7 +57,14 @@ import time
 from types import SimpleNamespace
 
 from ..backend import mitsuba
-from ..materials.brdfs import AnalyticBRDF, canonical_model, check_gamma, lobe_terms
+from ..materials.brdfs import (
+    AnalyticBRDF,
+    canonical_model,
+    check_gamma,
+    lobe_terms,
+    pca_variable,
+    uses_half_angle,
+)
 from .mitsuba_scene import MaterialParts, register_material_converter
 
 __all__ = ["INTEGRATOR_NAME", "PLUGIN_NAME", "bsdf_dict", "drjit_ops", "register_plugin",
@@ -96,6 +116,15 @@ def _plugin_class(mi):
             c_xy = float(props["c_xy"]) if "c_xy" in props else -1.0
             c_z = float(props["c_z"]) if "c_z" in props else 1.0
             self.lafortune_c = (c_xy, c_z)
+            self.pca_basis = int(props["pca_basis"]) if "pca_basis" in props else 0
+            if self.pca_basis > 0:
+                from ..materials.brdf_pca import build_pca_basis
+
+                basis = build_pca_basis(self.model, self.pca_basis)
+                self.pca_table = mi.Float(basis.reconstruct(self.gamma).astype("float32"))
+                self.pca_start = float(basis.delta[0])
+                self.pca_step = float(basis.delta[1] - basis.delta[0])
+                self.pca_size = len(basis.delta)
             weight_s, weight_d = sum(rho_s) / 3.0, sum(rho_d) / 3.0
             total = weight_s + weight_d
             self.glossy_probability = 0.5 if total <= 0 else weight_s / total
@@ -103,11 +132,33 @@ def _plugin_class(mi):
             self.m_flags = diffuse_flags | glossy_flags
 
         # -- the BRDF itself ---------------------------------------------------------
+        def _lobe(self, cos_l, cos_v, l_dot_v):
+            """Return the fixed and edited terms (the edited one from the PCA table if K > 0)."""
+            fixed, edited = lobe_terms(self.model, self.gamma, cos_l, cos_v, l_dot_v, ops,
+                                       f0=self.f0, lafortune_c=self.lafortune_c)
+            if self.pca_basis == 0:
+                return fixed, edited
+            variable = pca_variable(self.model, cos_l, cos_v, l_dot_v, ops,
+                                    lafortune_c=self.lafortune_c)
+            if uses_half_angle(self.model):
+                delta = dr.acos(dr.clip(variable, 0.0, 1.0))
+            else:
+                delta = variable
+            position = dr.clip((delta - self.pca_start) / self.pca_step, 0.0,
+                               self.pca_size - 1.0)
+            index = dr.minimum(mi.UInt32(position), self.pca_size - 2)
+            fraction = position - mi.Float(index)
+            table = (dr.gather(mi.Float, self.pca_table, index) * (1.0 - fraction)
+                     + dr.gather(mi.Float, self.pca_table, index + 1) * fraction)
+            inside = (cos_l > 0) & (cos_v > 0)
+            if not uses_half_angle(self.model):  # zero where every gamma's lobe is zero
+                inside &= delta > 0
+            return fixed, dr.select(inside, table, 0.0)
+
         def _value(self, wi, wo):
             cos_v = mi.Frame3f.cos_theta(wi)
             cos_l = mi.Frame3f.cos_theta(wo)
-            fixed, edited = lobe_terms(self.model, self.gamma, cos_l, cos_v, dr.dot(wi, wo),
-                                       ops, f0=self.f0, lafortune_c=self.lafortune_c)
+            fixed, edited = self._lobe(cos_l, cos_v, dr.dot(wi, wo))
             above = (cos_l > 0) & (cos_v > 0)
             diffuse = dr.select(above, self.rho_d * dr.inv_pi, 0.0)
             return (diffuse + self.rho_s * (fixed * edited)) * dr.maximum(cos_l, 0.0)
@@ -178,9 +229,8 @@ def _plugin_class(mi):
             if has_diffuse:
                 above = (mi.Frame3f.cos_theta(wi) > 0) & (cos_l > 0)
                 return dr.select(above, self.rho_d * dr.inv_pi * cos_l, 0.0)
-            fixed, edited = lobe_terms(self.model, self.gamma, mi.Frame3f.cos_theta(wo),
-                                       mi.Frame3f.cos_theta(wi), dr.dot(wi, wo), ops,
-                                       f0=self.f0, lafortune_c=self.lafortune_c)
+            fixed, edited = self._lobe(mi.Frame3f.cos_theta(wo), mi.Frame3f.cos_theta(wi),
+                                       dr.dot(wi, wo))
             return self.rho_s * (fixed * edited) * cos_l
 
         # -- the mi.BSDF interface -------------------------------------------------
@@ -226,7 +276,7 @@ def _plugin_class(mi):
         def to_string(self):
             return (f"AnalyticBRDFPlugin[model={self.model}, gamma={self.gamma}, "
                     f"rho_s={self.rho_s}, rho_d={self.rho_d}, f0={self.f0}, "
-                    f"lafortune_c={self.lafortune_c}]")
+                    f"lafortune_c={self.lafortune_c}, pca_basis={self.pca_basis}]")
 
     return AnalyticBRDFPlugin
 
@@ -249,7 +299,7 @@ def register_plugin():
     return _register("bsdf", mitsuba().variant())
 
 
-def bsdf_dict(material: AnalyticBRDF) -> dict:
+def bsdf_dict(material: AnalyticBRDF, pca_basis: int = 0) -> dict:
     """Return the Mitsuba ``load_dict`` entry of ``material`` (registering the plugin).
 
     Parameters
@@ -266,13 +316,15 @@ def bsdf_dict(material: AnalyticBRDF) -> dict:
     return {"type": PLUGIN_NAME, "model": material.model, "gamma": float(material.gamma),
             "rho_s": mi.ScalarColor3f(*material.rho_s.tolist()),
             "rho_d": mi.ScalarColor3f(*material.rho_d.tolist()), "f0": float(material.f0),
-            "c_xy": float(material.lafortune_c[0]), "c_z": float(material.lafortune_c[1])}
+            "c_xy": float(material.lafortune_c[0]), "c_z": float(material.lafortune_c[1]),
+            "pca_basis": int(pca_basis)}
 
 
 def _convert_analytic_brdf(material: AnalyticBRDF, context) -> MaterialParts:
     # two-sided like the Lambertian conversion: open meshes (floors) reflect on both sides,
     # as the fast method's view samples (normals turned towards the eye) assume
-    return MaterialParts({"type": "twosided", "bsdf": bsdf_dict(material)})
+    return MaterialParts({"type": "twosided", "bsdf": bsdf_dict(material,
+                                                                 context.brdf_basis)})
 
 
 register_material_converter(AnalyticBRDF, _convert_analytic_brdf)

@@ -7,12 +7,12 @@ stored as ``reference/data/<scene>.exr``: the mean, the variance of the mean and
 provenance (scene content hash, integrator, spp, passes, seconds, variant, Mitsuba version,
 the noise reached and why the render stopped).
 
-Beside them, the *model references* of the scenes whose translucent objects are homogeneous
-(:data:`MODEL_PLANS`): the same scene rendered by the BSSRDF path tracer
-(:mod:`~translucent.reference.bssrdf_path`) with a radial profile, the default one
-(:data:`MODEL_PROFILES`), stored as ``reference/data/model/<scene>.<profile>.exr``. Against
-the volumetric reference it is the profile's own error; against a fast method of that
-profile, the method's.
+Beside them, the *model references* (:data:`MODEL_PLANS`): each scene whose translucent
+objects are homogeneous rendered by the BSSRDF path tracer
+(:mod:`~translucent.reference.bssrdf_path`) with the default radial profile, and the glossy
+scene with the BRDF-editing method's PCA BRDF (:mod:`~translucent.reference.brdf_plugins`),
+stored as ``reference/data/model/<scene>.<model>.exr``. Against the reference it is the
+model's own error; against a fast method of that model, the method's.
 
 A committed reference is used only while its scene is the one it was rendered from: the
 header's ``scene_content_hash`` must equal the hash of the scene as it loads now (and a
@@ -33,8 +33,8 @@ from ..image import Image, read_exr
 
 __all__ = ["REFERENCE_FOLDER", "PLANS", "MODEL_PLANS", "MODEL_PROFILES", "ReferencePlan",
            "CommittedReference", "committed_path", "committed_reference",
-           "committed_scene_names", "committed_model_scene_names", "render_committed",
-           "rerender_command"]
+           "committed_scene_names", "committed_model_cases", "committed_model_scene_names",
+           "render_committed", "rerender_command"]
 
 #: Where the committed references live.
 REFERENCE_FOLDER = Path(__file__).resolve().parent / "data"
@@ -94,27 +94,39 @@ PLANS: dict[str, ReferencePlan] = {
 }
 
 
-#: The integrator of a model reference (the BSSRDF path tracer).
+#: The integrator of a profile's model reference (the BSSRDF path tracer).
 MODEL_INTEGRATOR = "bssrdf_path"
 
-#: The profiles whose model references are committed: the one every method uses unless
-#: told otherwise (:data:`translucent.fast.knobs.DEFAULT_PROFILE`, the classical dipole).
-MODEL_PROFILES = ("dipole",)
-
-#: The built-in scenes whose model references are committed, and how each is rendered:
-#: every default scene whose translucent objects are homogeneous (a heterogeneous medium
-#: has no radial profile). The BSSRDF path tracer needs no manifold search behind a
-#: dielectric and no per-channel walks: a pass costs a fraction of the volumetric one.
-MODEL_PLANS: dict[str, ReferencePlan] = {
-    "sphere": ReferencePlan(spp=256, budget_seconds=1200.0, integrator=MODEL_INTEGRATOR),
-    "bowl": ReferencePlan(spp=256, budget_seconds=1200.0, integrator=MODEL_INTEGRATOR),
-    "cornell_block": ReferencePlan(spp=64, budget_seconds=1200.0,
-                                   integrator=MODEL_INTEGRATOR),
-    "sphere_dielectric": ReferencePlan(spp=256, budget_seconds=1200.0,
-                                       integrator=MODEL_INTEGRATOR),
-    "dielectric_on_floor": ReferencePlan(spp=256, budget_seconds=1200.0,
-                                         integrator=MODEL_INTEGRATOR),
+#: The built-in scenes whose model references are committed, per model, and how each is
+#: rendered: every default scene whose translucent objects are homogeneous (a
+#: heterogeneous medium has no radial profile) with the profile every method uses unless
+#: told otherwise (:data:`translucent.fast.knobs.DEFAULT_PROFILE`, the classical dipole),
+#: by the BSSRDF path tracer, which needs no manifold search behind a dielectric and no
+#: per-channel walks; and the glossy scene with the BRDF-editing method's default model,
+#: the 6-term PCA of its BRDFs (:func:`~translucent.materials.brdf_pca.pca_model_name`),
+#: by Mitsuba's path tracer with the PCA BRDF plugin (:mod:`.brdf_plugins`).
+MODEL_PLANS: dict[str, dict[str, ReferencePlan]] = {
+    "sphere": {"dipole": ReferencePlan(spp=256, budget_seconds=1200.0,
+                                       integrator=MODEL_INTEGRATOR)},
+    "bowl": {"dipole": ReferencePlan(spp=256, budget_seconds=1200.0,
+                                     integrator=MODEL_INTEGRATOR)},
+    "cornell_block": {"dipole": ReferencePlan(spp=64, budget_seconds=1200.0,
+                                              integrator=MODEL_INTEGRATOR)},
+    "sphere_dielectric": {"dipole": ReferencePlan(spp=256, budget_seconds=1200.0,
+                                                  integrator=MODEL_INTEGRATOR)},
+    "dielectric_on_floor": {"dipole": ReferencePlan(spp=256, budget_seconds=1200.0,
+                                                    integrator=MODEL_INTEGRATOR)},
+    "glossy": {"brdf_pca_k6": ReferencePlan(spp=1024, budget_seconds=900.0,
+                                            integrator="path")},
 }
+
+#: Every model whose references are committed (for some scene).
+MODEL_PROFILES = tuple(sorted({profile for plans in MODEL_PLANS.values() for profile in plans}))
+
+
+def committed_model_cases() -> list[tuple[str, str]]:
+    """Return every ``(scene, model)`` whose model reference is committed."""
+    return [(name, profile) for name, plans in MODEL_PLANS.items() for profile in plans]
 
 
 def committed_scene_names() -> list[str]:
@@ -122,9 +134,9 @@ def committed_scene_names() -> list[str]:
     return list(PLANS)
 
 
-def committed_model_scene_names() -> list[str]:
-    """Return the built-in scenes whose model references are committed (:data:`MODEL_PLANS`)."""
-    return list(MODEL_PLANS)
+def committed_model_scene_names(profile: str | None = None) -> list[str]:
+    """Return the built-in scenes with a committed model reference (of ``profile``)."""
+    return [name for name, plans in MODEL_PLANS.items() if profile is None or profile in plans]
 
 
 def _plan(name: str, profile: str | None = None) -> ReferencePlan:
@@ -137,10 +149,11 @@ def _plan(name: str, profile: str | None = None) -> ReferencePlan:
     if profile not in MODEL_PROFILES:
         raise InputError(f"no model reference is committed for this profile (committed: "
                          f"{', '.join(MODEL_PROFILES)})", field="profile", value=profile)
-    if name not in MODEL_PLANS:
-        raise InputError(f"no committed model reference is planned for this scene (planned: "
-                         f"{', '.join(MODEL_PLANS)})", field="scene", value=name)
-    return MODEL_PLANS[name]
+    if profile not in MODEL_PLANS.get(name, {}):
+        raise InputError(f"no committed model reference of {profile} is planned for this "
+                         f"scene (planned: {', '.join(committed_model_scene_names(profile))})",
+                         field="scene", value=name)
+    return MODEL_PLANS[name][profile]
 
 
 def committed_path(name: str, profile: str | None = None) -> Path:
@@ -219,7 +232,7 @@ def committed_reference(name: str, scene=None, profile: str | None = None
 
     from ..cache import content_hash
 
-    _plan(name, profile)
+    plan = _plan(name, profile)
     path = committed_path(name, profile)
     if scene is None:
         from ..scenes import load_scene
@@ -252,8 +265,8 @@ def committed_reference(name: str, scene=None, profile: str | None = None
         meta = image.metadata
         made = (meta.get("profile") or {}).get("name") if isinstance(
             meta.get("profile"), dict) else None
-        if meta.get("integrator") != MODEL_INTEGRATOR or made != profile:
-            return unusable(f"the committed reference is not the {MODEL_INTEGRATOR} render of "
+        if meta.get("integrator") != plan.integrator or made != profile:
+            return unusable(f"the committed reference is not the {plan.integrator} render of "
                             f"profile {profile!r} (integrator {meta.get('integrator')!r}, "
                             f"profile {made!r})", image)
     return CommittedReference(name, path, image, True, profile=profile)

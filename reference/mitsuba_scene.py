@@ -56,6 +56,8 @@ import numpy as np
 from ..backend import mitsuba
 from ..errors import InputError, check_count
 from ..materials import Dipole, Lambertian
+from ..materials.brdf_pca import pca_model_basis
+from ..materials.brdfs import AnalyticBRDF
 from ..scenes import (
     ConstantEnvironment,
     DirectionalLight,
@@ -126,11 +128,15 @@ class ConversionContext:
     channel : int or None
         For a per-channel monochrome render, the RGB channel (0, 1, 2) whose coefficients
         every channel should carry; None for an ordinary RGB render.
+    brdf_basis : int
+        K > 0: an analytic BRDF renders the K-term PCA of its edited term.
     """
 
     scene: Scene
     object_name: str
     channel: int | None = None
+    #: K > 0: analytic BRDFs render their K-term PCA (the BRDF-editing method's model)
+    brdf_basis: int = 0
 
     def per_channel(self, values) -> list[float]:
         """Return an RGB triple, or channel ``channel`` repeated three times."""
@@ -387,6 +393,22 @@ def _light_entries(light, index: int, substitute: bool, scene: Scene, size: floa
                      field=f"lights[{index}]", value=type(light).__name__)
 
 
+def _brdf_model(scene: Scene, integrator, profile, brdf_basis: int) -> dict:
+    """Check a PCA BRDF model asked of ``scene``; return what the image header says of it."""
+    if not brdf_basis:
+        return {}
+    if integrator not in (None, "path"):
+        raise InputError(f"the PCA BRDF model {profile} renders with the path integrator",
+                         file=scene.source, field="integrator", value=integrator)
+    objects = {obj.name: f"{obj.material.model} gamma {obj.material.gamma:g}"
+               for obj in scene.objects if isinstance(obj.material, AnalyticBRDF)}
+    if not objects:
+        raise InputError(f"the PCA BRDF model {profile} needs an analytic BRDF; the scene "
+                         "has none", file=scene.source, field="profile", value=profile)
+    return {"name": profile, "objects": objects,
+            "brdf": f"edited term by its {brdf_basis}-term PCA (Nguyen et al. 2010, Eq. 10)"}
+
+
 def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int | None = None,
                   spp: int = 64, channel: int | None = None,
                   substitute_delta_lights: bool | None = None,
@@ -423,7 +445,10 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         :data:`RR_ALBEDO_THRESHOLD`.
     profile : str, optional
         With ``bssrdf_path`` (and only with it): the profile's name
-        (:data:`~translucent.materials.profiles.PROFILE_NAMES`).
+        (:data:`~translucent.materials.profiles.PROFILE_NAMES`). Or ``brdf_pca_kK``
+        (:func:`~translucent.materials.brdf_pca.pca_model_name`), with ``path``: every
+        analytic BRDF renders the K-term PCA of its edited term, the BRDF-editing method's
+        model (:mod:`.brdf_plugins`).
 
     Returns
     -------
@@ -444,7 +469,9 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     check_count(spp, "spp")
     from .bssrdf_path import bssrdf_conversion
 
-    bssrdf = bssrdf_conversion(scene, integrator, profile, channel)
+    brdf_basis = pca_model_basis(profile) or 0
+    brdf_model = _brdf_model(scene, integrator, profile, brdf_basis)
+    bssrdf = None if brdf_basis else bssrdf_conversion(scene, integrator, profile, channel)
     if max_depth is None:
         max_depth = DEFAULT_MAX_DEPTH
     if max_depth != -1:
@@ -464,7 +491,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     blocking: list[int] = []
     shape_props: dict[str, dict] = {}
     for index, obj in enumerate(scene.objects):
-        context = ConversionContext(scene, obj.name, channel)
+        context = ConversionContext(scene, obj.name, channel, brdf_basis)
         parts = material_converter(obj.material, object_name=obj.name)(obj.material, context)
         if bssrdf is not None:  # a translucent object's boundary alone: the profile is inside
             parts = bssrdf.surface_parts(index, obj, parts)
@@ -550,7 +577,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     }
     return MitsubaConversion(scene_dict, integrator, int(max_depth), int(rr_depth), has_media,
                              per_channel_recommended, notes, media, shape_props,
-                             {} if bssrdf is None else bssrdf.description())
+                             brdf_model if bssrdf is None else bssrdf.description())
 
 
 def to_mitsuba_dict(scene: Scene, *, integrator: str | None = None,

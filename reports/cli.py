@@ -87,6 +87,18 @@ def _build_parser(chosen: str | None = None, *, every: bool = False) -> argparse
     return parser
 
 
+def _parser_or_missing_extra(chosen: str | None):
+    """Return the parser of command ``chosen``; None (said why) when it lacks its extra."""
+    try:
+        return _build_parser(chosen)
+    except ModuleNotFoundError as error:
+        missing = missing_extra(error)
+        if missing is None:
+            raise
+        print(f"translucent {chosen}: error: {missing}", file=sys.stderr)
+        return None
+
+
 def _chosen_command(argv: list[str]) -> str | None:
     """Return the command ``argv`` names (its first word that is one), or None."""
     return next((token for token in argv if token in COMMANDS), None)
@@ -292,14 +304,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"translucent: error: TRANSLUCENT_OPTIONS = {text!r}: {asked[0]} is asked for on "
               "the command line, not set for every command", file=sys.stderr)
         return 2
-    chosen = _chosen_command(argv)
-    try:
-        parser = _build_parser(chosen)
-    except ModuleNotFoundError as error:
-        missing = missing_extra(error)
-        if missing is None:
-            raise
-        print(f"translucent {chosen}: error: {missing}", file=sys.stderr)
+    parser = _parser_or_missing_extra(_chosen_command(argv))
+    if parser is None:
         return 2
     end, command_parser = _command_end(parser, argv)
     if end and options:

@@ -5,6 +5,7 @@ the package index or the machine's cache: slow tier) and runs ``translucent comp
 the plugin on committed EXRs; a command that needs an extra says which one, exit 2.
 """
 
+import shutil
 import subprocess
 import textwrap
 import venv
@@ -22,7 +23,11 @@ def base_install(tmp_path_factory):
     folder = tmp_path_factory.mktemp("base_venv")
     venv.create(folder / "venv", with_pip=True)
     python = folder / "venv" / "bin" / "python"
-    subprocess.run([python, "-m", "pip", "install", "--quiet", str(ROOT), "pytest"],
+    # built from a copy: setuptools builds in the source tree (build/, *.egg-info)
+    source = folder / "source"
+    shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(
+        ".git", ".tox", "build", "*.egg-info", "report", "__pycache__", ".hypothesis"))
+    subprocess.run([python, "-m", "pip", "install", "--quiet", str(source), "pytest"],
                    check=True, capture_output=True, timeout=1200)
     return folder / "venv"
 

@@ -72,7 +72,7 @@ TOG 25(3), 2006.
 from __future__ import annotations
 
 from .knobs import DEFAULT_KNOBS, FORMAT_VERSION, KNOBS, LADDERS, QUICK_KNOBS
-from .method import add_approx_arguments, applies_to, approx, precompute
+from .method import add_approx_arguments, applies_to, approx, model_name, precompute
 from .state import BRDFPCAState
 from .transfer import Precomputation, disk_transfer
 
@@ -88,5 +88,6 @@ __all__ = [
     "applies_to",
     "approx",
     "disk_transfer",
+    "model_name",
     "precompute",
 ]

@@ -22,7 +22,7 @@ from .lighting import check_lights
 from .state import BRDFPCAState
 from .transfer import Precomputation, compute_precomputation, is_glossy_material
 
-__all__ = ["add_approx_arguments", "applies_to", "approx", "precompute"]
+__all__ = ["add_approx_arguments", "applies_to", "approx", "model_name", "precompute"]
 
 
 def applies_to(scene) -> Refusal | None:
@@ -46,6 +46,19 @@ def applies_to(scene) -> Refusal | None:
     except InputError as error:
         return Refusal(UNSUPPORTED_LIGHT, str(error))
     return None
+
+
+def model_name(knobs: dict) -> str:
+    """Return the model the method approximates: the K-term PCA of its BRDFs (Eq. 10).
+
+    The reference renders it exactly (``brdf_pca_kK``,
+    :func:`~translucent.materials.brdf_pca.pca_model_name`): against the exact-BRDF
+    reference that is the PCA's error; the method against it, the gathering's, the
+    wavelets' and the sub-areas'.
+    """
+    from ...materials.brdf_pca import pca_model_name
+
+    return pca_model_name(KNOBS.resolve(knobs)["n_basis"])
 
 
 def _resolve_knobs(knobs: dict) -> dict:

@@ -40,7 +40,7 @@ def _row(name: str, profile: str | None = None) -> dict:
     from ...noise import noise_summary
     from ...reference.committed import MODEL_PLANS, PLANS, committed_reference, rerender_command
 
-    plan = (PLANS if profile is None else MODEL_PLANS)[name]
+    plan = PLANS[name] if profile is None else MODEL_PLANS[name][profile]
     entry = committed_reference(name, profile=profile)
     row = {"scene": name, "profile": profile, "path": str(entry.path),
            "current": entry.current, "problem": entry.problem or None,
@@ -85,13 +85,15 @@ def run(args) -> int:
     """List the committed references, or render the named ones again."""
     from ...reference.committed import (
         MODEL_PROFILES,
+        committed_model_cases,
         committed_model_scene_names,
         committed_scene_names,
         render_committed,
     )
 
     profile = args.profile
-    names = committed_scene_names() if profile is None else committed_model_scene_names()
+    names = committed_scene_names() if profile is None else \
+        committed_model_scene_names(profile)
     if args.action == "list":
         if args.names:
             raise InputError("names go with 'render'; 'translucent references' lists all",
@@ -100,8 +102,7 @@ def run(args) -> int:
             if value is not None:
                 raise InputError("goes with 'render'", field=flag, value=value)
         rows = [_row(name) for name in names] + [
-            _row(name, model) for model in MODEL_PROFILES
-            for name in committed_model_scene_names()]
+            _row(name, model) for name, model in committed_model_cases()]
         _print_rows(rows)
         record(args, references=rows)
         return 0 if all(row["current"] for row in rows) else 1

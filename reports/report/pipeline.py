@@ -595,19 +595,18 @@ def _plan_model_references(plan: _Plan, report: SceneReport, portable, spp, pass
     the volumetric reference's (fixed passes with ``spp``, else progressive); or why none
     can be made (a heterogeneous medium).
     """
-    from ...fast.knobs import DEFAULT_PROFILE
-
     if report.reference_error:
         return
     wanted = {split_profile(name, run)[0] for name, run in report.runs.items()
               if run.status == "ok"}
-    wanted |= {entry_parts(p.owner)[1] or DEFAULT_PROFILE for p in plan.tasks
-               if p.report is report and isinstance(p.owner, str) and p.owner != PATH_TRACING
-               and profile_knob_of(entry_parts(p.owner)[0]) is not None}
-    refusal = model_reference_refusal(report.scene)
+    wanted |= {split_profile(p.owner, MethodRun(p.owner, report.name, "planned",
+                                                knobs=p.task.knobs))[0]
+               for p in plan.tasks if p.report is report and isinstance(p.owner, str)
+               and p.owner != PATH_TRACING}
     for profile in sorted(wanted - {None}):
-        if refusal or unrendered_profile(profile):
-            report.model_reference_errors[profile] = refusal or unrendered_profile(profile)
+        refusal = unrendered_profile(profile) or model_reference_refusal(report.scene, profile)
+        if refusal:
+            report.model_reference_errors[profile] = refusal
             continue
         committed = committed_reference_for(report.scene, profile) if spp is None else None
         if committed is not None:

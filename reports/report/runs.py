@@ -214,14 +214,18 @@ def render_reference(scene, spp: int, passes: int | None, target_rse: float | No
     ``passes`` fixed passes of ``spp`` samples; or, with ``passes`` None, passes added until
     the median relative standard error is ``target_rse`` or ``budget_seconds`` are spent.
     With ``profile``: the model reference, the BSSRDF path tracer's render of that profile
-    (:mod:`translucent.reference.bssrdf_path`).
+    (:mod:`translucent.reference.bssrdf_path`), or for a PCA BRDF model
+    (``brdf_pca_kK``) the path tracer's with that BRDF (:mod:`translucent.reference.brdf_plugins`).
     A task for :func:`~translucent.reports.report.distributed.run_tasks`: a failure comes back as
     the string ``"Type: message"`` so that one scene's failure does not stop the others.
     """
+    from ...materials.brdf_pca import pca_model_basis
     from ...reference.committed import MODEL_INTEGRATOR
     from ...reference.render import render, render_to_target
 
-    model = {} if profile is None else {"integrator": MODEL_INTEGRATOR, "profile": profile}
+    model = {} if profile is None else {"profile": profile}
+    if profile is not None and pca_model_basis(profile) is None:
+        model["integrator"] = MODEL_INTEGRATOR  # a radial profile: the BSSRDF path tracer
     try:
         if passes is None:
             return render_to_target(scene, target_rse=target_rse,
@@ -266,12 +270,12 @@ def committed_reference_for(scene, profile: str | None = None):
         unreadable, of another size): the message names the file, the scene and the
         command that renders it again. Never silently re-used, never silently replaced.
     """
-    from ...reference.committed import MODEL_PLANS, MODEL_PROFILES, PLANS, committed_reference
+    from ...reference.committed import MODEL_PLANS, PLANS, committed_reference
     from ...scenes.scene_file import builtin_scene_path
 
-    if profile is not None and profile not in MODEL_PROFILES:
-        return None
-    if scene.name not in (PLANS if profile is None else MODEL_PLANS) or not scene.source:
+    planned = scene.name in PLANS if profile is None else \
+        profile in MODEL_PLANS.get(scene.name, {})
+    if not planned or not scene.source:
         return None
     try:
         builtin = builtin_scene_path(scene.name)

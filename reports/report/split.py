@@ -23,8 +23,11 @@ they say which part dominates, in relative MSE: the one that clears its noise fl
 the other does not; when both do, the larger if it is at least :data:`DOMINANCE_RATIO`
 times the other, else "both"; "within noise" when neither does.
 
-A method without a profile (BRDF editing), another renderer's image, and a scene whose
-translucent objects are heterogeneous (no radial profile) have no split; each says why.
+BRDF editing has the same split with its own model: the K-term PCA of its BRDFs (Nguyen et
+al. 2010, Eq. 10; the method's ``model_name``), rendered exactly by Mitsuba's path tracer
+with the PCA BRDF plugin (:mod:`translucent.reference.brdf_plugins`), against the
+exact-BRDF reference. Another renderer's image, and a scene whose translucent objects are
+heterogeneous (no radial profile), have no split; each says why.
 
 Examples
 --------
@@ -222,15 +225,15 @@ class ErrorSplit:
             return f"No split into model and approximation: {self.reason}."
         model = format_value(self.model.get("relative_mse"), 3)
         approximation = format_value(self.approximation.get("relative_mse"), 3)
-        numbers = (f"relative MSE of the profile {self.profile!r} against transport (model) "
-                   f"{model}, of the method against its profile rendered exactly "
+        numbers = (f"relative MSE of the model {self.profile!r} against the reference "
+                   f"(model) {model}, of the method against its model rendered exactly "
                    f"(approximation) {approximation}")
         return {
-            "model": f"The profile's error dominates: {numbers}. A better method of this "
-                     "profile cannot do much better; another profile may.",
+            "model": f"The model's error dominates: {numbers}. A better method of this "
+                     "model cannot do much better; another model may.",
             "approximation": f"The method's own error dominates: {numbers}. Its knobs, not "
-                             "the profile, hold it there.",
-            "both": f"Profile and method share the error: {numbers}.",
+                             "the model, hold it there.",
+            "both": f"Model and method share the error: {numbers}.",
             "within noise": f"Neither part clears its noise floor: {numbers}.",
         }.get(self.dominant, numbers + ".")
 
@@ -254,15 +257,23 @@ class ErrorSplit:
                                              self.approximation_verdicts)}
 
 
-def model_reference_refusal(scene) -> str:
-    """Return why ``scene`` can have no model reference ("" when it can).
+def model_reference_refusal(scene, profile: str | None = None) -> str:
+    """Return why ``scene`` can have no model reference of ``profile`` ("" when it can).
 
     The BSSRDF path tracer renders homogeneous translucent objects
     (:class:`~translucent.materials.Dipole` materials) by their radial profile; a
-    heterogeneous medium has none.
+    heterogeneous medium has none. A PCA BRDF model (``brdf_pca_kK``) needs an analytic
+    BRDF.
     """
     from ...materials import Dipole
+    from ...materials.brdf_pca import pca_model_basis
+    from ...materials.brdfs import AnalyticBRDF
     from ...materials.solid import SolidMedium
+
+    if pca_model_basis(profile) is not None:
+        if not any(isinstance(item.material, AnalyticBRDF) for item in scene.objects):
+            return "the scene has no analytic BRDF: no PCA BRDF is rendered"
+        return ""
 
     heterogeneous = [item.name for item in scene.objects
                      if isinstance(item.material, SolidMedium)]
@@ -287,9 +298,10 @@ def unrendered_profile(profile: str) -> str:
     >>> unrendered_profile("better_dipole")
     ''
     """
+    from ...materials.brdf_pca import pca_model_basis
     from ...materials.profiles import PROFILE_NAMES
 
-    if profile in PROFILE_NAMES:
+    if profile in PROFILE_NAMES or pca_model_basis(profile) is not None:
         return ""
     return (f"{profile!r} is the radial average of a directional profile; the BSSRDF path "
             "tracer renders the directional profile itself (each sample with its own "
@@ -310,12 +322,14 @@ def split_profile(name: str, run) -> tuple[str | None, str]:
 
     method_name, asked = entry_parts(name)
     try:
-        method(method_name)
+        module = method(method_name)
     except InputError:
         return None, "another renderer's image: the model it renders is not known"
+    if callable(getattr(module, "model_name", None)):
+        return module.model_name(dict(run.knobs or {})), ""
     if profile_knob_of(method_name) is None:
-        return None, (f"{method_name} renders no radial profile; its model has no exact "
-                      "reference in the suite")
+        return None, (f"{method_name} names no model (no model_name, no profile knob): its "
+                      "error cannot be split")
     return (run.knobs or {}).get("profile", asked or DEFAULT_PROFILE), ""
 
 

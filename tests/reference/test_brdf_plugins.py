@@ -232,3 +232,58 @@ def test_7_lambertian_gather_misses_glossy_paths():
     assert difference > 5 * standard_error
     with pytest.raises(InputError, match=r"bounces = -1: must be an integer >= 0"):
         render_lambertian_gather(scene, bounces=-1)
+
+
+@pytest.mark.parametrize("model,gamma", [("BP", 60.0), ("W", 0.2), ("CT", 0.3), ("La", 20.0)])
+def test_8_pca_plugin_evaluates_the_k_term_reconstruction(model, gamma, rng):
+    """With pca_basis = K the edited term is b_0 + sum c_j b_j (Eq. 10), as numpy makes it."""
+    from translucent.materials.brdf_pca import build_pca_basis
+    from translucent.materials.brdfs import canonical_model, lobe_terms, pca_variable
+
+    mi = mitsuba()
+    material = _material(model, gamma, lafortune_c=(-0.8, 0.9))
+    directions = rng.normal(size=(3000, 3))
+    directions[:, 2] = np.abs(directions[:, 2]) + 1e-3
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    wi = _unit(INCIDENT[1])
+    cos_l, cos_v = directions[:, 2], np.full(len(directions), wi[2])
+    l_dot_v = directions @ wi
+    fixed, exact = lobe_terms(canonical_model(model), gamma, cos_l, cos_v, l_dot_v,
+                              f0=material.f0, lafortune_c=(-0.8, 0.9))
+    variable = pca_variable(canonical_model(model), cos_l, cos_v, l_dot_v,
+                            lafortune_c=(-0.8, 0.9))
+    differences = {}
+    for k in (6, 48):
+        basis = build_pca_basis(canonical_model(model), k)
+        edited = basis.basis_values(variable) @ basis.coefficients(gamma)
+        expected = (material.rho_d / math.pi + material.rho_s * (fixed * edited)[:, None]) \
+            * cos_l[:, None]
+        bsdf = mi.load_dict(bsdf_dict(material, pca_basis=k))
+        got = np.array(bsdf.eval(mi.BSDFContext(), _surface(mi, wi, len(directions)),
+                                 mi.Vector3f(directions.T.astype(np.float32)))).T
+        scale = expected.max()
+        np.testing.assert_allclose(got, expected, rtol=FLOAT32_RTOL,
+                                   atol=FLOAT32_ATOL_FRACTION * scale * 10)
+        exact_value = (material.rho_d / math.pi + material.rho_s * (fixed * exact)[:, None]) \
+            * cos_l[:, None]
+        differences[k] = np.abs(got - exact_value).max() / scale
+    # the exact plugin's lobe is approached as K grows: 48 terms reproduce it closely
+    assert differences[48] < 0.02 and differences[48] < differences[6]
+
+
+def test_8_a_pca_model_render_converges_to_the_exact_one_with_many_terms():
+    from translucent.reference.render import render
+    from translucent.scenes import load_scene
+
+    scene = load_scene("glossy")
+    exact = render(scene, spp=4, passes=2, cache=False, progress=False)
+    many = render(scene, spp=4, passes=2, cache=False, progress=False, profile="brdf_pca_k48")
+    six = render(scene, spp=4, passes=2, cache=False, progress=False, profile="brdf_pca_k6")
+    assert many.metadata["profile"]["name"] == "brdf_pca_k48"
+    # the same seeds: the renders differ by the BRDF's values alone
+    scale = exact.rgb.mean()
+    assert np.abs(many.rgb - exact.rgb).mean() < 0.1 * np.abs(six.rgb - exact.rgb).mean()
+    assert np.abs(six.rgb - exact.rgb).mean() > 1e-4 * scale
+    with pytest.raises(InputError, match="needs an analytic BRDF"):
+        render(load_scene("sphere"), spp=1, passes=1, cache=False, progress=False,
+               profile="brdf_pca_k6")

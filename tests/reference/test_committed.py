@@ -28,8 +28,9 @@ from translucent.noise import lit_mask, noise_summary
 from translucent.reference import committed as committed_module
 from translucent.reference.committed import (
     MODEL_PLANS,
-    MODEL_PROFILES,
     PLANS,
+    committed_model_cases,
+    committed_model_scene_names,
     committed_path,
     committed_reference,
     rerender_command,
@@ -126,7 +127,7 @@ def test_a_fresh_render_is_consistent_with_the_committed_reference(name):
     _assert_consistent_and_sensitive(name, fresh, committed)
 
 
-MODEL_CASES = [(name, profile) for profile in MODEL_PROFILES for name in MODEL_PLANS]
+MODEL_CASES = committed_model_cases()
 
 
 @pytest.mark.parametrize("name, profile", MODEL_CASES)
@@ -134,10 +135,11 @@ def test_committed_model_reference_is_current_and_meets_its_noise_target(name, p
     entry = committed_reference(name, profile=profile)
     assert entry.current, entry.problem
     meta = entry.image.metadata
-    assert meta["integrator"] == "bssrdf_path" and meta["profile"]["name"] == profile
+    plan = MODEL_PLANS[name][profile]
+    assert meta["integrator"] == plan.integrator and meta["profile"]["name"] == profile
     summary = noise_summary(entry.image.rgb, entry.image.variance)
-    assert summary.median <= MODEL_PLANS[name].target_rse, summary.text()
-    assert summary.p99 <= MODEL_PLANS[name].target_p99_rse, summary.text()
+    assert summary.median <= plan.target_rse, summary.text()
+    assert summary.p99 <= plan.target_p99_rse, summary.text()
 
 
 def test_every_default_scene_of_a_homogeneous_medium_has_a_committed_model_reference():
@@ -146,8 +148,10 @@ def test_every_default_scene_of_a_homogeneous_medium_has_a_committed_model_refer
     from translucent.reports.report.split import model_reference_refusal
 
     names, _ = default_scenes()
-    splittable = [name for name in names if not model_reference_refusal(load_scene(name))]
-    assert splittable and sorted(splittable) == sorted(MODEL_PLANS)
+    for model in ("dipole", "brdf_pca_k6"):  # the default models of the methods
+        splittable = [name for name in names
+                      if not model_reference_refusal(load_scene(name), model)]
+        assert splittable and sorted(splittable) == sorted(committed_model_scene_names(model))
 
 
 def test_a_fresh_bssrdf_render_is_consistent_with_the_committed_model_reference():
@@ -155,6 +159,13 @@ def test_a_fresh_bssrdf_render_is_consistent_with_the_committed_model_reference(
     fresh = render(load_scene("sphere"), spp=16, passes=8, seed=1, cache=False,
                    progress=False, integrator="bssrdf_path", profile="dipole")
     _assert_consistent_and_sensitive("sphere (model)", fresh, committed)
+
+
+def test_a_fresh_pca_brdf_render_is_consistent_with_the_committed_model_reference():
+    committed = committed_reference("glossy", profile="brdf_pca_k6").require()
+    fresh = render(load_scene("glossy"), spp=16, passes=8, seed=1, cache=False,
+                   progress=False, profile="brdf_pca_k6")
+    _assert_consistent_and_sensitive("glossy (PCA BRDF)", fresh, committed)
 
 
 def test_a_volumetric_render_is_not_taken_for_a_model_reference(reference_folder):
@@ -242,8 +253,7 @@ def test_references_command_with_the_shipped_files(capsys, tmp_path):
     assert code == 0, out
     rows = json.loads((tmp_path / "r.json").read_text())["references"]
     assert [row["scene"] for row in rows if row["profile"] is None] == NAMES
-    assert [(row["scene"], row["profile"]) for row in rows if row["profile"]] == [
-        (name, profile) for profile in MODEL_PROFILES for name in MODEL_PLANS]
+    assert [(row["scene"], row["profile"]) for row in rows if row["profile"]] == MODEL_CASES
     assert "(model reference, profile dipole): current" in out
     assert "relative standard error over" in out
 

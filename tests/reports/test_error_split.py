@@ -74,7 +74,7 @@ def test_a_profile_too_bright_is_the_models_error_and_the_method_adds_little():
         numpy_relative_mse(model.rgb, method.rgb), rel=1e-9)
     assert split.model_verdicts["relative_mse"] == "resolved"
     assert split.dominant == "model"
-    assert "profile's error dominates" in split.sentence()
+    assert "model's error dominates" in split.sentence()
     blocks = split.as_dict()
     for block in ("model_error", "approximation_error"):
         assert set(blocks[block]["noise"]) == set(NOISE_FLOOR_FIELDS)
@@ -109,15 +109,17 @@ def test_the_models_floor_carries_both_renders_noise():
     assert split.dominant == "within noise"
 
 
-def test_a_method_without_a_profile_and_another_renderer_say_why_there_is_no_split():
+def test_a_missing_model_reference_and_another_renderer_say_why_there_is_no_split():
     volumetric, model, method = _images(1.1, 1.0)
     report = _report_of(volumetric, model, method, method="brdf_pca")
     report.runs["other"] = MethodRun("other", "synthetic", "ok", image=method)
     report.metrics["other"] = {}
     score_splits(report)
-    assert "renders no radial profile" in report.splits["brdf_pca"].reason
+    # BRDF editing stands on its PCA BRDF (model_name): without that render, it says so
+    assert report.splits["brdf_pca"].profile == "brdf_pca_k6"
+    assert "no model reference of 'brdf_pca_k6'" in report.splits["brdf_pca"].reason
     assert "another renderer" in report.splits["other"].reason
-    assert report.splits["brdf_pca"].sentence().startswith("No split")
+    assert report.splits["other"].sentence().startswith("No split")
 
 
 def test_a_heterogeneous_scene_has_no_model_reference_and_says_why():
