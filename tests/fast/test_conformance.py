@@ -359,6 +359,7 @@ def _with_example(site: Path) -> dict:
     return environment
 
 
+@pytest.mark.slow  # 16 s; the report's own tests score stand-in methods in the fast tier
 def test_an_installed_method_is_scored_in_the_report(installed_example, tmp_path):
     scene = tmp_path / "tiny_lambert.toml"
     scene.write_text(TINY_SCENE)

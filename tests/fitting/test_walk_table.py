@@ -259,6 +259,7 @@ def test_fit_walk_refuses_a_finite_slab_before_writing(tmp_path, capsys):
     assert not (tmp_path / "fit").exists()
 
 
+@pytest.mark.slow  # 12 s; the outputs of a fit are checked in the fast tier by test_fit.py
 @needs_drjit
 def test_fit_walk_writes_its_outputs(tmp_path, capsys):
     from translucent.reports.cli import main

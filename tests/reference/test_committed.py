@@ -43,9 +43,10 @@ from translucent.scenes import load_scene
 NAMES = list(PLANS)
 
 #: The scenes rendered with manifold next-event estimation take 10-20 s each to render
-#: again: their fresh-render check is in the slow tier (its kernels are checked in the fast
-#: tier by tests/reference/test_manifold_nee*.py).
-SLOW_TO_RENDER = ("sphere_dielectric", "dielectric_on_floor")
+#: again, the Cornell block (its medium once per channel) 8 s: their fresh-render check is
+#: in the slow tier (manifold NEE's kernels are checked in the fast tier by
+#: tests/reference/test_manifold_nee*.py, volpath's by the other scenes here).
+SLOW_TO_RENDER = ("sphere_dielectric", "dielectric_on_floor", "cornell_block")
 FRESH_RENDER_CASES = [pytest.param(name, marks=pytest.mark.slow) if name in SLOW_TO_RENDER
                       else name for name in NAMES]
 

@@ -48,6 +48,7 @@ def test_stops_when_the_target_is_reached():
     assert meta["seed_offset"] == PROGRESSIVE_SEED_OFFSET
 
 
+@pytest.mark.slow  # 17 s; the stopping rules are checked in the fast tier below
 def test_tighter_target_takes_more_passes_and_p99_target_counts():
     loose = render_to_target(_scene(), target_rse=0.2, spp=1, min_passes=2, cache=False,
                              progress=False)
