@@ -7,7 +7,10 @@ import pytest
 import translucent
 
 
-# Every other module's Examples run in tests/test_doctests.py.
+# Every other module's Examples run in tests/test_doctests.py. These render, precompute
+# radiosity and fit a capture (26 s): slow tier; the functions they call are tested in the
+# fast tier by the tests of their modules.
+@pytest.mark.slow
 def test_the_examples_run():
     module = importlib.import_module("translucent.api")
     failures, tried = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE)

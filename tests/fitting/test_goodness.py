@@ -80,6 +80,7 @@ def test_the_discrepancy_likelihood_reduces_to_the_base_one_without_discrepancy(
     assert goodness_of_fit(base, theta[None, :], draws=200).channels
 
 
+@pytest.mark.slow  # 23 s: two chains; the verdict's parts are tested in the fast tier above
 def test_a_misspecified_capture_is_flagged_with_wider_intervals(tmp_path, capsys):
     """A capture no dipole can explain: the verdict, exit code 1, the wider intervals."""
     data = _misfit_capture()

@@ -196,8 +196,10 @@ PROFILE_METHOD = textwrap.dedent('''
 ''')
 
 
+@pytest.mark.parametrize("profiles", [
+    [], pytest.param(["better_dipole"], marks=pytest.mark.slow)])  # a second render: 12 s
 def test_a_report_splits_each_profiles_error_against_its_model_reference(tmp_path,
-                                                                         monkeypatch):
+                                                                         monkeypatch, profiles):
     (tmp_path / "report_profile_method.py").write_text(PROFILE_METHOD)
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setitem(fast_base.METHODS, "flatprofile", "report_profile_method")
@@ -209,14 +211,14 @@ def test_a_report_splits_each_profiles_error_against_its_model_reference(tmp_pat
     out = tmp_path / "report"
     code = main(["report", str(scene), "--out", str(out), "--baseline",
                  str(tmp_path / "baseline.json"), "--update-baseline", "--methods",
-                 "flatprofile", "--profiles", "better_dipole", "--serial", "--no-progress",
-                 "--spp", "16", "--passes", "2"])
+                 "flatprofile", "--serial", "--no-progress", "--spp", "16", "--passes", "2"]
+                + (["--profiles", ",".join(profiles)] if profiles else []))
     assert code == 0
     data = json.loads((out / "metrics.json").read_text())["scenes"]["tiny_sphere"]
     reference = read_exr(out / "tiny_sphere" / "reference.exr")
     mask = scored_pixels(load_scene(str(scene)))
-    for name, profile in (("flatprofile", "dipole"), ("flatprofile@better_dipole",
-                                                      "better_dipole")):
+    for name, profile in [("flatprofile", "dipole")] + [(f"flatprofile@{p}", p)
+                                                         for p in profiles]:
         entry = data["methods"][name]
         assert entry["status"] == "ok", entry
         split = entry["error_split"]
@@ -236,5 +238,5 @@ def test_a_report_splits_each_profiles_error_against_its_model_reference(tmp_pat
         assert entry["model_error"]["metrics"]["relative_mse_raw"] == pytest.approx(
             numpy_relative_mse(reference.rgb[mask], model.rgb[mask]), rel=1e-5)
     page = (out / "index.html").read_text()
-    assert page.count("Why: the error split") == 2
-    assert "flatprofile@better_dipole" in page
+    assert page.count("Why: the error split") == 1 + len(profiles)
+    assert all(f"flatprofile@{p}" in page for p in profiles)
