@@ -46,6 +46,7 @@ from ...atomic import atomic_write_text, check_output_folder
 from ...errors import InputError, check_count
 from ...materials import Dipole, measured_medium, measured_medium_names
 from . import write_figures
+from ._model_error_profiles import measure_profiles, profiles_markdown
 
 __all__ = [
     "DEFAULT_ETA",
@@ -270,7 +271,7 @@ def _side_by_side(folder: Path, name: str, reference, images: dict) -> str:
 def measure_medium(scene, medium: Dipole, methods=METHODS, *, spp: int = DEFAULT_SPP,
                    passes: int = DEFAULT_PASSES, method_medium: Dipole | None = None,
                    mask: np.ndarray | None = None, images: Path | None = None,
-                   knobs: dict | None = None) -> dict:
+                   knobs: dict | None = None, profiles=()) -> dict:
     """Return one row of the table: a medium's reference, its noise, each method's error.
 
     Parameters
@@ -293,6 +294,8 @@ def measure_medium(scene, medium: Dipole, methods=METHODS, *, spp: int = DEFAULT
     knobs : dict, optional
         Method name -> knobs for its ``precompute`` besides its defaults (the benchmark
         uses the defaults; tests make the methods cheaper).
+    profiles : sequence of str
+        Radial profiles for the profile axis (:mod:`._model_error_profiles`); none: no axis.
 
     Returns
     -------
@@ -309,9 +312,9 @@ def measure_medium(scene, medium: Dipole, methods=METHODS, *, spp: int = DEFAULT
     reference, cached = _reference(scene.with_material(OBJECT, medium), spp, passes)
     noise = reference_noise(reference, mask)
     method_scene = scene.with_material(OBJECT, method_medium)
-    results, rendered = {}, {}
+    results, rendered, runs = {}, {}, {}
     for name in methods:
-        run = run_method(name, method_scene, (knobs or {}).get(name))
+        run = runs[name] = run_method(name, method_scene, (knobs or {}).get(name))
         entry = {"status": run.status, "reason": run.reason,
                  "precompute_seconds": run.precompute_seconds,
                  "frame_seconds": run.frame_seconds}
@@ -333,6 +336,10 @@ def measure_medium(scene, medium: Dipole, methods=METHODS, *, spp: int = DEFAULT
                          "integrator": meta.get("integrator"),
                          "per_channel": meta.get("per_channel"), **noise},
            "methods": results, "image": None}
+    if profiles:
+        row["profiles"] = measure_profiles(method_scene, method_medium, reference, mask,
+                                           methods, profiles, runs, spp=spp, passes=passes,
+                                           metrics=object_metrics, knobs=knobs)
     if images is not None:
         row["image"] = f"{images.name}/{_side_by_side(images, medium.name, reference, rendered)}"
     return row
@@ -355,6 +362,22 @@ def _check(size: int, spp: int, passes: int, methods, eta: float) -> tuple:
     if not (math.isfinite(eta) and 1.0 <= eta <= 3.0):
         raise InputError("must be in [1, 3] (1: index-matched)", field="--eta", value=eta)
     return int(size), int(spp), int(passes), methods, float(eta)
+
+
+def _check_profiles(profiles) -> list[str]:
+    """Return the radial profiles asked (``"all"``: every one), each checked by name."""
+    from ...fast.knobs import radial_profile_names
+
+    if not profiles:
+        return []
+    names = list(radial_profile_names()) if profiles == "all" or list(profiles) == ["all"] \
+        else list(profiles)
+    valid = [n for n in radial_profile_names() if not n.endswith("_average")]
+    for name in names:
+        if name not in valid:
+            raise InputError(f"unknown radial profile; valid: all, {', '.join(valid)}",
+                             field="--profiles", value=name)
+    return names
 
 
 def _context(scene, mask, size, spp, passes, methods, eta, media) -> dict:
@@ -425,7 +448,7 @@ def markdown(result: dict) -> str:
     if failures:
         lines += ["", "Not measured:", ""]
         lines += [f"- {medium}, {name}: {reason}" for medium, name, reason in failures]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + profiles_markdown(result, table_cell)
 
 
 def write_table(result: dict, json_path: Path, markdown_path: Path, to_markdown=None) -> None:
@@ -437,7 +460,7 @@ def write_table(result: dict, json_path: Path, markdown_path: Path, to_markdown=
 def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_SIZE,
                       spp: int = DEFAULT_SPP, passes: int = DEFAULT_PASSES,
                       eta: float = DEFAULT_ETA, json_path=None, progress: bool = True,
-                      pngs: bool = True, knobs: dict | None = None) -> dict:
+                      pngs: bool = True, knobs: dict | None = None, profiles=()) -> dict:
     """Measure the model error of the fast methods for measured media; write it into ``out``.
 
     The dipole of Jensen et al. 2001 (Eq. 4-5 there), as each method renders it, against
@@ -466,6 +489,10 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
         Write a side-by-side PNG per medium into ``out/images``.
     knobs : dict, optional
         Method name -> knobs besides its defaults (see :func:`measure_medium`).
+    profiles : sequence of str
+        Radial profiles of the profile axis (``--profiles``; the default profile is always
+        in it when any is asked): model error, and per method total and approximation
+        error and speed-up over path tracing (:mod:`._model_error_profiles`).
 
     Returns
     -------
@@ -481,6 +508,7 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
     from ...progress import progress_bar
 
     size, spp, passes, methods, eta = _check(size, spp, passes, methods, eta)
+    profiles = _check_profiles(profiles)
     names = list(measured_medium_names() if media is None else media)
     if not names:
         raise InputError("no medium given", field="--media", value="")
@@ -498,7 +526,8 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
     for medium in bar:
         bar.set_postfix_str(medium.name)
         result["rows"].append(measure_medium(scene, medium, methods, spp=spp, passes=passes,
-                                             mask=mask, images=images, knobs=knobs))
+                                             mask=mask, images=images, knobs=knobs,
+                                             profiles=profiles))
         result["seconds"] = time.perf_counter() - started
         write_table(result, json_path, out / MARKDOWN_NAME)
     result["complete"] = True
@@ -529,6 +558,11 @@ def add_arguments(parser):
                         help="boundary index of every medium (default 1: index-matched; "
                              "the reference of a point light behind a dielectric converges "
                              "slowly)")
+    parser.add_argument("--profiles", default=None, metavar="all|P1,P2",
+                        help="the profile axis: each method with each of these radial "
+                             "profiles, each profile's model error (BSSRDF path tracer) and "
+                             "the best (method, profile) per medium with its speed-up over "
+                             "path tracing")
     parser.add_argument("--no-images", action="store_true",
                         help="write no side-by-side PNG per medium")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -546,7 +580,8 @@ def run(args) -> int:
     result = model_error_table(out, media=_split(args.media), methods=_split(args.methods),
                                size=args.size, spp=args.spp, passes=args.passes,
                                eta=args.eta, json_path=args.json,
-                               progress=not args.no_progress, pngs=not args.no_images)
+                               progress=not args.no_progress, pngs=not args.no_images,
+                               profiles=_split(args.profiles))
     print(markdown(result), end="")
     print(f"wrote {Path(args.json) if args.json else out / JSON_NAME} and "
           f"{out / MARKDOWN_NAME} in {result['seconds']:.1f} s")

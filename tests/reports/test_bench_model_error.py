@@ -290,3 +290,33 @@ def test_an_out_that_is_a_file_is_refused_before_any_medium_is_measured(tmp_path
                      "--methods", "prt", "--size", "11", "--no-progress"]) == 2
         assert message in capsys.readouterr().err
     assert a_file.read_text() == "keep me"
+
+
+def test_the_profile_axis_splits_each_profiles_error_and_names_the_best_pair(tmp_path):
+    """One medium, splatting with the default and one more profile, on the tiny set-up."""
+    result = model_error_table(tmp_path / "out", media=("Skin1",), methods=("splatting",),
+                               progress=False, knobs=TINY_KNOBS, profiles=["better_dipole"],
+                               pngs=False, **TINY)
+    axis = result["rows"][0]["profiles"]
+    assert list(axis["profiles"]) == ["dipole", "better_dipole"]  # the default always
+    for profile, entry in axis["profiles"].items():
+        method = entry["methods"]["splatting"]
+        assert method["status"] == "ok", (profile, method)
+        assert math.isfinite(entry["model_relative_mse"])
+        assert math.isfinite(method["relative_mse"])
+        assert math.isfinite(method["approximation_relative_mse"])
+    # the default profile's total is the table's own column
+    assert axis["profiles"]["dipole"]["methods"]["splatting"]["relative_mse"] == \
+        result["rows"][0]["methods"]["splatting"]["relative_mse"]
+    best = axis["best"]
+    totals = {p: e["methods"]["splatting"]["relative_mse"] for p, e in axis["profiles"].items()}
+    assert best["profile"] == min(totals, key=totals.get) and best["method"] == "splatting"
+    text = (tmp_path / "out" / "model_error.md").read_text()
+    assert "## The profile axis" in text and "Lowest total error per medium" in text
+
+
+def test_an_unknown_profile_is_refused_before_anything_runs(tmp_path):
+    with pytest.raises(InputError, match="unknown radial profile") as error:
+        model_error_table(tmp_path / "out", media=("Skin1",), profiles=["nope"], **TINY)
+    assert error.value.field == "--profiles"
+    assert not (tmp_path / "out").exists()

@@ -1,0 +1,147 @@
+"""The profile axis of ``translucent bench model_error --profiles``: which profile, which method.
+
+For each medium of the table and each radial profile asked (the default one, the classical
+dipole, always), the BSSRDF path tracer renders the sphere with that profile (the model
+reference, :mod:`translucent.reference.bssrdf_path`, at the reference's spp and passes),
+and each method that takes the profile runs with it. A row holds, per profile: the model
+error (model reference against the volumetric reference), and per method its total error,
+its approximation error (against the model reference), its warm frame and its speed-up
+over path tracing at equal error (the path-tracing ladder of the report,
+:mod:`translucent.reports.report.speedup`, rendered once per medium). The pair (method,
+profile) of lowest total relative MSE is named per medium, with its speed-up.
+
+All relative MSEs are over the object's pixels, each with its reference's variance
+discounted (:func:`~translucent.reports.bench.model_error.object_metrics`).
+"""
+
+from __future__ import annotations
+
+from ...errors import InputError
+
+__all__ = ["measure_profiles", "profiles_markdown"]
+
+
+def measure_profiles(scene, medium, reference, mask, methods, profiles, default_runs, *,
+                     spp: int, passes: int, metrics, knobs: dict | None = None) -> dict:
+    """Return a medium's profile axis: model error, and per method total and approximation.
+
+    Parameters
+    ----------
+    scene : Scene
+        The bench scene with the medium in place.
+    medium : Dipole
+    reference : Image
+        Its volumetric reference.
+    mask : ndarray of bool
+        The object's pixels.
+    methods : sequence of str
+    profiles : sequence of str
+        Radial profiles; the default one is measured with the runs of ``default_runs``.
+    default_runs : dict
+        Method -> its :class:`~translucent.reports.report.runs.MethodRun` at the defaults.
+    spp, passes : int
+        The model references' samples (as the volumetric reference's).
+    metrics : callable
+        ``metrics(reference, test, mask) -> dict`` with ``relative_mse`` (the bench's
+        :func:`~translucent.reports.bench.model_error.object_metrics`).
+    knobs : dict, optional
+        Method -> knobs besides its defaults.
+    """
+    from ...fast.knobs import DEFAULT_PROFILE
+    from ...reference import render
+    from ..report.runs import run_method
+    from ..report.speedup import PATH_TRACING_SPP, path_tracing_ladder, scored_curve
+
+    curve = scored_curve(path_tracing_ladder(scene, PATH_TRACING_SPP), reference, mask)
+    table: dict = {}
+    for profile in [DEFAULT_PROFILE] + [p for p in profiles if p != DEFAULT_PROFILE]:
+        try:
+            model = render(scene, spp=spp, passes=passes, progress=False,
+                           integrator="bssrdf_path", profile=profile)
+            model_error = metrics(reference, model, mask)["relative_mse"]
+        except InputError as error:
+            table[profile] = {"error": error.reason, "methods": {}}
+            continue
+        entries = {}
+        for name in methods:
+            run = (default_runs[name] if profile == DEFAULT_PROFILE else
+                   run_method(name, scene, {**(knobs or {}).get(name, {}), "profile": profile}))
+            entries[name] = _entry(run, reference, model, mask, curve, metrics)
+        table[profile] = {"model_relative_mse": model_error, "methods": entries}
+    return {"profiles": table, "best": _best(table),
+            "path_tracing": curve.as_dict() if curve is not None else None}
+
+
+def _entry(run, reference, model, mask, curve, metrics) -> dict:
+    """Return one method with one profile: total and approximation error, frame, speed-up."""
+    from ..report.speedup import speedup
+
+    if run.status != "ok":
+        return {"status": run.status, "reason": run.reason}
+    total = metrics(reference, run.image, mask)["relative_mse"]
+    found = speedup(curve, total, run.frame_seconds, None)
+    return {"status": "ok", "relative_mse": total,
+            "approximation_relative_mse": metrics(model, run.image, mask)["relative_mse"],
+            "frame_seconds": run.frame_seconds,
+            "speedup_vs_path_tracing": found["speedup_vs_path_tracing"],
+            "speedup_extrapolated": found["extrapolated"]}
+
+
+def _best(table: dict) -> dict | None:
+    """Return the (method, profile) of lowest total relative MSE, and its speed-up."""
+    candidates = [(entry["relative_mse"], name, profile, entry)
+                  for profile, row in table.items() for name, entry in row["methods"].items()
+                  if entry.get("status") == "ok"]
+    if not candidates:
+        return None
+    error, name, profile, entry = min(candidates, key=lambda c: c[0])
+    return {"method": name, "profile": profile, "relative_mse": error,
+            "speedup_vs_path_tracing": entry["speedup_vs_path_tracing"],
+            "speedup_extrapolated": entry["speedup_extrapolated"]}
+
+
+def profiles_markdown(result: dict, table_cell) -> str:
+    """Return the profile axis of a table as Markdown ("" when it has none).
+
+    ``table_cell(value, digits)`` formats a number (the bench's own).
+    """
+    rows = [row for row in result["rows"] if row.get("profiles")]
+    if not rows:
+        return ""
+    methods = result["methods"]
+    header = ["medium", "profile", "model relMSE"]
+    for name in methods:
+        header += [f"{name} relMSE", f"{name} approx.", f"{name} vs PT"]
+    lines = ["", "## The profile axis", "",
+             "Per medium and profile: the model error (the BSSRDF path tracer's render of "
+             "the profile against the volumetric reference), then per method its total "
+             "relative MSE, its approximation error (against the profile's render) and its "
+             "speed-up over path tracing at equal error (~: extrapolated).", "",
+             "| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
+    for row in rows:
+        for profile, entry in row["profiles"]["profiles"].items():
+            cells = [row["medium"], profile,
+                     entry.get("error") or table_cell(entry.get("model_relative_mse"))]
+            for name in methods:
+                method = entry["methods"].get(name, {})
+                if method.get("status") != "ok":
+                    cells += [method.get("status", "–"), "–", "–"]
+                    continue
+                speed = method["speedup_vs_path_tracing"]
+                cells += [table_cell(method["relative_mse"]),
+                          table_cell(method["approximation_relative_mse"]),
+                          ("~" if method["speedup_extrapolated"] else "")
+                          + (table_cell(speed, 2) + "x" if speed is not None else "–")]
+            lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "Lowest total error per medium:", ""]
+    for row in rows:
+        best = row["profiles"]["best"]
+        if best is None:
+            lines.append(f"- {row['medium']}: no method ran")
+            continue
+        speed = best["speedup_vs_path_tracing"]
+        lines.append(f"- {row['medium']}: {best['method']} with {best['profile']}, relative "
+                     f"MSE {table_cell(best['relative_mse'])}, "
+                     f"{'~' if best['speedup_extrapolated'] else ''}"
+                     f"{table_cell(speed, 2) if speed is not None else '–'}x path tracing")
+    return "\n".join(lines) + "\n"
