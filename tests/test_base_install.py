@@ -25,8 +25,14 @@ def base_install(tmp_path_factory):
     python = folder / "venv" / "bin" / "python"
     # built from a copy: setuptools builds in the source tree (build/, *.egg-info)
     source = folder / "source"
-    shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(
-        ".git", ".tox", "build", "*.egg-info", "report", "__pycache__", ".hypothesis"))
+    anywhere = shutil.ignore_patterns(".git", ".tox", "build", "*.egg-info", "__pycache__",
+                                      ".hypothesis")
+
+    def ignored(path, names):  # a report folder at the root, not reports/report/
+        extra = {"report"} if Path(path).resolve() == ROOT else set()
+        return set(anywhere(path, names)) | (extra & set(names))
+
+    shutil.copytree(ROOT, source, ignore=ignored)
     subprocess.run([python, "-m", "pip", "install", "--quiet", str(source), "pytest"],
                    check=True, capture_output=True, timeout=1200)
     return folder / "venv"
