@@ -45,6 +45,7 @@ import numpy as np
 from ...atomic import atomic_write_text, check_output_folder
 from ...errors import InputError, check_count
 from ...materials import Dipole, measured_medium, measured_medium_names
+from ..report.split import requested_profiles
 from . import write_figures
 from ._model_error_profiles import measure_profiles, profiles_markdown
 
@@ -364,22 +365,6 @@ def _check(size: int, spp: int, passes: int, methods, eta: float) -> tuple:
     return int(size), int(spp), int(passes), methods, float(eta)
 
 
-def _check_profiles(profiles) -> list[str]:
-    """Return the radial profiles asked (``"all"``: every one), each checked by name."""
-    from ...fast.knobs import radial_profile_names
-
-    if not profiles:
-        return []
-    names = list(radial_profile_names()) if profiles == "all" or list(profiles) == ["all"] \
-        else list(profiles)
-    valid = [n for n in radial_profile_names() if not n.endswith("_average")]
-    for name in names:
-        if name not in valid:
-            raise InputError(f"unknown radial profile; valid: all, {', '.join(valid)}",
-                             field="--profiles", value=name)
-    return names
-
-
 def _context(scene, mask, size, spp, passes, methods, eta, media) -> dict:
     from ..report.runs import backend_versions
 
@@ -508,7 +493,7 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
     from ...progress import progress_bar
 
     size, spp, passes, methods, eta = _check(size, spp, passes, methods, eta)
-    profiles = _check_profiles(profiles)
+    profiles = requested_profiles(profiles)  # the default one is measured anyway
     names = list(measured_medium_names() if media is None else media)
     if not names:
         raise InputError("no medium given", field="--media", value="")

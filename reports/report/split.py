@@ -308,14 +308,15 @@ def unrendered_profile(profile: str) -> str:
             "incident direction), not its average")
 
 
-def split_profile(name: str, run) -> tuple[str | None, str]:
+def split_profile(name: str, knobs: dict | None) -> tuple[str | None, str]:
     """Return the profile a report entry rendered, or why it has none.
 
     Parameters
     ----------
     name : str
         The entry (:func:`entry_name`).
-    run : MethodRun
+    knobs : dict or None
+        The knobs of its run (besides the defaults).
     """
     from ...fast.base import method
     from ...fast.knobs import DEFAULT_PROFILE
@@ -326,11 +327,11 @@ def split_profile(name: str, run) -> tuple[str | None, str]:
     except InputError:
         return None, "another renderer's image: the model it renders is not known"
     if callable(getattr(module, "model_name", None)):
-        return module.model_name(dict(run.knobs or {})), ""
+        return module.model_name(dict(knobs or {})), ""
     if profile_knob_of(method_name) is None:
         return None, (f"{method_name} names no model (no model_name, no profile knob): its "
                       "error cannot be split")
-    return (run.knobs or {}).get("profile", asked or DEFAULT_PROFILE), ""
+    return (knobs or {}).get("profile", asked or DEFAULT_PROFILE), ""
 
 
 def score_splits(report) -> None:
@@ -343,7 +344,7 @@ def score_splits(report) -> None:
 def _split(report, name: str, cache: dict) -> ErrorSplit:
     from ..metrics.compute import evaluate_on, noise_verdicts
 
-    profile, reason = split_profile(name, report.runs[name])
+    profile, reason = split_profile(name, report.runs[name].knobs)
     if reason:
         return ErrorSplit(profile, reason)
     model = report.model_references.get(profile)
