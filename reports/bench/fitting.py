@@ -62,10 +62,8 @@ def add_arguments(parser):
     bias.add_argument("--photons", type=float, default=1e5, help="photons per channel (walk)")
     bias.add_argument("--r-min", type=float, nargs="+", default=[0.0],
                       help="fit outside these many transport lengths (one row each)")
-    from ...materials.profiles.registry import PROFILES
+    from ...fitting.named_models import NAMED_MODELS as named
 
-    named = [name for name, entry in PROFILES.items()
-             if not entry.directional and name not in ("dipole", "random_walk")]
     bias.add_argument("--forward", choices=("dipole", "walk", *named), default="dipole",
                       metavar="MODEL",
                       help="the fitted profile: the dipole (default), the tabulated walk, or "

@@ -27,11 +27,8 @@ from pathlib import Path
 def add_arguments(parser):
     """Options of ``translucent fit``."""
     parser.add_argument("capture", help="the capture's JSON sidecar (docs/capture-format.md)")
-    from ...materials.profiles.registry import PROFILES
+    from ...fitting.named_models import NAMED_MODELS as named  # imports no emcee
 
-    # the names of fitting.fit.MODELS (a test keeps them equal), without importing emcee
-    named = [name for name, entry in PROFILES.items()
-             if not entry.directional and name not in ("dipole", "random_walk")]
     models = ("dipole", "walk", "subedit", *named)
     parser.add_argument("--model", choices=(*models, "both"), default="dipole",
                         metavar="MODEL",
