@@ -79,6 +79,14 @@ TAIL_WEIGHT = 1e-9
 #: ln P of a profile that is zero: exp(-300) mm^-2 is far below any measured value and
 #: keeps sqrt(P_i P_o) and the energy integrals finite.
 LOG_FLOOR = -300.0
+#: ln P fitted to a profile's negligible tail is bounded below by ln of this fraction of
+#: its channel's peak: a tabulated profile that ends in exact zeros (photon beam
+#: diffusion's table) would otherwise ask for ln 0 = LOG_FLOOR beside 1e-68 round-off,
+#: and the ill-posed knots there spiked to ln P = -2.8 at 47 mm (Chicken1, blue).
+RELATIVE_LOG_FLOOR = 1e-30
+#: Below this fraction of its channel's peak a profile carries no energy the fit can see;
+#: there its ln R is made non-increasing in r (round-off of a table is not a shape).
+NEGLIGIBLE_TAIL = 1e-8
 #: Texels averaged into the mean normalised profile (a regular subsample of a larger
 #: texture: the mean of 256 profiles of a smooth texture moves by well under epsilon).
 MEAN_PROFILE_TEXELS = 256
@@ -491,6 +499,19 @@ def _quadrature_grid(r_s: float, segments: int, smallest: float) -> np.ndarray:
     return np.unique(np.concatenate([[0.0], near, far]))
 
 
+def _log_target(values: np.ndarray) -> np.ndarray:
+    """ln R of one channel on the fitting grid, its negligible tail floored and monotone.
+
+    Where R is below :data:`NEGLIGIBLE_TAIL` of its peak, ln R is the running minimum
+    along r, bounded below by :data:`RELATIVE_LOG_FLOOR` of the peak: what the knots
+    follow there carries no energy, and a well-posed least squares needs a smooth target.
+    """
+    peak = float(values.max(initial=0.0))
+    floor = peak * RELATIVE_LOG_FLOOR if peak > 0 else np.exp(LOG_FLOOR)
+    logs = np.log(np.maximum(values, max(floor, np.exp(LOG_FLOOR))))
+    return np.where(values < peak * NEGLIGIBLE_TAIL, np.minimum.accumulate(logs), logs)
+
+
 def subedit_from_dipole(dipole: Dipole, *, segments: int = DEFAULT_SEGMENTS,
                         r_s: float | None = None) -> DipoleConversion:
     r"""Convert a dipole medium to a homogeneous SubEdit profile, with the error made.
@@ -580,7 +601,7 @@ def subedit_from_profile(profile, eta: float, *, segments: int = DEFAULT_SEGMENT
         if not np.any(w > 0):
             continue
         root = np.sqrt(w)[:, None]
-        log_target = np.log(np.maximum(target[:, channel], np.exp(LOG_FLOOR)))
+        log_target = _log_target(target[:, channel])
         solution, *_ = np.linalg.lstsq(basis * root, log_target * root[:, 0], rcond=None)
         knots[:, channel] = solution
     profiles = SubEditProfiles(knots, r_s, eta, name)

@@ -54,8 +54,11 @@ The measured effect and cost are in docs/radiosity.md.
 Solving (Sect. 5.3): Jacobi iteration :math:`B \leftarrow SE + SFB` (the paper's solver) or
 GMRES / BiCGSTAB from :mod:`scipy.sparse.linalg`, to a relative residual
 :math:`\|SE - (I - SF)B\| / \|SE\|` of 0.5 %. Before any iteration the condition of Eq. 15 is
-checked; a material that breaks it raises :class:`~translucent.errors.InputError` naming
-the object, patch, channel and column sum. A Jacobi sweep's change is the residual of the
+checked; where objects inter-reflect, a material that breaks it raises
+:class:`~translucent.errors.InputError` naming the object, patch, channel and column sum.
+A lone convex object has no series to diverge (:math:`B = SE`): a profile that reflects
+more than it receives (photon beam diffusion near albedo 1) is rendered as it is and
+reported (``convergence["energy_conserving"]``). A Jacobi sweep's change is the residual of the
 iterate it started from, so that iterate is returned with its :math:`FB` (which the image
 needs): every product of SF advances or checks, none is spent twice. Successive frames
 start from the earlier frames' solutions projected on the new irradiance

@@ -33,19 +33,27 @@ def check_convergence(S: ScatteringMatrix, F, patches: Patches, *,
     factors never exceed 1) the spectral radius of :math:`SF` is below
     :math:`\max_i\sum_j A_j S_{ji}/A_i \cdot \max_j \sum_k A_k F_{kj}/A_j`.
 
+    The condition guards the series of Eq. 14, :math:`B = \sum_k (SF)^k SE`. Without form
+    factors (one convex object: nothing inter-reflects) there is no series, :math:`B = SE`,
+    and a column sum at or above 1 is then the material's own energy, not a divergence: a
+    published profile may reflect more than it receives (photon beam diffusion's total
+    reaches 1.08 at albedo 1, eta = 1), and so may a heterogeneous mix of profiles
+    (Eq. 16). The method renders it as it is and reports ``energy_conserving`` False.
+
     Returns
     -------
     dict
         ``max_scattering_column_sum`` (and where: ``patch``, ``object``, ``channel``),
         ``max_form_factor_row_sum``, ``max_form_factor_power_column_sum``,
-        ``spectral_radius_bound``.
+        ``spectral_radius_bound``, ``energy_conserving`` (every column sum below 1) and
+        ``inter_reflects`` (F has entries: the series of Eq. 14 is summed).
 
     Raises
     ------
     InputError
-        When a column sum of S reaches 1: the material returns more light than it
-        receives and the series of Eq. 14 diverges. The message names the object, patch,
-        channel and value.
+        When a column sum of S reaches 1 and F has entries: the material returns more
+        light than it receives and the series of Eq. 14 is not guaranteed to converge.
+        The message names the object, patch, channel and value.
     """
     sums = S.power_column_sums(patches.area)
     patch, channel = np.unravel_index(int(np.argmax(sums)), sums.shape)
@@ -56,7 +64,9 @@ def check_convergence(S: ScatteringMatrix, F, patches: Patches, *,
     report.update(form_factor_facts if form_factor_facts is not None
                   else form_factor_bounds(F, patches))
     report["spectral_radius_bound"] = largest * report["max_form_factor_power_column_sum"]
-    if not largest < 1.0:
+    report["energy_conserving"] = largest < 1.0
+    report["inter_reflects"] = F is not None and F.nnz > 0
+    if not np.isfinite(largest) or (largest >= 1.0 and report["inter_reflects"]):
         raise InputError(
             f"the scattering factors break the convergence condition of Eq. 15 (Sheng et al. "
             f"2014): patch {patch} of '{object_name}' sends {largest:.4f} of the light it "
@@ -64,10 +74,6 @@ def check_convergence(S: ScatteringMatrix, F, patches: Patches, *,
             "reflects more energy than it receives -- check its profile (total reflectance "
             "< 1) and the cut-off max_d", field="material", value=largest)
     return report
-
-
-
-
 
 
 def form_factor_product(F, B) -> np.ndarray:

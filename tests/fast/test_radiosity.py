@@ -258,6 +258,24 @@ def test_a_material_that_breaks_energy_conservation_is_refused():
         precompute(_block_scene(bright), rays_per_patch=16, max_distance_mm=20.0)
 
 
+def test_without_inter_reflection_an_energy_excess_is_rendered_and_reported():
+    # Eq. 15 guards the series of Eq. 14; a lone convex block has none (B = SE), so the
+    # profile's own excess is the model's and is rendered as it is, flagged in the report
+    bright = TwoExponentialProfile(0.05, 1.0, 0.2, 1.0, name="too bright")
+    block = box((1.0, 1.0, 1.0), subdivisions=2, name="block")
+    scene = Scene([SceneObject("block", block, bright)], (PointLight([1.0, 3.0, 1.0], 20.0),),
+                  CAMERA, mm_per_unit=10.0)
+    state = precompute(scene, rays_per_patch=16, max_distance_mm=20.0)
+    assert state.form_factors is None
+    assert state.convergence["energy_conserving"] is False
+    assert state.convergence["inter_reflects"] is False
+    assert state.convergence["max_scattering_column_sum"] > 1.2
+    irradiance = state.patch_irradiance()
+    B, info = state.solve(irradiance)
+    assert info["iterations"] == 0 and np.isfinite(B).all()
+    assert np.array_equal(B, state.S.dot(irradiance))
+
+
 def test_nan_or_negative_profiles_are_refused():
     class Negative(RadialProfile):
         name = "negative"

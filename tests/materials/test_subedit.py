@@ -6,9 +6,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
 from translucent.errors import InputError
-from translucent.materials import measured_medium, measured_medium_names
+from translucent.materials import Dipole, measured_medium, measured_medium_names
 from translucent.materials.factory import material_from_dict, material_to_dict
-from translucent.materials.profiles import DipoleProfile
+from translucent.materials.profiles import DipoleProfile, TwoExponentialProfile
 from translucent.materials.profiles import profile as registry_profile
 from translucent.materials.subedit import (
     BUILTIN_SUBEDIT,
@@ -211,6 +211,28 @@ def test_a_profile_peaked_at_the_origin_keeps_its_energy(name):
     kept = conversion.profiles.total_diffuse_reflectance()[0, 0]
     assert np.all(np.abs(kept - total) <= conversion.relative_error * total)
     assert np.all(np.abs(kept / total - 1.0) < 0.01)
+
+
+def test_a_profile_that_ends_in_exact_zeros_keeps_its_energy_where_it_is():
+    # a table that stops (photon beam diffusion's) leaves exact zeros and round-off beside
+    # them; the knots there once spiked to ln P = -2.8 at 47 mm and held most of the energy
+    class Truncated(TwoExponentialProfile):
+        def reflection(self, r):
+            values = super().reflection(r)
+            r = np.asarray(r, dtype=float)[..., None]
+            noise = np.where(np.sin(997.0 * r) > 0, 1e-68, 0.0)
+            return np.where(r < 12.0, values, noise)
+
+    truncated = Truncated(0.3, 2.0, 0.02, 0.5, name="truncated")
+    conversion = subedit_from_profile(truncated, 1.0, r_s=65.0)
+    fitted = conversion.profiles.profile(np.array([20.0, 30.0, 40.0, 47.0, 55.0, 64.0]))
+    assert np.all(fitted < 1e-12)
+    assert np.all(conversion.relative_error < 0.02)
+    chicken = measured_medium("Chicken1")
+    matched = Dipole(chicken.sigma_a, chicken.sigma_s_prime, eta=1.0, name="Chicken1")
+    beam = subedit_from_profile(registry_profile("photon_beam_diffusion", matched), 1.0)
+    assert beam.profiles.profile(np.array([40.0, 47.0, 55.0]))[:, 2].max() < 1e-12
+    assert np.all(beam.relative_error < 0.35)  # 2.0 in blue with the spike
 
 
 def test_a_directional_profile_is_refused():
