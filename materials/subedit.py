@@ -500,7 +500,7 @@ def _quadrature_grid(r_s: float, segments: int, smallest: float) -> np.ndarray:
 
 
 def _log_target(values: np.ndarray) -> np.ndarray:
-    """ln R of one channel on the fitting grid, its negligible tail floored and monotone.
+    """Return ln R of one channel on the fitting grid, its negligible tail floored and monotone.
 
     Where R is below :data:`NEGLIGIBLE_TAIL` of its peak, ln R is the running minimum
     along r, bounded below by :data:`RELATIVE_LOG_FLOOR` of the peak: what the knots
