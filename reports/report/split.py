@@ -80,14 +80,17 @@ def requested_profiles(profiles) -> list[str]:
     --------
     >>> requested_profiles("better_dipole,dipole"), requested_profiles(None)
     (['better_dipole'], [])
+    >>> requested_profiles(["all"]) == requested_profiles("all")
+    True
     """
     from ...fast.knobs import DEFAULT_PROFILE, radial_profile_names
 
     if profiles is None:
         return []
-    names = list(radial_profile_names()) if profiles == "all" else (
-        [part.strip() for part in profiles.split(",")] if isinstance(profiles, str)
-        else list(profiles))
+    names = ([part.strip() for part in profiles.split(",")] if isinstance(profiles, str)
+             else list(profiles))
+    if "all" in names:  # as a string or as a list's item (a command line split on commas)
+        names = list(radial_profile_names())
     valid = radial_profile_names()
     for name in names:
         if name not in valid:

@@ -153,6 +153,7 @@ def test_profiles_are_read_by_name_or_all_and_an_unknown_one_is_refused():
 
     assert requested_profiles("all") == [n for n in radial_profile_names() if n != "dipole"]
     assert requested_profiles(["burley_dmfp", "burley_dmfp"]) == ["burley_dmfp"]
+    assert requested_profiles(["all"]) == requested_profiles("all")  # the bench splits on ","
     assert entry_parts("prt@burley_dmfp") == ("prt", "burley_dmfp")
     with pytest.raises(InputError, match="unknown radial profile") as error:
         requested_profiles("dipole,no_such_profile")
