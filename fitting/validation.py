@@ -184,6 +184,7 @@ class BiasRow:
     forward: str = "dipole"
     covered: list | None = None
     misfit: bool = False
+    exposure_known: bool = False
 
     def to_json(self) -> dict:
         """JSON-able dict."""
@@ -196,7 +197,7 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
                      on_row=None, generator: str = "walk", spp: int = 4096,
                      pass_spp: int | None = None,
                      beam_radius_fraction: float | None = None,
-                     forward: str = "dipole") -> list[BiasRow]:
+                     forward: str = "dipole", exposure_known: bool = False) -> list[BiasRow]:
     """Fit transport-solver captures of measured media; recovered against true coefficients.
 
     Each capture: ``size`` x ``size`` pixels spanning ~12 diffusion lengths
@@ -234,6 +235,11 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
     forward : str
         The fitted profile: a coefficient model of :data:`~translucent.fitting.fit.MODELS`
         (see :func:`~translucent.fitting.fit.fit_dipole`).
+    exposure_known : bool
+        Write the camera's exposure into each capture's sidecar, so the fit does not sample
+        it. A Christensen-Burley profile needs it: one shape per channel (its scale d)
+        times an amplitude A(albedo), so with the exposure free every channel's albedo
+        trades against it along a ridge of equally good fits (7 unknowns, 6 constraints).
 
     Returns
     -------
@@ -253,7 +259,8 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
                                               photons=photons, rotations=rotations, spp=spp,
                                               pass_spp=pass_spp,
                                               beam_radius_fraction=beam_radius_fraction,
-                                              seed=int(rng.integers(2**31)), progress=progress)
+                                              seed=int(rng.integers(2**31)), progress=progress,
+                                              camera=Camera(exposure_known=exposure_known))
         capture = Capture(spec, pixels)
         for lengths in r_min_transport_lengths:
             r_min = float(lengths * np.max(material.mean_free_path))
@@ -265,7 +272,8 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
             else:
                 result = fit_dipole(capture, walkers=walkers, seed=fit_seed, progress=progress,
                                     profile=profile, forward=forward)
-                row = _bias_row(material, result, r_min, pixel, photons, began, extra)
+                row = _bias_row(material, result, r_min, pixel, photons, began,
+                                {**extra, "exposure_known": exposure_known})
             rows.append(row)
             if on_row is not None:
                 on_row(row)
@@ -273,13 +281,14 @@ def model_bias_table(materials=None, *, photons: int = 100_000, size: int = 96,
 
 
 def _solver_capture(generator, material, *, size, pixel, photons, rotations, spp, pass_spp,
-                    beam_radius_fraction, seed, progress):
+                    beam_radius_fraction, seed, progress, camera):
     """Make one capture for the bias table: (pixels, spec, BiasRow fields of the solver)."""
     if generator == "walk":
         from .random_walk import walk_capture
 
         pixels, spec, _ = walk_capture(material, size=size, pixel_size_mm=pixel,
-                                       photons=photons, rotations=rotations, seed=seed)
+                                       photons=photons, rotations=rotations, seed=seed,
+                                       camera=camera)
         return pixels, spec, {"photons": int(photons)}
     from .volpath_capture import DEFAULT_BEAM_FRACTION, DEFAULT_PASS_SPP, volpath_capture
 
@@ -288,7 +297,8 @@ def _solver_capture(generator, material, *, size, pixel, photons, rotations, spp
     pass_spp = DEFAULT_PASS_SPP if pass_spp is None else pass_spp  # 0 is refused, not replaced
     pixels, spec, render = volpath_capture(material, size=size, pixel_size_mm=pixel, spp=spp,
                                            pass_spp=pass_spp,
-                                           beam_radius_mm=beam, seed=seed, progress=progress)
+                                           beam_radius_mm=beam, seed=seed, progress=progress,
+                                           camera=camera)
     return pixels, spec, {"photons": 0, "generator": "mitsuba volpath", "spp": render.spp,
                           "beam_radius_mm": beam,
                           "relative_standard_error": render.relative_standard_error().tolist()}

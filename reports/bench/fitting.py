@@ -68,6 +68,10 @@ def add_arguments(parser):
                       metavar="MODEL",
                       help="the fitted profile: the dipole (default), the tabulated walk, or "
                            f"any other radial profile ({', '.join(named)})")
+    bias.add_argument("--known-exposure", action="store_true",
+                      help="write the camera's exposure into each capture (the fit does not "
+                           "sample it); a Christensen-Burley model is not identifiable "
+                           "without it")
     bias.add_argument("--out", default=".",
                       help="folder for bias_<generator>[_<forward>].json / .md")
 
@@ -102,14 +106,15 @@ def _bias_table(args) -> int:
     from ...fitting.validation import bias_table_text, model_bias_table
 
     out = check_output_folder(args.out, "--out")
-    stem = f"bias_{args.generator}" + ("" if args.forward == "dipole" else f"_{args.forward}")
+    stem = (f"bias_{args.generator}" + ("" if args.forward == "dipole" else f"_{args.forward}")
+            + ("_known_exposure" if args.known_exposure else ""))
     json_path, text_path = out / f"{stem}.json", out / f"{stem}.md"
     rows = []
     began = time.perf_counter()
     solver = (f"volpath {args.spp} spp" if args.generator == "volpath"
               else f"random walk {int(args.photons)} photons/channel")
     print(f"model bias of the {args.forward} fit: {solver}, {args.size} x {args.size}, "
-          f"seed {args.seed}, "
+          f"exposure {'known' if args.known_exposure else 'unknown'}, seed {args.seed}, "
           f"materials {', '.join(args.materials) if args.materials else 'all twelve'}",
           flush=True)
 
@@ -117,6 +122,7 @@ def _bias_table(args) -> int:
         rows.append(row)
         out.mkdir(parents=True, exist_ok=True)  # at the first row: bad input leaves nothing
         figures = {"generator": args.generator, "forward": args.forward, "size": args.size,
+                   "exposure_known": bool(args.known_exposure),
                    "seed": args.seed,
                    "spp": args.spp if args.generator == "volpath" else None,
                    "photons": int(args.photons) if args.generator == "walk" else None,
@@ -136,7 +142,8 @@ def _bias_table(args) -> int:
         model_bias_table(args.materials, photons=int(args.photons), size=args.size,
                          seed=args.seed, r_min_transport_lengths=tuple(args.r_min),
                          generator=args.generator, spp=args.spp, pass_spp=args.pass_spp,
-                         progress=True, on_row=finished, forward=args.forward)
+                         progress=True, on_row=finished, forward=args.forward,
+                         exposure_known=args.known_exposure)
     print(bias_table_text(rows))
     covered = sum(sum(row.covered) for row in rows)
     print(f"truth inside its 95 % interval: {covered} of {6 * len(rows)} coefficients; "

@@ -71,3 +71,21 @@ def test_bias_table_hands_pass_spp_0_on_instead_of_the_default(monkeypatch):
     with pytest.raises(InputError, match="stop"):
         model_bias_table(["skin1"], generator="volpath", size=16, spp=4, pass_spp=0)
     assert given == [0]
+
+
+@pytest.mark.parametrize("known", [False, True])
+def test_bias_table_writes_the_exposure_into_the_capture_only_when_asked(monkeypatch, known):
+    # a Christensen-Burley fit is not identifiable with the exposure free: --known-exposure
+    # must reach the capture the fitter reads, and the row must say which it was
+    from translucent.fitting import validation
+
+    seen = []
+
+    def fit(capture, **options):
+        seen.append(capture.spec.exposure)
+        raise InputError("stop", field="fit", value=None)
+
+    monkeypatch.setattr(validation, "fit_dipole", fit)
+    with pytest.raises(InputError, match="stop"):
+        model_bias_table(["skin1"], photons=2000, size=16, exposure_known=known)
+    assert len(seen) == 1 and (seen[0] is not None) == known
