@@ -108,6 +108,7 @@ class RadiosityState:
         self._say_profile()
         self.convergence = check_convergence(self.S, self.form_factors, self.patches,
                                              form_factor_facts=self._form_factor_facts)
+        self._say_energy_excess()
         self._energy_beyond_cutoff()
         self.transfer = None
         self._transfer_materials = None
@@ -125,6 +126,19 @@ class RadiosityState:
         if chosen != DEFAULT_PROFILE and self.knobs["finite_object_energy"] and \
                 sentence not in self.log.skipped:
             self.log.skip(sentence)
+
+    def _say_energy_excess(self) -> None:
+        """Say where Eq. 15 is broken but not needed (no inter-reflection: B = SE)."""
+        report = self.convergence
+        prefix = "the energy condition of Eq. 15"
+        self.log.skipped[:] = [s for s in self.log.skipped if not s.startswith(prefix)]
+        if report["energy_conserving"]:
+            return
+        self.log.skip(f"{prefix}: patch {report['patch']} of "
+                      f"'{report['object']}' sends {report['max_scattering_column_sum']:.4f} "
+                      f"of the light it receives back out ({report['channel']}); nothing "
+                      "inter-reflects, so there is no series to diverge and B = SE is the "
+                      "material's as its profile gives it")
 
     def _energy_beyond_cutoff(self):
         max_d = self.geometry.grid.max_radius

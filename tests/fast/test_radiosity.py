@@ -270,6 +270,7 @@ def test_without_inter_reflection_an_energy_excess_is_rendered_and_reported():
     assert state.convergence["energy_conserving"] is False
     assert state.convergence["inter_reflects"] is False
     assert state.convergence["max_scattering_column_sum"] > 1.2
+    assert any("energy condition of Eq. 15" in sentence for sentence in state.log.skipped)
     irradiance = state.patch_irradiance()
     B, info = state.solve(irradiance)
     assert info["iterations"] == 0 and np.isfinite(B).all()
