@@ -4,9 +4,10 @@ For each medium of the table and each radial profile asked (the default one, the
 dipole, always), the BSSRDF path tracer renders the sphere with that profile (the model
 reference, :mod:`translucent.reference.bssrdf_path`, at the reference's spp and passes),
 and each method that takes the profile runs with it. A row holds, per profile: the model
-error (model reference against the volumetric reference), and per method its total error,
-its approximation error (against the model reference), its warm frame and its speed-up
-over path tracing at equal error (the path-tracing ladder of the report,
+error (model reference against the volumetric reference: two independent renders, so the
+variance it discounts, and its noise floor, carry both), and per method its total error,
+its approximation error (against the model reference; its floor is the model
+reference's noise), its warm frame and its speed-up over path tracing at equal error (the path-tracing ladder of the report,
 :mod:`translucent.reports.report.speedup`, rendered once per medium). The pair (method,
 profile) of lowest total relative MSE is named per medium, with its speed-up.
 
@@ -22,7 +23,8 @@ __all__ = ["measure_profiles", "profiles_markdown"]
 
 
 def measure_profiles(scene, medium, reference, mask, methods, profiles, default_runs, *,
-                     spp: int, passes: int, metrics, knobs: dict | None = None) -> dict:
+                     spp: int, passes: int, metrics, noise,
+                     knobs: dict | None = None) -> dict:
     """Return a medium's profile axis: model error, and per method total and approximation.
 
     Parameters
@@ -44,6 +46,9 @@ def measure_profiles(scene, medium, reference, mask, methods, profiles, default_
     metrics : callable
         ``metrics(reference, test, mask) -> dict`` with ``relative_mse`` (the bench's
         :func:`~translucent.reports.bench.model_error.object_metrics`).
+    noise : callable
+        ``noise(image, mask) -> dict`` with ``noise_relative_mse`` (the bench's
+        :func:`~translucent.reports.bench.model_error.reference_noise`).
     knobs : dict, optional
         Method -> knobs besides its defaults.
     """
@@ -58,7 +63,8 @@ def measure_profiles(scene, medium, reference, mask, methods, profiles, default_
         try:
             model = render(scene, spp=spp, passes=passes, progress=False,
                            integrator="bssrdf_path", profile=profile)
-            model_error = metrics(reference, model, mask)["relative_mse"]
+            both = _both_variances(reference, model)
+            model_error = metrics(both, model, mask)["relative_mse"]
         except InputError as error:
             table[profile] = {"error": error.reason, "methods": {}}
             continue
@@ -67,9 +73,22 @@ def measure_profiles(scene, medium, reference, mask, methods, profiles, default_
             run = (default_runs[name] if profile == DEFAULT_PROFILE else
                    run_method(name, scene, {**(knobs or {}).get(name, {}), "profile": profile}))
             entries[name] = _entry(run, reference, model, mask, curve, metrics)
-        table[profile] = {"model_relative_mse": model_error, "methods": entries}
+        table[profile] = {"model_relative_mse": model_error,
+                          "model_noise_relative_mse": noise(both, mask)["noise_relative_mse"],
+                          "approximation_noise_relative_mse":
+                              noise(model, mask)["noise_relative_mse"],
+                          "methods": entries}
     return {"profiles": table, "best": _best(table),
             "path_tracing": curve.as_dict() if curve is not None else None}
+
+
+def _both_variances(reference, model):
+    """Return ``reference`` carrying its variance plus the model reference's (or as it is)."""
+    from ...image import Image
+
+    if reference.variance is None or model.variance is None:
+        return reference
+    return Image(reference.rgb, reference.variance + model.variance, reference.metadata)
 
 
 def _entry(run, reference, model, mask, curve, metrics) -> dict:
@@ -116,20 +135,24 @@ def profiles_markdown(result: dict, table_cell) -> str:
              "Per medium and profile: the model error (the BSSRDF path tracer's render of "
              "the profile against the volumetric reference), then per method its total "
              "relative MSE, its approximation error (against the profile's render) and its "
-             "speed-up over path tracing at equal error (~: extrapolated).", "",
+             "speed-up over path tracing at equal error (~: extrapolated). `*`: below "
+             "the noise its references add (within noise).", "",
              "| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
     for row in rows:
+        total_floor = row["reference"].get("noise_relative_mse")
         for profile, entry in row["profiles"]["profiles"].items():
-            cells = [row["medium"], profile,
-                     entry.get("error") or table_cell(entry.get("model_relative_mse"))]
+            cells = [row["medium"], profile, entry.get("error") or _floored(
+                table_cell, entry.get("model_relative_mse"),
+                entry.get("model_noise_relative_mse"))]
             for name in methods:
                 method = entry["methods"].get(name, {})
                 if method.get("status") != "ok":
                     cells += [method.get("status", "–"), "–", "–"]
                     continue
                 speed = method["speedup_vs_path_tracing"]
-                cells += [table_cell(method["relative_mse"]),
-                          table_cell(method["approximation_relative_mse"]),
+                cells += [_floored(table_cell, method["relative_mse"], total_floor),
+                          _floored(table_cell, method["approximation_relative_mse"],
+                                   entry.get("approximation_noise_relative_mse")),
                           ("~" if method["speedup_extrapolated"] else "")
                           + (table_cell(speed, 2) + "x" if speed is not None else "–")]
             lines.append("| " + " | ".join(cells) + " |")
@@ -145,3 +168,10 @@ def profiles_markdown(result: dict, table_cell) -> str:
                      f"{'~' if best['speedup_extrapolated'] else ''}"
                      f"{table_cell(speed, 2) if speed is not None else '–'}x path tracing")
     return "\n".join(lines) + "\n"
+
+
+def _floored(table_cell, value, floor) -> str:
+    """Return a cell, marked ``*`` where the value is below its noise floor."""
+    if value is None:
+        return "–"
+    return table_cell(value) + ("*" if floor is not None and value < floor else "")

@@ -340,7 +340,8 @@ def measure_medium(scene, medium: Dipole, methods=METHODS, *, spp: int = DEFAULT
     if profiles:
         row["profiles"] = measure_profiles(method_scene, method_medium, reference, mask,
                                            methods, profiles, runs, spp=spp, passes=passes,
-                                           metrics=object_metrics, knobs=knobs)
+                                           metrics=object_metrics, noise=reference_noise,
+                                           knobs=knobs)
     if images is not None:
         row["image"] = f"{images.name}/{_side_by_side(images, medium.name, reference, rendered)}"
     return row

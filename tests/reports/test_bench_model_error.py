@@ -305,6 +305,8 @@ def test_the_profile_axis_splits_each_profiles_error_and_names_the_best_pair(tmp
         assert math.isfinite(entry["model_relative_mse"])
         assert math.isfinite(method["relative_mse"])
         assert math.isfinite(method["approximation_relative_mse"])
+        # two independent renders: the model error's floor carries both variances
+        assert entry["model_noise_relative_mse"] > entry["approximation_noise_relative_mse"] > 0
     # the default profile's total is the table's own column
     assert axis["profiles"]["dipole"]["methods"]["splatting"]["relative_mse"] == \
         result["rows"][0]["methods"]["splatting"]["relative_mse"]
