@@ -7,8 +7,9 @@ and each method that takes the profile runs with it. A row holds, per profile: t
 error (model reference against the volumetric reference: two independent renders, so the
 variance it discounts, and its noise floor, carry both), and per method its total error,
 its approximation error (against the model reference; its floor is the model
-reference's noise), its warm frame and its speed-up over path tracing at equal error (the path-tracing ladder of the report,
-:mod:`translucent.reports.report.speedup`, rendered once per medium). The pair (method,
+reference's noise), its warm frame and its speed-up over path tracing at equal error
+(the path-tracing ladder of the report, :mod:`translucent.reports.report.speedup`,
+rendered once per medium). The pair (method,
 profile) of lowest total relative MSE is named per medium, with its speed-up.
 
 All relative MSEs are over the object's pixels, each with its reference's variance
