@@ -54,33 +54,63 @@ def measure_profiles(scene, medium, reference, mask, methods, profiles, default_
         Method -> knobs besides its defaults.
     """
     from ...fast.knobs import DEFAULT_PROFILE
-    from ...reference import render
     from ..report.runs import run_method
     from ..report.speedup import PATH_TRACING_SPP, path_tracing_ladder, scored_curve
 
     curve = scored_curve(path_tracing_ladder(scene, PATH_TRACING_SPP), reference, mask)
     table: dict = {}
     for profile in [DEFAULT_PROFILE] + [p for p in profiles if p != DEFAULT_PROFILE]:
-        try:
-            model = render(scene, spp=spp, passes=passes, progress=False,
-                           integrator="bssrdf_path", profile=profile)
-            both = _both_variances(reference, model)
-            model_error = metrics(both, model, mask)["relative_mse"]
-        except InputError as error:
-            table[profile] = {"error": error.reason, "methods": {}}
-            continue
-        entries = {}
+        table[profile] = found = _model_error(scene, reference, mask, profile, spp=spp,
+                                              passes=passes, metrics=metrics, noise=noise)
+        model = found.pop("model")
         for name in methods:
+            refusal = _refusal(name, profile)
+            if refusal:
+                found["methods"][name] = {"status": "not applicable", "reason": refusal}
+                continue
             run = (default_runs[name] if profile == DEFAULT_PROFILE else
                    run_method(name, scene, {**(knobs or {}).get(name, {}), "profile": profile}))
-            entries[name] = _entry(run, reference, model, mask, curve, metrics)
-        table[profile] = {"model_relative_mse": model_error,
-                          "model_noise_relative_mse": noise(both, mask)["noise_relative_mse"],
-                          "approximation_noise_relative_mse":
-                              noise(model, mask)["noise_relative_mse"],
-                          "methods": entries}
+            found["methods"][name] = _entry(run, reference, model, mask, curve, metrics)
     return {"profiles": table, "best": _best(table),
             "path_tracing": curve.as_dict() if curve is not None else None}
+
+
+def _model_error(scene, reference, mask, profile, *, spp, passes, metrics, noise) -> dict:
+    """Return a profile's model error and floors, with its ``model`` render (None: why not).
+
+    The methods still run where the profile has no model reference (the radial average of
+    a directional profile): their total error needs none.
+    """
+    from ...reference import render
+    from ..report.split import unrendered_profile
+
+    reason = unrendered_profile(profile)
+    if reason:
+        return {"error": reason, "model": None, "methods": {}}
+    try:
+        model = render(scene, spp=spp, passes=passes, progress=False,
+                       integrator="bssrdf_path", profile=profile)
+    except InputError as error:
+        return {"error": error.reason, "model": None, "methods": {}}
+    both = _both_variances(reference, model)
+    return {"model_relative_mse": metrics(both, model, mask)["relative_mse"],
+            "model_noise_relative_mse": noise(both, mask)["noise_relative_mse"],
+            "approximation_noise_relative_mse": noise(model, mask)["noise_relative_mse"],
+            "model": model, "methods": {}}
+
+
+def _refusal(method_name: str, profile: str) -> str:
+    """Return why a method refuses ``profile`` ("" when it takes it)."""
+    from ..report.split import profile_knob_of
+
+    knob = profile_knob_of(method_name)
+    if knob is None:
+        return f"{method_name} has no profile knob"
+    try:
+        knob.validate(profile)
+    except InputError as error:
+        return error.reason
+    return ""
 
 
 def _both_variances(reference, model):
@@ -100,8 +130,9 @@ def _entry(run, reference, model, mask, curve, metrics) -> dict:
         return {"status": run.status, "reason": run.reason}
     total = metrics(reference, run.image, mask)["relative_mse"]
     found = speedup(curve, total, run.frame_seconds, None)
+    approximation = None if model is None else metrics(model, run.image, mask)["relative_mse"]
     return {"status": "ok", "relative_mse": total,
-            "approximation_relative_mse": metrics(model, run.image, mask)["relative_mse"],
+            "approximation_relative_mse": approximation,
             "frame_seconds": run.frame_seconds,
             "speedup_vs_path_tracing": found["speedup_vs_path_tracing"],
             "speedup_extrapolated": found["extrapolated"]}
@@ -139,15 +170,20 @@ def profiles_markdown(result: dict, table_cell) -> str:
              "speed-up over path tracing at equal error (~: extrapolated). `*`: below "
              "the noise its references add (within noise).", "",
              "| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
+    why: dict = {}  # one sentence per profile without a model, per refused pair
     for row in rows:
         total_floor = row["reference"].get("noise_relative_mse")
         for profile, entry in row["profiles"]["profiles"].items():
-            cells = [row["medium"], profile, entry.get("error") or _floored(
+            if entry.get("error"):
+                why[f"{profile}: no model reference"] = entry["error"]
+            cells = [row["medium"], profile, "none" if entry.get("error") else _floored(
                 table_cell, entry.get("model_relative_mse"),
                 entry.get("model_noise_relative_mse"))]
             for name in methods:
                 method = entry["methods"].get(name, {})
                 if method.get("status") != "ok":
+                    if method.get("status") == "not applicable":
+                        why[f"{name} with {profile}: not applicable"] = method["reason"]
                     cells += [method.get("status", "–"), "–", "–"]
                     continue
                 speed = method["speedup_vs_path_tracing"]
@@ -157,6 +193,7 @@ def profiles_markdown(result: dict, table_cell) -> str:
                           ("~" if method["speedup_extrapolated"] else "")
                           + (table_cell(speed, 2) + "x" if speed is not None else "–")]
             lines.append("| " + " | ".join(cells) + " |")
+    lines += [""] + [f"- {what} ({reason})" for what, reason in why.items()]
     lines += ["", "Lowest total error per medium:", ""]
     for row in rows:
         best = row["profiles"]["best"]

@@ -317,6 +317,27 @@ def test_the_profile_axis_splits_each_profiles_error_and_names_the_best_pair(tmp
     assert "## The profile axis" in text and "Lowest total error per medium" in text
 
 
+def test_a_refused_pair_is_not_applicable_and_a_profile_without_model_still_runs(tmp_path):
+    # PRT refuses quantized diffusion (its basis is too slow to build); the radial average
+    # of the directional dipole has no model reference, but the methods' totals need none
+    knobs = {"prt": {**TINY_KNOBS["prt"], "basis_samples": 16}}
+    result = model_error_table(tmp_path / "out", media=("Skin1",), methods=("prt",),
+                               progress=False, knobs=knobs, pngs=False,
+                               profiles=["quantized_diffusion", "directional_dipole_average"],
+                               **TINY)
+    axis = result["rows"][0]["profiles"]["profiles"]
+    refused = axis["quantized_diffusion"]["methods"]["prt"]
+    assert refused["status"] == "not applicable" and "quantized_diffusion" in refused["reason"]
+    average = axis["directional_dipole_average"]
+    assert "radial average" in average["error"] and "model_relative_mse" not in average
+    ran = average["methods"]["prt"]
+    assert ran["status"] == "ok" and math.isfinite(ran["relative_mse"])
+    assert ran["approximation_relative_mse"] is None
+    text = (tmp_path / "out" / "model_error.md").read_text()
+    assert "- prt with quantized_diffusion: not applicable (" in text
+    assert "- directional_dipole_average: no model reference (" in text
+
+
 def test_an_unknown_profile_is_refused_before_anything_runs(tmp_path):
     with pytest.raises(InputError, match="unknown radial profile") as error:
         model_error_table(tmp_path / "out", media=("Skin1",), profiles=["nope"], **TINY)
