@@ -491,7 +491,9 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
     InputError
         Bad sizes or counts, an unknown method or medium, ``eta`` outside [1, 3].
     """
+    from ...cache import limited_entries
     from ...progress import progress_bar
+    from ..report.pipeline import REPORT_CACHE_ENTRY_LIMIT
 
     size, spp, passes, methods, eta = _check(size, spp, passes, methods, eta)
     profiles = requested_profiles(profiles)  # the default one is measured anyway
@@ -509,13 +511,17 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
     started = time.perf_counter()
     bar = progress_bar(chosen, description="model error", unit="medium", enabled=progress,
                        terminal_only=False)
-    for medium in bar:
-        bar.set_postfix_str(medium.name)
-        result["rows"].append(measure_medium(scene, medium, methods, spp=spp, passes=passes,
-                                             mask=mask, images=images, knobs=knobs,
-                                             profiles=profiles))
-        result["seconds"] = time.perf_counter() - started
-        write_table(result, json_path, out / MARKDOWN_NAME)
+    # the report's policy: a medium's radiosity operators (about 1 GB on the 48 px sphere,
+    # one per medium and profile, each used once) would push the references out of the
+    # cache's budget, which a second run re-renders no more
+    with limited_entries(REPORT_CACHE_ENTRY_LIMIT):
+        for medium in bar:
+            bar.set_postfix_str(medium.name)
+            result["rows"].append(measure_medium(scene, medium, methods, spp=spp,
+                                                 passes=passes, mask=mask, images=images,
+                                                 knobs=knobs, profiles=profiles))
+            result["seconds"] = time.perf_counter() - started
+            write_table(result, json_path, out / MARKDOWN_NAME)
     result["complete"] = True
     write_table(result, json_path, out / MARKDOWN_NAME)
     return result

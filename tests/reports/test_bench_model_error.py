@@ -343,3 +343,25 @@ def test_an_unknown_profile_is_refused_before_anything_runs(tmp_path):
         model_error_table(tmp_path / "out", media=("Skin1",), profiles=["nope"], **TINY)
     assert error.value.field == "--profiles"
     assert not (tmp_path / "out").exists()
+
+
+def test_the_table_keeps_no_precomputation_larger_than_the_reports(tmp_path, monkeypatch):
+    # radiosity's operators (about 1 GB a medium and profile) pushed the references out of
+    # the cache's budget, and the next medium's run re-rendered them
+    import os
+
+    from translucent.cache import ENTRY_LIMIT_VARIABLE
+    from translucent.reports.report.pipeline import REPORT_CACHE_ENTRY_LIMIT
+
+    seen = []
+
+    def measured(scene, medium, methods, **options):
+        seen.append(os.environ.get(ENTRY_LIMIT_VARIABLE))
+        raise InputError("stop", field="medium", value=medium.name)
+
+    monkeypatch.delenv(ENTRY_LIMIT_VARIABLE, raising=False)
+    monkeypatch.setattr(model_error, "measure_medium", measured)
+    with pytest.raises(InputError, match="stop"):
+        model_error_table(tmp_path / "out", media=("Skin1",), progress=False, **TINY)
+    assert seen == [str(REPORT_CACHE_ENTRY_LIMIT)]
+    assert ENTRY_LIMIT_VARIABLE not in os.environ  # restored
