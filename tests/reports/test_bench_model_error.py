@@ -313,8 +313,14 @@ def test_the_profile_axis_splits_each_profiles_error_and_names_the_best_pair(tmp
     best = axis["best"]
     totals = {p: e["methods"]["splatting"]["relative_mse"] for p, e in axis["profiles"].items()}
     assert best["profile"] == min(totals, key=totals.get) and best["method"] == "splatting"
+    speeds = {p: e["methods"]["splatting"]["speedup_vs_path_tracing"]
+              for p, e in axis["profiles"].items()}
+    assert all(v is not None for v in speeds.values())  # the ladder brackets them here
+    assert axis["fastest"]["speedup_vs_path_tracing"] == max(speeds.values())
+    assert axis["fastest"]["profile"] == max(speeds, key=speeds.get)
     text = (tmp_path / "out" / "model_error.md").read_text()
     assert "## The profile axis" in text and "Lowest total error per medium" in text
+    assert "Highest speed-up over path tracing at equal error per medium" in text
 
 
 def test_a_refused_pair_is_not_applicable_and_a_profile_without_model_still_runs(tmp_path):
