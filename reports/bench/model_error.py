@@ -493,7 +493,7 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
     """
     from ...cache import limited_entries
     from ...progress import progress_bar
-    from ..report.pipeline import REPORT_CACHE_ENTRY_LIMIT
+    from ..report.runs import REPORT_CACHE_ENTRY_LIMIT
 
     size, spp, passes, methods, eta = _check(size, spp, passes, methods, eta)
     profiles = requested_profiles(profiles)  # the default one is measured anyway

@@ -68,6 +68,7 @@ from .model import LADDER, PATH_TRACING, ReportResult, SceneReport, keep_run
 from .page import html_page
 from .renderer_images import renderer_images, renderers_in
 from .runs import (
+    REPORT_CACHE_ENTRY_LIMIT,
     MethodRun,
     backend_versions,
     committed_reference_for,
@@ -135,11 +136,6 @@ DEFAULT_REFERENCE_BUDGET = 300.0
 
 #: Samples per pixel of each pass of such a progressive reference.
 PROGRESSIVE_SPP = 32
-
-#: The largest method precomputation (bytes) a report keeps in the cache by default
-#: (``--keep-precomputations`` keeps all): PRT's and BRDF-PCA's are kept, radiosity's
-#: dense operators on the default spheres are not (their sizes: docs/report.md).
-REPORT_CACHE_ENTRY_LIMIT = 256 * 2**20
 
 #: Bumped when what a cached method run holds changes, so older entries miss (2: the warm
 #: frame is the median of relit frames).

@@ -286,6 +286,12 @@ def committed_reference_for(scene, profile: str | None = None):
     return committed_reference(scene.name, scene, profile).require()
 
 
+#: The largest method precomputation (bytes) a report keeps in the cache by default
+#: (``--keep-precomputations`` keeps all): PRT's and BRDF-PCA's are kept, radiosity's
+#: dense operators on the default spheres are not (their sizes: docs/report.md). The
+#: model-error bench keeps to it too.
+REPORT_CACHE_ENTRY_LIMIT = 256 * 2**20
+
 #: How far :func:`nudged_lights` moves a light per frame, scene units (a direction: radians).
 LIGHT_NUDGE = 1e-4
 

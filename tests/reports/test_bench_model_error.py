@@ -357,7 +357,7 @@ def test_the_table_keeps_no_precomputation_larger_than_the_reports(tmp_path, mon
     import os
 
     from translucent.cache import ENTRY_LIMIT_VARIABLE
-    from translucent.reports.report.pipeline import REPORT_CACHE_ENTRY_LIMIT
+    from translucent.reports.report.runs import REPORT_CACHE_ENTRY_LIMIT
 
     seen = []
 
