@@ -53,9 +53,11 @@ def measure_profiles(scene, medium, reference, mask, methods, profiles, default_
     knobs : dict, optional
         Method -> knobs besides its defaults.
     """
+    from ...fast.base import method
     from ...fast.knobs import DEFAULT_PROFILE
     from ..report.runs import run_method
     from ..report.speedup import PATH_TRACING_SPP, path_tracing_ladder, scored_curve
+    from ..report.split import refused_profile
 
     curve = scored_curve(path_tracing_ladder(scene, PATH_TRACING_SPP), reference, mask)
     table: dict = {}
@@ -64,9 +66,9 @@ def measure_profiles(scene, medium, reference, mask, methods, profiles, default_
                                               passes=passes, metrics=metrics, noise=noise)
         model = found.pop("model")
         for name in methods:
-            refusal = _refusal(name, profile)
-            if refusal:
-                found["methods"][name] = {"status": "not applicable", "reason": refusal}
+            refusal = refused_profile(method(name), profile)
+            if refusal is not None:
+                found["methods"][name] = {"status": "not applicable", "reason": refusal.sentence}
                 continue
             run = (default_runs[name] if profile == DEFAULT_PROFILE else
                    run_method(name, scene, {**(knobs or {}).get(name, {}), "profile": profile}))
@@ -82,7 +84,7 @@ def _model_error(scene, reference, mask, profile, *, spp, passes, metrics, noise
     a directional profile): their total error needs none.
     """
     from ...reference import render
-    from ..report.split import unrendered_profile
+    from ..report.split import unrendered_profile, with_both_variances
 
     reason = unrendered_profile(profile)
     if reason:
@@ -92,34 +94,11 @@ def _model_error(scene, reference, mask, profile, *, spp, passes, metrics, noise
                        integrator="bssrdf_path", profile=profile)
     except InputError as error:
         return {"error": error.reason, "model": None, "methods": {}}
-    both = _both_variances(reference, model)
+    both = with_both_variances(reference, model)
     return {"model_relative_mse": metrics(both, model, mask)["relative_mse"],
             "model_noise_relative_mse": noise(both, mask)["noise_relative_mse"],
             "approximation_noise_relative_mse": noise(model, mask)["noise_relative_mse"],
             "model": model, "methods": {}}
-
-
-def _refusal(method_name: str, profile: str) -> str:
-    """Return why a method refuses ``profile`` ("" when it takes it)."""
-    from ..report.split import profile_knob_of
-
-    knob = profile_knob_of(method_name)
-    if knob is None:
-        return f"{method_name} has no profile knob"
-    try:
-        knob.validate(profile)
-    except InputError as error:
-        return error.reason
-    return ""
-
-
-def _both_variances(reference, model):
-    """Return ``reference`` carrying its variance plus the model reference's (or as it is)."""
-    from ...image import Image
-
-    if reference.variance is None or model.variance is None:
-        return reference
-    return Image(reference.rgb, reference.variance + model.variance, reference.metadata)
 
 
 def _entry(run, reference, model, mask, curve, metrics) -> dict:
@@ -140,15 +119,7 @@ def _entry(run, reference, model, mask, curve, metrics) -> dict:
 
 def _best(table: dict) -> dict | None:
     """Return the (method, profile) of lowest total relative MSE, and its speed-up."""
-    candidates = [(entry["relative_mse"], name, profile, entry)
-                  for profile, row in table.items() for name, entry in row["methods"].items()
-                  if entry.get("status") == "ok"]
-    if not candidates:
-        return None
-    error, name, profile, entry = min(candidates, key=lambda c: c[0])
-    return {"method": name, "profile": profile, "relative_mse": error,
-            "speedup_vs_path_tracing": entry["speedup_vs_path_tracing"],
-            "speedup_extrapolated": entry["speedup_extrapolated"]}
+    return _chosen(table, "relative_mse", min)
 
 
 def _fastest(table: dict) -> dict | None:
@@ -157,15 +128,19 @@ def _fastest(table: dict) -> dict | None:
     Where the errors are close the lowest error says little, the speed-up much (PRT and
     radiosity with one profile on an absorbing medium: the same error, ten times apart).
     """
-    candidates = [(entry["speedup_vs_path_tracing"], name, profile, entry)
+    return _chosen(table, "speedup_vs_path_tracing", max)
+
+
+def _chosen(table: dict, key: str, pick) -> dict | None:
+    """Return the pair whose ``key`` ``pick`` (min or max) chooses among the runs that have it."""
+    candidates = [(entry[key], name, profile, entry)
                   for profile, row in table.items() for name, entry in row["methods"].items()
-                  if entry.get("status") == "ok"
-                  and entry.get("speedup_vs_path_tracing") is not None]
+                  if entry.get("status") == "ok" and entry.get(key) is not None]
     if not candidates:
         return None
-    speed, name, profile, entry = max(candidates, key=lambda c: c[0])
+    _, name, profile, entry = pick(candidates, key=lambda c: c[0])
     return {"method": name, "profile": profile, "relative_mse": entry["relative_mse"],
-            "speedup_vs_path_tracing": speed,
+            "speedup_vs_path_tracing": entry["speedup_vs_path_tracing"],
             "speedup_extrapolated": entry["speedup_extrapolated"]}
 
 

@@ -49,7 +49,7 @@ from ...image import Image
 __all__ = ["DOMINANCE_RATIO", "ENTRY_SEPARATOR", "MODEL", "ErrorSplit", "dominant_part",
            "entry_name", "entry_parts", "model_reference_info", "model_reference_refusal",
            "profile_knob_of", "refused_profile", "requested_profiles", "score_splits",
-           "split_profile", "unrendered_profile"]
+           "split_profile", "unrendered_profile", "with_both_variances"]
 
 #: One part dominates when its relative MSE is at least this factor times the other's.
 DOMINANCE_RATIO = 2.0
@@ -370,13 +370,22 @@ def _split(report, name: str, cache: dict) -> ErrorSplit:
         report.model_reference_info.get(profile, {}))
 
 
+def with_both_variances(reference: Image, model: Image) -> Image:
+    """Return ``reference`` carrying its variance plus ``model``'s (as it is without both).
+
+    A model error compares two independent renders: the variance its relative MSE
+    discounts, and its noise floor, are the sum of theirs.
+    """
+    if reference.variance is None or model.variance is None:
+        return reference
+    return Image(reference.rgb, reference.variance + model.variance, reference.metadata)
+
+
 def _model_error(reference: Image, model: Image, mask) -> tuple[dict, dict | None]:
     """Return the profile's error over ``mask`` and its floor (the two variances summed)."""
     from ..metrics.compute import evaluate_on
 
-    both = reference
-    if reference.variance is not None and model.variance is not None:
-        both = Image(reference.rgb, reference.variance + model.variance)
+    both = with_both_variances(reference, model)
     metrics = evaluate_on(both, model, [mask])[0].metrics.as_dict()
     return metrics, _floor(both, mask)
 
