@@ -5,7 +5,11 @@ cached result is never computed again and a change of any input misses the cache
 Entries are written atomically (temporary name, then rename).
 
 The folder is ``TRANSLUCENT_CACHE`` if set, else ``$XDG_CACHE_HOME/translucent`` or
-``~/.cache/translucent``.
+``~/.cache/translucent``. The cache uses only a folder of its own (:func:`check_folder`): one
+it made or adopted empty, marked by its ``CACHEDIR.TAG``; any other folder that holds files
+is refused, and pruning or clearing removes only files named and placed as its entries
+(``NAMESPACE/KE/KEY.SUFFIX``), never anything else. A full disk or quota while writing an
+entry is a warning: the result is kept in memory and computed again when next needed.
 
 No pickle is ever loaded from it. Objects (precomputations, method runs) are stored as
 ``.npz`` entries of arrays and JSON (:mod:`translucent.entries`), read with
@@ -17,9 +21,11 @@ or a file of another layout is a miss, said once on standard error, and computed
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import os
+import re
 import shutil
 import stat
 import sys
@@ -34,8 +40,8 @@ import numpy as np
 from .atomic import atomic_path
 from .errors import InputError
 
-__all__ = ["cache_dir", "check_settings", "content_hash", "private_cache", "limited_entries",
-           "entry_limit",
+__all__ = ["cache_dir", "check_folder", "check_settings", "content_hash", "MARKER_NAME",
+           "private_cache", "limited_entries", "entry_limit",
            "environment_variable", "ENTRY_LIMIT_VARIABLE", "ENTRY_SUFFIX", "Cache",
            "BUDGET_VARIABLE", "DEFAULT_BUDGET_BYTES", "CacheEntry", "budget", "cache_entries",
            "prune", "keep_within_budget", "mark_used", "report_rejected", "IN_USE_SECONDS"]
@@ -58,9 +64,39 @@ DEFAULT_BUDGET_BYTES = 20 * 2**30
 #: An entry written or read this recently (seconds) is in use: never pruned.
 IN_USE_SECONDS = 60.0
 
+#: The file at the cache's root that makes a folder the cache's own: a cache directory tag
+#: (https://bford.info/cachedir/), so that backup tools skip the folder too.
+MARKER_NAME = "CACHEDIR.TAG"
+
+_MARKER_SIGNATURE = b"Signature: 8a477f597d28d172789f06886806bc55"
+_MARKER_OWNER = b"created by translucent"
+_MARKER_TEXT = (_MARKER_SIGNATURE + b"\n# This file is a cache directory tag " + _MARKER_OWNER
+                + b".\n# translucent removes only its own entries here "
+                b"(`translucent cache --clear`).\n")
+
+_KEY = r"[0-9a-f]{64}"
+#: A namespace's folder, and the folder of the keys that begin with two hex digits.
+_NAMESPACE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_-]*$")
+_SHARD = re.compile(r"^[0-9a-f]{2}$")
+#: An entry: what is counted, pruned and cleared (``.pkl``: the layout before ``.entry.npz``).
+_ENTRY = re.compile(rf"^({_KEY})\.(entry\.npz|partial\.npz|exr|pkl)$")
+#: What else the cache makes beside its entries: locks, and writes in progress
+#: (:func:`translucent.atomic.atomic_path`'s temporary names).
+_ENTRY_COMPANION = re.compile(rf"^({_KEY})\.lock$|"
+                              rf"^\.({_KEY})(\.entry|\.partial)?\.[A-Za-z0-9_]{{8}}"
+                              r"\.part\.(npz|exr|pkl)$")
+#: Temporaries at the root: the marker being written, a probe, ``translucent doctor``'s.
+_ROOT_TEMPORARY = re.compile(r"^\.(CACHEDIR\.TAG\.|translucent-probe-|doctor-)"
+                             r"[A-Za-z0-9_]{8}$")
+
+#: The errors of a write that found no room: a warning, never a failure of the command.
+_NO_ROOM = frozenset(code for code in (getattr(errno, name, None)
+                                       for name in ("ENOSPC", "EDQUOT", "EFBIG"))
+                     if code is not None)
+
 
 def cache_dir() -> Path:
-    """Return the cache folder (created on first use).
+    """Return the cache folder (made on first use by :func:`check_folder`).
 
     Raises
     ------
@@ -89,6 +125,242 @@ def check_settings() -> None:
     cache_dir()
     budget()
     entry_limit()
+
+
+def _refused(root: Path, why: str) -> InputError:
+    """Return the refusal of the cache folder ``root``, saying ``why``."""
+    return InputError(f"the cache cannot be written ({why}); point TRANSLUCENT_CACHE at a "
+                      "writable folder", field="TRANSLUCENT_CACHE", value=str(root))
+
+
+def _kind(mode: int) -> str:
+    """Name what a path that is no folder is."""
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "a file"
+
+
+def check_folder(root=None, *, create: bool = True) -> Path:
+    """Return the cache folder once it is known to be the cache's own and writable.
+
+    The one check of the folder, before anything is written or removed there: the commands
+    (``translucent cache``, a render, a precomputation) and :func:`prune` all pass here.
+    A folder that does not exist is made; one marked by the cache's :data:`MARKER_NAME` is
+    the cache's; an unmarked one is adopted (marked) only where it is empty or holds
+    nothing but what the cache itself makes (an older cache, made before the marker).
+
+    Parameters
+    ----------
+    root : path, optional
+        The folder; default :func:`cache_dir`.
+    create : bool
+        Make the folder where it does not exist; False: return it as it is (nothing to
+        list or remove).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    InputError
+        Naming ``TRANSLUCENT_CACHE`` and the folder, where it is no folder (a file, a FIFO,
+        a link to nothing, a loop of links), cannot be made or written, or is not a cache
+        (no marker) and holds anything else. A full disk or quota is only a warning.
+    """
+    root = Path(root) if root is not None else cache_dir()
+    try:
+        found = os.stat(root)
+    except ValueError as error:  # a NUL in the name
+        raise InputError(f"is not a usable path ({error})", field="TRANSLUCENT_CACHE",
+                         value=str(root)) from None
+    except OSError as error:
+        if error.errno == errno.ELOOP:
+            raise _refused(root, "it is a loop of symbolic links") from None
+        if os.path.islink(root):
+            raise _refused(root, f"it is a symbolic link to {os.readlink(root)}, which does "
+                           "not exist") from None
+        if error.errno == errno.ENOTDIR:
+            raise _refused(root, "it cannot be made: a file stands in its path") from None
+        if error.errno != errno.ENOENT:
+            raise _refused(root, error.strerror or str(error)) from None
+        if not create:
+            return root
+        try:
+            root.mkdir(parents=True, exist_ok=True)
+        except OSError as made:
+            if made.errno in _NO_ROOM:
+                _warn_no_room(root, root, made.strerror or str(made))
+                return root
+            raise _refused(root, f"it cannot be made: {made.strerror or made}") from None
+        return _mark(root)
+    if not stat.S_ISDIR(found.st_mode):
+        raise _refused(root, f"it is {_kind(found.st_mode)}, not a folder")
+    if _is_marked(root):
+        return _probe(root)
+    foreign = _first_foreign(root)
+    if foreign is not None:
+        raise InputError(
+            f"is not a translucent cache (no {MARKER_NAME} of translucent) and holds other "
+            f"files ({foreign}); the cache removes entries to keep within its budget, so it "
+            "uses only a folder of its own: point TRANSLUCENT_CACHE at a new or empty folder",
+            field="TRANSLUCENT_CACHE", value=str(root))
+    return _mark(root)
+
+
+def _is_marked(root: Path) -> bool:
+    """Return whether ``root`` holds the cache's own marker (a regular file, not a link)."""
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+    try:
+        fd = os.open(root / MARKER_NAME, flags)
+    except OSError:
+        return False
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return False
+        head = os.read(fd, 512)
+    except OSError:
+        return False
+    finally:
+        os.close(fd)
+    return head.startswith(_MARKER_SIGNATURE) and _MARKER_OWNER in head
+
+
+def _mark(root: Path) -> Path:
+    """Write the marker into ``root`` (the test of writing there too); return ``root``."""
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{MARKER_NAME}.", dir=root)
+    except OSError as error:
+        if error.errno in _NO_ROOM:
+            _warn_no_room(root, root / MARKER_NAME, error.strerror or str(error))
+            return root
+        raise _refused(root, error.strerror or str(error)) from None
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(_MARKER_TEXT)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, root / MARKER_NAME)
+    except OSError as error:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if error.errno in _NO_ROOM:
+            _warn_no_room(root, root / MARKER_NAME, error.strerror or str(error))
+            return root
+        raise _refused(root, error.strerror or str(error)) from None
+    return root
+
+
+def _probe(root: Path) -> Path:
+    """Return ``root`` once a file could be made in it (tried: permission bits can mislead)."""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".translucent-probe-", dir=root)
+    except OSError as error:
+        if error.errno in _NO_ROOM:
+            _warn_no_room(root, root, error.strerror or str(error))
+            return root
+        raise _refused(root, error.strerror or str(error)) from None
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(probe)
+    return root
+
+
+def _own_files(root: Path):
+    """Yield ``(namespace, path, dir entry)`` of each file where the cache puts its entries.
+
+    ``root/NAMESPACE/KE/NAME``: only real folders are walked (no link is followed), and a
+    folder that cannot be read is passed over.
+    """
+    for namespace in _scan(root) or ():
+        if not (_NAMESPACE.match(namespace.name) and namespace.is_dir(follow_symlinks=False)):
+            continue
+        for shard in _scan(namespace.path) or ():
+            if not (_SHARD.match(shard.name) and shard.is_dir(follow_symlinks=False)):
+                continue
+            for item in _scan(shard.path) or ():
+                yield namespace.name, Path(item.path), item
+
+
+def _scan(folder) -> list | None:
+    """Return the entries of ``folder``; None where it cannot be read."""
+    try:
+        with os.scandir(folder) as found:
+            return list(found)
+    except OSError:
+        return None
+
+
+def _entry_key(name: str, shard: str) -> str | None:
+    """Return the key an entry's file name holds, if it is an entry's name in ``shard``."""
+    match = _ENTRY.match(name)
+    return match.group(1) if match and match.group(1).startswith(shard) else None
+
+
+def _first_foreign(root: Path) -> str | None:
+    """Return the first path in ``root`` (relative) the cache did not make; None if none.
+
+    A folder that cannot be read counts as not the cache's.
+    """
+    items = _scan(root)
+    if items is None:
+        return "."
+    for item in items:
+        name = item.name
+        if _ROOT_TEMPORARY.match(name) and item.is_file(follow_symlinks=False):
+            continue
+        if not (_NAMESPACE.match(name) and item.is_dir(follow_symlinks=False)):
+            return name
+        shards = _scan(item.path)
+        if shards is None:
+            return name
+        for shard in shards:
+            if not (_SHARD.match(shard.name) and shard.is_dir(follow_symlinks=False)):
+                return f"{name}/{shard.name}"
+            files = _scan(shard.path)
+            if files is None:
+                return f"{name}/{shard.name}"
+            for file in files:
+                if not (file.is_file(follow_symlinks=False) and _own_name(file.name, shard.name)):
+                    return f"{name}/{shard.name}/{file.name}"
+    return None
+
+
+def _own_name(name: str, shard: str) -> bool:
+    """Return whether ``name`` in the folder ``shard`` is a name the cache gives its files."""
+    if _entry_key(name, shard) is not None:
+        return True
+    match = _ENTRY_COMPANION.match(name)
+    return bool(match) and (match.group(1) or match.group(2)).startswith(shard)
+
+
+def _no_room(error: BaseException) -> str | None:
+    """Return the system's words where ``error`` says the disk or quota is full; else None.
+
+    An ``OSError`` says it by its number; the writers' own errors (an ``InputError`` of
+    :mod:`translucent.atomic` naming the file) by the ``OSError`` behind them or by their
+    ``why``.
+    """
+    for found in (error, error.__cause__):
+        if isinstance(found, OSError) and found.errno in _NO_ROOM:
+            return found.strerror or os.strerror(found.errno)
+    why = getattr(error, "why", None)
+    return why if why in {os.strerror(code) for code in _NO_ROOM} else None
+
+
+_NO_ROOM_SAID: set[str] = set()
+
+
+def _warn_no_room(root: Path, path: Path, reason: str) -> None:
+    """Say once per cache folder that ``path`` found no room; the command goes on."""
+    if str(root) in _NO_ROOM_SAID:
+        return
+    _NO_ROOM_SAID.add(str(root))
+    print(f"translucent: warning: the cache cannot store {path} ({reason}); results are not "
+          "kept there and are computed again when next needed", file=sys.stderr, flush=True)
 
 
 @contextlib.contextmanager
@@ -217,6 +489,17 @@ class Cache:
     def __init__(self, namespace: str, root=None):
         self.root = Path(root) if root is not None else cache_dir()
         self.folder = self.root / namespace
+        self._checked = False
+
+    def check(self) -> Path:
+        """Check the folder (:func:`check_folder`) before the first write; return the root.
+
+        Reading needs no check: an entry is served only once its key and checksum match.
+        """
+        if not self._checked:
+            check_folder(self.root)
+            self._checked = True
+        return self.root
 
     def path(self, key: str, suffix: str) -> Path:
         """Where the entry for ``key`` lives (it may not exist)."""
@@ -227,7 +510,13 @@ class Cache:
 
         Said once on standard error; the entry is then made again in its place. Returns
         ``path``.
+
+        Raises
+        ------
+        InputError
+            Where the cache's folder may not be used (:func:`check_folder`).
         """
+        self.check()
         try:
             found = os.lstat(path)
         except OSError:
@@ -252,8 +541,9 @@ class Cache:
         entry, released when the block ends or the process dies (``kill -9`` included; the
         file is removed when the block ends, and one a killed process left is only ever
         locked again, never trusted as an entry).
-        Where locks cannot be taken (no ``fcntl``, a cache folder that cannot be written),
-        the block runs unlocked.
+        Where locks cannot be taken (no ``fcntl``, a full disk), the block runs unlocked;
+        a folder that is not the cache's or cannot be written (:func:`check_folder`) is
+        refused before the block, so before any work.
 
         Parameters
         ----------
@@ -261,6 +551,7 @@ class Cache:
         what : str
             Named in the one line said on standard error while waiting.
         """
+        self.check()
         try:
             import fcntl
         except ImportError:  # not POSIX
@@ -377,13 +668,16 @@ class Cache:
         Returns
         -------
         Path or None
-            None where nothing was kept (over the limit, or a value that cannot be stored).
+            None where nothing was kept: over the limit, a value that cannot be stored, or
+            no room on the disk or in the quota (said once on standard error; nothing of the
+            entry is left behind).
 
         Raises
         ------
         InputError
-            When the cache folder cannot be written; the message names
-            ``TRANSLUCENT_CACHE``, the setting that moves it.
+            When the cache folder cannot be written or is not the cache's
+            (:func:`check_folder`); the message names ``TRANSLUCENT_CACHE``, the setting
+            that moves it.
         """
         from .entries import EntryError, write_entry
 
@@ -391,18 +685,41 @@ class Cache:
         if nbytes is not None and limit is not None and nbytes > limit:
             return None
         path = self.make_room(self.path(key, ENTRY_SUFFIX))
-        try:
-            with atomic_path(path, suffix=".npz") as tmp, open(tmp, "w+b") as handle, \
-                    _byte_progress(f"writing the {self.folder.name} cache", nbytes) as bar:
-                write_entry(handle, key, value, progress=bar.update)
-        except EntryError:
-            return None  # kept in memory only; the atomic write left nothing behind
-        except InputError as error:
-            raise InputError(f"the cache cannot be written ({error.reason}); point "
-                             "TRANSLUCENT_CACHE at a writable folder", field="TRANSLUCENT_CACHE",
-                             value=str(self.root)) from error
+        stored = False
+        with self.storing(path):
+            try:
+                with atomic_path(path, suffix=".npz") as tmp, open(tmp, "w+b") as handle, \
+                        _byte_progress(f"writing the {self.folder.name} cache", nbytes) as bar:
+                    write_entry(handle, key, value, progress=bar.update)
+            except EntryError:
+                return None  # kept in memory only; the atomic write left nothing behind
+            stored = True
+        if not stored:
+            return None
         keep_within_budget(self.root)
         return path
+
+    @contextlib.contextmanager
+    def storing(self, path: Path):
+        """Write the entry ``path`` in the block (atomically); no room is only a warning.
+
+        A disk or quota that is full (``ENOSPC``, ``EDQUOT``, ``EFBIG``) is said once on
+        standard error, naming the path, and the block ends quietly: the caller keeps its
+        result, and the atomic write left no partial entry. Any other failure to write is
+        an :class:`InputError` naming ``TRANSLUCENT_CACHE``.
+        """
+        try:
+            yield
+        except (InputError, OSError) as error:
+            full = _no_room(error)
+            if full is not None:
+                _warn_no_room(self.root, path, full)
+                return
+            reason = error.reason if isinstance(error, InputError) else \
+                f"{path}: {error.strerror or error}"
+            raise InputError(f"the cache cannot be written ({reason}); point "
+                             "TRANSLUCENT_CACHE at a writable folder", field="TRANSLUCENT_CACHE",
+                             value=str(self.root)) from error
 
 
 def budget() -> int | None:
@@ -448,23 +765,23 @@ class CacheEntry:
 def cache_entries(root=None) -> list[CacheEntry]:
     """Return the cache's entries, least recently used first.
 
-    Lock files and the hidden temporary files of a write in progress are not entries.
+    Only regular files named and placed as entries are (``NAMESPACE/KE/KEY.SUFFIX``, no
+    link followed): lock files, the hidden temporary files of a write in progress and
+    anything else in the folder are not.
     """
     root = Path(root) if root is not None else cache_dir()
     found = []
     if not root.is_dir():
         return found
-    for folder, _, files in os.walk(root):
-        for name in files:
-            if name.startswith(".") or name.endswith(".lock"):
-                continue
-            path = Path(folder) / name
-            try:
-                stat = path.stat()
-            except OSError:  # removed meanwhile
-                continue
-            namespace = path.relative_to(root).parts[0] if path.parent != root else ""
-            found.append(CacheEntry(path, namespace, stat.st_size, stat.st_mtime))
+    for namespace, path, item in _own_files(root):
+        if _entry_key(path.name, path.parent.name) is None:
+            continue
+        try:
+            info = item.stat(follow_symlinks=False)
+        except OSError:  # removed meanwhile
+            continue
+        if stat.S_ISREG(info.st_mode):
+            found.append(CacheEntry(path, namespace, info.st_size, info.st_mtime))
     return sorted(found, key=lambda entry: (entry.used, str(entry.path)))
 
 
@@ -484,10 +801,19 @@ def prune(max_bytes: int | None, root=None, *, keep_recent: bool = True) -> list
     Returns
     -------
     list of CacheEntry
-        What was removed. A reader that meets a removed entry computes it again.
+        What was removed: only the cache's entries (:func:`cache_entries`), never another
+        file. A reader that meets a removed entry computes it again.
+
+    Raises
+    ------
+    InputError
+        Where the folder is not the cache's or cannot be written (:func:`check_folder`).
+    OSError
+        Where an entry cannot be removed (no permission); those before it are removed.
     """
     if max_bytes is None:
         return []
+    root = check_folder(root, create=False)
     entries = cache_entries(root)
     total = sum(entry.nbytes for entry in entries)
     recent = time.time() - IN_USE_SECONDS

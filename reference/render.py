@@ -369,8 +369,13 @@ def _cached(store, key, scene, passes) -> Image | None:
 
 
 def _store_image(store, key, image) -> None:
-    """Write a finished reference into the cache, then keep the cache within its budget."""
-    image.write(store.make_room(store.path(key, ".exr")))
+    """Write a finished reference into the cache, then keep the cache within its budget.
+
+    A cache without room is a warning: the render is still the command's result.
+    """
+    path = store.make_room(store.path(key, ".exr"))
+    with store.storing(path):
+        image.write(path)
     keep_within_budget(store.root)
 
 

@@ -28,10 +28,11 @@ def _aged(path, seconds_ago):
 
 
 def _entries(root, sizes_and_ages):
-    """Write files of the given sizes, each last used the given seconds ago."""
+    """Write entries of the given sizes, each last used the given seconds ago."""
     paths = []
     for index, (size, age) in enumerate(sizes_and_ages):
-        path = root / "prt" / f"{index:02d}" / f"{index:064d}{ENTRY_SUFFIX}"
+        key = f"{index:02x}" + "0" * 62
+        path = root / "prt" / key[:2] / f"{key}{ENTRY_SUFFIX}"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(b"x" * size)
         _aged(path, age)
@@ -56,15 +57,16 @@ def test_the_least_recently_used_go_first_and_entries_in_use_stay(tmp_path):
     old, older, recent, oldest = _entries(tmp_path, [(4 * KIB, 3000), (4 * KIB, 4000),
                                                      (4 * KIB, 1.0), (4 * KIB, 5000)])
     # a lock file and a write in progress are not entries
-    (tmp_path / "prt" / "00" / "x.lock").write_bytes(b"")
-    (tmp_path / "prt" / "00" / ".entry.part.npz").write_bytes(b"y" * 8 * KIB)
+    writing = tmp_path / "prt" / "00" / f".{'0' * 64}.entry.a1b2c3d4.part.npz"
+    (tmp_path / "prt" / "00" / f"{'0' * 64}.lock").write_bytes(b"")
+    writing.write_bytes(b"y" * 8 * KIB)
     assert [e.path for e in cache_entries(tmp_path)] == [oldest, older, old, recent]
     removed = prune(9 * KIB, tmp_path)
     assert [e.path for e in removed] == [oldest, older]
     assert old.is_file() and recent.is_file()
     # under a budget no older entry can meet, the entry in use is still kept
     assert [e.path for e in prune(0, tmp_path)] == [old]
-    assert recent.is_file() and (tmp_path / "prt" / "00" / ".entry.part.npz").is_file()
+    assert recent.is_file() and writing.is_file()
     assert [e.path for e in prune(0, tmp_path, keep_recent=False)] == [recent]
     assert prune(None, tmp_path) == [] and cache_entries(tmp_path) == []
 

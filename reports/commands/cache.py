@@ -4,7 +4,10 @@
 runs), ``--prune`` removes the least recently used entries until it is within its budget
 (``TRANSLUCENT_CACHE_MAX_BYTES``, or ``--max-bytes``), and ``--clear`` removes every entry.
 Every store already keeps the cache within its budget; an entry used in the last minute is
-never pruned. A removed entry is computed again when it is next needed.
+never pruned. A removed entry is computed again when it is next needed. Only the cache's own
+entries are ever listed or removed; a ``TRANSLUCENT_CACHE`` that is no folder, cannot be
+written or is not the cache's (:func:`translucent.cache.check_folder`, the check every write
+to the cache passes) is refused with exit 2, as is an entry that cannot be removed.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ def run(args) -> int:
     """Print the cache's contents; prune or clear it when asked."""
     from collections import Counter
 
-    from ...cache import budget, cache_dir, cache_entries, prune
+    from ...cache import budget, cache_entries, check_folder, prune
     from ...errors import InputError, check_count
     from .record import record
 
@@ -39,17 +42,22 @@ def run(args) -> int:
             raise InputError("only with --prune", field="--max-bytes", value=args.max_bytes)
         check_count(args.max_bytes, "--max-bytes", minimum=0)
     limit = budget() if args.max_bytes is None else (args.max_bytes or None)
-    folder = cache_dir()
+    folder = check_folder()
     removed = []
-    if args.clear:
-        removed = prune(0, folder, keep_recent=False)
-    elif args.prune:
-        removed = prune(limit, folder)
+    try:
+        if args.clear:
+            removed = prune(0, folder, keep_recent=False)
+        elif args.prune:
+            removed = prune(limit, folder)
+    except OSError as error:  # an entry in a folder this user may not change
+        raise InputError(f"cannot remove the entry {error.filename} "
+                         f"({error.strerror or error}); the entries after it are kept",
+                         field="TRANSLUCENT_CACHE", value=str(folder)) from None
     entries = cache_entries(folder)
     counts, sizes = Counter(), Counter()
     for entry in entries:
-        counts[entry.namespace or "(top)"] += 1
-        sizes[entry.namespace or "(top)"] += entry.nbytes
+        counts[entry.namespace] += 1
+        sizes[entry.namespace] += entry.nbytes
     kinds = {name: (counts[name], sizes[name]) for name in sorted(counts)}
     total = sum(entry.nbytes for entry in entries)
     print(f"cache: {folder}")

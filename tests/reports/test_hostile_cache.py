@@ -5,17 +5,27 @@ resumable render's state that was edited, holds NaN or belongs to another render
 entry path that has become a folder: each is a miss, said on standard error, and made again;
 the command ends with exit 0 and the image of its own scene. Every render here is the
 16 x 16 sphere at 1 sample per pixel.
+
+A ``TRANSLUCENT_CACHE`` that is no folder the cache can write (a file, a FIFO, a link to
+nothing, a loop of links, a folder without permission) is refused by ``translucent cache``
+as by every command that writes there: exit 2, one line naming it, nothing changed.
 """
 
+import errno
 import json
+import os
+import tempfile
 
 import numpy as np
 import pytest
-from hostile import TINY_SPHERE
+from hostile import TINY_SPHERE, Made, run_case
 from translucent.cache import Cache
 from translucent.entries import read_entry, write_entry
 from translucent.image import read_exr
 from translucent.reports.cli import main
+
+#: A key as the cache makes them (a SHA-256 in hex).
+KEY = "c" * 64
 
 
 @pytest.fixture
@@ -142,9 +152,62 @@ def test_an_entry_not_made_for_its_key_is_made_again(kind, scenes, capsys):
 
 def test_a_precomputation_entry_that_is_a_folder_is_a_miss(tmp_path, capsys):
     cache = Cache("method", root=tmp_path)
-    path = cache.path("k" * 64, ".entry.npz")
+    cache.store_object("d" * 64, 1)  # the folder is the cache's before the entry is spoilt
+    path = cache.path(KEY, ".entry.npz")
     (path / "inside").mkdir(parents=True)
-    assert cache.load_object("k" * 64) is None
-    assert cache.store_object("k" * 64, {"values": np.arange(3.0)}) == path
-    assert cache.load_object("k" * 64)["values"].tolist() == [0.0, 1.0, 2.0]
+    assert cache.load_object(KEY) is None
+    assert cache.store_object(KEY, {"values": np.arange(3.0)}) == path
+    assert cache.load_object(KEY)["values"].tolist() == [0.0, 1.0, 2.0]
     assert "is not trusted (it is not a file)" in capsys.readouterr().err
+
+
+def _loop(path):
+    (path.parent / "loop").symlink_to(path)
+    path.symlink_to(path.parent / "loop")
+
+
+def _an_entry_of_a_cache_it_cannot_write(path):
+    from translucent.cache import check_folder
+
+    check_folder(path)  # made and marked: the cache's own
+    entry = path / "prt" / "ab" / f"{'ab' * 32}.entry.npz"
+    entry.parent.mkdir(parents=True)
+    entry.write_bytes(b"an entry")
+
+
+#: what TRANSLUCENT_CACHE names -> (the files made, where it points: "{d}/cache" unless said)
+UNUSABLE = {
+    "a file": ({"cache": "not a folder"}, "cannot be written (it is a file, not a folder)"),
+    "a FIFO": ({"cache": Made(os.mkfifo)}, "it is a FIFO, not a folder"),
+    "a link to nothing": ({"cache": Made(lambda path: path.symlink_to(path.parent / "gone"))},
+                          "is a symbolic link to"),
+    "a loop of links": ({"cache": Made(_loop)}, "it is a loop of symbolic links"),
+    "a path through a file": ({"file": "x"}, "a file stands in its path", "{d}/file/cache"),
+    "a folder it cannot write": ({"cache": Made(_an_entry_of_a_cache_it_cannot_write)},
+                                 "Permission denied"),
+}
+
+
+@pytest.mark.parametrize("arguments", [[], ["--clear"]], ids=["list", "clear"])
+@pytest.mark.parametrize("kind", sorted(UNUSABLE))
+def test_the_cache_command_refuses_a_cache_it_cannot_use(kind, arguments, tmp_path,
+                                                         monkeypatch, capsys):
+    files, words, *where = UNUSABLE[kind]
+    where = where[0] if where else "{d}/cache"
+    mkstemp = tempfile.mkstemp
+
+    def unwritable(*args, **kwargs):
+        # what a folder of another user answers (a test run as root is never refused);
+        # the marker made before it is in place
+        folder = kwargs.get("dir")
+        if folder is not None and os.path.isfile(os.path.join(folder, "CACHEDIR.TAG")) \
+                and os.path.samefile(folder, tmp_path / "cache"):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), folder)
+        return mkstemp(*args, **kwargs)
+
+    if kind == "a folder it cannot write":
+        monkeypatch.setattr(tempfile, "mkstemp", unwritable)
+    out, err = run_case((["cache", *arguments], files, ["TRANSLUCENT_CACHE", where, words],
+                         {"env": {"TRANSLUCENT_CACHE": where}}),
+                        tmp_path, monkeypatch, capsys)
+    assert err.count("\n") == 1 and out == "", (out, err)
