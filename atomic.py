@@ -11,6 +11,14 @@ which :func:`check_output_file` and :func:`check_output_folder` call) are compar
 are named, resolved (symbolic links followed, hard links by device and inode): an output
 that is an input, or that another output also names, is refused before any work, and
 :func:`atomic_path` refuses to write over a noted input whatever asked it to.
+
+An output that cannot be written (a full disk, a quota, a read-only mount) is an
+:class:`OutputError` (an :class:`~translucent.errors.InputError`: the command line's exit
+code 2, one line naming the path), whatever the writer raised (``OSError``, OpenEXR's and
+Mitsuba's ``RuntimeError``), and leaves nothing behind: no temporary file, no folder made
+for it (:func:`output_folder`), no staging folder (:mod:`translucent.staging`). Temporary
+names fit the file system's limit on a name whatever the target's
+(:mod:`translucent.temporaries`).
 """
 
 from __future__ import annotations
@@ -23,25 +31,38 @@ import shutil
 import stat
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 from .errors import InputError
+from .temporaries import ORPHAN_AGE_SECONDS, ORPHAN_NAME, sweep_orphans, temporary_affixes
 
-__all__ = ["ORPHAN_AGE_SECONDS", "atomic_path", "atomic_write_bytes", "atomic_write_text",
-           "check_input_file", "check_output_file", "check_output_folder", "claim_output",
-           "guarded_files", "is_stream", "make_output_folder", "note_input", "safe_file_name",
-           "sweep_orphans"]
+# ORPHAN_AGE_SECONDS, ORPHAN_NAME and sweep_orphans are named here too, where they were
+__all__ = ["ORPHAN_AGE_SECONDS", "ORPHAN_NAME", "OutputError", "atomic_path",
+           "atomic_write_bytes", "atomic_write_text", "check_input_file", "check_output_file",
+           "check_output_folder", "claim_output", "failed_file", "guarded_files", "is_stream",
+           "make_output_folder", "note_input", "output_failure", "output_folder",
+           "safe_file_name", "sweep_orphans"]
 
-#: A temporary file or folder of an interrupted write (``.NAME.XXXXXXXX.part[.EXT]``, or
-#: ``.old`` for a report folder being replaced) older than this is swept when something is
-#: next written beside it: no live write takes that long between creating it and renaming
-#: it, except a render, whose temporary file is made only once the pixels are done.
-ORPHAN_AGE_SECONDS = 600.0
+#: The suffixes a temporary file keeps (some writers pick a format from it); another
+#: (long, or of other characters) is left off, so that every temporary matches ORPHAN_NAME.
+_PLAIN_SUFFIX = re.compile(r"^\.[A-Za-z0-9]{1,16}$")
 
-#: The names :func:`atomic_path` and the report's staging folders give their temporaries
-#: (``tempfile``'s 8 random characters between the prefix and the suffix).
-ORPHAN_NAME = re.compile(r"^\..+\.[A-Za-z0-9_]{8}\.(part(\.[A-Za-z0-9]+)?|old)$")
+#: What says that an output cannot take its bytes, whichever file the error names: no
+#: space, a quota, a file too large for the file system, a read-only file system.
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
+
+
+class OutputError(InputError):
+    """An output that cannot be written (a full disk, a quota, a read-only mount).
+
+    An :class:`~translucent.errors.InputError`: the command line exits 2 with one line that
+    names the path; nothing half-written is left. ``why`` is the system's reason alone
+    (``"No space left on device"``), where known.
+    """
+
+    def __init__(self, message: str, *, why: str | None = None, **where):
+        super().__init__(message, **where)
+        self.why = why or message
 
 
 #: Folders this process has swept already.
@@ -229,18 +250,31 @@ def is_stream(path) -> bool:
 @contextlib.contextmanager
 def _stream_path(target: Path, suffix: str):
     """Yield a private temporary file; copy it into the stream ``target`` on success."""
-    folder = tempfile.mkdtemp(prefix="translucent-stream-")
-    tmp = Path(folder) / f"output{suffix}"
     try:
-        yield tmp
+        folder = tempfile.mkdtemp(prefix="translucent-stream-")
+    except OSError as error:  # the temporary folder's disk is full, ...
+        raise OutputError(f"could not write it: no temporary file can be made in "
+                          f"{tempfile.gettempdir()} ({error.strerror or error})", file=target,
+                          field="path", value=str(target)) from error
+    tmp = Path(folder) / f"output{suffix if _PLAIN_SUFFIX.match(suffix) else ''}"
+    try:
+        try:
+            yield tmp
+        except Exception as error:
+            reason = output_failure(error, names=(str(tmp),), folder=folder)
+            if reason is None:
+                raise
+            raise OutputError(f"could not write it: its temporary copy in {folder} failed "
+                              f"({reason})", file=target, field="path",
+                              value=str(target)) from error
         sys.stdout.flush()  # what the command printed comes first on a shared stream
         try:
             # appended: a descriptor that is a regular file keeps what was written to it
             with open(tmp, "rb") as source, open(target, "ab") as sink:
                 shutil.copyfileobj(source, sink)
         except OSError as error:  # a full device, a closed pipe, ...
-            raise InputError(f"could not write it ({error.strerror or error})", file=target,
-                             field="path", value=str(target)) from error
+            raise OutputError(f"could not write it ({error.strerror or error})", file=target,
+                              field="path", value=str(target), why=error.strerror) from error
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 
@@ -283,8 +317,9 @@ def check_input_file(path, field: str, *, file=None, what: str = "file") -> Path
     Raises
     ------
     InputError
-        Missing, a folder, a name too long or holding a NUL, or not readable; the message
-        names the file, the field and the value.
+        Missing, a folder, a FIFO, a device or a socket (refused before it is opened), a
+        name too long or holding a NUL, or not readable; the message names the file, the
+        field and the value.
     """
     where = path if file is None else file
     try:
@@ -304,41 +339,31 @@ def check_input_file(path, field: str, *, file=None, what: str = "file") -> Path
                          field=field, value=_short_path(path)) from None
     if stat.S_ISDIR(found.st_mode):
         raise InputError(f"is a folder; give a {what}", file=file, field=field, value=str(path))
+    if not stat.S_ISREG(found.st_mode):
+        # refused before it is opened: opening a FIFO waits for a writer that may never
+        # come, and a device (/dev/zero) never ends
+        raise InputError(f"is {_node_kind(found.st_mode)}, not a regular file; give a {what}",
+                         file=file, field=field, value=str(path))
     return Path(path)
+
+
+def _node_kind(mode: int) -> str:
+    """Name the kind of a file that is neither a regular file nor a folder."""
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (named pipe)"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    if stat.S_ISCHR(mode):
+        return "a character device"
+    if stat.S_ISBLK(mode):
+        return "a block device"
+    return "a special file"
 
 
 def _short_path(path) -> str:
     """``path`` as text, cut short where a message would otherwise be pages long."""
     text = str(path)
     return text if len(text) <= 200 else f"{text[:120]}...{text[-60:]}"
-
-
-def sweep_orphans(folder, *, older_than: float = ORPHAN_AGE_SECONDS) -> list[Path]:
-    """Remove the temporaries that interrupted writes left in ``folder``; return them.
-
-    Only names of the suite's own temporaries (:data:`ORPHAN_NAME`) older than
-    ``older_than`` seconds are removed; a folder that cannot be read is left alone.
-    """
-    removed = []
-    now = time.time()
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return removed
-    for entry in entries:
-        if not ORPHAN_NAME.match(entry.name):
-            continue
-        try:
-            if now - entry.stat(follow_symlinks=False).st_mtime < older_than:
-                continue
-            if entry.is_dir(follow_symlinks=False):
-                shutil.rmtree(entry.path)
-            else:
-                os.unlink(entry.path)
-            removed.append(Path(entry.path))
-        except OSError:
-            continue  # another process swept it, or it is not ours to remove
-    return removed
 
 
 def make_output_folder(folder, *, field: str, value, file=None, what: str | None = None
@@ -363,9 +388,137 @@ def make_output_folder(folder, *, field: str, value, file=None, what: str | None
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as error:  # a file in the way, no permission, a read-only mount, ...
         what = what or f"the folder {folder}"
-        raise InputError(f"cannot create {what} ({error.strerror or error})", file=file,
-                         field=field, value=value) from error
+        raise OutputError(f"cannot create {what} ({error.strerror or error})", file=file,
+                          field=field, value=value, why=error.strerror) from error
     return folder
+
+
+def _missing_folders(folder) -> list[Path]:
+    """Return the folders that making ``folder`` would create, deepest first."""
+    missing = []
+    folder = Path(folder).absolute()
+    while not os.path.lexists(folder) and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove ``folders`` (deepest first) as long as each is empty; stop at one that is not."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except FileNotFoundError:
+            continue
+        except OSError:
+            break
+
+
+def output_failure(error: BaseException, *, names=(), folder=None) -> str | None:
+    """Return why an output could not be written, where ``error`` says so; else None.
+
+    Parameters
+    ----------
+    error : BaseException
+        What a writer raised.
+    names : iterable of str
+        The files being written: an ``OSError`` about one of them, or another exception
+        whose message names one, is the output's.
+    folder : str or PathLike, optional
+        Where they are written: a writer's exception that says nothing more (OpenEXR's
+        "Failed to write pixel data") is the output's when that file system is full.
+
+    Returns
+    -------
+    str or None
+        The reason, for a message (``"No space left on device"``); None for an exception
+        that is not the output's (a bug, an input, an interrupt) and for an
+        :class:`~translucent.errors.InputError`, which says what it is already.
+    """
+    if isinstance(error, InputError) or not isinstance(error, Exception):
+        return None
+    names = [str(name) for name in names]
+    if isinstance(error, OSError):
+        if error.errno in WRITE_ERRNOS or failed_file(error) in names:
+            return error.strerror or str(error)
+        return None
+    # OpenEXR and Mitsuba raise RuntimeError with the system's words in the message
+    text = str(error)
+    for code in sorted(WRITE_ERRNOS):
+        if os.strerror(code) in text:
+            return os.strerror(code)
+    if any(name and name in text for name in names):
+        return text
+    if folder is not None:
+        try:
+            if os.statvfs(folder).f_bavail == 0:
+                return os.strerror(errno.ENOSPC)
+        except (OSError, ValueError):
+            pass
+    return None
+
+
+def failed_file(error: BaseException) -> str | None:
+    """Return the file an ``OSError`` names (its ``filename``), as text; None if none."""
+    name = getattr(error, "filename", None)
+    return os.fsdecode(name) if isinstance(name, str | bytes | os.PathLike) else None
+
+
+@contextlib.contextmanager
+def output_folder(folder, *, field: str, value=None, file=None, create: bool = False,
+                  what: str | None = None):
+    """Write the block's outputs into ``folder``; a failure leaves no folder made for them.
+
+    On an exception in the block the folders that did not exist before it (``folder`` and
+    those above it) are removed where empty, and a failure to write
+    (:func:`output_failure`) becomes an :class:`OutputError` naming ``value``.
+
+    Parameters
+    ----------
+    folder : str or PathLike
+        Where the outputs go.
+    field, value, file
+        What a message names: the option, its value (default ``folder``), the file.
+    create : bool
+        Create ``folder`` before the block (:func:`make_output_folder`): before work that
+        would be lost if it could not be made.
+    what : str, optional
+        How a message calls the folder.
+
+    Yields
+    ------
+    Path
+    """
+    folder = Path(folder)
+    value = str(folder) if value is None else value
+    missing = _missing_folders(folder)
+    try:
+        if create:
+            make_output_folder(folder, field=field, value=value, file=file, what=what)
+        yield folder
+    except BaseException as error:
+        _remove_empty(missing)
+        existing = folder.absolute()
+        while not existing.exists() and existing != existing.parent:
+            existing = existing.parent
+        if isinstance(error, OutputError) and error.field == "path" and isinstance(
+                error.value, str) and _inside(os.path.abspath(error.value), str(folder.absolute())):
+            # a writer's own (atomic_path's) in the folder: named by the option that gave it
+            raise OutputError(error.reason, why=error.why, field=field,
+                              value=error.value) from error
+        reason = output_failure(error, folder=existing)
+        if reason is None:
+            raise
+        where = failed_file(error)
+        where = f"{where}: " if where else ""
+        raise OutputError(f"could not write it ({where}{reason})", why=f"{where}{reason}",
+                          file=file, field=field, value=value) from error
+
+
+def _umask() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
 
 
 def _unwritable(folder: Path) -> str | None:
@@ -503,6 +656,9 @@ def atomic_path(target, suffix: str | None = None):
     InputError
         When ``target`` is a folder, an input of the command (:func:`note_input`), or its
         folder cannot be created or written, before anything is written.
+    OutputError
+        When the block fails to write the temporary file (:func:`output_failure`: no space
+        left, a quota, a writer's own error about it); the temporary file is removed.
     """
     # its own temporary file below is the test of writing there: no probe first
     target = _not_a_folder(target, "path", file=target)
@@ -516,29 +672,33 @@ def atomic_path(target, suffix: str | None = None):
         _SWEPT.add(str(target.parent))
         sweep_orphans(target.parent)
     suffix = target.suffix if suffix is None else suffix
+    # kept only where short and plain; the name cut to fit the longest name allowed
+    tail = f".part{suffix if _PLAIN_SUFFIX.match(suffix) else ''}"
+    prefix, tail = temporary_affixes(target.stem, tail, target.parent)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{suffix}",
-                                   dir=target.parent)
+        fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=tail, dir=target.parent)
     except OSError as error:  # no permission, a read-only mount, /proc, no space, ...
-        raise InputError(f"cannot write in {target.parent} ({error.strerror or error})",
-                         file=target, field="path", value=str(target)) from error
+        raise OutputError(f"cannot write in {target.parent} ({error.strerror or error})",
+                          file=target, field="path", value=str(target),
+                          why=error.strerror) from error
     os.close(fd)
     tmp = Path(tmp)
     # mkstemp creates 0600; give the result the permissions an ordinary file would have
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
+    os.chmod(tmp, 0o666 & ~_umask())
     try:
         try:
             yield tmp
             os.replace(tmp, target)
             if _LEDGERS:
                 _LEDGERS[-1].written |= {key for key in _identity(target) if key[0] == "inode"}
-        except OSError as error:
-            if error.filename not in (str(tmp), str(target)):
-                raise  # not the output's: an input read inside the block, for example
-            raise InputError(f"could not write it ({error.strerror or error})", file=target,
-                             field="path", value=str(target)) from error
+        except Exception as error:
+            # not the output's (an input read inside the block, a bug): raised as it is
+            reason = output_failure(error, names=(str(tmp),), folder=target.parent)
+            if reason is None:
+                raise
+            reason = reason.replace(str(tmp), str(target))
+            raise OutputError(f"could not write it ({reason})", why=reason, file=target,
+                              field="path", value=str(target)) from error
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
@@ -560,7 +720,9 @@ def atomic_save_figure(target, figure, *, dpi: int = 90) -> Path:
     """Save a Matplotlib ``figure`` as PNG to ``target`` atomically, close it, return the path."""
     import matplotlib.pyplot as plt
 
-    with atomic_path(target, suffix=".png") as tmp:
-        figure.savefig(tmp, format="png", dpi=dpi)
-    plt.close(figure)
+    try:
+        with atomic_path(target, suffix=".png") as tmp:
+            figure.savefig(tmp, format="png", dpi=dpi)
+    finally:
+        plt.close(figure)  # closed on a failure too: figures are held until closed
     return Path(target)

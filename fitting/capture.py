@@ -355,11 +355,12 @@ def sidecar_from_dict(data, *, path=None) -> CaptureSpec:
 # --- the image -------------------------------------------------------------------------------
 
 
-def _read_image(path: Path) -> np.ndarray:
+def _read_image(path: Path, what: str = "capture image") -> np.ndarray:
     from ..atomic import check_input_file
 
     suffix = path.suffix.lower()
-    check_input_file(path, "image", what="image file")
+    # a FIFO or a device is refused here, before any reader opens it (and waits)
+    check_input_file(path, "image", what=what)
     if suffix == ".exr":
         return _read_exr_pixels(path)
     if suffix == ".png":
@@ -496,7 +497,7 @@ def read_capture(path) -> Capture:
         beam_path = path.parent / spec.beam_image
         note_input(beam_path, "beam_image")
         try:
-            beam_pixels = _read_image(beam_path)
+            beam_pixels = _read_image(beam_path, "beam image")
         except InputError as error:
             raise InputError(error.reason, file=beam_path, field="beam_image",
                              value=spec.beam_image) from None

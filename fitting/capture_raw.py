@@ -136,9 +136,10 @@ def read_raw(path, field: str = "photo", *, black_level: float | None = None,
         ``black_level``), or a white level not above the black level; each names the file,
         the field and the value.
     """
+    from ..atomic import check_input_file
+
     path = Path(path)
-    if not path.is_file():
-        raise InputError("no such file", file=path, field=field, value=str(path))
+    check_input_file(path, field, what="photo")  # a FIFO is refused before LibRaw waits on it
     black_level = _check_level(black_level, "black_level", path, field)
     white_level = _check_level(white_level, "white_level", path, field)
     rawpy = _rawpy()

@@ -93,8 +93,9 @@ def _read_photo(path: Path, field: str) -> tuple[np.ndarray, float]:
         raise InputError(f"unsupported photo format; valid: {', '.join(PHOTO_SUFFIXES)} and "
                          f"camera RAW ({', '.join(RAW_SUFFIXES)})", file=path, field=field,
                          value=suffix)
-    if not path.is_file():
-        raise InputError("no such file", file=path, field=field)
+    from ..atomic import check_input_file
+
+    check_input_file(path, field, what="photo")  # a FIFO is refused before a reader waits on it
     if suffix == ".exr":
         from ..image import read_exr
 

@@ -1,7 +1,8 @@
 """The ``translucent`` command line.
 
 ``main(argv=None) -> int``: 0 success (or within the threshold), 1 a check failed (metric
-beyond its threshold, regression, unstable kernel), 2 bad usage or bad input. Each
+beyond its threshold, regression, unstable kernel), 2 bad usage or bad input, an output
+that cannot be written (no permission, a full disk) included. Each
 subcommand lives in its own module under :mod:`translucent.reports.commands` with two
 functions, ``add_arguments(parser)`` and ``run(args) -> int``; the CLI is thin and the work
 happens in the library.
@@ -284,6 +285,36 @@ def _signal_behind(error: BaseException) -> BaseException | None:
     return None
 
 
+def _ended_by(error: BaseException, command: str) -> int | None:
+    """Say in one line how ``error`` ended ``command``; return the exit code, None for a bug.
+
+    A missing extra (2), an interrupt (130), SIGTERM (143), and a full disk, quota or
+    read-only mount met where no writer of the command said so in its own words (2, as an
+    output the writers cannot write is: :class:`~translucent.atomic.OutputError`).
+    """
+    from ..atomic import failed_file, output_failure
+
+    missing = missing_extra(error)
+    if missing is not None:
+        print(f"translucent {command}: error: {missing}", file=sys.stderr)
+        return 2
+    signal_error = _signal_behind(error)
+    if isinstance(signal_error, KeyboardInterrupt):
+        print(f"translucent {command}: interrupted", file=sys.stderr)
+        return 130
+    if isinstance(signal_error, Terminated):
+        print(f"translucent {command}: terminated", file=sys.stderr)
+        return 143
+    reason = output_failure(error)
+    if reason is not None:
+        where = failed_file(error)
+        where = f"{where}: " if where else ""
+        print(f"translucent {command}: error: {where}an output cannot be written ({reason})",
+              file=sys.stderr)
+        return 2
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code.
 
@@ -353,18 +384,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"translucent {args.command}: error: {error}", file=sys.stderr)
         return 2
     except BaseException as error:
-        missing = missing_extra(error)
-        if missing is not None:
-            print(f"translucent {args.command}: error: {missing}", file=sys.stderr)
-            return 2
-        signal_error = _signal_behind(error)
-        if isinstance(signal_error, KeyboardInterrupt):
-            print(f"translucent {args.command}: interrupted", file=sys.stderr)
-            return 130
-        if isinstance(signal_error, Terminated):
-            print(f"translucent {args.command}: terminated", file=sys.stderr)
-            return 143
-        raise
+        code = _ended_by(error, args.command)
+        if code is None:
+            raise
+        return code
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

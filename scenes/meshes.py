@@ -1,4 +1,4 @@
-"""Procedural meshes and mesh files.
+"""Procedural meshes (the files they are read from and written to: :mod:`.mesh_files`).
 
 Every generator returns a :class:`~translucent.scenes.Mesh` (or, for the Cornell box, a
 dict of named parts) in scene units, with counter-clockwise faces seen from outside
@@ -20,11 +20,11 @@ Public API (stable): :func:`icosphere`, :func:`box`, :func:`slab`, :func:`plane`
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError, check_finite
+from .mesh_files import MESH_FILE_SUFFIXES, load_mesh, save_mesh
 from .scene import Mesh, vector3
 
 __all__ = [
@@ -54,10 +54,6 @@ MAX_FREQUENCY = 256
 
 #: Names of the Cornell box parts, in the order :func:`cornell_box` returns them.
 CORNELL_BOX_PARTS = ("floor", "ceiling", "back_wall", "left_wall", "right_wall")
-
-#: File suffixes :func:`load_mesh` reads: ``.npz`` is the suite's own lossless format
-#: (written by :func:`save_mesh`), the others are read through trimesh.
-MESH_FILE_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".npz")
 
 
 # ---------------------------------------------------------------------------------------
@@ -633,147 +629,6 @@ def rotation_matrix(degrees) -> np.ndarray:
     about_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
     about_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
     return about_z @ about_y @ about_x
-
-
-#: Memory that reading a mesh file takes per byte of the file, at most: trimesh's text
-#: parsers hold the text, its split tokens and the arrays. Peak traced allocations
-#: measured on a 12.5 MB icosphere (subdivision 7): 6.3 bytes a byte as OBJ, 15.3 as ASCII
-#: PLY; 16 leaves room.
-MESH_READ_BYTES_PER_FILE_BYTE = 16
-
-#: Files above this size whose bytes on disk are under 1/64 of their length are refused as
-#: sparse (mostly holes); compression on disk shrinks mesh text far less than that.
-SPARSE_CHECK_BYTES = 1 << 20
-
-
-def load_mesh(path, *, name: str | None = None) -> Mesh:
-    """Read a triangle mesh from an OBJ, PLY, STL or OFF file (through trimesh) or an NPZ.
-
-    Polygons are triangulated, nothing is merged or repaired: geometry the suite cannot
-    use is rejected rather than silently fixed. An ``.npz`` written by :func:`save_mesh`
-    comes back exactly (normals, uv and grid shape included).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The file; its units are the scene's.
-    name : str, optional
-        The mesh's name (default: the file's stem).
-
-    Returns
-    -------
-    Mesh
-        From OBJ/PLY/STL/OFF the vertex normals are area-weighted face normals and
-        ``uv`` is kept when the file has one texture coordinate per vertex.
-
-    Raises
-    ------
-    InputError
-        Missing or unreadable file, unsupported suffix, no triangles, NaN/Inf vertices,
-        zero-area faces; the message names the file.
-    """
-    from ..atomic import check_input_file
-    from ..resources import check_memory, format_bytes
-
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in MESH_FILE_SUFFIXES:
-        raise InputError(f"unsupported mesh file; valid suffixes: {', '.join(MESH_FILE_SUFFIXES)}",
-                         file=path, field="file", value=path.suffix)
-    check_input_file(path, "file", what="file")
-    found = path.stat()
-    size = found.st_size
-    # before a byte is parsed: a file of holes, or one too large to hold, is refused now
-    on_disk = getattr(found, "st_blocks", None)
-    if on_disk is not None and size > SPARSE_CHECK_BYTES and on_disk * 512 * 64 < size:
-        raise InputError(f"is a sparse file: {format_bytes(on_disk * 512)} of its "
-                         f"{format_bytes(size)} are on disk, the rest are holes (zeros never "
-                         "written), not a mesh", file=path, field="file", value=str(path))
-    check_memory(size * MESH_READ_BYTES_PER_FILE_BYTE, what=f"reading a mesh file of "
-                 f"{format_bytes(size)}", file=path, field="file", value=str(path))
-    try:
-        arrays = _read_npz(path) if suffix == ".npz" else _read_trimesh(path)
-    except InputError:
-        raise
-    except ImportError as error:  # trimesh reaches for an optional module (an encoding guess)
-        raise InputError(f"not a readable mesh: its reader needs the module {error.name}, "
-                         "which is not installed (a text STL in another encoding than ASCII "
-                         "or UTF-8?); convert it to binary STL, PLY, OBJ or .npz", file=path,
-                         field="file", value=str(path)) from None
-    except Exception as error:  # readers raise many types on malformed files
-        raise InputError(f"not a readable mesh ({error})", file=path) from error
-    if len(arrays["faces"]) == 0:
-        raise InputError("the file holds no triangles", file=path, field="faces", value=0)
-    try:
-        return Mesh(**arrays, name=name or path.stem)
-    except InputError as error:
-        raise InputError(error.reason, file=path, field=error.field, value=error.value) \
-            from error
-
-
-def _read_trimesh(path: Path) -> dict:
-    import trimesh
-
-    loaded = trimesh.load(str(path), force="mesh", process=False)
-    vertices = np.asarray(loaded.vertices, dtype=np.float64)
-    faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3), dtype=np.int64)))
-    uv = getattr(getattr(loaded, "visual", None), "uv", None)
-    if uv is not None and len(uv) != len(vertices):
-        uv = None
-    return {"vertices": vertices, "faces": faces, "uv": uv}
-
-
-def _read_npz(path: Path) -> dict:
-    with np.load(path, allow_pickle=False) as data:
-        missing = {"vertices", "faces"} - set(data.files)
-        if missing:
-            raise InputError(f"an NPZ mesh needs arrays {sorted(missing)}", file=path,
-                             field="arrays", value=sorted(data.files))
-        arrays = {key: np.array(data[key]) for key in ("vertices", "faces", "normals", "uv")
-                  if key in data.files}
-        if "grid_shape" in data.files:
-            arrays["grid_shape"] = tuple(int(n) for n in data["grid_shape"])
-    return arrays
-
-
-def save_mesh(mesh: Mesh, path) -> Path:
-    """Write ``mesh`` atomically; the suffix picks the format.
-
-    ``.npz`` keeps everything exactly, ``.obj`` and ``.ply`` (through trimesh) keep
-    positions and faces.
-
-    Parameters
-    ----------
-    mesh : Mesh
-    path : str or os.PathLike
-        Target file; its suffix picks the format.
-
-    Returns
-    -------
-    pathlib.Path
-    """
-    from ..atomic import atomic_path
-
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".npz", ".obj", ".ply"):
-        raise InputError("mesh files are written as .npz, .obj or .ply", file=path,
-                         field="file", value=path.suffix)
-    with atomic_path(path) as tmp:
-        if suffix == ".npz":
-            arrays = {"vertices": mesh.vertices, "faces": mesh.faces, "normals": mesh.normals}
-            if mesh.uv is not None:
-                arrays["uv"] = mesh.uv
-            if mesh.grid_shape is not None:
-                arrays["grid_shape"] = np.asarray(mesh.grid_shape, dtype=np.int64)
-            with open(tmp, "wb") as stream:
-                np.savez(stream, **arrays)
-        else:
-            import trimesh
-
-            trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(str(tmp),
-                                                                             file_type=suffix[1:])
-    return path
 
 
 #: name -> generator, the ``type`` of a procedural mesh in a scene file

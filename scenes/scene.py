@@ -36,6 +36,10 @@ __all__ = [
 #: scale is degenerate (collinear or repeated vertices).
 DEGENERATE_AREA_FRACTION = 1e-12
 
+#: The largest vertex coordinate a mesh may have: the renderers hold positions as float32,
+#: and a larger one would become infinite there.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
 #: Vertex normals within this of unit length are kept as given (normalising them again
 #: would change their last bits); others are normalised.
 UNIT_NORMAL_TOLERANCE = 1e-12
@@ -91,7 +95,8 @@ class Mesh:
     Raises
     ------
     InputError
-        Non-finite vertices, indices out of range, or zero-area (degenerate) faces.
+        Non-finite vertices or ones beyond float32's range (:data:`FLOAT32_MAX`), indices
+        out of range, or zero-area (degenerate) faces.
     """
 
     vertices: np.ndarray
@@ -113,6 +118,13 @@ class Mesh:
             index = int(np.flatnonzero(bad)[0])
             raise InputError(f"{int(bad.sum())} vertices are NaN or Inf (first: vertex {index})",
                              file=where, field=f"vertices[{index}]", value=vertices[index].tolist())
+        beyond = (np.abs(vertices) > FLOAT32_MAX).any(axis=1)
+        if beyond.any():
+            index = int(np.flatnonzero(beyond)[0])
+            raise InputError(f"{int(beyond.sum())} vertices are beyond float32's range "
+                             f"(+-{FLOAT32_MAX:.7g}), where the renderers hold positions "
+                             f"(first: vertex {index})", file=where, field=f"vertices[{index}]",
+                             value=vertices[index].tolist())
         if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
             raise InputError("must be an array of shape (F >= 1, 3)", file=where,
                              field="faces", value=faces.shape)

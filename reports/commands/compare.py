@@ -91,7 +91,13 @@ def _table(rows) -> list[str]:
 
 def run(args) -> int:
     """Read both images, compute the metrics, write the maps, print the table."""
-    from ...atomic import check_output_folder, claim_output, note_input
+    from ...atomic import (
+        check_input_file,
+        check_output_folder,
+        claim_output,
+        note_input,
+        output_folder,
+    )
     from ...image import read_exr
     from ...noise import reference_noise_warning
     from ..metrics.compute import NOISE_MARGIN, evaluate, noise_floor
@@ -100,8 +106,9 @@ def run(args) -> int:
     from .record import record
 
     definition, threshold = _threshold(args)
-    note_input(args.reference, "reference")
-    note_input(args.test, "test")
+    for field in ("reference", "test"):  # named by their argument; a FIFO is never opened
+        check_input_file(getattr(args, field), field, what="file")
+        note_input(getattr(args, field), field)
     if args.maps and not args.no_maps:
         check_output_folder(args.maps, "--maps")  # before the metrics are computed
     test_path = Path(args.test)
@@ -118,7 +125,11 @@ def run(args) -> int:
     metrics = comparison.metrics
     files = {}
     if not args.no_maps:
-        files = write_error_maps(reference, test, folder, prefix=prefix, comparison=comparison)
+        # a failure (a full disk) removes the maps written and a --maps folder made for them
+        with output_folder(folder, field="--maps" if args.maps else "error map",
+                           value=str(folder)):
+            files = write_error_maps(reference, test, folder, prefix=prefix,
+                                     comparison=comparison)
     noise = ("reference variance discounted" if metrics.noise_discounted
              else "reference has no variance: nothing discounted")
     print(f"{args.test} against {args.reference} ({test.shape[1]} x {test.shape[0]}; "

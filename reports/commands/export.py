@@ -39,13 +39,27 @@ def run(args) -> int:
     if args.format not in FORMATS:
         raise InputError(f"unknown format; valid: {', '.join(FORMATS)}", field="--format",
                          value=args.format)
-    from ...atomic import safe_file_name
+    import os
+    from pathlib import Path
+
+    from ...atomic import check_output_folder, output_folder, safe_file_name
+    from ...staging import staged_outputs
 
     scene = load_scene(args.scene)
     # a name from the scene file: never a path out of the working folder
-    out = args.out or f"{safe_file_name(scene.name)}_{args.format}"
-    path = export_mitsuba(scene, out, spp=args.spp, integrator=args.integrator,
-                          profile=args.profile)
+    out = Path(args.out or f"{safe_file_name(scene.name)}_{args.format}")
+    if os.path.exists(out) and not os.path.isdir(out):  # export_mitsuba's words, at once
+        raise InputError("must be a folder (or a path where one can be made)", field="--out",
+                         value=str(out))
+    check_output_folder(out, "--out")
+    # written beside --out and moved in when complete: a failure (a full disk: Mitsuba's
+    # and NumPy's writers say so in their own words) leaves none of the files, and no
+    # folder made for them
+    with staged_outputs(out, field="--out") as staging, \
+            output_folder(staging, field="--out", value=str(out)):
+        written = export_mitsuba(scene, staging, spp=args.spp, integrator=args.integrator,
+                                 profile=args.profile)
+    path = out / written.relative_to(staging)
     text = path.read_text()
     plugins = sorted(p for p in SUITE_PLUGINS if f'type="{p}"' in text)
     print(f"wrote {path}")

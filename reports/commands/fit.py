@@ -19,8 +19,6 @@ or the model misfits, 2 for bad input.
 
 from __future__ import annotations
 
-import contextlib
-import os
 from pathlib import Path
 
 
@@ -59,42 +57,11 @@ def add_arguments(parser):
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
-@contextlib.contextmanager
-def _staged(out_dir: Path):
-    """Yield a temporary folder for the outputs; move them into ``out_dir`` on success.
-
-    The folder is made beside ``out_dir`` (in the nearest folder that exists), named as
-    :mod:`translucent.atomic`'s temporaries are, so that one a killed run left is swept.
-    Each file is moved with a rename and checked against the command's inputs first
-    (:func:`~translucent.atomic.claim_output`).
-    """
-    import shutil
-    import tempfile
-
-    from ...atomic import claim_output, make_output_folder
-
-    parent = out_dir.absolute().parent
-    while not parent.is_dir():
-        parent = parent.parent
-    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".part", dir=parent))
-    try:
-        yield staging
-        staged = sorted(path for path in staging.rglob("*") if path.is_file())
-        for path in staged:
-            claim_output(out_dir / path.relative_to(staging), "out_dir (--out)")
-        make_output_folder(out_dir, field="out_dir (--out)", value=str(out_dir))
-        for path in staged:
-            target = out_dir / path.relative_to(staging)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(path, target)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-
-
 def run(args) -> int:
     """Fit, write the outputs, print the summary; 1 if a chain did not converge or misfit."""
     from ...atomic import check_output_folder, claim_output
     from ...fitting.fit import fit_capture, output_names
+    from ...staging import staged_outputs
     from .record import json_target, record
 
     capture = Path(args.capture)
@@ -115,8 +82,9 @@ def run(args) -> int:
         for name in output_names(kind):
             claim_output(out_dir / name, "out_dir (--out)")
     # written into a staging folder beside it, moved in when every model is done: a
-    # refused, failed or interrupted fit leaves no empty or half-filled --out
-    with _staged(out_dir) as staging:
+    # refused, failed (a full disk) or interrupted fit leaves no empty or half-filled --out,
+    # and a killed one's staging folder is swept by the next write beside it
+    with staged_outputs(out_dir, field="out_dir (--out)") as staging:
         results = fit_capture(capture, models=models, out_dir=staging, seed=args.seed,
                               progress=not args.no_progress, **options)
     status = 0

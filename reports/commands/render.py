@@ -26,7 +26,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ...atomic import check_output_file, make_output_folder, safe_file_name
+from ...atomic import check_output_file, output_folder, safe_file_name
 from ...errors import InputError
 
 
@@ -91,28 +91,11 @@ def run(args) -> int:
     scene = load_scene(args.scene)
     out = check_output_file(args.out or f"{safe_file_name(scene.name)}_reference.exr", "--out",
                             what="a file name ending in .exr")
-    # before rendering: a folder that cannot be made would lose the whole render
-    created = _missing_folders(out.parent)
-    make_output_folder(out.parent, field="--out", value=str(out), what="the output folder")
-    try:
+    # made before rendering: a folder that cannot be made would lose the whole render; a
+    # refused, failed (a full disk) or interrupted render leaves no folder made for it
+    with output_folder(out.parent, field="--out", value=str(out), create=True,
+                       what="the output folder"):
         return _render_and_write(args, scene, out, progressive)
-    except BaseException:
-        for folder in created:  # a refused or interrupted render leaves no empty folder
-            try:
-                folder.rmdir()
-            except OSError:
-                break
-        raise
-
-
-def _missing_folders(folder: Path) -> list[Path]:
-    """Return the folders ``folder`` needs created, deepest first."""
-    missing = []
-    folder = folder.absolute()
-    while not folder.exists():
-        missing.append(folder)
-        folder = folder.parent
-    return missing
 
 
 def _render_and_write(args, scene, out: Path, progressive: bool) -> int:

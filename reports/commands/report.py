@@ -30,7 +30,7 @@ def add_arguments(parser):
                              "scenes, less the test scenes the page lists)")
     parser.add_argument("--out", "-o", default="report",
                         help="report folder (default ./report; a previous report there is "
-                             "replaced)")
+                             "replaced, any other folder with files in it refused)")
     parser.add_argument("--methods", default=None, metavar="M1,M2",
                         help="comma-separated fast methods (default: all; those not installed "
                              "are listed as such)")

@@ -14,7 +14,10 @@ and writes one self-contained folder::
 
 The folder is built under a temporary name beside ``OUT`` and renamed when complete, so
 an interrupted or failed run leaves no half-written report (a previous report in ``OUT``
-is replaced only then).
+is replaced only then), and a disk that fills up ends it with nothing left behind. Every
+report folder holds a marker, :data:`REPORT_MARKER`, that lists the files the report
+wrote: only a folder whose every file is so listed is replaced; any other folder with
+something in it is refused before any work.
 
 Reference renders and method runs are independent tasks
 (:func:`translucent.reports.report.distributed.run_tasks`): a local Dask process cluster by
@@ -39,9 +42,7 @@ import hashlib
 import json
 import os
 import re
-import shutil
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +52,7 @@ from ...atomic import atomic_write_text, check_output_folder, note_input
 from ...errors import InputError, check_count
 from ...image import Image
 from ...progress import progress_bar
+from ...staging import replace_folder, staging_folder
 from .baselines import (
     BASELINE_FORMAT,
     DEFAULT_BASELINE,
@@ -264,9 +266,9 @@ def _check_out(out) -> Path:
             from None
     # the folder's content is replaced: no input (the --images folder) may lie inside it
     out = check_output_folder(out, "--out", replaces=True)
-    if out.is_dir() and any(out.iterdir()) and not (out / "metrics.json").is_file():
-        raise InputError("is a folder with other files in it; give a new or empty folder (a "
-                         "previous report there is replaced)", field="--out", value=str(out))
+    problem = _not_replaceable(out) if out.is_dir() else None
+    if problem:
+        raise InputError(problem, field="--out", value=str(out))
     ancestor = out.absolute().parent
     while not ancestor.exists():
         ancestor = ancestor.parent
@@ -400,9 +402,8 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     _announce(plan.tasks, stream)
     timing: dict[str, Any] = {"planning": time.perf_counter() - started, "tasks": 0.0,
                               "scoring": 0.0, "scoring_during_tasks": 0.0}
-    staging = None
-    try:
-        staging = _staging_folder(out)
+    # built beside --out and renamed onto it when complete; a killed run's is swept
+    with staging_folder(out, field="--out") as staging:
         task_times = _run(plan, staging, timing, scheduler=scheduler, serial=serial,
                           progress=progress, keep_precomputations=keep_precomputations)
         regressions = _judge(plan, stored_baseline)
@@ -421,11 +422,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         }
         summary = summary_rows(plan.reports, plan.scored)
         _write(plan, staging, context)
-        _replace_folder(staging, out)
-        staging = None
-    finally:
-        if staging is not None:
-            shutil.rmtree(staging, ignore_errors=True)
+        replace_folder(staging, out, field="--out")
     if update_baseline:
         _update_baseline(plan, stored_baseline, baseline_path)
     seconds = time.perf_counter() - started
@@ -754,6 +751,7 @@ def _write(plan: _Plan, staging: Path, context: dict) -> None:
                                  sort_keys=False, allow_nan=False))
     context["overview"] = _overview(plan.reports, staging)
     atomic_write_text(staging / "index.html", html_page(plan.reports, plan.scored, context))
+    _write_marker(staging)  # last: it lists every file the report wrote
 
 
 def _update_baseline(plan: _Plan, stored_baseline: dict, baseline_path: Path) -> None:
@@ -766,27 +764,74 @@ def _update_baseline(plan: _Plan, stored_baseline: dict, baseline_path: Path) ->
     atomic_write_text(baseline_path, json.dumps(new, indent=2, allow_nan=False) + "\n")
 
 
-def _staging_folder(out: Path) -> Path:
-    from ...atomic import sweep_orphans
+#: The file every report folder holds: what wrote it and the files it wrote. A folder is
+#: replaced by a new report only where it holds this and nothing it does not list.
+REPORT_MARKER = ".translucent-report.json"
 
-    parent = out.absolute().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    sweep_orphans(parent)  # staging folders of reports killed before they finished
-    return Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=parent))
+#: The largest marker read (a report's lists a few hundred names).
+_MARKER_LIMIT = 1 << 22
 
 
-def _replace_folder(staging: Path, out: Path) -> None:
-    """Rename the finished ``staging`` onto ``out``; an old report there goes only then."""
-    os.chmod(staging, 0o755)
-    old = None
-    if out.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old",
-                                    dir=out.absolute().parent))
-        os.rmdir(old)
-        os.rename(out, old)
-    os.rename(staging, out)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+def _report_files(folder: Path) -> list[str]:
+    """Return every entry of ``folder`` below it that is not a folder, as relative names.
+
+    Symbolic links are listed, not followed; the marker itself is left out.
+    """
+    found = []
+    for root, folders, files in os.walk(folder):
+        links = [name for name in folders if os.path.islink(os.path.join(root, name))]
+        for name in files + links:
+            relative = Path(root, name).relative_to(folder).as_posix()
+            if relative != REPORT_MARKER:
+                found.append(relative)
+    return sorted(found)
+
+
+def _write_marker(folder: Path) -> None:
+    atomic_write_text(folder / REPORT_MARKER, json.dumps(
+        {"written_by": "translucent report", "files": _report_files(folder)}, indent=1) + "\n")
+
+
+def _marked_files(folder: Path) -> set[str] | None:
+    """Return the files the marker in ``folder`` lists; None where there is no such marker."""
+    marker = folder / REPORT_MARKER
+    try:
+        if not marker.is_file() or marker.is_symlink() or \
+                marker.stat().st_size > _MARKER_LIMIT:
+            return None
+        found = json.loads(marker.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(found, dict) or found.get("written_by") != "translucent report":
+        return None
+    files = found.get("files")
+    if not isinstance(files, list) or not all(isinstance(name, str) for name in files):
+        return None
+    return set(files)
+
+
+def _not_replaceable(out: Path) -> str | None:
+    """Return why the folder ``out`` may not be replaced by a report; None where it may.
+
+    It may where it is empty, or a report this suite wrote (its :data:`REPORT_MARKER`)
+    holding no file the report did not write.
+    """
+    try:
+        if not any(os.scandir(out)):
+            return None
+    except OSError as error:
+        return f"cannot be read ({error.strerror or error})"
+    listed = _marked_files(out)
+    if listed is None:
+        return (f"is a folder with other files in it, not a report folder (it has no "
+                f"{REPORT_MARKER}); give a new or empty folder (a previous report there is "
+                "replaced; one written before reports were marked is not: remove it first)")
+    others = [name for name in _report_files(out) if name not in listed]
+    if others:
+        more = f" and {len(others) - 1} other file(s)" if len(others) > 1 else ""
+        return (f"holds {others[0]}{more} that the report there did not write, which "
+                "replacing it would destroy; move them out or give another folder")
+    return None
 
 
 def _overview(reports: list[SceneReport], folder: Path) -> str | None:

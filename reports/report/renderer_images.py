@@ -7,7 +7,9 @@ with the times its header holds (:func:`renderer_images`).
 
 from __future__ import annotations
 
+import errno
 import math
+import os
 import re
 from pathlib import Path
 
@@ -58,23 +60,27 @@ def renderer_images(images, renderers: list[str], scene) -> dict:
     camera size. Its times come from its header where written there: ``seconds`` (a
     frame) and ``precompute_seconds``, as the suite's own images carry them, or a number
     attribute named in :data:`HEADER_SECONDS` (``renderTime``, ...). A renderer with no
-    image of the scene is "not run".
+    image of the scene (nothing of that name in its folder) is "not run".
 
     Raises
     ------
     InputError
-        An unreadable image, or one of another size than the scene's camera (naming the
-        file).
+        An unreadable image: a folder, a FIFO, a link loop or one leading nowhere, or no
+        readable OpenEXR; or one of another size than the scene's camera (naming the file).
     """
+    from ...atomic import check_input_file
     from ...image import header_number, read_exr
 
     runs = {}
     for name in renderers:
         path = Path(images) / name / f"{scene.name}.exr"
         base = {"method": name, "scene": scene.name, "measured_at": timestamp()}
-        if not path.is_file():
+        if not _exists(path):
             runs[name] = MethodRun(status="not run", reason=f"no image {path}", **base)
             continue
+        # anything else of that name is the renderer's image, and one that cannot be read
+        # is an input error, not a renderer that did not run
+        check_input_file(path, "--images", what="renderer's image")
         image = read_exr(path)
         shape = (scene.camera.height, scene.camera.width)
         if image.rgb.shape[:2] != shape:
@@ -96,3 +102,12 @@ def renderer_images(images, renderers: list[str], scene) -> dict:
                      + ("" if "seconds" in times else "; its header has no time")],
             notes={"image": str(path)}, **base)
     return runs
+
+
+def _exists(path: Path) -> bool:
+    """Return whether anything (a link too, even one leading nowhere) is named ``path``."""
+    try:
+        os.lstat(path)
+    except OSError as error:  # another error (no permission) is the check's to name
+        return error.errno not in (errno.ENOENT, errno.ENAMETOOLONG)
+    return True

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...atomic import OutputError
 from ...errors import InputError
 from .model import SceneReport
 from .speedup import scored_curve, scored_relative_mse, speedup, tradeoff_plot
@@ -64,6 +65,8 @@ def score_scene(report: SceneReport, folder: Path) -> None:
             maps = write_error_maps(report.reference, run.image, scene_folder,
                                     prefix=f"{name}_", comparison=comparison, scored=mask,
                                     scored_metrics=on_pixels.metrics)
+        except OutputError:
+            raise  # the report cannot be written (a full disk): not this method's failure
         except (InputError, TypeError) as error:
             report.metric_errors[name] = str(error)
             continue

@@ -124,7 +124,7 @@ def test_missing_corrupt_and_8_bit_images(tmp_path, sidecar_data):
 
     path = tmp_path / "capture.json"
     path.write_text(json.dumps(sidecar_data))
-    with pytest.raises(InputError, match="no such image file"):
+    with pytest.raises(InputError, match="no such capture image"):
         read_capture(path)
     (tmp_path / "capture.exr").write_bytes(b"not an exr")
     with pytest.raises(InputError, match="not a readable OpenEXR file"):

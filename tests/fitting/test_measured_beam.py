@@ -121,7 +121,7 @@ def test_a_capture_with_its_beam_image_fits_its_truth(top_hat_capture):
 @pytest.mark.parametrize("change, message", [
     ({"beam_image": None}, 'needs beam_image'),
     ({"beam_profile": "gaussian"}, 'only with beam_profile "measured"'),
-    ({"beam_image": "missing.tif"}, "no such image file"),
+    ({"beam_image": "missing.tif"}, "no such beam image"),
 ])
 def test_bad_beam_images_are_refused(top_hat_capture, change, message):
     sidecar, _ = top_hat_capture

@@ -8,7 +8,11 @@ words of the case (the file, the field, the value). The kinds that would destroy
 are in ``test_hostile_outputs.py``, those of the cache in ``test_hostile_cache.py``.
 """
 
+import contextlib
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -16,6 +20,7 @@ from hostile import (
     SPHERE,
     TINY_SPHERE,
     CaptureFile,
+    Made,
     declaring,
     exr_bytes,
     nested_json,
@@ -56,6 +61,34 @@ SPHERE_MATERIAL = 'material = { type = "measured", name = "Marble", eta = 1.0 }'
 SPHERE_NAME = 'name = "sphere"\ndescription'
 #: 400 digits: an integer no float64 holds.
 HUGE = "9" * 400
+
+#: Arguments that keep a render that should have been refused short.
+ONE_SAMPLE = ["--spp", "1", "--passes", "1", "--no-cache"]
+
+
+def _meshed(name: str) -> str:
+    """The sphere's scene at 16 x 16 pixels with its object's mesh read from ``name``."""
+    return sphere_text(**{SPHERE_MESH: f'mesh = {{ file = "{name}" }}', "width = 96":
+                          "width = 16", "height = 96": "height = 16"})
+
+
+#: A named pipe that nothing writes: a command that opened it would wait for ever.
+FIFO = Made(os.mkfifo)
+
+#: A sidecar whose beam is measured in ``beam.exr``.
+MEASURED_BEAM_SIDECAR = {"image": "small.exr", "pixel_size_mm": 0.25, "incident_px": [16, 16],
+                         "side": "reflection", "black_level": 256.0,
+                         "saturation_level": 65535.0, "beam_profile": "measured",
+                         "beam_image": "beam.exr"}
+
+#: An ASCII PLY whose header declares ten million faces over the two it holds.
+PLY_OF_TWO_FACES = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                    "property float y\nproperty float z\nelement face 10000000\n"
+                    "property list uchar int vertex_indices\nend_header\n"
+                    "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 2 1\n")
+
+#: An OFF whose header line counts ten million faces over the two it holds.
+OFF_OF_TWO_FACES = "OFF\n3 10000000 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 2 1\n"
 
 
 def _subsampled() -> bytes:
@@ -380,6 +413,65 @@ CASES = {
                                                 "--pixel-size-mm", "0.1", "--out",
                                                 "{d}/c.json"], {"photo.tif/keep": "x"},
                                                ["photo.tif", "is a folder"]),
+    # ----------------------------------------------------------------- meshes that lie
+    "ASCII PLY declaring ten million faces": (["render", "{d}/s.toml", *ONE_SAMPLE],
+                                              {"s.toml": _meshed("m.ply"),
+                                               "m.ply": PLY_OF_TWO_FACES},
+                                              ["m.ply", "element face", "10000000",
+                                               "holds only 2 face lines"]),
+    "OFF declaring ten million faces": (["render", "{d}/s.toml", *ONE_SAMPLE],
+                                        {"s.toml": _meshed("m.off"), "m.off": OFF_OF_TWO_FACES},
+                                        ["m.off", "face count (line 2)", "10000000",
+                                         "holds only 2 face lines"]),
+    "OBJ coordinate beyond float32": (["render", "{d}/s.toml", *ONE_SAMPLE],
+                                      {"s.toml": _meshed("m.obj"),
+                                       "m.obj": "v 0 0 0\nv 1 0 0\nv 0 1e39 0\nf 1 2 3\n"},
+                                      ["m.obj", "line 3 = 1e+39", "float32"]),
+    "icosphere beyond float32": (["render", "{d}/s.toml", *ONE_SAMPLE],
+                                 {"s.toml": TINY_SPHERE.replace("radius = 1.0", "radius = 1e39")},
+                                 ["s.toml", "objects[0].mesh", "float32"]),
+    # ----------------------------------------------------------------- what is not a file
+    **{f"{command}: {what} a FIFO": (arguments, {**files, name: FIFO}, [name, "FIFO"])
+       for command, what, arguments, files, name in (
+        ("render", "scene file", ["render", "{d}/s.toml"], {}, "s.toml"),
+        ("render", "mesh file", ["render", "{d}/s.toml"], {"s.toml": _meshed("m.obj")},
+         "m.obj"),
+        ("render", "SubEdit file", ["render", "{d}/s.toml"],
+         {"s.toml": sphere_text(**{SPHERE_MATERIAL: 'material = { type = "subedit", file = '
+                                                    '"t.npz" }'})}, "t.npz"),
+        ("export", "scene file", ["export", "{d}/s.toml", "--out", "{d}/e"], {}, "s.toml"),
+        ("report", "scene file", ["report", "{d}/s.toml", "--out", "{d}/r"], {}, "s.toml"),
+        ("report", "renderer's image", ["report", "sphere", "--images", "{d}/im", "--out",
+                                        "{d}/r"], {}, "im/other/sphere.exr"),
+        ("capture", "material file", ["capture", "{d}/m.toml", "--out", "{d}/c.json"], {},
+         "m.toml"),
+        ("fit", "sidecar", ["fit", "{d}/c.json", "--out", "{d}/fit"], {}, "c.json"),
+        ("fit", "image", ["fit", "{d}/c.json", "--out", "{d}/fit"],
+         {"c.json": CAPTURE["c.json"]}, "small.exr"),
+        ("fit", "beam image", ["fit", "{d}/c.json", "--out", "{d}/fit"],
+         {"c.json": json.dumps(MEASURED_BEAM_SIDECAR), "small.exr": CAPTURE["small.exr"]},
+         "beam.exr"),
+        ("capture-import", "photo", ["capture-import", "{d}/photo.exr", "--pixel-size-mm", "0.1",
+                                     "--out", "{d}/c.json"], {}, "photo.exr"),
+        ("capture-import", "dark frame", ["capture-import", "{d}/photo.exr", "--dark",
+                                          "{d}/dark.exr", "--pixel-size-mm", "0.1", "--out",
+                                          "{d}/c.json"], {"photo.exr": GOOD_EXR}, "dark.exr"),
+        ("capture-import", "beam image", ["capture-import", "{d}/photo.exr", "--beam-image",
+                                          "{d}/beam.exr", "--pixel-size-mm", "0.1", "--out",
+                                          "{d}/c.json"], {"photo.exr": GOOD_EXR}, "beam.exr"),
+        ("compare", "reference", ["compare", "{d}/ref.exr", "{d}/a.exr"], {"a.exr": GOOD_EXR},
+         "ref.exr"),
+        ("compare", "test image", ["compare", "{d}/ref.exr", "{d}/a.exr"],
+         {"ref.exr": GOOD_EXR}, "a.exr"),
+    )},
+    "report: renderer's image a folder": (["report", "sphere", "--images", "{d}/im", "--out",
+                                           "{d}/r"], {"im/other/sphere.exr/keep": "x"},
+                                          ["im/other/sphere.exr", "is a folder"]),
+    "report: renderer's image a link loop": (["report", "sphere", "--images", "{d}/im",
+                                              "--out", "{d}/r"],
+                                             {"im/other/sphere.exr": Made(
+                                                 lambda path: os.symlink(path.name, path))},
+                                             ["im/other/sphere.exr", "symbolic links"]),
 }
 
 
@@ -400,11 +492,52 @@ def test_the_modules_check_at_least_ninety_kinds():
     assert kinds >= LEAST_KINDS, kinds
 
 
+#: What :func:`_fifo_guard` runs: ``after`` seconds in, it opens and closes for writing
+#: every FIFO of the folder that a reader holds open, printing its name.
+_UNBLOCK = """
+import os, stat, sys, time
+folder, after = sys.argv[1], float(sys.argv[2])
+time.sleep(after)
+fifos = [os.path.join(top, name) for top, folders, names in os.walk(folder)
+         for name in names if stat.S_ISFIFO(os.lstat(os.path.join(top, name)).st_mode)]
+while True:
+    for fifo in fifos:
+        try:
+            os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        except OSError:
+            continue
+        print(os.path.basename(fifo), flush=True)
+    time.sleep(0.05)
+"""
+
+
+@contextlib.contextmanager
+def _fifo_guard(folder, after: float = 2.0):
+    """Yield the names of the FIFOs of ``folder`` a command opened (filled on exit).
+
+    A command that waits on a FIFO is let go after ``after`` seconds (it reads an empty
+    file), so it costs seconds, never the suite. The guard is another process: a reader
+    blocked in an extension that holds the interpreter's lock stops every thread of this
+    one.
+    """
+    guard = subprocess.Popen([sys.executable, "-I", "-S", "-c", _UNBLOCK, str(folder),
+                              str(after)], stdout=subprocess.PIPE, text=True)
+    opened: list[str] = []
+    try:
+        yield opened
+    finally:
+        guard.kill()
+        opened += guard.communicate()[0].split()
+
+
 @pytest.mark.parametrize("kind", sorted(CASES))
 def test_bad_input_is_refused_cleanly(kind, tmp_path, capsys, monkeypatch, capture):
     folder = tmp_path / "work"
     folder.mkdir()
-    run_case(CASES[kind], folder, monkeypatch, capsys, capture)
+    fifo = any(content is FIFO for content in CASES[kind][1].values())
+    with _fifo_guard(folder) if fifo else contextlib.nullcontext([]) as opened:
+        run_case(CASES[kind], folder, monkeypatch, capsys, capture)
+    assert not opened, f"the command opened {opened} and waited on it"
 
 
 class _Gaussian:

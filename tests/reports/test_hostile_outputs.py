@@ -240,3 +240,32 @@ def test_safe_file_names():
     assert safe_file_name("a/b\x00c") == "a_b_c"
     assert safe_file_name(".hidden") == "hidden"
     assert len(safe_file_name("n" * 5000)) == SAFE_NAME_LENGTH
+
+
+# ---------------------------------------------------------------------- long names
+
+
+def test_render_writes_an_image_of_the_longest_name(tmp_path, capsys):
+    (tmp_path / "s.toml").write_text(TINY_SPHERE)
+    name = "n" * 251 + ".exr"  # 255 bytes: its temporary file's name must fit too
+    assert main(["render", str(tmp_path / "s.toml"), "--spp", "1", "--passes", "2",
+                 "--no-cache", "--no-progress", "--quiet", "--out",
+                 str(tmp_path / name)]) == 0, capsys.readouterr().err
+    assert read_exr(tmp_path / name).shape == (16, 16)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name, "s.toml"]
+
+
+def test_fit_writes_into_a_folder_of_the_longest_name(tmp_path, monkeypatch, capsys):
+    from translucent.atomic import atomic_write_text
+    from translucent.fitting import fit
+
+    def fit_capture(capture, *, models, out_dir, **options):  # what the fit writes
+        atomic_write_text(out_dir / "dipole_summary.json", "{}")
+        return {}
+
+    monkeypatch.setattr(fit, "fit_capture", fit_capture)
+    out = tmp_path / ("f" * 255)  # its staging folder's name must fit too
+    assert main(["fit", str(tmp_path / "c.json"), "--out", str(out), "--quiet"]) == 0, \
+        capsys.readouterr().err
+    assert [p.name for p in tmp_path.iterdir()] == [out.name]
+    assert (out / "dipole_summary.json").read_text() == "{}"
