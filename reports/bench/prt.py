@@ -42,7 +42,7 @@ from ...errors import check_count
 from ...fast import prt
 from ...materials import Dipole, measured_medium
 from ...scenes import Camera, PointLight, Scene, SceneObject, geometry_image, icosphere
-from . import count_list, steps_bar, write_figures
+from . import count_list, is_quick, steps_bar, write_figures
 
 #: Targets of the task on this 2-core machine.
 TARGET_EDIT_FPS = 500.0
@@ -54,8 +54,16 @@ RADIUS_MM = 10.0
 LIGHT_DISTANCE = 6.4
 
 
+#: ``--quick``: a 642-vertex sphere, 256 samples, a 17 x 17 geometry image, a few frames.
+QUICK_ARGUMENTS = {"vertices": 642, "samples": "256", "spatial_rows": 17, "frames": 2,
+                   "edits": 3, "error_vertices": 16, "size": 16}
+
+
 def add_arguments(parser):
-    """Options of ``translucent bench prt``."""
+    """Options of ``translucent bench prt``.
+
+    ``--quick`` also measures the bandwidth on 8 MB and shadow rays in one batch of 1024.
+    """
     parser.add_argument("--vertices", type=int, default=20000,
                         help="vertex count of the icosphere (default 20000: 20252 vertices)")
     parser.add_argument("--samples", default="16384,65536",
@@ -187,7 +195,7 @@ def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -
     scene = bench_scene(mesh, args.size)
     start_wall, start_cpu = time.perf_counter(), time.process_time()
     with private_cache(prefix="bench_prt_"):
-        state = prt.precompute(scene, samples=samples, progress=True)
+        state = prt.precompute(scene, samples=samples)
     precompute_wall = time.perf_counter() - start_wall
     precompute_cpu = time.process_time() - start_cpu
     transfer = state.transfers[0]
@@ -277,14 +285,13 @@ def error_sweep(samples: int = 4096) -> dict:
             rows = []
             for count in (2, 4, 6, 8, 10, 12, 14, 16):
                 state = prt.precompute(bench_scene(mesh, 32), samples=samples, basis=basis,
-                                       basis_terms=count, progress=False)
+                                       basis_terms=count)
                 rows.append((count, max(brute_force_error(state, measured_medium(n), 642)
                                         for n in names)))
             result["basis_terms"][basis] = rows
         rows = []
         for terms in (32, 64, 128, 256, 512, 1024):
-            state = prt.precompute(bench_scene(mesh, 32), samples=samples, terms=terms,
-                                   progress=False)
+            state = prt.precompute(bench_scene(mesh, 32), samples=samples, terms=terms)
             rows.append((terms, max(brute_force_error(state, measured_medium(n), 642)
                                     for n in names),
                          state.transfers[0].statistics["megabytes"]))
@@ -333,7 +340,7 @@ def run(args) -> int:
         check_output_file(args.png, "--png", what="a file name for the figure")
     bar = steps_bar("bench prt", 2 + len(counts) + bool(args.spatial_rows))
     bar.set_postfix_str("memory bandwidth")
-    bandwidth = memory_bandwidth()
+    bandwidth = memory_bandwidth(8, 2) if is_quick() else memory_bandwidth()
     bar.update()
     print(f"memory bandwidth: copy {bandwidth['copy_gb_per_s']:.1f} GB/s, read "
           f"{bandwidth['read_gb_per_s']:.1f} GB/s (CPU time: "
@@ -343,7 +350,7 @@ def run(args) -> int:
 
     mesh = mesh_with_vertices("icosphere", args.vertices)
     bar.set_postfix_str("shadow rays")
-    rays = shadow_ray_timings(mesh)
+    rays = shadow_ray_timings(mesh, (1024,), 1) if is_quick() else shadow_ray_timings(mesh)
     bar.update()
     for row in rays:
         print(f"shadow rays: {row['engine']:<8} {row['rays']:>6} rays {row['ms']:8.1f} ms "
@@ -385,6 +392,7 @@ def run(args) -> int:
         print(f"{r['label']} / {r['samples']}: editing {r['edit_fps']:.0f} fps "
               f"({_status(r['edit_fps'], TARGET_EDIT_FPS)} {TARGET_EDIT_FPS:.0f}), "
               f"relighting {r['relight_fps']:.1f} fps "
+              f"(editing {r['edit_over_relight_speed']:.0f}x faster) "
               f"({_status(r['relight_fps'], TARGET_RELIGHT_FPS)} {TARGET_RELIGHT_FPS:.0f}), "
               f"bandwidth fraction {r['bandwidth_fraction']:.2f} "
               f"({_status(r['bandwidth_fraction'], TARGET_BANDWIDTH_FRACTION)} "
