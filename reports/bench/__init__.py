@@ -1,5 +1,48 @@
 """Benchmarks, one module each (``translucent bench <module>``)."""
 
+import contextlib
+import contextvars
+
+#: Whether the running benchmark is a ``--quick`` smoke run (its JSON says so).
+_QUICK = contextvars.ContextVar("translucent_bench_quick", default=False)
+
+
+@contextlib.contextmanager
+def quick_run():
+    """Mark the figures written inside the block as a quick run's (``"quick": true``)."""
+    token = _QUICK.set(True)
+    try:
+        yield
+    finally:
+        _QUICK.reset(token)
+
+
+def is_quick() -> bool:
+    """Return whether the running benchmark is a ``--quick`` smoke run."""
+    return _QUICK.get()
+
+
+def quick_knobs(methods) -> dict | None:
+    """Return each method's cheap knobs (its ``QUICK_KNOBS``) in a quick run; else None.
+
+    Parameters
+    ----------
+    methods : iterable of str
+        Registered fast methods.
+
+    Returns
+    -------
+    dict or None
+        Method name -> knobs, for the benches' ``knobs`` arguments; None (each method's
+        defaults) outside a ``--quick`` run.
+    """
+    if not is_quick():
+        return None
+    from ...fast.registry import method
+
+    return {name: dict(getattr(method(name), "QUICK_KNOBS", {}) or {}) for name in methods}
+
+
 #: A bench's progress bar appears once a step has lasted this long (seconds), as the
 #: reference renders' do.
 PROGRESS_DELAY_SECONDS = 1.0
@@ -144,5 +187,6 @@ def write_figures(path, name: str, figures: dict):
     from ...atomic import atomic_write_text
 
     out = Path(path) if path else Path(f"bench_{name}.json")
+    figures = {**figures, "quick": is_quick()}
     atomic_write_text(out, json.dumps(json_figures(figures), indent=2, allow_nan=False) + "\n")
     return out

@@ -65,16 +65,33 @@ def measure_profiles(scene, medium, reference, mask, methods, profiles, default_
         table[profile] = found = _model_error(scene, reference, mask, profile, spp=spp,
                                               passes=passes, metrics=metrics, noise=noise)
         model = found.pop("model")
+        refuses_medium = _refuses_medium(profile, medium)
         for name in methods:
             refusal = refused_profile(method(name), profile)
-            if refusal is not None:
-                found["methods"][name] = {"status": "not applicable", "reason": refusal.sentence}
+            if refusal is not None or refuses_medium:
+                found["methods"][name] = {"status": "not applicable", "reason":
+                                          refusal.sentence if refusal else refuses_medium}
                 continue
             run = (default_runs[name] if profile == DEFAULT_PROFILE else
                    run_method(name, scene, {**(knobs or {}).get(name, {}), "profile": profile}))
             found["methods"][name] = _entry(run, reference, model, mask, curve, metrics)
     return {"profiles": table, "best": _best(table), "fastest": _fastest(table),
             "path_tracing": curve.as_dict() if curve is not None else None}
+
+
+def _refuses_medium(profile: str, medium) -> str | None:
+    """Return why ``profile`` takes no ``medium`` (burley_dmfp without absorption); else None.
+
+    A method cannot run a profile its medium has none of: "not applicable", as a profile the
+    method refuses, not "failed".
+    """
+    from ...fast.knobs import radial_profile
+
+    try:
+        radial_profile(profile, medium)
+    except InputError as error:
+        return f"the profile refuses this medium: {error.reason}"
+    return None
 
 
 def _model_error(scene, reference, mask, profile, *, spp, passes, metrics, noise) -> dict:

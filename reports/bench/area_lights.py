@@ -25,6 +25,10 @@ from . import count_list, steps_bar, write_figures
 DEFAULT_SCENES = ("bowl", "cornell_block")
 
 
+#: ``--quick``: a Cornell block (its committed reference), one and four emitters, one frame.
+QUICK_ARGUMENTS: dict = {"scenes": "cornell_block", "counts": "1,4", "frames": 1}
+
+
 def add_arguments(parser):
     """Scenes, counts, frames."""
     parser.add_argument("--scenes", default=",".join(DEFAULT_SCENES),

@@ -57,6 +57,12 @@ VALIDATION_FLOORS = {
 }
 
 
+#: ``--quick``: a 24 x 24 frame, 256 gather samples, two frames, a one-sample baseline.
+QUICK_ARGUMENTS: dict = {"width": 24, "height": 24, "gather_samples": 256, "frames": 2,
+                         "baseline_spp": 1, "validation_width": 16,
+                         "validation_gather_samples": 256, "validation_spp": 4}
+
+
 def add_arguments(parser):
     """Add the options of ``translucent bench brdf_pca``."""
     parser.add_argument("--scene", default="glossy_cornell",

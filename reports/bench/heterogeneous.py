@@ -38,7 +38,7 @@ import numpy as np
 from ...atomic import check_output_folder
 from ...errors import InputError, check_count
 from ...materials import Dipole, measured_medium, measured_medium_names
-from . import count_list, with_size
+from . import count_list, quick_knobs, with_size
 from .model_error import (
     method_cells,
     object_mask,
@@ -129,8 +129,9 @@ def measure_checker(scene, *, spp: int = DEFAULT_SPP, passes: int = DEFAULT_PASS
     reference = render(scene, spp=spp, passes=passes, progress=False)
     noise = reference_noise(reference, mask)
     results = {}
+    knobs = quick_knobs(methods) or {}
     for name in methods:
-        run = run_method(name, scene, None)
+        run = run_method(name, scene, knobs.get(name))
         entry = {"status": run.status, "reason": run.reason,
                  "precompute_seconds": run.precompute_seconds,
                  "frame_seconds": run.frame_seconds}
@@ -269,6 +270,11 @@ def markdown(result: dict) -> str:
             cells += method_cells(row["methods"].get(name, {}))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+#: ``--quick``: a 12-pixel image, a 9-row sphere, two contrasts, one cell size, 4 x 2 spp.
+QUICK_ARGUMENTS: dict = {"size": 12, "rows": 9, "contrasts": "0,1", "cells": "2", "spp": 4,
+                         "passes": 2}
 
 
 def add_arguments(parser):

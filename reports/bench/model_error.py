@@ -46,7 +46,7 @@ from ...atomic import atomic_write_text, check_output_folder
 from ...errors import InputError, check_count
 from ...materials import Dipole, measured_medium, measured_medium_names
 from ..report.split import requested_profiles
-from . import write_figures
+from . import quick_knobs, write_figures
 from ._model_error_profiles import measure_profiles, profiles_markdown
 
 __all__ = [
@@ -530,6 +530,10 @@ def model_error_table(out, *, media=None, methods=METHODS, size: int = DEFAULT_S
 # ---------------------------------------------------------------------- the command
 
 
+#: ``--quick``: one medium at 16 pixels, 4 x 2 spp.
+QUICK_ARGUMENTS: dict = {"media": "Skin1", "size": 16, "spp": 4, "passes": 2}
+
+
 def add_arguments(parser):
     """Options of ``translucent bench model_error``."""
     parser.add_argument("--out", default="model_error",
@@ -573,7 +577,8 @@ def run(args) -> int:
                                size=args.size, spp=args.spp, passes=args.passes,
                                eta=args.eta, json_path=args.json,
                                progress=not args.no_progress, pngs=not args.no_images,
-                               profiles=_split(args.profiles))
+                               profiles=_split(args.profiles),
+                               knobs=quick_knobs(_split(args.methods) or METHODS))
     print(markdown(result), end="")
     print(f"wrote {Path(args.json) if args.json else out / JSON_NAME} and "
           f"{out / MARKDOWN_NAME} in {result['seconds']:.1f} s")

@@ -828,6 +828,11 @@ def command_line(settings: Settings, *, quick: bool = False) -> str:
             f"--burley-photons {settings.burley_photons}")
 
 
+#: ``--quick``: a tiny table (two albedos, eta 1, g 0, Ketchup, 4,000 photons, 1e5 radii timed):
+#: :data:`QUICK`, read by :func:`run`, since the Burley albedos are no option of their own.
+QUICK_ARGUMENTS: dict = {}
+
+
 def add_arguments(parser):
     """Options of ``translucent bench profiles``."""
     parser.add_argument("--out", default="bench_profiles",
@@ -850,9 +855,6 @@ def add_arguments(parser):
     parser.add_argument("--burley-photons", type=int, default=None,
                         help="photons per albedo of the Christensen-Burley comparison "
                              f"(default {BURLEY_PHOTONS:,})")
-    parser.add_argument("--quick", action="store_true",
-                        help="a tiny table (2 albedos, eta 1, g 0, Ketchup, 4,000 photons, "
-                             "1e5 radii timed): what the tests run")
     parser.add_argument("--no-images", action="store_true", help="write no plots")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 

@@ -48,7 +48,7 @@ from ...materials import Dipole, measured_medium
 from ...scenes import RectangularAreaLight, SceneObject
 from ...scenes.raycast import embree_available, ray_engine
 from ...scenes.scene_file import builtin_scene_path, loads_scene
-from . import count_list, steps_bar, write_figures
+from . import count_list, is_quick, steps_bar, write_figures
 
 #: The paper's Table 1, Cornell box (24,640 polygons, GTX 590).
 PAPER = {"relighting fps": 14.0, "translucency change fps": 4.0,
@@ -69,6 +69,12 @@ LOW_RANK_REFERENCE_TOLERANCE = 1e-6
 
 #: Columns added to the rank of the randomized range finder (Halko et al. 2011, Sect. 4).
 LOW_RANK_OVERSAMPLING = 10
+
+
+#: ``--quick``: a coarse box (6 wall, 4 block segments), 16 rays, one frame, rank 8, an 8 x 8
+#: sheet for the sampling comparison.
+QUICK_ARGUMENTS: dict = {"wall_subdivisions": 6, "block_subdivisions": 4, "rays": 16,
+                         "frames": 1, "transfer_patches": 300, "low_rank": "8"}
 
 
 def add_arguments(parser):
@@ -452,8 +458,10 @@ def _sampling(out):
 
     profile = DipoleProfile(measured_medium("Skin1"))
     max_d = profile.support_radius(1e-3)
-    scene = Scene([SceneObject("sheet", plane(2.2 * max_d, 2.2 * max_d, subdivisions=24),
-                               profile)], [], Camera([0, 1, 4], [0, 0, 0]))
+    subdivisions = 8 if is_quick() else 24
+    scene = Scene([SceneObject("sheet", plane(2.2 * max_d, 2.2 * max_d,
+                                              subdivisions=subdivisions), profile)], [],
+                  Camera([0, 1, 4], [0, 0, 0]))
     patches = build_patches(scene)
     middle = int(np.argmin(np.linalg.norm(patches.centroid, axis=1)))
     expected = profile.total(max_radius=max_d)

@@ -56,6 +56,10 @@ ESTIMATORS = {
 }
 
 
+#: ``--quick``: a 12-pixel sphere, one sample, two passes, one repeat.
+QUICK_ARGUMENTS: dict = {"size": 12, "spp": 1, "passes": 2, "repeats": 1}
+
+
 def add_arguments(parser):
     """Add the scene, sample counts, repeats, image size and the integrator comparison."""
     parser.add_argument("--scene", default="sphere", help="built-in scene name or TOML "

@@ -63,6 +63,13 @@ TARGET_SPEEDUP = 5.0
 EQUAL_ERROR_RATIO = 1.0
 
 
+#: ``--quick``: a 32 x 24 frame, 32-pixel irradiance, one frame, one setting of each kind.
+QUICK_ARGUMENTS: dict = {"width": 32, "height": 24, "irradiance_resolution": 32, "frames": 1,
+                         "validation_stride": 16, "validation_width": 16,
+                         "validation_irradiance": 16, "epsilons": "0.00025",
+                         "level_samplings": "1", "levels_list": "5"}
+
+
 def add_arguments(parser):
     """Options of ``translucent bench splatting``."""
     parser.add_argument("--scene", default="heterogeneous",

@@ -44,7 +44,7 @@ import numpy as np
 from ...atomic import atomic_save_figure, check_output_file
 from ...errors import InputError, check_count
 from ..report.speedup import equal_error_seconds, path_tracing_point
-from . import at_width, steps_bar, write_figures
+from . import at_width, quick_knobs, steps_bar, write_figures
 
 __all__ = ["DEFAULT_SCENES", "add_arguments", "declared_ladders", "run", "sweep",
            "path_tracing_point", "equal_error_seconds"]
@@ -65,6 +65,12 @@ RELIGHT_FRAMES = 3
 #: Smallest relative MSE drawn on the log axis: a noise-discounted relMSE can come out at
 #: or below zero when an image is closer to the truth than the reference's noise resolves.
 PLOT_FLOOR = 1e-6
+
+
+#: ``--quick``: the sphere at 12 pixels, path tracing to 2 spp, a 4 x 2 spp reference, in this
+#: process; each ladder is its cheapest point on the method's ``QUICK_KNOBS``.
+QUICK_ARGUMENTS: dict = {"scene": ["sphere"], "size": 12, "max_spp": 2, "reference_spp": 4,
+                         "reference_passes": 2, "serial": True}
 
 
 def add_arguments(parser):
@@ -263,7 +269,10 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
             ladders, notes = _ladders(module, name)
             entry["methods"][name] = {"status": "ok", "notes": notes,
                                       "ladders": {ladder: [] for ladder in ladders}}
+            cheap = (quick_knobs([name]) or {}).get(name)
             for ladder, points in ladders.items():
+                if cheap is not None:  # a quick run: the cheapest point, on cheap knobs
+                    points = [{**cheap, **points[0]}]
                 for knobs in points[-ladder_points:] if ladder_points else points:
                     tasks.append(("method", scene, name, knobs))
                     owners.append((scene.name, "method", name, ladder))

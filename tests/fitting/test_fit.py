@@ -173,18 +173,6 @@ def test_subedit_outputs_load_as_a_subedit_material(tmp_path):
     np.testing.assert_allclose(material.log_profile[0, 0].T, knots, rtol=1e-6)
 
 
-def test_command_line_capture_and_fit(tmp_path, capsys):
-    sidecar = tmp_path / "skin.json"
-    assert main(["capture", "skin1", "--generator", "dipole", "--size", "32", "--seed", "1",
-                 "--out", str(sidecar), "--pixel-size", "0.3"]) == 0
-    assert sidecar.is_file() and (tmp_path / "skin.exr").is_file()
-    code = main(["fit", str(sidecar), "--max-steps", "300", "--walkers", "16", "--no-progress",
-                 "--out", str(tmp_path / "fit")])
-    output = capsys.readouterr().out
-    assert code == 1 and "NOT converged" in output  # 300 steps cannot reach 50 tau
-    assert (tmp_path / "fit" / "dipole_material.toml").is_file()
-
-
 def test_command_line_bad_input_exits_2(tmp_path, capsys):
     (tmp_path / "bad.json").write_text(json.dumps({"image": "x.exr"}))
     assert main(["fit", str(tmp_path / "bad.json")]) == 2

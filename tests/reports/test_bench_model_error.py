@@ -371,3 +371,32 @@ def test_the_table_keeps_no_precomputation_larger_than_the_reports(tmp_path, mon
         model_error_table(tmp_path / "out", media=("Skin1",), progress=False, **TINY)
     assert seen == [str(REPORT_CACHE_ENTRY_LIMIT)]
     assert ENTRY_LIMIT_VARIABLE not in os.environ  # restored
+
+
+def test_a_profile_that_refuses_the_medium_is_not_applicable_not_failed(monkeypatch):
+    # burley_dmfp scales a mean free path that is infinite without absorption (Spectralon):
+    # no method can run it there, which is "not applicable", as a profile a method refuses
+    from types import SimpleNamespace
+
+    import translucent.reports.report.runs as runs
+    import translucent.reports.report.speedup as speedup
+    from translucent.reports.bench import _model_error_profiles as axis
+
+    monkeypatch.setattr(speedup, "path_tracing_ladder", lambda scene, spp: [])
+    monkeypatch.setattr(speedup, "scored_curve", lambda *arguments: None)
+    monkeypatch.setattr(axis, "_model_error", lambda *arguments, **options: {
+        "error": "not rendered here", "model": None, "methods": {}})
+    ran = []
+    monkeypatch.setattr(runs, "run_method", lambda *arguments, **options: ran.append(arguments))
+    stub = SimpleNamespace(status="failed", reason="not run here")
+    from translucent.materials import measured_medium
+
+    table = axis.measure_profiles(None, measured_medium("Spectralon"), None, None,
+                                  ("splatting", "radiosity"), ["burley_dmfp"],
+                                  {"splatting": stub, "radiosity": stub}, spp=1, passes=2,
+                                  metrics=None, noise=None)
+    refused = table["profiles"]["burley_dmfp"]["methods"]
+    assert {entry["status"] for entry in refused.values()} == {"not applicable"}
+    assert all("needs sigma_a > 0" in entry["reason"] for entry in refused.values())
+    assert ran == []
+    assert axis._refuses_medium("burley_dmfp", measured_medium("Skin1")) is None
