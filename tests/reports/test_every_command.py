@@ -166,6 +166,7 @@ def test_capture_import(tmp_path):
                                              saturation_level=1e9))
     tifffile.imwrite(tmp_path / "photo.tif", np.clip(np.rint(pixels + 100), 0, 65535)
                      .astype(np.uint16))
-    result = run_ok("capture-import", tmp_path / "photo.tif", "--black-level", "100",
+    # the spelling the documentation gives; the parser lists it as capture-import
+    result = run_ok("capture", "import", tmp_path / "photo.tif", "--black-level", "100",
                     "--pixel-size-mm", "0.2", "--out", tmp_path / "c.json", cwd=tmp_path)
     assert (tmp_path / "c.json").is_file() and "translucent fit" in result.stdout

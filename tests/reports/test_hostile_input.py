@@ -75,6 +75,20 @@ def _meshed(name: str) -> str:
 #: A named pipe that nothing writes: a command that opened it would wait for ever.
 FIFO = Made(os.mkfifo)
 
+
+def _device(path):
+    """Make a character device node of the test's own (reads as empty), never the machine's."""
+    import stat
+
+    try:
+        os.mknod(path, stat.S_IFCHR | 0o600, os.makedev(1, 3))
+    except PermissionError:
+        pytest.skip("making a device node needs root")
+
+
+#: A device where a file is expected.
+DEVICE = Made(_device)
+
 #: A sidecar whose beam is measured in ``beam.exr``.
 MEASURED_BEAM_SIDECAR = {"image": "small.exr", "pixel_size_mm": 0.25, "incident_px": [16, 16],
                          "side": "reflection", "black_level": 256.0,
@@ -464,6 +478,11 @@ CASES = {
         ("compare", "test image", ["compare", "{d}/ref.exr", "{d}/a.exr"],
          {"ref.exr": GOOD_EXR}, "a.exr"),
     )},
+    "render: scene file a device": (["render", "{d}/s.toml"], {"s.toml": DEVICE},
+                                    ["s.toml", "device"]),
+    "fit: image a device": (["fit", "{d}/c.json", "--out", "{d}/fit"],
+                            {"c.json": CAPTURE["c.json"], "small.exr": DEVICE},
+                            ["small.exr", "device"]),
     "report: renderer's image a folder": (["report", "sphere", "--images", "{d}/im", "--out",
                                            "{d}/r"], {"im/other/sphere.exr/keep": "x"},
                                           ["im/other/sphere.exr", "is a folder"]),
