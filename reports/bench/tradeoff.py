@@ -68,9 +68,11 @@ PLOT_FLOOR = 1e-6
 
 
 #: ``--quick``: the sphere at 12 pixels, path tracing to 2 spp, a 4 x 2 spp reference, in this
-#: process; each ladder is its cheapest point on the method's ``QUICK_KNOBS``.
+#: process; radiosity and splatting, each ladder at its cheapest point on the method's
+#: ``QUICK_KNOBS`` (the sweep treats every method alike).
 QUICK_ARGUMENTS: dict = {"scene": ["sphere"], "size": 12, "max_spp": 2, "reference_spp": 4,
-                         "reference_passes": 2, "serial": True}
+                         "reference_passes": 2, "serial": True,
+                         "methods": "radiosity,splatting"}
 
 
 def add_arguments(parser):

@@ -15,6 +15,13 @@ FIT_MODELS = ("dipole", "walk", "subedit", "both", "better_dipole", "quantized_d
               "photon_beam_diffusion", "burley_searchlight", "burley_transmission",
               "burley_dmfp", "burley_cycles")
 
+#: The models the fast tier fits: each kind of model once (the analytic dipole, the walk's
+#: table, SubEdit beside the dipole, one profile read from its reduced table, one of
+#: Burley's). The other named profiles take the same path as these two (a reduced table
+#: and its NamedModel, each table checked in tests/fitting/test_named_models.py); they run
+#: in the slow tier, about 8 s each.
+FAST_TIER = ("dipole", "walk", "both", "photon_beam_diffusion", "burley_cycles")
+
 
 def test_the_models_are_those_the_fit_command_offers():
     from translucent.fitting.named_models import NAMED_MODELS
@@ -38,7 +45,9 @@ def test_capture(capture):
     assert (folder / sidecar["image"]).is_file()
 
 
-@pytest.mark.parametrize("model", FIT_MODELS)
+@pytest.mark.parametrize("model", [model if model in FAST_TIER else
+                                   pytest.param(model, marks=pytest.mark.slow)
+                                   for model in FIT_MODELS])
 def test_fit_with_every_model(capture, tmp_path, model):
     folder, made = capture
     assert made.returncode == 0, explain(made)
