@@ -4,6 +4,7 @@ import math
 
 import numba
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from translucent.fast import splatting
@@ -285,3 +286,22 @@ def test_add_scaled_by_texel_is_the_numpy_expression(seed):
     texel = rng.integers(0, 11, (5, 7))
     assert np.array_equal(buffer_kernels.add_scaled_by_texel(exitance, upsampled, factors, texel),
                           exitance + factors[texel] * upsampled)
+
+
+@pytest.mark.slow
+def test_rasterizer_bits_do_not_depend_on_threads_with_two_threads():
+    # the fast tier runs one numba thread a process (tox.ini): there the test above compares
+    # a single-threaded rasterizer with itself; here it runs with two threads
+    import os
+    import subprocess
+    import sys
+
+    if numba.get_num_threads() > 1:
+        pytest.skip("this process has several numba threads: the test above compared them")
+    test = f"{__file__}::test_rasterizer_bits_do_not_depend_on_bands_outlines_or_threads"
+    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                             "-p", "no:xdist", test],
+                            env={**os.environ, "NUMBA_NUM_THREADS": "2"}, capture_output=True,
+                            text=True, timeout=1200)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    assert "1 passed" in result.stdout
