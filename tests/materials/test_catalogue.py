@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import numpy as np
 import pytest
 from translucent.errors import InputError
@@ -260,13 +262,19 @@ intensity = 100.0
 def test_the_prt_command_renders_one(tmp_path, capsys):
     from translucent.image import Image
     from translucent.reports.cli import main
+    from translucent.scenes import load_scene
 
+    # the built-in sphere at 16 x 16 pixels on its coarsest mesh: the name is what is checked
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(Path(load_scene("sphere").source).read_text(encoding="utf-8")
+                     .replace("width = 96", "width = 16").replace("height = 96", "height = 16")
+                     .replace("subdivisions = 4", "subdivisions = 1"), encoding="utf-8")
     out = tmp_path / "milk.exr"
-    assert main(["approx", "prt", "sphere", "--material", "Lowfat Milk", "--samples", "256",
+    assert main(["approx", "prt", str(scene), "--material", "Lowfat Milk", "--samples", "256",
                  "--no-progress", "--out", str(out)]) == 0
     rgb = Image.read(out).rgb
     assert np.all(np.isfinite(rgb)) and rgb.mean() > 0
-    assert main(["approx", "prt", "sphere", "--material", "Lowfat Jelly", "--out",
+    assert main(["approx", "prt", str(scene), "--material", "Lowfat Jelly", "--out",
                  str(tmp_path / "jelly.exr")]) == 2
     assert "valid names: Apple" in capsys.readouterr().err
 

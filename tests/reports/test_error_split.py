@@ -212,7 +212,7 @@ def test_a_report_splits_each_profiles_error_against_its_model_reference(tmp_pat
     out = tmp_path / "report"
     code = main(["report", str(scene), "--out", str(out), "--baseline",
                  str(tmp_path / "baseline.json"), "--update-baseline", "--methods",
-                 "flatprofile", "--serial", "--no-progress", "--spp", "16", "--passes", "2"]
+                 "flatprofile", "--serial", "--no-progress", "--spp", "4", "--passes", "2"]
                 + (["--profiles", ",".join(profiles)] if profiles else []))
     assert code == 0
     data = json.loads((out / "metrics.json").read_text())["scenes"]["tiny_sphere"]

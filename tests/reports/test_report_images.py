@@ -17,7 +17,7 @@ def _report(tmp_path, images, *extra):
     scene = tmp_path / "tiny_images.toml"
     scene.write_text(TINY_SCENE)
     return main(["report", str(scene), "--images", str(images), "--out",
-                 str(tmp_path / "report"), "--serial", "--no-progress", "--spp", "16",
+                 str(tmp_path / "report"), "--serial", "--no-progress", "--spp", "4",
                  "--passes", "2", "--baseline", str(tmp_path / "baseline.json"),
                  "--update-baseline", *extra])
 
