@@ -75,18 +75,6 @@ def test_bad_scene_file_exits_2(tmp_path, capsys):
     assert not (tmp_path / "x.exr").exists()
 
 
-def test_bench_reference_writes_its_figures(scene_file, tmp_path, capsys):
-    result = tmp_path / "bench.json"
-    assert main(["bench", "reference", "--scene", str(scene_file), "--spp", "1", "--passes",
-                 "2", "--repeats", "1", "--size", "0", "--json", str(result)]) == 0
-    figures = json.loads(result.read_text())
-    assert figures["spp"] == 1 and figures["passes"] == 2
-    assert len(figures["ratios"]) == 1 and figures["median_ratio"] > 0
-    assert len(figures["cpu_ratios"]) == 1 and figures["median_cpu_ratio"] > 0
-    printed = capsys.readouterr().out
-    assert "median wall-clock ratio" in printed and "median CPU-time ratio" in printed
-
-
 @pytest.mark.slow  # three integrators compiled: about 11 s here
 def test_bench_reference_compares_integrators(scene_file, tmp_path):
     result = tmp_path / "integrators.json"

@@ -132,6 +132,9 @@ def _radiosity(figures):
 
 
 def _reference(figures):
+    assert figures["spp"] == 1 and figures["passes"] == 2
+    assert len(figures["ratios"]) == 1 and figures["median_ratio"] > 0
+    assert len(figures["cpu_ratios"]) == 1 and figures["median_cpu_ratio"] > 0
     return [figures], ("median_ratio", "median_cpu_ratio", "load_seconds")
 
 
@@ -169,6 +172,11 @@ BENCHMARKS = {
 }
 
 
+#: What a benchmark's quick run prints, beside its JSON.
+PRINTED = {"reference": ("median wall-clock ratio", "median CPU-time ratio"),
+           "area_lights": ("cornell_block: splatting on block",)}
+
+
 def check_quick_bench(name, folder):
     """Run ``translucent bench NAME --quick`` in ``folder``; check its exit and its JSON."""
     import json
@@ -178,6 +186,8 @@ def check_quick_bench(name, folder):
     assert result.returncode == 0, explain(result)
     assert "Traceback" not in result.stderr, explain(result)
     assert f"quick run of bench {name}" in result.stdout
+    for words in PRINTED.get(name, ()):
+        assert words in result.stdout, explain(result)
     figures = json.loads(out.read_text())
     keys, rows_of = BENCHMARKS[name]
     assert figures["quick"] is True
@@ -193,4 +203,6 @@ def check_quick_bench(name, folder):
 #: The benchmarks in two test files, so that the two test processes share them (the tests
 #: run ``--dist loadfile``): those that render references, and the others.
 QUICK_RENDERING = ("reference", "tradeoff", "model_error", "heterogeneous", "area_lights")
-QUICK_OTHERS = tuple(sorted(set(BENCHMARKS) - set(QUICK_RENDERING)))
+#: Benchmarks whose quick run is the fixture of their own test file, which reads its output.
+QUICK_ELSEWHERE = {"profiles": "test_bench_profiles.py"}
+QUICK_OTHERS = tuple(sorted(set(BENCHMARKS) - set(QUICK_RENDERING) - set(QUICK_ELSEWHERE)))

@@ -1,6 +1,5 @@
 """``translucent bench profiles``: every registered profile against the photon random walk."""
 
-import json
 import math
 
 import numpy as np
@@ -60,12 +59,13 @@ def exact_total_reflectance(albedo):
 
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
-    out = tmp_path_factory.mktemp("bench_profiles")
-    json_path = out / "figures.json"
-    code = main(["bench", "profiles", "--quick", "--out", str(out), "--json", str(json_path),
-                 "--no-progress"])
-    assert code == 0
-    return out, json.loads(json_path.read_text())
+    """``translucent bench profiles --quick`` through the console script: the smoke run of
+    every benchmark (tests/reports/smoke.py) for this one, whose output the tests here read."""
+    from smoke import check_quick_bench
+
+    folder = tmp_path_factory.mktemp("bench_profiles")
+    figures = check_quick_bench("profiles", folder)
+    return folder / "bench_profiles", figures
 
 
 # ---------------------------------------------------------------------- the quick table

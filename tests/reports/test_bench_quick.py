@@ -6,13 +6,24 @@ JSON; each is checked for exit 0, the JSON's keys and a finite figure in each ro
 are in ``test_bench_quick_methods.py``.
 """
 
+from pathlib import Path
+
 import pytest
-from smoke import BENCHMARKS, QUICK_OTHERS, QUICK_RENDERING, check_quick_bench, listed
+from smoke import (
+    BENCHMARKS,
+    QUICK_ELSEWHERE,
+    QUICK_OTHERS,
+    QUICK_RENDERING,
+    check_quick_bench,
+    listed,
+)
 
 
 def test_every_benchmark_the_help_lists_has_a_quick_check():
     assert sorted(listed("bench")) == sorted(BENCHMARKS)
-    assert sorted(QUICK_RENDERING + QUICK_OTHERS) == sorted(BENCHMARKS)
+    assert sorted(QUICK_RENDERING + QUICK_OTHERS + tuple(QUICK_ELSEWHERE)) == sorted(BENCHMARKS)
+    for name, test_file in QUICK_ELSEWHERE.items():
+        assert f'check_quick_bench("{name}"' in (Path(__file__).parent / test_file).read_text()
 
 
 def test_every_quick_value_is_an_option_of_its_benchmark():

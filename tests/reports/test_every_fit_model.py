@@ -15,12 +15,11 @@ FIT_MODELS = ("dipole", "walk", "subedit", "both", "better_dipole", "quantized_d
               "photon_beam_diffusion", "burley_searchlight", "burley_transmission",
               "burley_dmfp", "burley_cycles")
 
-#: The models the fast tier fits: the analytic dipole, and SubEdit beside it. The walk's
-#: table is fitted in the fast tier by ``bench fitting --quick`` (its walk-made capture),
-#: and every named profile's reduced table is checked in tests/fitting/test_named_models.py;
-#: their fits through the command line (8-19 s each on a fresh environment) run in the
-#: slow tier.
-FAST_TIER = ("dipole", "both")
+#: The model the fast tier fits: the dipole, the default. SubEdit, the walk's table and a
+#: named profile are fitted in the fast tier by ``bench fitting --quick`` and in-process by
+#: tests/fitting (each named profile's reduced table in test_named_models.py); their fits
+#: through the command line (8-19 s each on a fresh environment) run in the slow tier.
+FAST_TIER = ("dipole",)
 
 
 def test_the_models_are_those_the_fit_command_offers():
