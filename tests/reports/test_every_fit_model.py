@@ -3,6 +3,7 @@
 The capture command makes a 24-pixel dipole capture of Skin1; each fit model samples it
 with short chains (16 walkers, 200 steps: too few to converge, which the fit says with
 exit 1, as the documentation promises) and writes its summary, material file and plots.
+The fast tier fits the dipole (:data:`FAST_TIER`); the slow tier every model.
 """
 
 import json
