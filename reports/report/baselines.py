@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ...atomic import check_input_file
 from ...errors import InputError
 from ..metrics.registry import (
     METRIC_LABELS,
@@ -64,6 +66,9 @@ def load_baseline(path, *, required: bool = False) -> dict:
     if path.is_dir():
         raise InputError("is a folder; give the baseline's JSON file", file=path,
                          field="--baseline", value=str(path))
+    if os.path.lexists(path) and not path.is_file():
+        # a FIFO, a device, a link to nothing: said for what it is, before it is opened
+        check_input_file(path, "--baseline", what="baseline file")
     if not path.is_file():
         if required:
             raise InputError("no such baseline file (run with --update-baseline to create it)",

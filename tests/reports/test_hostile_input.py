@@ -473,6 +473,8 @@ CASES = {
         ("capture-import", "beam image", ["capture-import", "{d}/photo.exr", "--beam-image",
                                           "{d}/beam.exr", "--pixel-size-mm", "0.1", "--out",
                                           "{d}/c.json"], {"photo.exr": GOOD_EXR}, "beam.exr"),
+        ("report", "baseline", ["report", "sphere", "--baseline", "{d}/b.json", "--out",
+                                "{d}/r"], {}, "b.json"),
         ("compare", "reference", ["compare", "{d}/ref.exr", "{d}/a.exr"], {"a.exr": GOOD_EXR},
          "ref.exr"),
         ("compare", "test image", ["compare", "{d}/ref.exr", "{d}/a.exr"],
