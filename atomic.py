@@ -40,7 +40,7 @@ from .temporaries import ORPHAN_AGE_SECONDS, ORPHAN_NAME, sweep_orphans, tempora
 __all__ = ["ORPHAN_AGE_SECONDS", "ORPHAN_NAME", "OutputError", "atomic_path",
            "atomic_write_bytes", "atomic_write_text", "check_input_file", "check_output_file",
            "check_output_folder", "claim_output", "failed_file", "guarded_files", "is_stream",
-           "make_output_folder", "note_input", "output_failure", "output_folder",
+           "make_output_folder", "node_kind", "note_input", "output_failure", "output_folder",
            "safe_file_name", "sweep_orphans"]
 
 #: The suffixes a temporary file keeps (some writers pick a format from it); another
@@ -342,21 +342,26 @@ def check_input_file(path, field: str, *, file=None, what: str = "file") -> Path
     if not stat.S_ISREG(found.st_mode):
         # refused before it is opened: opening a FIFO waits for a writer that may never
         # come, and a device (/dev/zero) never ends
-        raise InputError(f"is {_node_kind(found.st_mode)}, not a regular file; give a {what}",
+        raise InputError(f"is {node_kind(found.st_mode)}, not a regular file; give a {what}",
                          file=file, field=field, value=str(path))
     return Path(path)
 
 
-def _node_kind(mode: int) -> str:
-    """Name the kind of a file that is neither a regular file nor a folder."""
+def node_kind(mode: int) -> str:
+    """Name the kind of a file that is neither a regular file nor a folder (from its mode).
+
+    Examples
+    --------
+    >>> import stat
+    >>> node_kind(stat.S_IFIFO)
+    'a FIFO'
+    """
     if stat.S_ISFIFO(mode):
-        return "a FIFO (named pipe)"
+        return "a FIFO"
     if stat.S_ISSOCK(mode):
         return "a socket"
-    if stat.S_ISCHR(mode):
-        return "a character device"
-    if stat.S_ISBLK(mode):
-        return "a block device"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
     return "a special file"
 
 

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from .atomic import atomic_path
+from .atomic import atomic_path, node_kind
 from .errors import InputError
 
 __all__ = ["cache_dir", "check_folder", "check_settings", "content_hash", "MARKER_NAME",
@@ -133,17 +133,6 @@ def _refused(root: Path, why: str) -> InputError:
                       "writable folder", field="TRANSLUCENT_CACHE", value=str(root))
 
 
-def _kind(mode: int) -> str:
-    """Name what a path that is no folder is."""
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    return "a file"
-
-
 def check_folder(root=None, *, create: bool = True) -> Path:
     """Return the cache folder once it is known to be the cache's own and writable.
 
@@ -199,7 +188,8 @@ def check_folder(root=None, *, create: bool = True) -> Path:
             raise _refused(root, f"it cannot be made: {made.strerror or made}") from None
         return _mark(root)
     if not stat.S_ISDIR(found.st_mode):
-        raise _refused(root, f"it is {_kind(found.st_mode)}, not a folder")
+        kind = "a file" if stat.S_ISREG(found.st_mode) else node_kind(found.st_mode)
+        raise _refused(root, f"it is {kind}, not a folder")
     if _is_marked(root):
         return _probe(root)
     foreign = _first_foreign(root)
