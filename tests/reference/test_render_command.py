@@ -50,6 +50,30 @@ def test_render_writes_the_exr_with_its_variance_and_metadata(scene_file, tmp_pa
     assert f"wrote {out}" in capsys.readouterr().out
 
 
+def test_a_cache_without_room_is_a_warning_and_the_render_still_comes(scene_file, tmp_path,
+                                                                       capsys, monkeypatch):
+    import errno
+    from pathlib import Path
+
+    from translucent import image as image_module
+
+    cache, write = tmp_path / "cache", image_module.write_exr
+
+    def full_cache(path, image):
+        if cache in Path(path).absolute().parents:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return write(path, image)
+
+    monkeypatch.setattr(image_module, "write_exr", full_cache)
+    out = tmp_path / "tiny.exr"
+    assert main(["render", str(scene_file), "--spp", "1", "--passes", "2", "--out",
+                 str(out)]) == 0
+    assert read_exr(out).shape == (6, 8)
+    err = capsys.readouterr().err
+    assert "the cache cannot store" in err and "No space left" in err
+    assert not [p for p in cache.rglob("*") if p.is_file() and p.suffix == ".exr"]
+
+
 @pytest.mark.parametrize(("arguments", "message"), [
     (["no_such_scene"], "no such built-in scene"),
     (["{scene}", "--spp", "0"], "spp = 0: must be an integer >= 1"),
