@@ -21,6 +21,7 @@ from ..knobs import (
     directional_profile_names,
     profile_knob,
 )
+from ..indirect_light import indirect_light_knobs
 from .profile_basis import family_basis
 
 
@@ -97,6 +98,9 @@ KNOBS = KnobSpec([
     Knob("area_light_samples", 16, "samples per area light (shadow rays per sample)",
          kind="int", low=1, high=4096),
     Knob("seed", 0, "random seed of the samples", kind="int", low=0, high=2**32 - 1),
+    # the light the scene's diffuse surfaces bounce onto the object, gathered at the
+    # illumination samples (fast.indirect_light); "off" is Eq. 6 as the paper
+    *indirect_light_knobs(),
     # rendering only: profiles the illumination samples cannot resolve go to the local
     # vector (SAMPLING_BLEND_START); False: Eq. 5-7 as the paper sums them
     Knob("sampling_blend", True, "blend profiles the samples cannot resolve into the local "
@@ -124,7 +128,8 @@ LADDERS: dict = KNOBS.ladders
 #: Cheap knobs for smoke runs and the conformance checks (fast.conformance): 256
 #: illumination samples (4 parts x 8 x 8) on one core, and a basis over a 16 x 16 grid
 #: of media (another profile's basis then builds in about a second).
-QUICK_KNOBS: dict = {"samples": 256, "workers": 1, "basis_samples": 16}
+QUICK_KNOBS: dict = {"samples": 256, "workers": 1, "basis_samples": 16, "indirect_rays": 16,
+                     "indirect_patch_rays": 64}
 
 #: Knobs read when rendering, or that change how and not what is computed: left out of
 #: the cache key.

@@ -18,6 +18,7 @@ from ..base import (
     load_or_precompute,
     refuse_inapplicable,
 )
+from ..indirect_light import precompute_indirect_light
 from .knobs import KNOBS, basis_and_facts, check_knobs
 from .profile_basis import basis_error_notes
 from .state import PRTState
@@ -103,8 +104,7 @@ def precompute(scene, **knobs) -> PRTState:
         kinds = ", ".join(f"'{name}' ({type(scene.object(name).material).__name__})"
                           for name in others)
         log.skip(f"objects left black (the method renders homogeneous translucent objects "
-                 f"only; they are not scored): {kinds}; the light they bounce onto the "
-                 "translucent objects is missing from its image")
+                 f"only; they are not scored): {kinds}")
     for index in _translucent_objects(scene):
         item = scene.objects[index]
         key = transfer_key(item, scene.mm_per_unit, knobs)
@@ -115,12 +115,18 @@ def precompute(scene, **knobs) -> PRTState:
         if not made:
             spatial_decision(item, knobs, log)
         transfers.append(transfer)
-    others = [o.name for o in scene.objects if not isinstance(o.material, Dipole)]
-    if others:
-        log.skip(f"objects {', '.join(others)} are not homogeneous translucent and outside "
-                 f"the camera's view: they only cast shadows")
+    started = time.perf_counter()
+    indirect = precompute_indirect_light(
+        scene, {t.name: (t.samples.positions, t.samples.normals) for t in transfers}, knobs, log)
+    log.seconds["indirect light"] = time.perf_counter() - started
+    hidden = [o.name for o in scene.objects
+              if not isinstance(o.material, Dipole) and o.name not in others]
+    if hidden:
+        log.skip(f"objects {', '.join(hidden)} are not homogeneous translucent and outside "
+                 "the camera's view: they only cast shadows"
+                 + (" and bounce light" if indirect is not None else ""))
     log.seconds["precompute"] = time.perf_counter() - start
-    return PRTState(scene, knobs, transfers, log)
+    return PRTState(scene, knobs, transfers, log, indirect)
 
 
 

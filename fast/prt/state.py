@@ -23,6 +23,7 @@ from ...scenes.scene import (
     ImageEnvironment,
 )
 from ..base import StageLog
+from ..indirect_light import IndirectLight
 from ..knobs import DEFAULT_PROFILE
 from ..wavelets import (
     SpatialWavelet,
@@ -233,6 +234,8 @@ class PRTState:
     knobs: dict
     transfers: list
     log: StageLog = field(default_factory=StageLog)
+    #: the light the scene's diffuse surfaces bounce onto the objects (None: lights alone)
+    indirect: IndirectLight | None = None
 
     def __post_init__(self):
         self.basis = pca_basis_for(self.knobs)
@@ -278,11 +281,20 @@ class PRTState:
         return self._environment[transfer.name]
 
     def irradiance(self, transfer: ObjectTransfer, lights, eta: float) -> np.ndarray:
-        """E at the samples of one object (:func:`sample_irradiance`), (N, 3)."""
-        return sample_irradiance(self.scene, transfer.samples, lights, eta,
-                                 area_light_samples=self.knobs["area_light_samples"],
-                                 environment=self._environment_transfer(transfer, lights),
-                                 seed=self.knobs["seed"])
+        """E at the samples of one object, (N, 3): the lights' (:func:`sample_irradiance`)
+        plus, with indirect light, what the scene's diffuse surfaces bounce
+        (:class:`~translucent.fast.indirect_light.IndirectLight`)."""
+        direct = sample_irradiance(self.scene, transfer.samples, lights, eta,
+                                   area_light_samples=self.knobs["area_light_samples"],
+                                   environment=self._environment_transfer(transfer, lights),
+                                   seed=self.knobs["seed"])
+        if self.indirect is None:
+            return direct
+        radiosity, facts = self.indirect.radiosity(
+            self.scene, lights, bounces=self.knobs["indirect_bounces"],
+            light_samples=self.knobs["area_light_samples"], seed=self.knobs["seed"])
+        self.log.notes["indirect bounces"] = facts
+        return direct + self.indirect.irradiance(transfer.name, radiosity, eta)
 
     def basis_vectors(self, transfer: ObjectTransfer, irradiance) -> np.ndarray:
         """:math:`v_k = {}^wT_k^w E^w` (Eq. 8-9) for all k, shape (3, K + 1, R), float32.

@@ -30,6 +30,7 @@ from ...scenes.mesh_shape import is_convex
 __all__ = [
     "Patches",
     "build_patches",
+    "first_hit_patches",
     "form_factors",
     "needs_form_factors",
     "sphere_form_factors",
@@ -356,7 +357,7 @@ def needs_form_factors(scene) -> str | None:
 
 def form_factors(scene, patches: Patches, *, rays_per_patch: int = 256,
                  threshold: float = 0.0, seed: int = 0, batch: int = 1 << 20,
-                 trace=None) -> tuple[sparse.csr_matrix, dict]:
+                 trace=None, rows=None) -> tuple[sparse.csr_matrix, dict]:
     r"""Form factors :math:`F_{ij}` by ray casting (Sheng et al. 2014, Sect. 5.1, Eq. 1).
 
     For each patch, ``rays_per_patch`` rays leave uniformly distributed points of the
@@ -384,6 +385,8 @@ def form_factors(scene, patches: Patches, *, rays_per_patch: int = 256,
     trace : callable, optional
         The ray query, ``trace(scene, origins, directions)``; defaults to
         :func:`translucent.scenes.raycast.trace`.
+    rows : array_like of int, optional
+        Cast from these patches only (default all); the other rows are empty.
 
     Returns
     -------
@@ -402,20 +405,22 @@ def form_factors(scene, patches: Patches, *, rays_per_patch: int = 256,
         from ...scenes.raycast import trace
     rng = np.random.default_rng(seed)
     count = len(patches)
+    sources = np.arange(count) if rows is None else np.asarray(rows, dtype=np.int64)
     rays = int(rays_per_patch)
     rows_all, cols_all = [], []
     per_batch = max(1, batch // rays)
-    for start in range(0, count, per_batch):
-        chunk = np.arange(start, min(count, start + per_batch))
+    for start in range(0, len(sources), per_batch):
+        chunk = sources[start:start + per_batch]
         rows, origins = patches.sample_points(chunk, rays, rng)
         normals = patches.normal[chunk]
         directions = stratified_cosine_directions(normals, rays, rng).reshape(-1, 3)
         offset = RAY_OFFSET * patches.radius[chunk][rows][:, None] * normals[rows]
-        hit_patch = _first_hit_patches(scene, patches, origins + offset, directions, trace)
+        hit_patch = first_hit_patches(scene, patches, origins + offset, directions, trace)
         valid = hit_patch >= 0
         rows_all.append(chunk[rows[valid]])
         cols_all.append(hit_patch[valid])
-    rows, cols = np.concatenate(rows_all), np.concatenate(cols_all)
+    rows, cols = (np.concatenate(rows_all), np.concatenate(cols_all)) if rows_all else \
+        (np.zeros(0, np.int64), np.zeros(0, np.int64))
     matrix = sparse.coo_matrix((np.full(len(rows), 1.0 / rays), (rows, cols)),
                                shape=(count, count)).tocsr()
     matrix.sum_duplicates()
@@ -426,7 +431,7 @@ def form_factors(scene, patches: Patches, *, rays_per_patch: int = 256,
         matrix.eliminate_zeros()
     row_sum_after = np.asarray(matrix.sum(axis=1)).ravel()
     matrix = matrix.astype(np.float32)
-    facts = {"rays": count * rays, "hits": int(len(rows)), "entries": int(matrix.nnz),
+    facts = {"rays": len(sources) * rays, "hits": int(len(rows)), "entries": int(matrix.nnz),
              "dropped_entries": int(entries - matrix.nnz),
              "dropped_energy": float(np.mean(row_sum_before - row_sum_after)),
              "max_row_sum": float(row_sum_after.max()) if count else 0.0,
@@ -441,7 +446,7 @@ def form_factors(scene, patches: Patches, *, rays_per_patch: int = 256,
     return matrix, facts
 
 
-def _first_hit_patches(scene, patches: Patches, origins, directions, trace) -> np.ndarray:
+def first_hit_patches(scene, patches: Patches, origins, directions, trace) -> np.ndarray:
     """Patch of the first front-face hit of each ray, -1 for a miss or a back face."""
     hits = trace(scene, origins, directions)
     found = np.asarray(hits.hit, dtype=bool)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ..base import Refusal
+from ..indirect_light import indirect_light_knobs
 from ..knobs import (
     RADIAL_AVERAGE,
     UNSUPPORTED_PROFILE,
@@ -40,7 +41,8 @@ PROFILE_REFUSALS = {
 
 #: The knobs of the method (Chen et al. 2012, Sect. 4 and 5): validation, the
 #: ``translucent approx splatting`` flags and the quality ladders all come from here.
-#: Nothing is precomputed, so no knob is part of a cache key.
+#: Only the indirect light's gather is precomputed, keyed by its own knobs, so no knob is
+#: part of the method's cache key.
 KNOBS = KnobSpec([
     Knob("irradiance_resolution", 512, "irradiance buffer side in pixels (Sect. 4)",
          kind="int", low=1, high=8192, ladder=(64, 128, 256)),
@@ -72,6 +74,11 @@ KNOBS = KnobSpec([
          kind="int", low=1, high=MAX_AREA_LIGHT_POINTS),
     profile_knob(PROFILE_REFUSALS, keyed=False, help="radial profile a Dipole material is "
                  "converted to SubEdit from (SubEdit and solid materials keep theirs)"),
+    # the light the scene's diffuse surfaces bounce onto the object (fast.indirect_light),
+    # splatted from six axis views of the object; "off" is Eq. 5-6 as the paper
+    *indirect_light_knobs(),
+    Knob("indirect_resolution", 128, "side in pixels of the six axis views that carry the "
+         "indirect light", kind="int", low=1, high=8192),
 ], ladders={
     "levels": [{"levels": 5}, {"levels": 4}, {}, {"levels": 2}],
     # coarse levels splatted from irradiance samples as sparse as their pixels (the
@@ -92,7 +99,8 @@ LADDERS: dict = {"irradiance resolution": KNOBS.ladders["irradiance_resolution"]
                     if name != "irradiance_resolution"}}
 
 #: Cheap knobs for smoke runs and the conformance checks (fast.conformance).
-QUICK_KNOBS: dict = {"irradiance_resolution": 64}
+QUICK_KNOBS: dict = {"irradiance_resolution": 64, "indirect_resolution": 32,
+                     "indirect_rays": 16, "indirect_patch_rays": 64}
 
 
 #: Pairs evaluated at once by the numpy splatting kernel (bounds its memory to ~1 GB).

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import time
+
+import numpy as np
+
 from ...image import Image
 from ...scenes.scene import DirectionalLight, PointLight, SpotLight
 from ..base import (
@@ -9,9 +13,11 @@ from ..base import (
     NO_TRANSLUCENT_OBJECT,
     UNSUPPORTED_LIGHT,
     Refusal,
+    StageLog,
     applicability,
     refuse_inapplicable,
 )
+from ..indirect_light import precompute_indirect_light
 from .emitters import AREA_LIGHTS
 from .knobs import KNOBS
 from .state import SplattingState, translucent_objects
@@ -61,16 +67,31 @@ def _check_scene(scene) -> None:
 
 
 def precompute(scene, **knobs) -> SplattingState:
-    """Validate the scene and knobs; nothing geometric is precomputed (Chen et al. 2012).
+    """Validate the scene and knobs; precompute the indirect light's gather where it bounces.
 
-    The method needs no precomputation: every buffer is rebuilt each frame from the current
-    mesh, so a deforming mesh costs nothing extra and nothing can go stale. The only
-    tables (the SubEdit conversion of a dipole, Eq. 14's lookup table and the mean
-    profile's energy of the profile upsampling) depend on the material alone and are built
-    on first use.
+    The method itself needs no precomputation (Chen et al. 2012): every buffer is rebuilt
+    each frame from the current mesh, so a deforming mesh costs nothing extra and nothing
+    can go stale. The only tables (the SubEdit conversion of a dipole, Eq. 14's lookup
+    table and the mean profile's energy of the profile upsampling) depend on the material
+    alone and are built on first use. Where the scene has Lambertian surfaces and the knob
+    ``indirect_light`` is ``"diffuse"`` (the default), the light they bounce is gathered
+    at each translucent triangle (:mod:`translucent.fast.indirect_light`, cached on disk):
+    that part is for the mesh given here.
     """
     _check_scene(scene)
-    return SplattingState(scene, _check_knobs(knobs), check_scene=_check_scene)
+    resolved = _check_knobs(knobs)
+    log = StageLog()
+    started = time.perf_counter()
+    receivers = {}
+    for index in translucent_objects(scene):
+        mesh = scene.objects[index].mesh
+        triangles = mesh.vertices[mesh.faces]
+        normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+        receivers[scene.objects[index].name] = (triangles.mean(axis=1), normals)
+    indirect = precompute_indirect_light(scene, receivers, resolved, log)
+    log.seconds["indirect light"] = time.perf_counter() - started
+    return SplattingState(scene, resolved, log, check_scene=_check_scene, indirect=indirect)
 
 
 def add_approx_arguments(parser) -> None:

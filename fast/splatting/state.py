@@ -16,6 +16,7 @@ from ...materials.solid import SolidMedium
 from ...materials.subedit import SubEditProfiles
 from ...scenes.scene import DirectionalLight
 from ..base import StageLog
+from ..indirect_light import IndirectLight
 from ..knobs import DEFAULT_PROFILE
 from ..solid_inputs import subedit_from_solid
 from .buffers import CameraModel, SurfaceBuffer
@@ -149,6 +150,12 @@ class SplattingState:
     #: ``applies_to``, given by :func:`precompute`): asked again of every frame's scene,
     #: whose lights or material may have changed
     check_scene: Callable[[object], None] | None = None
+    #: the light the scene's diffuse surfaces bounce onto the objects (None: lights alone)
+    indirect: IndirectLight | None = None
+
+    def __post_init__(self):
+        self._precompute_log = self.log
+        self._indirect_views: dict = {}
 
     def render_ground_truth(self, lights=None, material=None, *, scene=None) -> Image:
         """Render the brute-force ground truth of :meth:`render` (see :func:`gather_frame`).
@@ -180,6 +187,8 @@ class SplattingState:
             self.check_scene(scene)
         log = StageLog()
         log.notes["profile"] = self.knobs["profile"]
+        log.notes.update(self._precompute_log.notes)
+        log.skipped.extend(self._precompute_log.skipped)
         start = time.perf_counter()
         camera_view = self._camera_view(scene)
         camera = CameraModel.from_camera(scene.camera)
@@ -241,7 +250,69 @@ class SplattingState:
                  for light in scene.lights
                  for emitter in ([light] if isinstance(light, DirectionalLight)
                                  else point_emitters(light, count, centre))]
-        return camera_buffer, views, material, radius
+        return camera_buffer, views + self._indirect_light_views(scene, index, material.eta,
+                                                                 centre, radius), \
+            material, radius
+
+    def _bounces_for(self, scene) -> bool:
+        """Whether the precomputed indirect light holds for ``scene``'s geometry."""
+        return self.indirect is not None and len(scene.objects) == len(self.scene.objects) \
+            and all(a.mesh is b.mesh for a, b in zip(scene.objects, self.scene.objects))
+
+    def _indirect_light_views(self, scene, index, eta, centre, radius) -> list[LightView]:
+        r"""The indirect light as six orthographic views of the object, along :math:`\pm`x, y, z.
+
+        The transmitted irradiance :math:`E_t` gathered at each triangle
+        (:class:`~translucent.fast.indirect_light.IndirectLight`) enters view v with the
+        weight :math:`\cos^2\theta_v` of the normal's angle to the view: a pixel of area
+        :math:`s^2` covers :math:`s^2/\cos\theta_v` of the surface, so its flux is
+        :math:`E_t\,s^2\cos\theta_v`, and because :math:`\sum_v \max(0, n\cdot d_v)^2 =
+        |n|^2 = 1` for the six axes, every surface point that the views see unoccluded
+        gets all of its :math:`E_t\,dA` once. Points the object hides from a view (inside
+        a concave part) lose that view's share.
+        """
+        if self.indirect is None:
+            return []
+        if not self._bounces_for(scene):
+            self.log.skip("indirect light left out: the frame's geometry is not the one its "
+                          "gather was precomputed for")
+            return []
+        name = scene.objects[index].name
+        if name not in self.indirect.gathers:
+            return []
+        if name not in self._indirect_views:
+            self._indirect_views[name] = self._axis_views(scene, index, centre, radius)
+        radiosity, facts = self.indirect.radiosity(scene, bounces=self.knobs["indirect_bounces"])
+        self.log.notes["indirect bounces"] = facts
+        irradiance = self.indirect.irradiance(name, radiosity, eta)
+        views = []
+        for direction, buffer, triangle in self._indirect_views[name]:
+            cosine = np.clip(-np.einsum("hwd,d->hw", buffer.normal, direction), 0.0, 1.0)
+            power = np.where(buffer.valid[..., None],
+                             irradiance[np.where(buffer.valid, triangle, 0)] * cosine[..., None],
+                             0.0)
+            views.append(light_view(buffer, -direction, power, 1.0))
+        return views
+
+    def _axis_views(self, scene, index, centre, radius) -> list:
+        """The object alone seen along the six axes: (direction, SurfaceBuffer, triangle)."""
+        from ...scenes.gbuffer import gbuffer_orthographic
+        from ...scenes.scene import Scene
+
+        item = scene.objects[index]
+        alone = Scene((item,), (), scene.camera, scene.mm_per_unit, scene.name)
+        size = self.knobs["indirect_resolution"]
+        views = []
+        for axis in range(3):
+            for sign in (1.0, -1.0):
+                direction = np.zeros(3)
+                direction[axis] = sign
+                view = gbuffer_orthographic(alone, direction, size, center=centre,
+                                            extent=radius * VIEW_MARGIN)
+                footprint = np.full(view.shape, math.sqrt(view.pixel_area))
+                views.append((direction, _surface_buffer(view, 0, item.mesh.uv, footprint),
+                              view.triangle_id))
+        return views
 
     def _render_object(self, scene, index, camera_view, camera, log, ground_truth):
         start = time.perf_counter()
