@@ -97,7 +97,10 @@ def load_mesh(path, *, name: str | None = None) -> Mesh:
     except Exception as error:  # readers raise many types on malformed files
         raise InputError(f"not a readable mesh ({error})", file=path) from error
     if len(arrays["faces"]) == 0:
-        raise InputError("the file holds no triangles", file=path, field="faces", value=0)
+        # a reader that guesses a text file's encoding may return nothing instead of failing
+        raise InputError("not a readable mesh: no triangle was read from it; if it holds "
+                         "some, convert it to binary STL, PLY, OBJ or .npz", file=path,
+                         field="faces", value=0)
     if suffix in (".obj", ".ply", ".off", ".stl"):
         _refuse_float32_overflow_line(path, suffix, arrays["vertices"])
     try:

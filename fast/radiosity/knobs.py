@@ -20,6 +20,12 @@ FORMAT_VERSION = 6
 SOLVERS = ("jacobi", "gmres", "bicgstab")
 
 
+#: Values of the knob ``boundary``: how the lights' direct light enters a translucent object
+#: behind a dielectric and how its exitance leaves (the inter-reflected light F B, diffuse,
+#: always enters with T_in).
+BOUNDARY_TERMS = ("directional", "diffuse")
+
+
 def _no_more_than_a_byte(value):
     if value > 255:
         raise InputError("must be <= 255 (points per segment are counted in a byte)",
@@ -92,6 +98,10 @@ KNOBS = KnobSpec([
          kind="float", positive=True, unit="MB", keyed=False),
     Knob("light_samples", 16, "samples per area light / environment per point", kind="int",
          low=1, keyed=False),
+    Knob("boundary", "directional", "Fresnel of a dielectric boundary: directional (F_t at "
+         "each light sample's angle in, at the camera's out) or diffuse (T_in in, a "
+         "Lambertian exit: the paper's Sect. 3.2)", kind="choice", choices=BOUNDARY_TERMS,
+         keyed=False),
     Knob("diffuse_light_samples", None, "per diffuse patch (its E feeds only F B); None: as "
          "light_samples", kind="int", low=1, optional=True, keyed=False),
     Knob("shadow_ray_engine", "auto", "relighting's shadow rays", kind="choice",

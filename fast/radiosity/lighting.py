@@ -15,7 +15,7 @@ from .kernels import compiled_shadow_rays
 
 
 def direct_irradiance(scene, points, normals, *, lights=None, samples: int = 16,
-                      seed: int = 0, visible=None, trace=None) -> np.ndarray:
+                      seed: int = 0, visible=None, trace=None, response=None) -> np.ndarray:
     """Irradiance from the lights at surface points, with shadows (W m^-2 in scene units).
 
     The :math:`E` of Sheng et al. 2014, Eq. 7 (per patch) and of the per-pixel direct
@@ -36,6 +36,9 @@ def direct_irradiance(scene, points, normals, *, lights=None, samples: int = 16,
     seed : int
     visible, trace : callable, optional
         Ray queries (default :mod:`translucent.scenes.raycast`).
+    response : callable, optional
+        ``response(cosine) -> weight`` of each light sample (default the cosine): a
+        dielectric boundary's directional entry passes ``F_t(eta, mu) mu``.
 
     Returns
     -------
@@ -58,7 +61,7 @@ def direct_irradiance(scene, points, normals, *, lights=None, samples: int = 16,
         return ~visible(scene, points[rows], ends, normals_a=normals[rows])
 
     return shared_direct_irradiance(lights, points, normals, occluded=occluded, count=samples,
-                                    rng=np.random.default_rng(seed))
+                                    rng=np.random.default_rng(seed), response=response)
 
 
 class AreaLightShadows:

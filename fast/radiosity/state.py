@@ -10,7 +10,7 @@ from scipy import sparse
 
 from ...errors import InputError
 from ...image import Image
-from ...materials.homogeneous import Lambertian
+from ...materials.homogeneous import Dipole, Lambertian
 from ...materials.profiles import (
     MixedProfiles,
     profile_for,
@@ -231,16 +231,74 @@ class RadiosityState:
         p = self.patches
         samples = self.knobs["light_samples"]
         diffuse_samples = self.knobs.get("diffuse_light_samples")
-        groups = [("all", slice(None), samples)]
+        everything = np.arange(len(p))
+        groups = [("all", everything, samples)]
         if diffuse_samples is not None and diffuse_samples != samples:
             groups = [("translucent", self._translucent_rows, samples),
                       ("diffuse", self._diffuse_rows, diffuse_samples)]
         lights = self.scene.lights if lights is None else tuple(lights)
         E = np.zeros((len(p), 3))
+        entries = self._directional_entries()
+        if entries:  # those objects' patches are lit below, through their boundary
+            taken = np.concatenate([rows for _, rows, _ in entries])
+            names = tuple(name for name, _, _ in entries)
+            groups = [((name, "without") + names, np.setdiff1d(rows, taken), count)
+                      for name, rows, count in groups]
         for name, rows, count in groups:
             E[rows] = self._direct_irradiance(("patches", name), self._patch_points[rows],
                                               p.normal[rows], lights, count, self.knobs["seed"])
+        for _, rows, response in entries:
+            E[rows] = direct_irradiance(self.scene, self._patch_points[rows], p.normal[rows],
+                                        lights=lights, samples=samples,
+                                        seed=self.knobs["seed"], response=response)
         return E
+
+    def _directional_boundaries(self) -> list:
+        """``(object index, eta, 1 / T_in(eta))`` of each homogeneous object behind a
+        dielectric, where the knob ``boundary`` is directional (else none)."""
+        if self.knobs.get("boundary", "diffuse") != "directional":
+            return []
+        from ...materials.profiles.base import diffuse_entry_transmittance
+
+        found = []
+        for index in self.geometry.objects:
+            item = self.scene.objects[index]
+            material = self.materials.get(item.name, item.material)
+            if isinstance(material, Dipole) and material.eta != 1.0:
+                eta = float(material.eta)
+                found.append((index, eta, 1.0 / float(diffuse_entry_transmittance(eta))))
+        return found
+
+    def _directional_entries(self) -> list:
+        r"""Objects whose lights' light enters through a dielectric at its own angle.
+
+        S carries the diffuse entry :math:`T_{in}(\eta)` in every column (Sheng et al. 2014,
+        Sect. 3.2), right for the inter-reflected light F B, which arrives from every
+        direction. A light's direct light arrives from one direction and enters with
+        :math:`F_t(\eta, \mu)`, as the BSSRDF of Jensen et al. 2001 has it: with the knob
+        ``boundary`` at ``"directional"`` the direct irradiance of a homogeneous object's
+        patches is weighted :math:`F_t(\eta, \mu)\,\mu / T_{in}(\eta)` per light sample,
+        so that S times it is the light that entered.
+
+        Returns
+        -------
+        list of (name, rows, response)
+            Empty with ``boundary`` diffuse; index-matched objects (:math:`F_t = T_{in} = 1`)
+            are left out.
+        """
+        from ...materials.fresnel import fresnel_transmittance
+
+        entries = []
+        for index, eta, scale in self._directional_boundaries():
+
+            def response(cosine, eta=eta, scale=scale):
+                return np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0, 1))
+                                * cosine * scale, 0.0)
+
+            item = self.scene.objects[index]
+            rows = self.patches.of_object(index)
+            entries.append((item.name, rows, response))
+        return entries
 
     def _direct_irradiance(self, key, points, normals, lights, samples, seed) -> np.ndarray:
         """:func:`direct_irradiance` at a fixed point set, named by ``key``.
@@ -349,6 +407,7 @@ class RadiosityState:
         object_id = gb.object_id.reshape(-1)
         behind = np.einsum("hwd,hwd->hw", gb.geometric_normal, gb.view_direction).reshape(-1) < 0
         diffuse, diffuse_weights, translucent, translucent_weights = [], [], [], []
+        translucent_object = []
         for index, obj in enumerate(scene.objects):
             pixels = np.flatnonzero(object_id == index)
             if not len(pixels):
@@ -368,6 +427,7 @@ class RadiosityState:
                 weights = self._pixel_weights(gb, index, obj.mesh, pixels)
             translucent.append(pixels)
             translucent_weights.append(weights)
+            translucent_object.append(np.full(len(pixels), index))
         size = len(self.patches)
 
         def stacked(blocks):
@@ -383,13 +443,35 @@ class RadiosityState:
         facing = np.sign(np.einsum("ij,ij->i", normals,
                                    gb.view_direction.reshape(-1, 3)[diffuse]))
         shading = gb.normal.reshape(-1, 3)[diffuse] * np.where(facing == 0, 1.0, facing)[:, None]
+        translucent = np.concatenate(translucent) if translucent else np.zeros(0, dtype=np.int64)
+        # the cosine of the view at each translucent pixel, for a directional exit
+        exit_cosine = np.abs(np.einsum("ij,ij->i", gb.normal.reshape(-1, 3)[translucent],
+                                       gb.view_direction.reshape(-1, 3)[translucent]))
         self._cached_image_operators = {
             "lambertian": lambertian, "diffuse": diffuse, "diffuse_weights":
-            stacked(diffuse_weights), "translucent": np.concatenate(translucent) if translucent
-            else np.zeros(0, dtype=np.int64), "translucent_weights": stacked(translucent_weights),
+            stacked(diffuse_weights), "translucent": translucent,
+            "translucent_weights": stacked(translucent_weights),
+            "translucent_object": np.concatenate(translucent_object) if translucent_object
+            else np.zeros(0, dtype=np.int64), "exit_cosine": np.clip(exit_cosine, 0.0, 1.0),
             "albedo_over_pi": albedo / np.pi, "points": points + 1e-6 * normals * facing[:, None],
             "shading": shading}
         return self._cached_image_operators
+
+    def _exit_factor(self, operators) -> np.ndarray:
+        r"""Per translucent pixel: :math:`F_t(\eta, \mu_o) / T_{in}(\eta)`, or 1.
+
+        The exit of the BSSRDF the model reference renders (reference/bssrdf_path.py):
+        the exitance B leaves distributed as :math:`F_t(\eta, \mu_o)\,\mu_o`, normalised
+        by :math:`1 - F_{dr} = T_{in}`, where the paper's :math:`B/\pi` leaves it
+        Lambertian. 1 for index-matched objects and with ``boundary`` diffuse.
+        """
+        from ...materials.fresnel import fresnel_transmittance
+
+        factor = np.ones(len(operators["translucent"]))
+        for index, eta, scale in self._directional_boundaries():
+            where = operators["translucent_object"] == index
+            factor[where] = fresnel_transmittance(eta, operators["exit_cosine"][where]) * scale
+        return factor
 
     def _pixel_weights(self, gb, index, mesh, pixels, back=False) -> sparse.csr_matrix:
         """(pixels x patches) weights: area-weighted vertex averages, then barycentrics."""
@@ -421,7 +503,8 @@ class RadiosityState:
         else:
             global_irradiance = form_factor_product(self.form_factors, B)
         diffuse = operators["diffuse"]
-        rgb[operators["translucent"]] = operators["translucent_weights"] @ B / np.pi
+        rgb[operators["translucent"]] = operators["translucent_weights"] @ B / np.pi \
+            * self._exit_factor(operators)[:, None]
         if len(diffuse):
             direct = self._direct_irradiance(("pixels",), operators["points"],
                                              operators["shading"], lights,
