@@ -84,6 +84,21 @@ def _area_lights(figures):
     return scene["rows"], ("relative_mse", "hdr_flip", "frame_seconds")
 
 
+def _scaling(figures):
+    scene = figures["scenes"][0]
+    assert scene["scene"] == "sphere" and figures["sizes"] == [96, 192]
+    rows = scene["rows"]
+    assert [(row["method"], row["size"]) for row in rows] == [("splatting", 96),
+                                                             ("splatting", 192)]
+    assert all(row["status"] == "ok" for row in rows)
+    # the 192 px image, box-filtered to 96 px, is scored against the same reference
+    assert abs(rows[1]["relative_mse"] - rows[0]["relative_mse"]) < 0.5 * rows[0]["relative_mse"]
+    # path tracing at 192 px costs more than at 96 px for the same samples
+    assert rows[1]["path_tracing_spp_seconds"]["4"] > rows[0]["path_tracing_spp_seconds"]["4"]
+    assert [row["vertices"] for row in figures["meshes"]["rows"]] == [642]
+    return rows + figures["meshes"]["rows"], ("speedup", "relative_mse", "frame_seconds")
+
+
 def _brdf_pca(figures):
     return [figures["performance"]], ("precompute_seconds", "edit_fps", "relight_fps")
 
@@ -167,6 +182,7 @@ BENCHMARKS = {
     "radiosity": ({"baseline seconds", "precomputation", "relighting", "translucency change",
                    "transfer", "sampling"}, _radiosity),
     "reference": ({"suite_seconds", "plain_seconds", "ratios", "median_ratio"}, _reference),
+    "scaling": ({"scenes", "meshes", "sizes", "spp"}, _scaling),
     "splatting": ({"results", "validation", "materials"}, _splatting),
     "tradeoff": ({"scenes"}, _tradeoff),
 }
@@ -202,7 +218,8 @@ def check_quick_bench(name, folder):
 
 #: The benchmarks in two test files, so that the two test processes share them (the tests
 #: run ``--dist loadfile``): those that render references, and the others.
-QUICK_RENDERING = ("reference", "tradeoff", "model_error", "heterogeneous", "area_lights")
+QUICK_RENDERING = ("reference", "tradeoff", "model_error", "heterogeneous", "area_lights",
+                   "scaling")
 #: Benchmarks whose quick run is the fixture of their own test file, which reads its output.
 QUICK_ELSEWHERE = {"profiles": "test_bench_profiles.py"}
 QUICK_OTHERS = tuple(sorted(set(BENCHMARKS) - set(QUICK_RENDERING) - set(QUICK_ELSEWHERE)))
