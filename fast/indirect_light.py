@@ -75,7 +75,7 @@ RECEIVER_OFFSET = 1e-4
 
 
 def indirect_light_knobs(*, rays: int = 64, patch_rays: int = 256) -> list[Knob]:
-    """The knobs every method with indirect light declares (one spec, one meaning).
+    """Return the knobs every method with indirect light declares (one spec, one meaning).
 
     Not part of the method's own cache key (``keyed=False``): the indirect light has its
     own cache entry, keyed by them.
@@ -96,7 +96,7 @@ def indirect_light_knobs(*, rays: int = 64, patch_rays: int = 256) -> list[Knob]
 
 
 def bouncing_objects(scene) -> list[int]:
-    """Indices of the objects that bounce light diffusely: Lambertian, albedo above 0."""
+    """Return the objects that bounce light diffusely (Lambertian, albedo above 0), by index."""
     return [index for index, item in enumerate(scene.objects)
             if isinstance(item.material, Lambertian) and float(np.max(item.material.albedo)) > 0]
 
@@ -175,16 +175,16 @@ class IndirectLight:
         emitted = albedo * direct
         B = emitted.copy()
         change, made = 0.0, 1
-        for made in range(2, bounces + 1):
+        while made < bounces:
             updated = emitted + albedo * (F @ B)
             change = float(np.max(np.abs(updated - B)) / max(float(np.max(np.abs(updated))),
                                                              1e-300))
-            B = updated
+            B, made = updated, made + 1
             if change < BOUNCE_TOLERANCE:
                 break
         full = np.zeros((len(patches), 3))
         full[rows] = B
-        return full, {"bounces": made if bounces > 1 else 1, "last_change": change}
+        return full, {"bounces": made, "last_change": change}
 
     def gather_matrix(self, name: str, eta: float) -> sparse.csr_matrix:
         r"""Receivers x patches: :math:`F_t(\eta, n\cdot\omega_k) / K` summed per patch."""
@@ -205,7 +205,7 @@ class IndirectLight:
         return matrices[key]
 
     def irradiance(self, name: str, radiosity: np.ndarray, eta: float) -> np.ndarray:
-        """Transmitted irradiance at receiver set ``name``, (N, 3), from patch ``radiosity``."""
+        """Return the transmitted irradiance at receivers ``name``, (N, 3), from ``radiosity``."""
         return np.asarray(self.gather_matrix(name, eta) @ radiosity)
 
 

@@ -12,6 +12,7 @@ from ...materials.dipole_pca import (
     dipole_pca_basis,
 )
 from ..base import Refusal
+from ..indirect_light import indirect_light_knobs
 from ..knobs import (
     DEFAULT_PROFILE,
     RADIAL_AVERAGE,
@@ -21,7 +22,6 @@ from ..knobs import (
     directional_profile_names,
     profile_knob,
 )
-from ..indirect_light import indirect_light_knobs
 from .profile_basis import family_basis
 
 

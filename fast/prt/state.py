@@ -281,9 +281,11 @@ class PRTState:
         return self._environment[transfer.name]
 
     def irradiance(self, transfer: ObjectTransfer, lights, eta: float) -> np.ndarray:
-        """E at the samples of one object, (N, 3): the lights' (:func:`sample_irradiance`)
-        plus, with indirect light, what the scene's diffuse surfaces bounce
-        (:class:`~translucent.fast.indirect_light.IndirectLight`)."""
+        """Return E at the samples of one object, (N, 3).
+
+        The lights' (:func:`sample_irradiance`) plus, with indirect light, what the scene's
+        diffuse surfaces bounce (:class:`~translucent.fast.indirect_light.IndirectLight`).
+        """
         direct = sample_irradiance(self.scene, transfer.samples, lights, eta,
                                    area_light_samples=self.knobs["area_light_samples"],
                                    environment=self._environment_transfer(transfer, lights),

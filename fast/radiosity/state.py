@@ -254,8 +254,11 @@ class RadiosityState:
         return E
 
     def _directional_boundaries(self) -> list:
-        """``(object index, eta, 1 / T_in(eta))`` of each homogeneous object behind a
-        dielectric, where the knob ``boundary`` is directional (else none)."""
+        """Return ``(object index, eta, 1 / T_in(eta))`` per object behind a dielectric.
+
+        The homogeneous objects whose eta is not 1, where the knob ``boundary`` is
+        directional (else none).
+        """
         if self.knobs.get("boundary", "diffuse") != "directional":
             return []
         from ...materials.profiles.base import diffuse_entry_transmittance

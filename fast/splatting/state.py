@@ -255,12 +255,14 @@ class SplattingState:
             material, radius
 
     def _bounces_for(self, scene) -> bool:
-        """Whether the precomputed indirect light holds for ``scene``'s geometry."""
-        return self.indirect is not None and len(scene.objects) == len(self.scene.objects) \
-            and all(a.mesh is b.mesh for a, b in zip(scene.objects, self.scene.objects))
+        """Return whether the precomputed indirect light holds for ``scene``'s geometry."""
+        if self.indirect is None or len(scene.objects) != len(self.scene.objects):
+            return False
+        return all(a.mesh is b.mesh
+                   for a, b in zip(scene.objects, self.scene.objects, strict=True))
 
     def _indirect_light_views(self, scene, index, eta, centre, radius) -> list[LightView]:
-        r"""The indirect light as six orthographic views of the object, along :math:`\pm`x, y, z.
+        r"""Return the indirect light as six orthographic views of the object (+-x, y, z).
 
         The transmitted irradiance :math:`E_t` gathered at each triangle
         (:class:`~translucent.fast.indirect_light.IndirectLight`) enters view v with the
@@ -295,7 +297,7 @@ class SplattingState:
         return views
 
     def _axis_views(self, scene, index, centre, radius) -> list:
-        """The object alone seen along the six axes: (direction, SurfaceBuffer, triangle)."""
+        """Return the object alone seen along the six axes: (direction, buffer, triangles)."""
         from ...scenes.gbuffer import gbuffer_orthographic
         from ...scenes.scene import Scene
 

@@ -77,7 +77,7 @@ def _box_down(image, factor: int):
 
 
 def _path_tracing_seconds(scene, spp_values) -> dict:
-    """spp -> seconds of one render of ``scene`` (after an untimed one), or the error."""
+    """Return ``{spp: seconds}`` of one render of ``scene`` each, and the points."""
     from ..report.speedup import path_tracing_points
 
     points = path_tracing_points(scene, spp_values, repeats=1)
@@ -172,7 +172,7 @@ def _pays_from(rows, methods) -> dict:
 
 
 def measure_meshes(subdivisions, methods, spp_values, frames, knobs_of) -> dict:
-    """The sphere at 96 px with its icosphere at each level; return the figures."""
+    """Measure the sphere at 96 px with its icosphere at each level; return the figures."""
     from ...fast.base import method
     from ...reference.committed import committed_reference
     from ...scenes import icosphere, load_scene
@@ -209,14 +209,14 @@ def _plot(path, scenes) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     import io
+
+    import matplotlib.pyplot as plt
 
     from ...atomic import atomic_write_bytes
 
     figure, axes = plt.subplots(1, len(scenes), figsize=(5 * len(scenes), 4), squeeze=False)
-    for axis, result in zip(axes[0], scenes):
+    for axis, result in zip(axes[0], scenes, strict=True):
         for m in sorted({r["method"] for r in result["rows"]}):
             mine = [r for r in result["rows"] if r["method"] == m and r.get("speedup")]
             if mine:
