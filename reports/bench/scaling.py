@@ -116,7 +116,7 @@ def _speedup(row, curve_errors, seconds_by_spp, spp_values):
 
 def measure_scene(name, sizes, methods, spp_values, frames, knobs_of) -> dict:
     """Every size and method on one scene; return the figures."""
-    from ...fast.base import method
+    from ...fast.base import method, scored_object_names
     from ...reference.committed import committed_reference
     from ...scenes import load_scene
     from ..report.scoring import scored_pixels
@@ -125,7 +125,7 @@ def measure_scene(name, sizes, methods, spp_values, frames, knobs_of) -> dict:
     scene = load_scene(name)
     reference = committed_reference(name, scene).require()
     base = scene.camera.width
-    masks = {m: scored_pixels(scene, method(m).scored_objects(scene)) for m in methods}
+    masks = {m: scored_pixels(scene, scored_object_names(method(m), scene)) for m in methods}
     _, points = _path_tracing_seconds(scene, spp_values)
     curves = {m: [scored_relative_mse(reference, point["images"][0], masks[m])
                   for point in points] for m in methods}
@@ -173,7 +173,7 @@ def _pays_from(rows, methods) -> dict:
 
 def measure_meshes(subdivisions, methods, spp_values, frames, knobs_of) -> dict:
     """Measure the sphere at 96 px with its icosphere at each level; return the figures."""
-    from ...fast.base import method
+    from ...fast.base import method, scored_object_names
     from ...reference.committed import committed_reference
     from ...scenes import icosphere, load_scene
     from ...scenes.scene import Scene, SceneObject
@@ -193,7 +193,7 @@ def measure_meshes(subdivisions, methods, spp_values, frames, knobs_of) -> dict:
                            scene.camera, scene.mm_per_unit, scene.name)
             for m in methods:
                 bar.set_postfix_str(f"{m}, {len(mesh.vertices)} vertices")
-                mask = scored_pixels(meshed, method(m).scored_objects(meshed))
+                mask = scored_pixels(meshed, scored_object_names(method(m), meshed))
                 curve = [scored_relative_mse(reference, point["images"][0], mask)
                          for point in points]
                 row = {"subdivisions": level, "vertices": len(mesh.vertices), "method": m,
