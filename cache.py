@@ -193,6 +193,9 @@ def check_folder(root=None, *, create: bool = True) -> Path:
     if _is_marked(root):
         return _probe(root)
     foreign = _first_foreign(root)
+    if foreign is not None and _is_marked(root):
+        # another process (or thread) marked the new folder while this one looked
+        return _probe(root)
     if foreign is not None:
         raise InputError(
             f"is not a translucent cache (no {MARKER_NAME} of translucent) and holds other "

@@ -131,6 +131,26 @@ def test_an_empty_or_new_folder_is_made_the_caches_own(tmp_path):
     assert check_folder(empty) == empty  # marked: the cache's, whatever else is put there
 
 
+def test_a_folder_another_process_marks_while_it_is_checked_is_the_caches(tmp_path,
+                                                                       monkeypatch):
+    # two processes making one new cache: the other's marker lands between this one's
+    # look for the marker and its look for foreign files (seen in CI with three threads)
+    from translucent import cache
+    from translucent.cache import MARKER_NAME, check_folder
+
+    folder = tmp_path / "shared"
+    folder.mkdir()
+    looked = cache._first_foreign
+
+    def marked_meanwhile(root):
+        cache._mark(root)
+        return looked(root)
+
+    monkeypatch.setattr(cache, "_first_foreign", marked_meanwhile)
+    assert check_folder(folder) == folder
+    assert [path.name for path in folder.iterdir()] == [MARKER_NAME]
+
+
 def test_an_older_cache_without_the_marker_is_adopted(tmp_path, monkeypatch, capsys):
     from translucent.cache import MARKER_NAME
 
