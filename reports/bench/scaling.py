@@ -114,7 +114,8 @@ def _speedup(row, curve_errors, seconds_by_spp, spp_values):
     row["speedup"] = seconds / row["frame_seconds"] if row["frame_seconds"] else None
 
 
-def measure_scene(name, sizes, methods, spp_values, frames, knobs_of) -> dict:
+def measure_scene(name, sizes, methods, spp_values, frames, knobs_of, base_points=None
+                  ) -> dict:
     """Every size and method on one scene; return the figures."""
     from ...fast.base import method, scored_object_names
     from ...reference.committed import committed_reference
@@ -126,7 +127,7 @@ def measure_scene(name, sizes, methods, spp_values, frames, knobs_of) -> dict:
     reference = committed_reference(name, scene).require()
     base = scene.camera.width
     masks = {m: scored_pixels(scene, scored_object_names(method(m), scene)) for m in methods}
-    _, points = _path_tracing_seconds(scene, spp_values)
+    base_seconds, points = base_points or _path_tracing_seconds(scene, spp_values)
     curves = {m: [scored_relative_mse(reference, point["images"][0], masks[m])
                   for point in points] for m in methods}
     rows = []
@@ -135,7 +136,8 @@ def measure_scene(name, sizes, methods, spp_values, frames, knobs_of) -> dict:
         for size in sizes:
             sized = at_width(scene, size)
             bar.set_postfix_str(f"path tracing at {size} px")
-            seconds_by_spp, _ = _path_tracing_seconds(sized, spp_values)
+            seconds_by_spp = base_seconds if size == base else \
+                _path_tracing_seconds(sized, spp_values)[0]
             bar.update()
             factor = size // base if size % base == 0 else 0
             for m in methods:
@@ -171,7 +173,8 @@ def _pays_from(rows, methods) -> dict:
     return found
 
 
-def measure_meshes(subdivisions, methods, spp_values, frames, knobs_of) -> dict:
+def measure_meshes(subdivisions, methods, spp_values, frames, knobs_of, base_points=None
+                   ) -> dict:
     """Measure the sphere at 96 px with its icosphere at each level; return the figures."""
     from ...fast.base import method, scored_object_names
     from ...reference.committed import committed_reference
@@ -183,7 +186,7 @@ def measure_meshes(subdivisions, methods, spp_values, frames, knobs_of) -> dict:
     scene = load_scene("sphere")
     reference = committed_reference("sphere", scene).require()
     item = scene.objects[0]
-    seconds_by_spp, points = _path_tracing_seconds(scene, spp_values)
+    seconds_by_spp, points = base_points or _path_tracing_seconds(scene, spp_values)
     rows = []
     with steps_bar("scaling over the mesh", len(subdivisions) * len(methods),
                    unit="run") as bar:
@@ -265,10 +268,15 @@ def run(args) -> int:
     def knobs_of(name):
         return quick.get(name, {})
 
-    results = [measure_scene(name, sizes, methods, spp_values, args.frames, knobs_of)
-               for name in scenes]
-    meshes = measure_meshes(levels, methods, spp_values, args.frames, knobs_of) \
-        if levels else None
+    from ...scenes import load_scene
+
+    # one path-tracing ladder per scene at its own size: its errors and its times
+    ladders = {name: _path_tracing_seconds(load_scene(name), spp_values)
+               for name in set(scenes) | ({"sphere"} if levels else set())}
+    results = [measure_scene(name, sizes, methods, spp_values, args.frames, knobs_of,
+                             ladders[name]) for name in scenes]
+    meshes = measure_meshes(levels, methods, spp_values, args.frames, knobs_of,
+                            ladders["sphere"]) if levels else None
     for result in results:
         print(f"{result['scene']}: error at the reference's {result['reference_width']} px; "
               "path tracing at equal error over the method's warm frame")

@@ -105,6 +105,7 @@ def test_bench_reference_delta_lights_refuses_a_scene_without_a_dielectric(capsy
     assert "needs a delta light and a dielectric boundary" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # 30 s, most of it compiling the three estimators' kernels
 def test_bench_reference_delta_lights_measures_both_estimators(tmp_path, capsys):
     import json
 
