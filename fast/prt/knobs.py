@@ -59,6 +59,10 @@ KNOBS = KnobSpec([
          kind="int", low=1, high=1 << 18),
     Knob("parts", 4, "quadtree parts m of the illumination samples", kind="int", low=1,
          high=4096),
+    # the vertices radiance is computed at (fast/prt/exit_vertices.py): None derives them
+    Knob("exit_subdivisions", None, "midpoint subdivisions of the object's mesh for the "
+         "vertices radiance is computed at (default: while an edge spans two diffusion "
+         "lengths and eight sample spacings)", kind="int", low=0, high=3, optional=True),
     Knob("basis", "area_normalised", "R_d basis parameterisation (materials.dipole_pca)",
          kind="choice", choices=tuple(PARAMETERISATIONS)),
     Knob("basis_terms", 12, "K, PCA terms of R_d", kind="int", low=1, high=32),

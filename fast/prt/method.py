@@ -19,6 +19,7 @@ from ..base import (
     refuse_inapplicable,
 )
 from ..indirect_light import precompute_indirect_light
+from .exit_vertices import refined_scene
 from .knobs import KNOBS, basis_and_facts, check_knobs
 from .profile_basis import basis_error_notes
 from .state import PRTState
@@ -100,6 +101,7 @@ def precompute(scene, **knobs) -> PRTState:
         scene.objects[i].name: scene.objects[i].material for i in _translucent_objects(scene)}),
         **facts}
     others = _other_objects_in_view(scene)
+    scene = refined_scene(scene, _translucent_objects(scene), knobs, log)
     if others:
         kinds = ", ".join(f"'{name}' ({type(scene.object(name).material).__name__})"
                           for name in others)
