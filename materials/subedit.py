@@ -159,6 +159,10 @@ class SubEditProfiles:
         Relative index of refraction of the boundary (for :math:`F_t`), in [1, 3].
     name : str
         A label.
+    range_energy : float
+        The fraction of each profile's energy within its effective scattering range
+        (:attr:`effective_scattering_range`, Eq. 11), in (0, 1]; the paper's 0.95 by
+        default.
 
     Notes
     -----
@@ -171,6 +175,7 @@ class SubEditProfiles:
     r_s: float
     eta: float = 1.3
     name: str = ""
+    range_energy: float = ENERGY_FRACTION
 
     def __post_init__(self):
         table = np.asarray(self.log_profile, dtype=np.float64)
@@ -190,6 +195,10 @@ class SubEditProfiles:
         if not 1.0 <= eta <= 3.0:
             raise InputError("must be in [1, 3]", field="eta", value=self.eta)
         object.__setattr__(self, "eta", eta)
+        fraction = float(check_finite(self.range_energy, "range_energy"))
+        if not 0.0 < fraction <= 1.0:
+            raise InputError("must be in (0, 1]", field="range_energy", value=self.range_energy)
+        object.__setattr__(self, "range_energy", fraction)
 
     # ---------------------------------------------------------------- layout
     @property
@@ -325,13 +334,14 @@ class SubEditProfiles:
         total = 2.0 * np.pi * self._cumulative_knot_energy[:, -1]
         return total.reshape(*self.resolution, 3)
 
-    def channel_scattering_ranges(self, fraction: float = ENERGY_FRACTION) -> np.ndarray:
+    def channel_scattering_ranges(self, fraction: float | None = None) -> np.ndarray:
         r"""Radius keeping ``fraction`` of each profile's energy, mm, shape (H, W, 3).
 
         The effective scattering range :math:`R_{P_x}` of Eq. 11 of Chen et al. 2012
-        (``fraction`` = 0.95 there), per channel. Solved exactly on the log-linear
-        segments by bisection; 0 for a zero profile.
+        (``fraction`` = 0.95 there; default the material's ``range_energy``), per channel.
+        Solved exactly on the log-linear segments by bisection; 0 for a zero profile.
         """
+        fraction = self.range_energy if fraction is None else fraction
         if not 0.0 < fraction <= 1.0:
             raise InputError("must be in (0, 1]", field="fraction", value=fraction)
         cache = self.__dict__.setdefault("_range_cache", {})
@@ -369,9 +379,9 @@ class SubEditProfiles:
     def effective_scattering_range(self) -> np.ndarray:
         r""":math:`R_{P_x}`, the effective scattering range of each texel in mm, shape (H, W).
 
-        The radius keeping 95 % of the profile's energy (Eq. 11 of Chen et al. 2012),
-        taken as the largest over the RGB channels so that splatting up to it (Eq. 13)
-        keeps at least 95 % in every channel.
+        The radius keeping ``range_energy`` of the profile's energy (95 % in Eq. 11 of
+        Chen et al. 2012), taken as the largest over the RGB channels so that splatting up
+        to it (Eq. 13) keeps at least that much in every channel.
         """
         return self.channel_scattering_ranges().max(axis=-1)
 
@@ -423,7 +433,11 @@ class SubEditProfiles:
     # ---------------------------------------------------------------- construction
     def with_name(self, name: str) -> SubEditProfiles:
         """Return a copy labelled ``name``."""
-        return SubEditProfiles(self.log_profile, self.r_s, self.eta, name)
+        return SubEditProfiles(self.log_profile, self.r_s, self.eta, name, self.range_energy)
+
+    def with_range_energy(self, fraction: float) -> SubEditProfiles:
+        """Return a copy whose effective scattering range keeps ``fraction`` of the energy."""
+        return SubEditProfiles(self.log_profile, self.r_s, self.eta, self.name, fraction)
 
     @classmethod
     def blend(cls, first: SubEditProfiles, second: SubEditProfiles, weight, *,

@@ -70,6 +70,9 @@ KNOBS = KnobSpec([
          "level; docs/splatting.md)", kind="float", low=0.0),
     Knob("profile_upsampling", True, "upsample coarse levels divided by each texel's "
          "profile factor (off: Eq. 17 as published)", kind="bool"),
+    Knob("range_energy", 0.99, "energy fraction of each profile within its effective "
+         "scattering range, where splats stop (Eq. 11 has 0.95)", kind="float",
+         positive=True, high=1.0),
     Knob("area_light_points", 4, "point emitters an area light becomes (emitters.py)",
          kind="int", low=1, high=MAX_AREA_LIGHT_POINTS),
     profile_knob(PROFILE_REFUSALS, keyed=False, help="radial profile a Dipole material is "

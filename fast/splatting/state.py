@@ -156,6 +156,7 @@ class SplattingState:
     def __post_init__(self):
         self._precompute_log = self.log
         self._indirect_views: dict = {}
+        self._ranged: dict = {}
 
     def render_ground_truth(self, lights=None, material=None, *, scene=None) -> Image:
         """Render the brute-force ground truth of :meth:`render` (see :func:`gather_frame`).
@@ -233,7 +234,8 @@ class SplattingState:
 
     def _object_buffers(self, scene, index, camera_view):
         item = scene.objects[index]
-        material = as_subedit(item.material, item.mesh, self.knobs["profile"])
+        material = self._with_range_energy(as_subedit(item.material, item.mesh,
+                                                      self.knobs["profile"]))
         mesh = item.mesh
         if mesh.uv is None and not material.is_homogeneous:
             raise InputError("a textured SubEdit material needs a mesh with uv coordinates",
@@ -253,6 +255,19 @@ class SplattingState:
         return camera_buffer, views + self._indirect_light_views(scene, index, material.eta,
                                                                  centre, radius), \
             material, radius
+
+    def _with_range_energy(self, material: SubEditProfiles) -> SubEditProfiles:
+        """Return ``material`` with the knob's ``range_energy``, one copy per material kept."""
+        fraction = self.knobs["range_energy"]
+        if material.range_energy == fraction:
+            return material
+        held = self._ranged.get(id(material))
+        if held is None or held[0] is not material:  # the copy keeps its cached ranges
+            held = (material, material.with_range_energy(fraction))
+            if len(self._ranged) >= 8:
+                self._ranged.pop(next(iter(self._ranged)))
+            self._ranged[id(material)] = held
+        return held[1]
 
     def _bounces_for(self, scene) -> bool:
         """Return whether the precomputed indirect light holds for ``scene``'s geometry."""
