@@ -394,9 +394,35 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGINT, previous_interrupt)
 
 
+#: Exit code of a command ended by a bug of the suite's own (an exception no check made).
+INTERNAL_ERROR = 3
+
+#: Set (to anything) to see the traceback of an internal error instead of its one line.
+TRACEBACK_VARIABLE = "TRANSLUCENT_TRACEBACK"
+
+
+def _internal_error(error: Exception, argv) -> int:
+    """Say in one line that a bug ended the command; return :data:`INTERNAL_ERROR`."""
+    command = next((word for word in argv if not word.startswith("-")), "")
+    print(f"translucent{' ' + command if command else ''}: internal error, a bug in "
+          f"translucent ({type(error).__name__}: {error}); {TRACEBACK_VARIABLE}=1 shows its "
+          "traceback", file=sys.stderr)
+    return INTERNAL_ERROR
+
+
 def entry_point() -> None:
-    """Run :func:`main` as the ``translucent`` program and exit with its code."""
-    code = main()
+    """Run :func:`main` as the ``translucent`` program and exit with its code.
+
+    :func:`main` lets a bug's exception through (the files of the command are already
+    removed as it unwinds); here, for a user, it becomes one line and exit code
+    :data:`INTERNAL_ERROR`, or the traceback with ``TRANSLUCENT_TRACEBACK`` set.
+    """
+    try:
+        code = main()
+    except Exception as error:
+        if os.environ.get(TRACEBACK_VARIABLE):
+            raise
+        code = _internal_error(error, sys.argv[1:])
     if _STANDARD_OUTPUT_FAILED:
         # what is still buffered for it would fail again at exit, with a second message
         with contextlib.suppress(OSError, ValueError):

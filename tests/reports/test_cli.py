@@ -129,6 +129,33 @@ def test_an_error_with_no_signal_behind_it_is_not_taken_for_one(monkeypatch):
         cli.main(["scenes"])
 
 
+@pytest.mark.parametrize("shown", [False, True])
+def test_a_bug_reaches_a_user_as_one_line_unless_the_traceback_is_asked_for(shown):
+    # the console script's entry point, with the scenes command broken on purpose
+    import os
+    import subprocess
+    import sys
+
+    program = ("import sys; from translucent.reports import cli; "
+               "from translucent.reports.commands import scenes; "
+               "scenes.run = lambda args: {}['no such key']; "
+               "sys.argv = ['translucent', 'scenes']; cli.entry_point()")
+    environment = {key: value for key, value in os.environ.items()
+                   if key != "TRANSLUCENT_TRACEBACK"}
+    if shown:
+        environment["TRANSLUCENT_TRACEBACK"] = "1"
+    result = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True,
+                            env=environment, timeout=120)
+    if shown:
+        assert result.returncode == 1 and "Traceback" in result.stderr
+        return
+    assert result.returncode == 3
+    assert "Traceback" not in result.stderr
+    assert result.stderr.strip().splitlines() == [
+        "translucent scenes: internal error, a bug in translucent (KeyError: 'no such key'); "
+        "TRANSLUCENT_TRACEBACK=1 shows its traceback"]
+
+
 def test_an_unusable_variant_is_an_input_error_and_doctor_reports_it(tmp_path):
     env = {"TRANSLUCENT_VARIANT": "cuda_ad_rgb"}
     process = _translucent("render", "glossy", "--spp", "1", "--passes", "2",
