@@ -52,11 +52,13 @@ from ..scenes.lighting import stratified_cosine_directions
 from .knobs import Knob
 
 __all__ = ["INDIRECT_LIGHT", "IndirectLight", "bouncing_objects", "indirect_light_knobs",
-           "precompute_indirect_light"]
+           "precompute_indirect_light", "reflectance_of"]
 
 #: Values of the knob ``indirect_light``: ``"diffuse"`` adds the diffuse inter-reflection
-#: of the scene's Lambertian surfaces, ``"off"`` lights with the lights alone (the papers).
-INDIRECT_LIGHT = ("diffuse", "off")
+#: of the scene's Lambertian surfaces and of the translucent objects' own exitance,
+#: ``"lambertian"`` that of the Lambertian surfaces alone (the translucent objects absorb
+#: what reaches them), ``"off"`` lights with the lights alone (the papers).
+INDIRECT_LIGHT = ("diffuse", "lambertian", "off")
 
 #: Relative change of B below which the bounce iteration stops early.
 BOUNCE_TOLERANCE = 1e-4
@@ -81,10 +83,10 @@ def indirect_light_knobs(*, rays: int = 64, patch_rays: int = 256) -> list[Knob]
     own cache entry, keyed by them.
     """
     return [
-        Knob("indirect_light", "diffuse", "light bounced onto translucent objects by the "
-             "scene's Lambertian surfaces: diffuse (one inter-reflection solve a frame) or "
-             "off (the lights alone, as the paper)", kind="choice", choices=INDIRECT_LIGHT,
-             keyed=False),
+        Knob("indirect_light", "diffuse", "light bounced onto translucent objects: diffuse "
+             "(by the scene's Lambertian surfaces and the objects' own exitance), lambertian "
+             "(by the Lambertian surfaces alone) or off (the lights alone, as the paper)",
+             kind="choice", choices=INDIRECT_LIGHT, keyed=False),
         Knob("indirect_rays", rays, "gather rays per receiver of the indirect light",
              kind="int", low=1, high=1 << 16, keyed=False, ladder=(4, 16)),
         Knob("indirect_patch_rays", patch_rays, "form-factor rays per bouncing patch",
@@ -93,6 +95,27 @@ def indirect_light_knobs(*, rays: int = 64, patch_rays: int = 256) -> list[Knob]
              "earlier once a bounce adds under 1e-4)", kind="int", low=1, high=1000,
              keyed=False),
     ]
+
+
+def reflectance_of(material):
+    r"""Return ``(R_d, eta)`` of a translucent material for the bounce, or None.
+
+    :math:`R_d` is the total diffuse reflectance per channel, (3,): a Dipole's closed form
+    (Jensen et al. 2001, Eq. 6), a SubEdit texture's mean over its texels
+    (:math:`2\pi\int P\,r\,dr`). Other materials give None (they absorb).
+    """
+    from ..materials.dipole import total_diffuse_reflectance
+    from ..materials.homogeneous import Dipole
+    from ..materials.subedit import SubEditProfiles
+
+    if isinstance(material, Dipole):
+        return (np.asarray(total_diffuse_reflectance(material.sigma_a, material.sigma_s_prime,
+                                                     material.eta), dtype=np.float64),
+                float(material.eta))
+    if isinstance(material, SubEditProfiles):
+        total = material.total_diffuse_reflectance().reshape(-1, 3).mean(axis=0)
+        return np.clip(total, 0.0, 1.0), float(material.eta)
+    return None
 
 
 def bouncing_objects(scene) -> list[int]:
@@ -108,12 +131,12 @@ class IndirectLight:
     Attributes
     ----------
     patches : Patches
-        Every object's triangles (a ray that reaches a translucent object finds its patch,
-        which absorbs).
+        Every object's triangles.
     bouncing : ndarray of int
         The rows of the Lambertian patches.
     form_factors : scipy.sparse.csr_matrix
-        :math:`F_{ij}` for the bouncing rows (others empty), float32.
+        :math:`F_{ij}` for the bouncing rows and those of :attr:`reflecting` (others
+        empty), float32.
     gathers : dict
         Receiver set name -> ``(patch, cosine)``, each (N, K): the first patch each gather
         ray hits (-1 none) and :math:`n \cdot \omega_k`.
@@ -126,6 +149,9 @@ class IndirectLight:
     form_factors: sparse.csr_matrix
     gathers: dict
     facts: dict
+    #: Indices of the translucent objects that send their exitance back into the scene
+    #: (empty: they absorb what reaches them)
+    reflecting: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "_matrices", {})
@@ -146,8 +172,8 @@ class IndirectLight:
         return albedo
 
     def radiosity(self, scene, lights=None, *, bounces: int = 16,
-                  light_samples: int = PATCH_LIGHT_SAMPLES,
-                  seed: int = 0) -> tuple[np.ndarray, dict]:
+                  light_samples: int = PATCH_LIGHT_SAMPLES, seed: int = 0,
+                  reflectance: dict | None = None) -> tuple[np.ndarray, dict]:
         r"""Radiosity B of every patch under ``lights`` (default the scene's), (P, 3).
 
         :math:`B = \rho\,(E + F B)` by Jacobi iteration from :math:`B_0 = \rho E`, each
@@ -156,6 +182,14 @@ class IndirectLight:
         (:func:`translucent.fast.radiosity.lighting.direct_irradiance`, ``light_samples``
         per area light).
 
+        A translucent object of :attr:`reflecting` given in ``reflectance`` (object index
+        -> its total diffuse reflectance :math:`R_d`, (3,), and its eta) takes part as a
+        diffuse reflector: its patches leave :math:`B = R_d\,E_t`, with the lights' light
+        entering at each sample's angle (:math:`F_t(\eta, \mu)`) and the surfaces'
+        with :math:`T_{in}(\eta)`. The exitance is the object's as a whole: light leaves
+        near where it entered, which for a profile shorter than the object is the local
+        estimate of what the methods compute exactly.
+
         Returns
         -------
         B : ndarray, (P, 3)
@@ -163,6 +197,7 @@ class IndirectLight:
         facts : dict
             ``bounces`` made and the ``last_change`` (relative, max over channels).
         """
+        from ..materials.profiles.base import diffuse_entry_transmittance
         from .radiosity.lighting import direct_irradiance
 
         patches = self.patches
@@ -171,12 +206,29 @@ class IndirectLight:
         points = patches.centroid[rows] + 1e-6 * patches.radius[rows, None] * patches.normal[rows]
         direct = direct_irradiance(scene, points, patches.normal[rows], lights=lights,
                                    samples=light_samples, seed=seed)
+        gain = albedo  # what a patch sends on of the irradiance from the other patches
+        reflectance = {index: value for index, value in (reflectance or {}).items()
+                       if index in self.reflecting}
+        for index, (total, eta) in reflectance.items():
+            own = patches.of_object(index)
+            own = own[~patches.is_back[own]]
+            where = patches.centroid[own] + 1e-6 * patches.radius[own, None] \
+                * patches.normal[own]
+            entered = direct_irradiance(scene, where, patches.normal[own], lights=lights,
+                                        samples=light_samples, seed=seed,
+                                        response=_transmitted_cosine(eta))
+            total = np.asarray(total, dtype=np.float64).reshape(1, 3)
+            rows = np.concatenate([rows, own])
+            direct = np.concatenate([direct, entered])
+            albedo = np.concatenate([albedo, np.broadcast_to(total, (len(own), 3))])
+            gain = np.concatenate([gain, np.broadcast_to(
+                total * float(diffuse_entry_transmittance(eta)), (len(own), 3))])
         F = self.form_factors[rows][:, rows]
         emitted = albedo * direct
         B = emitted.copy()
         change, made = 0.0, 1
         while made < bounces:
-            updated = emitted + albedo * (F @ B)
+            updated = emitted + gain * (F @ B)
             change = float(np.max(np.abs(updated - B)) / max(float(np.max(np.abs(updated))),
                                                              1e-300))
             B, made = updated, made + 1
@@ -207,6 +259,15 @@ class IndirectLight:
     def irradiance(self, name: str, radiosity: np.ndarray, eta: float) -> np.ndarray:
         """Return the transmitted irradiance at receivers ``name``, (N, 3), from ``radiosity``."""
         return np.asarray(self.gather_matrix(name, eta) @ radiosity)
+
+
+def _transmitted_cosine(eta: float):
+    r"""Return the response :math:`F_t(\eta, \mu)\,\mu` of light entering a dielectric."""
+    def response(cosine):
+        return np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0.0, 1.0))
+                        * cosine, 0.0)
+
+    return response
 
 
 def _array_digest(*arrays) -> str:
@@ -277,8 +338,11 @@ def precompute_indirect_light(scene, receivers: dict, knobs: dict, log=None
             log.notes["indirect light"] = "no Lambertian surface: nothing bounces light"
         return None
     seed = knobs.get("seed", 0)
+    names = [item.name for item in scene.objects]
+    reflecting = tuple(names.index(name) for name in receivers if name in names) \
+        if knobs["indirect_light"] == "diffuse" else ()
     settings = {"rays": knobs["indirect_rays"], "patch_rays": knobs["indirect_patch_rays"],
-                "seed": seed}
+                "seed": seed, "reflecting": list(reflecting)}
     key = content_hash("indirect-light", 1, scene.geometry_key(),
                        [scene.objects[i].name for i in bouncing], settings,
                        {name: _array_digest(*pair) for name, pair in receivers.items()})
@@ -288,15 +352,17 @@ def precompute_indirect_light(scene, receivers: dict, knobs: dict, log=None
         rng = np.random.default_rng(seed)
         patches = build_patches(scene)
         rows = np.flatnonzero(np.isin(patches.object_of, bouncing))
+        cast = np.flatnonzero(np.isin(patches.object_of, bouncing + list(reflecting)))
         F, facts = form_factors(scene, patches, rays_per_patch=knobs["indirect_patch_rays"],
-                                seed=seed, rows=rows)
+                                seed=seed, rows=cast)
         gathers = {name: _gather(scene, patches, positions, normals, knobs["indirect_rays"],
                                  rng)
                    for name, (positions, normals) in receivers.items()}
         return IndirectLight(patches, rows, F, gathers, {
-            "bouncing patches": len(rows), "form factor rays": facts["rays"],
+            "bouncing patches": len(rows), "reflecting patches": len(cast) - len(rows),
+            "form factor rays": facts["rays"],
             "gather rays": sum(p.size for p, _ in gathers.values()),
-            "seconds": time.perf_counter() - started})
+            "seconds": time.perf_counter() - started}, reflecting)
 
     from .base import StageLog
 

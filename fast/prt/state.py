@@ -23,7 +23,7 @@ from ...scenes.scene import (
     ImageEnvironment,
 )
 from ..base import StageLog
-from ..indirect_light import IndirectLight
+from ..indirect_light import IndirectLight, reflectance_of
 from ..knobs import DEFAULT_PROFILE
 from ..wavelets import (
     SpatialWavelet,
@@ -252,6 +252,9 @@ class PRTState:
         self._environment: dict = {}
         self._wavelets = {t.name: SpatialWavelet(t.spatial_shape) for t in self.transfers
                           if t.spatial_shape is not None}
+        # the materials whose exitance the last relighting bounced back (an edit keeps it)
+        self._bounce_materials = {t.name: self.scene.object(t.name).material
+                                  for t in self.transfers}
         self._lock = threading.Lock()
 
     def _environment_transfer(self, transfer: ObjectTransfer, lights):
@@ -292,9 +295,14 @@ class PRTState:
                                    seed=self.knobs["seed"])
         if self.indirect is None:
             return direct
+        names = [item.name for item in self.scene.objects]
+        reflectance = {names.index(name): found for name, material in
+                       self._bounce_materials.items()
+                       if (found := reflectance_of(material)) is not None}
         radiosity, facts = self.indirect.radiosity(
             self.scene, lights, bounces=self.knobs["indirect_bounces"],
-            light_samples=self.knobs["area_light_samples"], seed=self.knobs["seed"])
+            light_samples=self.knobs["area_light_samples"], seed=self.knobs["seed"],
+            reflectance=reflectance)
         self.log.notes["indirect bounces"] = facts
         return direct + self.indirect.irradiance(transfer.name, radiosity, eta)
 
@@ -475,6 +483,9 @@ class PRTState:
                     (cached[0] if cached else tuple(self.scene.lights))
                 if cached is None or cached[1] != chosen.eta or not _same_lights(cached[0],
                                                                                  wanted):
+                    self._bounce_materials = {
+                        t.name: material or self.scene.object(t.name).material
+                        for t in self.transfers}
                     self.relight(transfer, wanted, chosen.eta)
                 radiance = self.vertex_radiance(transfer, chosen)
                 pixel_map = maps["maps"][transfer.name]

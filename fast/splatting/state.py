@@ -16,7 +16,7 @@ from ...materials.solid import SolidMedium
 from ...materials.subedit import SubEditProfiles
 from ...scenes.scene import DirectionalLight
 from ..base import StageLog
-from ..indirect_light import IndirectLight
+from ..indirect_light import IndirectLight, reflectance_of
 from ..knobs import DEFAULT_PROFILE
 from ..solid_inputs import subedit_from_solid
 from .buffers import CameraModel, SurfaceBuffer
@@ -252,7 +252,7 @@ class SplattingState:
                  for light in scene.lights
                  for emitter in ([light] if isinstance(light, DirectionalLight)
                                  else point_emitters(light, count, centre))]
-        return camera_buffer, views + self._indirect_light_views(scene, index, material.eta,
+        return camera_buffer, views + self._indirect_light_views(scene, index, material,
                                                                  centre, radius), \
             material, radius
 
@@ -276,7 +276,7 @@ class SplattingState:
         return all(a.mesh is b.mesh
                    for a, b in zip(scene.objects, self.scene.objects, strict=True))
 
-    def _indirect_light_views(self, scene, index, eta, centre, radius) -> list[LightView]:
+    def _indirect_light_views(self, scene, index, material, centre, radius) -> list[LightView]:
         r"""Return the indirect light as six orthographic views of the object (+-x, y, z).
 
         The transmitted irradiance :math:`E_t` gathered at each triangle
@@ -299,9 +299,18 @@ class SplattingState:
             return []
         if name not in self._indirect_views:
             self._indirect_views[name] = self._axis_views(scene, index, centre, radius)
-        radiosity, facts = self.indirect.radiosity(scene, bounces=self.knobs["indirect_bounces"])
+        reflectance = {}
+        for other in translucent_objects(scene):
+            item = scene.objects[other]
+            subedit = material if other == index else \
+                as_subedit(item.material, item.mesh, self.knobs["profile"])
+            found = reflectance_of(subedit)
+            if found is not None:
+                reflectance[other] = found
+        radiosity, facts = self.indirect.radiosity(scene, bounces=self.knobs["indirect_bounces"],
+                                                   reflectance=reflectance)
         self.log.notes["indirect bounces"] = facts
-        irradiance = self.indirect.irradiance(name, radiosity, eta)
+        irradiance = self.indirect.irradiance(name, radiosity, material.eta)
         views = []
         for direction, buffer, triangle in self._indirect_views[name]:
             cosine = np.clip(-np.einsum("hwd,d->hw", buffer.normal, direction), 0.0, 1.0)

@@ -139,7 +139,7 @@ def test_scenes_without_a_lambertian_surface_or_with_it_off_bounce_nothing():
     assert any("indirect light off" in sentence for sentence in log.skipped)
     black = Scene([SceneObject("black", box(), Lambertian(0.0))], [], CAMERA)
     assert bouncing_objects(black) == []
-    assert INDIRECT_LIGHT == ("diffuse", "off")
+    assert INDIRECT_LIGHT == ("diffuse", "lambertian", "off")
 
 
 @pytest.mark.parametrize("method", ["prt", "splatting"])
@@ -160,8 +160,37 @@ def test_the_cornell_block_lit_by_its_walls_follows_the_model_reference(method):
                                                              indirect_light=mode), mask)
               for mode in INDIRECT_LIGHT}
     assert errors["off"]["relative_mse"] > 0.15
-    assert errors["diffuse"]["relative_mse"] < 0.03
+    assert errors["lambertian"]["relative_mse"] < 0.03
+    # the block's own light sent back by the walls: closer still
+    assert errors["diffuse"]["relative_mse"] < errors["lambertian"]["relative_mse"]
     # the energy the walls send: at least half of the missing luminance is made up
     # (splatting's own direct light is low on the block, by 0.1-0.2 of the model's)
     gaps = {mode: abs(1.0 - errors[mode]["luminance_ratio"]) for mode in INDIRECT_LIGHT}
     assert gaps["diffuse"] < 0.5 * gaps["off"]
+
+
+def test_a_translucent_object_of_reflectance_rho_bounces_as_a_lambertian_of_albedo_rho():
+    # index-matched (F_t = T_in = 1), R_d E is what a Lambertian of albedo R_d sends on:
+    # the same patches, the same form-factor rays, the same solve
+    from translucent.materials import Dipole
+
+    outside = icosphere(2, 1.0)
+    room = Mesh(outside.vertices, outside.faces[:, ::-1], -outside.normals, name="room")
+    ball = icosphere(1, 0.3, center=(0.1, -0.2, 0.0))
+    light = PointLight([0.0, 0.5, 0.3], INTENSITY)
+    probes = {"ball": (ball.vertices, ball.normals)}
+    lambertian = Scene([SceneObject("room", room, Lambertian(ALBEDO)),
+                        SceneObject("ball", ball, Lambertian(0.4))], [light], CAMERA)
+    translucent = Scene([SceneObject("room", room, Lambertian(ALBEDO)),
+                         SceneObject("ball", ball, Dipole([0.01] * 3, [1.0] * 3, 1.0))],
+                        [light], CAMERA)
+    as_wall = precompute_indirect_light(lambertian, {}, {**KNOBS, "indirect_light": "lambertian"})
+    as_ball = precompute_indirect_light(translucent, probes, KNOBS)
+    assert as_ball.reflecting == (1,)
+    wall_B, _ = as_wall.radiosity(lambertian, bounces=200)
+    ball_B, _ = as_ball.radiosity(translucent, bounces=200,
+                                  reflectance={1: (np.full(3, 0.4), 1.0)})
+    assert np.allclose(ball_B, wall_B, rtol=1e-9, atol=1e-12)
+    # without its reflectance the ball absorbs, and the room is darker
+    dark_B, _ = as_ball.radiosity(translucent, bounces=200)
+    assert dark_B[as_ball.bouncing].sum() < 0.99 * ball_B[as_ball.bouncing].sum()
