@@ -40,13 +40,14 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
 
-from ..materials.fresnel import fresnel_transmittance
+from ..materials.fresnel import fresnel_transmittance, transmitted_cosine
 from ..materials.homogeneous import Lambertian
 from ..scenes.lighting import stratified_cosine_directions
 from .knobs import Knob
@@ -216,7 +217,7 @@ class IndirectLight:
                 * patches.normal[own]
             entered = direct_irradiance(scene, where, patches.normal[own], lights=lights,
                                         samples=light_samples, seed=seed,
-                                        response=_transmitted_cosine(eta))
+                                        response=functools.partial(transmitted_cosine, eta))
             total = np.asarray(total, dtype=np.float64).reshape(1, 3)
             rows = np.concatenate([rows, own])
             direct = np.concatenate([direct, entered])
@@ -259,15 +260,6 @@ class IndirectLight:
     def irradiance(self, name: str, radiosity: np.ndarray, eta: float) -> np.ndarray:
         """Return the transmitted irradiance at receivers ``name``, (N, 3), from ``radiosity``."""
         return np.asarray(self.gather_matrix(name, eta) @ radiosity)
-
-
-def _transmitted_cosine(eta: float):
-    r"""Return the response :math:`F_t(\eta, \mu)\,\mu` of light entering a dielectric."""
-    def response(cosine):
-        return np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0.0, 1.0))
-                        * cosine, 0.0)
-
-    return response
 
 
 def _array_digest(*arrays) -> str:

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 __all__ = ["diffuse_fresnel_reflectance", "fresnel_reflectance", "fresnel_transmittance",
-           "fresnel_transmittance_scalar"]
+           "fresnel_transmittance_scalar", "transmitted_cosine"]
 
 
 def float_dtype(*arrays) -> np.dtype:
@@ -101,6 +101,18 @@ def fresnel_transmittance(eta, cos_theta):
         :math:`F_t \in [0, 1]`.
     """
     return 1.0 - fresnel_reflectance(eta, cos_theta)
+
+
+def transmitted_cosine(eta, cosine):
+    r"""Return :math:`F_t(\eta, \mu)\,\mu` for :math:`\mu > 0`, 0 from below.
+
+    The response of a surface behind a dielectric to light arriving at cosine
+    :math:`\mu`: what enters, per unit irradiance on a surface facing the light (Eq. 6 of
+    Wang et al. 2008).
+    """
+    cosine = np.asarray(cosine)
+    return np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0.0, 1.0)) * cosine,
+                    0.0)
 
 
 def fresnel_transmittance_scalar(eta: float, cosine: float) -> float:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import InputError
-from ...materials.fresnel import fresnel_transmittance
+from ...materials.fresnel import fresnel_transmittance, transmitted_cosine
 from ...scenes.lighting import (
     ENVIRONMENT_LIGHTS,
     SAMPLED_LIGHTS,
@@ -32,11 +32,6 @@ from .knobs import FRESNEL_RANK
 from .transfer import IlluminationSamples
 
 # ------------------------------------------------------------------- lighting
-
-
-def _transmitted_cosine(eta, cosine):
-    r""":math:`F_t(\eta, n \cdot \omega_i)\,(n \cdot \omega_i)` of Eq. 6, 0 from below."""
-    return np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0, 1)) * cosine, 0.0)
 
 
 def _far_distance(samples: IlluminationSamples) -> float:
@@ -93,7 +88,7 @@ def sample_irradiance(scene, samples: IlluminationSamples, lights, eta: float, *
             irradiance += direct_irradiance(
                 [light], samples.positions, samples.normals, occluded=occluded,
                 count=area_light_samples, rng=rng,
-                response=lambda cosine: _transmitted_cosine(eta, cosine))
+                response=lambda cosine: transmitted_cosine(eta, cosine))
         else:
             raise InputError(f"unknown light type {type(light).__name__}",
                              field=f"lights[{light_index}]", value=type(light).__name__)

@@ -141,6 +141,7 @@ def _combine(vectors, coefficients, out):  # pragma: no cover
 
 
 def _same_lights(first, second) -> bool:
+    """Return whether two sequences hold the same objects (lights, materials), in order."""
     return len(first) == len(second) and all(a is b for a, b in zip(first, second, strict=True))
 
 
@@ -255,6 +256,7 @@ class PRTState:
         # the materials whose exitance the last relighting bounced back (an edit keeps it)
         self._bounce_materials = {t.name: self.scene.object(t.name).material
                                   for t in self.transfers}
+        self._bounced = None  # (lights, materials, radiosity) of the last bounce solve
         self._lock = threading.Lock()
 
     def _environment_transfer(self, transfer: ObjectTransfer, lights):
@@ -295,6 +297,15 @@ class PRTState:
                                    seed=self.knobs["seed"])
         if self.indirect is None:
             return direct
+        return direct + self.indirect.irradiance(transfer.name, self._radiosity(lights), eta)
+
+    def _radiosity(self, lights) -> np.ndarray:
+        """Return the surfaces' radiosity under ``lights``, solved once for every object."""
+        materials = tuple(self._bounce_materials.values())
+        held = self._bounced
+        if held is not None and _same_lights(held[1], materials) \
+                and _same_lights(held[0], lights):
+            return held[2]
         names = [item.name for item in self.scene.objects]
         reflectance = {names.index(name): found for name, material in
                        self._bounce_materials.items()
@@ -304,7 +315,8 @@ class PRTState:
             light_samples=self.knobs["area_light_samples"], seed=self.knobs["seed"],
             reflectance=reflectance)
         self.log.notes["indirect bounces"] = facts
-        return direct + self.indirect.irradiance(transfer.name, radiosity, eta)
+        self._bounced = (tuple(lights), materials, radiosity)
+        return radiosity
 
     def basis_vectors(self, transfer: ObjectTransfer, irradiance) -> np.ndarray:
         """:math:`v_k = {}^wT_k^w E^w` (Eq. 8-9) for all k, shape (3, K + 1, R), float32.

@@ -238,19 +238,18 @@ class RadiosityState:
                       ("diffuse", self._diffuse_rows, diffuse_samples)]
         lights = self.scene.lights if lights is None else tuple(lights)
         E = np.zeros((len(p), 3))
+        groups = [(name, rows, count, None) for name, rows, count in groups]
         entries = self._directional_entries()
-        if entries:  # those objects' patches are lit below, through their boundary
+        if entries:  # those objects' patches are lit through their boundary instead
             taken = np.concatenate([rows for _, rows, _ in entries])
             names = tuple(name for name, _, _ in entries)
-            groups = [((name, "without") + names, np.setdiff1d(rows, taken), count)
-                      for name, rows, count in groups]
-        for name, rows, count in groups:
+            groups = [((name, "without") + names, np.setdiff1d(rows, taken), count, None)
+                      for name, rows, count, _ in groups]
+            groups += [(name, rows, samples, response) for name, rows, response in entries]
+        for name, rows, count, response in groups:
             E[rows] = self._direct_irradiance(("patches", name), self._patch_points[rows],
-                                              p.normal[rows], lights, count, self.knobs["seed"])
-        for _, rows, response in entries:
-            E[rows] = direct_irradiance(self.scene, self._patch_points[rows], p.normal[rows],
-                                        lights=lights, samples=samples,
-                                        seed=self.knobs["seed"], response=response)
+                                              p.normal[rows], lights, count, self.knobs["seed"],
+                                              response=response)
         return E
 
     def _directional_boundaries(self) -> list:
@@ -289,29 +288,31 @@ class RadiosityState:
             Empty with ``boundary`` diffuse; index-matched objects (:math:`F_t = T_{in} = 1`)
             are left out.
         """
-        from ...materials.fresnel import fresnel_transmittance
+        from ...materials.fresnel import transmitted_cosine
 
         entries = []
         for index, eta, scale in self._directional_boundaries():
 
             def response(cosine, eta=eta, scale=scale):
-                return np.where(cosine > 0, fresnel_transmittance(eta, np.clip(cosine, 0, 1))
-                                * cosine * scale, 0.0)
+                return transmitted_cosine(eta, cosine) * scale
 
             item = self.scene.objects[index]
             rows = self.patches.of_object(index)
             entries.append((item.name, rows, response))
         return entries
 
-    def _direct_irradiance(self, key, points, normals, lights, samples, seed) -> np.ndarray:
+    def _direct_irradiance(self, key, points, normals, lights, samples, seed,
+                           response=None) -> np.ndarray:
         """:func:`direct_irradiance` at a fixed point set, named by ``key``.
 
         Rectangular area lights go through the point set's :class:`AreaLightShadows`, built
-        once per key and ray engine; other lights through :func:`direct_irradiance`.
+        once per key and ray engine; other lights, and a receiver's own ``response`` (a
+        dielectric's entry, which the compiled path does not weigh), through
+        :func:`direct_irradiance`.
         """
-        if not AreaLightShadows.handles(lights):
+        if response is not None or not AreaLightShadows.handles(lights):
             return direct_irradiance(self.scene, points, normals, lights=lights,
-                                     samples=samples, seed=seed)
+                                     samples=samples, seed=seed, response=response)
         key = key + (self.knobs["shadow_ray_engine"],)
         if key not in self._shadow_points:
             self._shadow_points[key] = AreaLightShadows(self.scene, points, normals,

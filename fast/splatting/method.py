@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 from ...image import Image
 from ...scenes.scene import DirectionalLight, PointLight, SpotLight
 from ..base import (
@@ -82,13 +80,9 @@ def precompute(scene, **knobs) -> SplattingState:
     resolved = _check_knobs(knobs)
     log = StageLog()
     started = time.perf_counter()
-    receivers = {}
-    for index in translucent_objects(scene):
-        mesh = scene.objects[index].mesh
-        triangles = mesh.vertices[mesh.faces]
-        normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-        receivers[scene.objects[index].name] = (triangles.mean(axis=1), normals)
+    receivers = {scene.objects[i].name: (scene.objects[i].mesh.face_centroids,
+                                         scene.objects[i].mesh.face_normals)
+                 for i in translucent_objects(scene)}
     indirect = precompute_indirect_light(scene, receivers, resolved, log)
     log.seconds["indirect light"] = time.perf_counter() - started
     return SplattingState(scene, resolved, log, check_scene=_check_scene, indirect=indirect)
