@@ -224,7 +224,7 @@ class IndirectLight:
             albedo = np.concatenate([albedo, np.broadcast_to(total, (len(own), 3))])
             gain = np.concatenate([gain, np.broadcast_to(
                 total * float(diffuse_entry_transmittance(eta)), (len(own), 3))])
-        F = self.form_factors[rows][:, rows]
+        F = self._form_factors_among(rows, tuple(reflectance))
         emitted = albedo * direct
         B = emitted.copy()
         change, made = 0.0, 1
@@ -238,6 +238,13 @@ class IndirectLight:
         full = np.zeros((len(patches), 3))
         full[rows] = B
         return full, {"bounces": made, "last_change": change}
+
+    def _form_factors_among(self, rows, reflecting: tuple) -> sparse.csr_matrix:
+        """F between ``rows`` (the bouncing patches, then those of ``reflecting``), kept."""
+        key = ("among", reflecting)
+        if key not in self._matrices:
+            self._matrices[key] = self.form_factors[rows][:, rows].tocsr()
+        return self._matrices[key]
 
     def gather_matrix(self, name: str, eta: float) -> sparse.csr_matrix:
         r"""Receivers x patches: :math:`F_t(\eta, n\cdot\omega_k) / K` summed per patch."""

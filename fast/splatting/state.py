@@ -37,6 +37,12 @@ def translucent_objects(scene) -> list[int]:
 
 
 
+def _bounding_sphere(mesh) -> tuple[np.ndarray, float]:
+    """Return the centre of a mesh's bounding box and the radius about it that holds it."""
+    centre = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
+    return centre, float(np.max(np.linalg.norm(mesh.vertices - centre, axis=1)))
+
+
 def _surface_buffer(gbuffer_view, object_index: int, uv_values, footprint) -> SurfaceBuffer:
     valid = gbuffer_view.hit & (gbuffer_view.object_id == object_index)
     uv = gbuffer_view.interpolate(object_index, uv_values) if uv_values is not None else \
@@ -155,8 +161,13 @@ class SplattingState:
 
     def __post_init__(self):
         self._precompute_log = self.log
-        self._indirect_views: dict = {}
         self._ranged: dict = {}
+        # the six axis views of each object the indirect light reaches: geometry only, made
+        # with the precomputation, not in a frame
+        self._indirect_views = {} if self.indirect is None else {
+            self.scene.objects[i].name: self._axis_views(self.scene, i)
+            for i in translucent_objects(self.scene)
+            if self.scene.objects[i].name in self.indirect.gathers}
 
     def render_ground_truth(self, lights=None, material=None, *, scene=None) -> Image:
         """Render the brute-force ground truth of :meth:`render` (see :func:`gather_frame`).
@@ -190,6 +201,7 @@ class SplattingState:
         log.notes["profile"] = self.knobs["profile"]
         log.notes.update(self._precompute_log.notes)
         log.skipped.extend(self._precompute_log.skipped)
+        self.log = log  # the frame's: the indirect light notes what it does there
         start = time.perf_counter()
         camera_view = self._camera_view(scene)
         camera = CameraModel.from_camera(scene.camera)
@@ -199,7 +211,6 @@ class SplattingState:
             radiance += self._render_object(scene, index, camera_view, camera, log,
                                             _ground_truth)
         seconds = time.perf_counter() - start
-        self.log = log
         producer = "splatting ground truth" if _ground_truth else "splatting"
         return Image(radiance.astype(np.float32), metadata={
             "producer": producer, "knobs": self.knobs, "seconds": seconds,
@@ -240,8 +251,7 @@ class SplattingState:
         if mesh.uv is None and not material.is_homogeneous:
             raise InputError("a textured SubEdit material needs a mesh with uv coordinates",
                              field=f"objects[{index}].mesh.uv", value=None)
-        centre = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
-        radius = float(np.max(np.linalg.norm(mesh.vertices - centre, axis=1)))
+        centre, radius = _bounding_sphere(mesh)
         if isinstance(camera_view, RasterView):
             camera_buffer = camera_view.surface(scene, index)
         else:
@@ -252,8 +262,7 @@ class SplattingState:
                  for light in scene.lights
                  for emitter in ([light] if isinstance(light, DirectionalLight)
                                  else point_emitters(light, count, centre))]
-        return camera_buffer, views + self._indirect_light_views(scene, index, material,
-                                                                 centre, radius), \
+        return camera_buffer, views + self._indirect_light_views(scene, index, material), \
             material, radius
 
     def _with_range_energy(self, material: SubEditProfiles) -> SubEditProfiles:
@@ -276,7 +285,7 @@ class SplattingState:
         return all(a.mesh is b.mesh
                    for a, b in zip(scene.objects, self.scene.objects, strict=True))
 
-    def _indirect_light_views(self, scene, index, material, centre, radius) -> list[LightView]:
+    def _indirect_light_views(self, scene, index, material) -> list[LightView]:
         r"""Return the indirect light as six orthographic views of the object (+-x, y, z).
 
         The transmitted irradiance :math:`E_t` gathered at each triangle
@@ -295,10 +304,8 @@ class SplattingState:
                           "gather was precomputed for")
             return []
         name = scene.objects[index].name
-        if name not in self.indirect.gathers:
-            return []
         if name not in self._indirect_views:
-            self._indirect_views[name] = self._axis_views(scene, index, centre, radius)
+            return []
         reflectance = {}
         for other in translucent_objects(scene):
             item = scene.objects[other]
@@ -320,12 +327,13 @@ class SplattingState:
             views.append(light_view(buffer, -direction, power, 1.0))
         return views
 
-    def _axis_views(self, scene, index, centre, radius) -> list:
+    def _axis_views(self, scene, index) -> list:
         """Return the object alone seen along the six axes: (direction, buffer, triangles)."""
         from ...scenes.gbuffer import gbuffer_orthographic
         from ...scenes.scene import Scene
 
         item = scene.objects[index]
+        centre, radius = _bounding_sphere(item.mesh)
         alone = Scene((item,), (), scene.camera, scene.mm_per_unit, scene.name)
         size = self.knobs["indirect_resolution"]
         views = []
