@@ -258,7 +258,10 @@ def run(args) -> int:
                          value=args.subdivisions)
     methods = [name.strip() for name in args.methods.split(",") if name.strip()]
     for name in methods:
-        registered(name)  # an unknown method is refused by name
+        try:
+            registered(name)
+        except InputError as error:
+            raise InputError(error.reason, field="--methods", value=name) from None
     scenes = [name.strip() for name in args.scenes.split(",") if name.strip()]
     if not scenes or not methods:
         raise InputError("give at least one scene and one method", field="--scenes",
@@ -268,8 +271,11 @@ def run(args) -> int:
     def knobs_of(name):
         return quick.get(name, {})
 
+    from ...reference.committed import committed_reference
     from ...scenes import load_scene
 
+    for name in scenes:  # before any rendering: each scene needs its reference
+        committed_reference(name, load_scene(name)).require()
     # one path-tracing ladder per scene at its own size: its errors and its times
     ladders = {name: _path_tracing_seconds(load_scene(name), spp_values)
                for name in set(scenes) | ({"sphere"} if levels else set())}

@@ -135,3 +135,19 @@ def test_bench_reference_delta_lights_measures_both_estimators(tmp_path, capsys)
 def test_bench_area_lights_refuses_bad_input(capsys, arguments, message):
     assert main(["bench", "area_lights", *arguments]) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--sizes", "0"], "--sizes"),
+    (["--spp", "4"], "give at least two sample counts"),
+    (["--subdivisions", "9"], "must be at most 6"),
+    (["--methods", "nope"], "--methods = 'nope': unknown fast method"),
+    (["--scenes", "furnace_sphere"], "no committed reference is planned"),
+    (["--frames", "0"], "--frames = 0"),
+])
+def test_bench_scaling_refuses_bad_input_before_it_renders(capsys, tmp_path, arguments,
+                                                           message):
+    out = tmp_path / "scaling.json"
+    assert main(["bench", "scaling", *arguments, "--json", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
