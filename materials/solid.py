@@ -22,7 +22,7 @@ al. 2001: the path tracer scatters isotropically with :math:`\sigma_s = \sigma'_
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -201,6 +201,11 @@ class SolidMedium:
         """
         z, y, x = self.voxel_index(points)
         return self.sigma_a[z, y, x], self.sigma_s_prime[z, y, x]
+
+    def in_frame(self, origin, scale: float) -> SolidMedium:
+        """Return this medium with its box in the scene units ``(x - origin) * scale``."""
+        bounds = (self.bounds - np.asarray(origin, dtype=np.float64)) * float(scale)
+        return replace(self, bounds=bounds)
 
     def check_covers(self, points, *, file=None, field: str = "bounds") -> None:
         """Raise :class:`InputError` unless the box holds every point (a mesh's vertices)."""

@@ -116,7 +116,8 @@ def _sphere_emitter(center, radius: float, intensity) -> dict:
                                                      "value": radiance.tolist()}}}
 
 
-def point_light_equivalent(light: PointLight, scene: Scene, size: float = DEFAULT_SIZE):
+def point_light_equivalent(light: PointLight, scene: Scene, size: float = DEFAULT_SIZE,
+                           frame_scale: float = 1.0):
     """Build a sphere emitter with the point light's intensity and power (module docstring).
 
     Returns
@@ -124,11 +125,13 @@ def point_light_equivalent(light: PointLight, scene: Scene, size: float = DEFAUL
     entries : dict
         ``{"emitter": Mitsuba sphere dictionary}``.
     note : str
-        One sentence for the image metadata.
+        One sentence for the image metadata, its lengths in units of ``scene`` divided by
+        ``frame_scale`` (the user's, when ``scene`` is in a rendering frame).
     """
     radius, distance = _emitter_radius(light, scene, size, "lights.position")
-    note = (f"point light -> sphere emitter of radius {radius:.4g} units ({size:g} x the "
-            f"{distance:.4g} units to the nearest surface), radiance I/(pi r^2): same "
+    note = (f"point light -> sphere emitter of radius {radius / frame_scale:.4g} units ({size:g} "
+            f"x the {distance / frame_scale:.4g} units to the nearest surface), radiance "
+            f"I/(pi r^2): same "
             f"intensity and power")
     return {"emitter": _sphere_emitter(light.position, radius, light.intensity)}, note
 
@@ -164,7 +167,8 @@ def shade_mesh(center, axis, radius: float, opening_degrees: float,
                 name="spot light shade")
 
 
-def spot_light_equivalent(light: SpotLight, scene: Scene, size: float = DEFAULT_SIZE):
+def spot_light_equivalent(light: SpotLight, scene: Scene, size: float = DEFAULT_SIZE,
+                          frame_scale: float = 1.0):
     """Build a sphere emitter in a black shade with the spot's cone and fall-off (module docstring).
 
     Returns
@@ -172,7 +176,7 @@ def spot_light_equivalent(light: SpotLight, scene: Scene, size: float = DEFAULT_
     entries : dict
         ``{"emitter": Mitsuba sphere dictionary, "shade": (Mesh, BSDF dictionary)}``.
     note : str
-        One sentence for the image metadata.
+        One sentence for the image metadata (lengths as :func:`point_light_equivalent`'s).
     """
     radius, distance = _emitter_radius(light, scene, size, "lights.position")
     falloff = max(light.cutoff_angle - light.beam_width,
@@ -183,8 +187,9 @@ def spot_light_equivalent(light: SpotLight, scene: Scene, size: float = DEFAULT_
     opening = light.cutoff_angle - falloff / 2.0
     shade = shade_mesh(light.position, light.direction, shade_radius, opening)
     black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
-    note = (f"spot light -> sphere emitter of radius {radius:.4g} units, radiance I/(pi r^2), "
-            f"in a black shade of radius {shade_radius:.4g} units open over {opening:.4g} "
+    note = (f"spot light -> sphere emitter of radius {radius / frame_scale:.4g} units, radiance "
+            f"I/(pi r^2), in a black shade of radius {shade_radius / frame_scale:.4g} units open "
+            f"over {opening:.4g} "
             f"degrees (fall-off over {falloff:.3g} degrees, S-shaped not linear)")
     return {"emitter": _sphere_emitter(light.position, radius, light.intensity),
             "shade": (shade, black)}, note

@@ -12,6 +12,10 @@ the analytic BRDFs of :mod:`translucent.reference.brdf_plugins`, the ``volpath_m
 integrator and the ``bssrdf_path`` integrator (its profile tables are written to
 ``profiles/*.npz``, which the XML names). A file that uses them says so in its header
 comment; load it after :func:`register_suite_plugins` has registered them.
+
+Lengths are those of the rendering frame (:mod:`translucent.scenes.frame`), which the header
+comment states: the scene moved and scaled so that Mitsuba's float32 ray offsets do not
+depend on the scene's unit.
 """
 
 from __future__ import annotations
@@ -276,6 +280,10 @@ def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None,
                   f"integrator {conversion.integrator}"
                   + ("" if notes else ", as the suite's references")] + notes
         header += [f"light: {sentence}" for sentence in conversion.substitutions]
+        frame = conversion.frame
+        header.append(f"lengths in the rendering frame x' = (x - {list(frame.origin)}) * "
+                      f"{frame.scale:g} of the scene's units (translucent.scenes.frame: "
+                      "float32 ray offsets independent of the unit)")
         for plugin in sorted(writer.suite_plugins):
             header.append(f"{plugin} is a plugin of translucent: load this file after "
                           "translucent.reference.mitsuba_export.register_suite_plugins()")

@@ -68,6 +68,7 @@ from ..scenes import (
     SphereAreaLight,
     SpotLight,
 )
+from ..scenes.frame import Frame, rendering_frame
 from ..scenes.mesh_shape import is_convex
 from ..scenes.raycast import perspective_sensor_dict, to_mitsuba_mesh
 from . import delta_lights
@@ -308,6 +309,9 @@ class MitsubaConversion:
     shape_props : dict of str to dict
         Shape key of ``scene_dict`` -> the plugins attached to that mesh (``bsdf``,
         ``interior``), as dictionaries: what an exported XML file writes beside the mesh.
+    frame : Frame, optional
+        The frame ``scene_dict`` is in (:func:`~translucent.scenes.frame.rendering_frame`):
+        its lengths are ``(x - frame.origin) * frame.scale`` of the scene's.
     """
 
     scene_dict: dict
@@ -320,6 +324,7 @@ class MitsubaConversion:
     media: dict[str, str] = field(default_factory=dict)
     shape_props: dict[str, dict] = field(default_factory=dict)
     profile: dict = field(default_factory=dict)
+    frame: Frame | None = None
 
 
 def _shape_key(name: str, used: set) -> str:
@@ -349,19 +354,26 @@ def _rectangle_transform(light: RectangularAreaLight):
 
 
 def _light_entries(light, index: int, substitute: bool, scene: Scene, size: float,
-                   environment: delta_lights.EnvironmentParts, notes: list[str]) -> dict:
-    """Mitsuba entries for one light (environments are collected into ``environment``)."""
+                   environment: delta_lights.EnvironmentParts, notes: list[str],
+                   frame_scale: float = 1.0) -> dict:
+    """Mitsuba entries for one light (environments are collected into ``environment``).
+
+    ``scene`` is in a rendering frame of ``frame_scale`` units per user unit: the notes give
+    lengths in the user's.
+    """
     name = f"light_{index}"
     if isinstance(light, PointLight):
         if substitute:
-            entries, note = delta_lights.point_light_equivalent(light, scene, size)
+            entries, note = delta_lights.point_light_equivalent(light, scene, size,
+                                                                  frame_scale)
             notes.append(f"{name} ({note})")
             return {f"{name}_{k}": v for k, v in entries.items()}
         return {name: {"type": "point", "position": light.position.tolist(),
                        "intensity": rgb(light.intensity)}}
     if isinstance(light, SpotLight):
         if substitute:
-            entries, note = delta_lights.spot_light_equivalent(light, scene, size)
+            entries, note = delta_lights.spot_light_equivalent(light, scene, size,
+                                                                 frame_scale)
             notes.append(f"{name} ({note})")
             shade_mesh, shade_bsdf = entries.pop("shade")
             entries["shade"] = to_mitsuba_mesh(shade_mesh, f"{name}_shade",
@@ -469,6 +481,10 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     check_count(spp, "spp")
     from .bssrdf_path import bssrdf_conversion
 
+    # float32 ray offsets must not depend on the user's unit (scenes/frame.py)
+    frame = rendering_frame(scene)
+    scene = frame.apply(scene)
+
     brdf_basis = pca_model_basis(profile) or 0
     brdf_model = _brdf_model(scene, integrator, profile, brdf_basis)
     bssrdf = None if brdf_basis else bssrdf_conversion(scene, integrator, profile, channel)
@@ -559,7 +575,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     emitters: dict[str, Any] = {}
     for index, light in enumerate(scene.lights):
         emitters.update(_light_entries(light, index, substitute, scene, delta_light_size,
-                                       environment, notes))
+                                       environment, notes, frame.scale))
     env_entry = environment.mitsuba_entry()
     if env_entry is not None:
         emitters["environment"] = env_entry
@@ -571,13 +587,13 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
                        **({"seeded_solutions": True} if seeded_solutions else {}),
                        **integrator_props},
         # the sensor of the G-buffers in translucent.scenes.raycast: same pixels
-        "sensor": perspective_sensor_dict(scene.camera, spp=spp),
+        "sensor": perspective_sensor_dict(scene.camera, spp=spp, frame_scale=frame.scale),
         **shapes,
         **emitters,
     }
     return MitsubaConversion(scene_dict, integrator, int(max_depth), int(rr_depth), has_media,
                              per_channel_recommended, notes, media, shape_props,
-                             brdf_model if bssrdf is None else bssrdf.description())
+                             brdf_model if bssrdf is None else bssrdf.description(), frame)
 
 
 def to_mitsuba_dict(scene: Scene, *, integrator: str | None = None,

@@ -1,5 +1,6 @@
 """Where things are: meshes, lights, cameras, scene files and Mitsuba ray queries."""
 
+from .frame import Frame, rendering_frame, translucent_object_indices
 from .gbuffer import GBuffer, gbuffer, gbuffer_from_point, gbuffer_orthographic
 from .meshes import (
     MESH_GENERATORS,
@@ -40,9 +41,12 @@ from .scene_file import (
 )
 
 __all__ = [
+    "Frame",
     "GBuffer",
     "RayHits",
     "gbuffer",
+    "rendering_frame",
+    "translucent_object_indices",
     "gbuffer_from_point",
     "gbuffer_orthographic",
     "trace",

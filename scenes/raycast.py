@@ -73,6 +73,9 @@ RAYS_PER_CALL = 1 << 21
 #: ``perspective`` sensor default (``near_clip = 0.01``), which camera rays follow.
 NEAR_CLIP = 1e-2
 
+#: Distance of the far clip plane, scene units: Mitsuba's ``perspective`` default.
+FAR_CLIP = 1e4
+
 #: Default offset of shadow-ray end points, as a fraction of the scene's bounding-box
 #: diagonal: float32 intersection has a relative error near 1e-7 of the coordinates, so
 #: 1e-5 clears self-intersection with two orders of margin while staying far below any
@@ -171,7 +174,8 @@ def _mitsuba_mesh(name, vertices, faces, normals=None, uv=None, props=None):
 
 
 def perspective_sensor_dict(camera: Camera, *, spp: int = 1, rfilter: str = "box",
-                            sampler: str = "independent", seed: int = 0) -> dict:
+                            sampler: str = "independent", seed: int = 0,
+                            frame_scale: float = 1.0) -> dict:
     """Return the Mitsuba ``perspective`` sensor whose pixels are those of :func:`gbuffer`.
 
     Parameters
@@ -186,6 +190,10 @@ def perspective_sensor_dict(camera: Camera, *, spp: int = 1, rfilter: str = "box
         Sampler plugin name.
     seed : int
         Sampler seed (independent passes use different seeds).
+    frame_scale : float
+        ``camera`` is in a frame of this many units per scene unit
+        (:class:`~translucent.scenes.frame.Frame`): the clip planes, :data:`NEAR_CLIP` and
+        :data:`FAR_CLIP` scene units, scale with it.
 
     Returns
     -------
@@ -199,7 +207,8 @@ def perspective_sensor_dict(camera: Camera, *, spp: int = 1, rfilter: str = "box
         "type": "perspective",
         "fov": float(camera.fov),
         "fov_axis": "x",
-        "near_clip": NEAR_CLIP,
+        "near_clip": NEAR_CLIP * frame_scale,
+        "far_clip": FAR_CLIP * frame_scale,
         "to_world": mi.ScalarTransform4f().look_at(origin=camera.origin.tolist(),
                                                    target=camera.target.tolist(),
                                                    up=camera.up.tolist()),

@@ -14,6 +14,7 @@ from ...image import Image
 from ...materials.homogeneous import Dipole
 from ...materials.solid import SolidMedium
 from ...materials.subedit import SubEditProfiles
+from ...scenes.frame import translucent_object_indices
 from ...scenes.scene import DirectionalLight
 from ..base import StageLog
 from ..indirect_light import IndirectLight, reflectance_of
@@ -30,10 +31,8 @@ MAX_LIGHT_FOV = 160.0
 VIEW_MARGIN = 1.02
 
 
-def translucent_objects(scene) -> list[int]:
-    """Return the indices of the objects the method renders: Dipole, SubEdit or solid."""
-    return [index for index, item in enumerate(scene.objects)
-            if isinstance(item.material, (Dipole, SubEditProfiles, SolidMedium))]
+#: The indices of the objects the method renders: Dipole, SubEdit or solid.
+translucent_objects = translucent_object_indices
 
 
 

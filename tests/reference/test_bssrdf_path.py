@@ -74,9 +74,10 @@ def _slab_scene(material, lights, half_width=40.0, thickness=30.0):
                  name="slab")
 
 
-def _orthographic(mi, extent, size, spp=16):
-    """A sensor looking straight down on y = 0, seeing [-extent, extent]^2 (mm)."""
-    to_world = mi.ScalarTransform4f().look_at(origin=[0.0, 20.0, 0.0], target=[0.0, 0.0, 0.0],
+def _orthographic(mi, frame, extent, size, spp=16):
+    """A sensor looking straight down on y = 0, seeing [-extent, extent]^2 (mm of the scene,
+    put in the conversion's ``frame``)."""
+    to_world = mi.ScalarTransform4f(frame.matrix()) @ mi.ScalarTransform4f().look_at(origin=[0.0, 20.0, 0.0], target=[0.0, 0.0, 0.0],
                                               up=[0.0, 0.0, 1.0]) \
         @ mi.ScalarTransform4f().scale([extent, extent, 1.0])
     return {"type": "orthographic", "to_world": to_world,
@@ -85,14 +86,17 @@ def _orthographic(mi, extent, size, spp=16):
             "sampler": {"type": "independent", "sample_count": spp}}
 
 
-def _pixel_positions(mi, scene, size, supersample=4):
-    """(x, z) of ``supersample``^2 points in each pixel, (size, size, S, 2), from the sensor."""
+def _pixel_positions(mi, scene, frame, size, supersample=4):
+    """(x, z) of ``supersample``^2 points in each pixel, (size, size, S, 2), from the sensor
+    (in the scene's units: ``frame`` is the conversion's)."""
     offsets = (np.arange(supersample) + 0.5) / supersample
     u = ((np.arange(size)[:, None] + offsets[None, :]) / size).ravel()
     sx, sy = np.meshgrid(u, u)
     sensor = scene.sensors()[0]
     rays, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(sx.ravel(), sy.ravel()), mi.Point2f(0.5))
-    positions = np.stack([np.array(rays.o.x), np.array(rays.o.z)], axis=-1)
+    origins = frame.to_scene(np.stack([np.array(rays.o.x), np.array(rays.o.y),
+                                       np.array(rays.o.z)], axis=-1))
+    positions = origins[:, [0, 2]]
     positions = positions.reshape(size, supersample, size, supersample, 2)
     return positions.transpose(0, 2, 1, 3, 4).reshape(size, size, -1, 2)
 
@@ -159,9 +163,10 @@ def _slab_check(mi, name, size, extent, spp, passes, edges, resolution=0.05):
     scene = _slab_scene(MEDIUM, [SPOT])
     conversion = convert_scene(scene, integrator="bssrdf_path", profile=name)
     mitsuba_scene = mi.load_dict({**conversion.scene_dict,
-                                  "sensor": _orthographic(mi, extent, size)})
+                                  "sensor": _orthographic(mi, conversion.frame, extent,
+                                                                      size)})
     images = _passes(mi, mitsuba_scene, spp, passes)
-    positions = _pixel_positions(mi, mitsuba_scene, size)
+    positions = _pixel_positions(mi, mitsuba_scene, conversion.frame, size)
     rho = np.linalg.norm(positions, axis=-1)  # (size, size, S)
     radial = profile(name, MEDIUM, radial=True)
     reach = radial.radius_containing(PROBE_ENERGY_FRACTION).max()
@@ -273,11 +278,12 @@ def _disk_lit_slab(mi, integrator, profile_name, size, extent, radius=2.0):
     # a disk facing down that lets every ray through (null BSDF): the camera sees the slab
     entries["disk"] = {
         "type": "disk",
-        "to_world": transform.translate([0.0, DISK_HEIGHT, 0.0])
+        "to_world": mi.ScalarTransform4f(conversion.frame.matrix())
+        @ transform.translate([0.0, DISK_HEIGHT, 0.0])
         @ transform.rotate([1.0, 0.0, 0.0], 90.0) @ transform.scale(radius),
         "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}},
         "bsdf": {"type": "null"}}
-    entries["sensor"] = _orthographic(mi, extent, size)
+    entries["sensor"] = _orthographic(mi, conversion.frame, extent, size)
     return mi.load_dict(entries)
 
 
@@ -324,7 +330,8 @@ def _uniform_light_check(mi, light, expected_factor, spp=64, passes=8, size=8):
 
     conversion = convert_scene(_slab_scene(MEDIUM, [light]), integrator="bssrdf_path",
                                profile="better_dipole")
-    scene = mi.load_dict({**conversion.scene_dict, "sensor": _orthographic(mi, 4.0, size)})
+    scene = mi.load_dict({**conversion.scene_dict, "sensor": _orthographic(mi, conversion.frame, 4.0,
+                                                                               size)})
     images = _passes(mi, scene, spp, passes)
     total = profile("better_dipole", MEDIUM).total()
     expected = np.broadcast_to(expected_factor(total), images.shape[1:])

@@ -64,12 +64,15 @@ def _rgb(value):
 def test_dipole_medium_is_per_scene_unit():
     material = Dipole(sigma_a=[0.01, 0.02, 0.04], sigma_s_prime=[1.0, 2.0, 3.0], eta=1.3, g=0.5)
     mm_per_unit = 7.0
-    params = mitsuba().traverse(_loaded(_scene(material, mm_per_unit=mm_per_unit)))
+    scene = _scene(material, mm_per_unit=mm_per_unit)
+    params = mitsuba().traverse(_loaded(scene))
     scale = float(_param(params, "interior_medium.scale"))
     sigma_t_rgb = _rgb(_param(params, "interior_medium.sigma_t.value.value"))
     albedo = _rgb(_param(params, "interior_medium.albedo.value.value"))
     sigma_s = material.sigma_s_prime / (1 - material.g)
-    expected_sigma_t = (material.sigma_a + sigma_s) * mm_per_unit
+    # per unit of the rendering frame: frame_scale of them to a scene unit
+    frame_scale = convert_scene(scene).frame.scale
+    expected_sigma_t = (material.sigma_a + sigma_s) * mm_per_unit / frame_scale
     np.testing.assert_allclose(scale * sigma_t_rgb, expected_sigma_t, rtol=FLOAT32_RTOL)
     np.testing.assert_allclose(albedo, sigma_s / (material.sigma_a + sigma_s),
                                rtol=FLOAT32_RTOL)
@@ -102,7 +105,9 @@ def test_per_channel_conversion_repeats_one_channel():
     params = mitsuba().traverse(_loaded(_scene(material), channel=1))
     scale = float(_param(params, "interior_medium.scale"))
     sigma_t = scale * _rgb(_param(params, "interior_medium.sigma_t.value.value"))
-    np.testing.assert_allclose(sigma_t, np.full(3, material.sigma_t[1]), rtol=FLOAT32_RTOL)
+    frame_scale = convert_scene(_scene(material)).frame.scale
+    np.testing.assert_allclose(sigma_t * frame_scale, np.full(3, material.sigma_t[1]),
+                               rtol=FLOAT32_RTOL)
 
 
 def test_unknown_material_names_the_object():
@@ -211,10 +216,15 @@ def test_point_light_becomes_a_sphere_of_the_same_intensity():
     emitter = conversion.scene_dict["light_0_emitter"]
     distance = nearest_surface_distance(scene, position)
     assert distance == pytest.approx(2.0, rel=0.01)  # icosphere(1) nearly touches radius 1
-    assert emitter["radius"] == pytest.approx(0.1 * distance)
+    # the note speaks in the scene's units, the dictionary in the rendering frame's
+    assert f"radius {0.1 * distance:.4g} units" in note
+    frame_scale = conversion.frame.scale
+    radius = emitter["radius"] / frame_scale
+    assert radius == pytest.approx(0.1 * distance)
     radiance = np.array(emitter["emitter"]["radiance"]["value"])
-    # a uniform sphere has intensity pi r^2 L in every direction
-    np.testing.assert_allclose(math.pi * emitter["radius"] ** 2 * radiance, intensity)
+    # a uniform sphere has intensity pi r^2 L in every direction (r^2 L in frame units^2:
+    # the frame's intensity is frame_scale^2 the scene's)
+    np.testing.assert_allclose(math.pi * radius ** 2 * radiance, intensity)
 
 
 def test_spot_light_shade_opens_over_the_cone():
@@ -227,11 +237,13 @@ def test_spot_light_shade_opens_over_the_cone():
     # rays from the emitter's centre: open within the fall-off band's middle (25 degrees)
     angles = np.radians([0.0, 20.0, 24.0, 26.0, 40.0, 120.0])
     directions = np.stack([np.sin(angles), -np.cos(angles), np.zeros_like(angles)])
-    shade_radius = float(conversion.substitutions[0].split("shade of radius ")[1].split()[0])
+    # the note's scene units -> the frame's
+    shade_radius = conversion.frame.scale * float(
+        conversion.substitutions[0].split("shade of radius ")[1].split()[0])
     emitter_radius = conversion.scene_dict["light_0_emitter"]["radius"]
     assert emitter_radius < shade_radius
     # start just outside the emitter sphere, stop just beyond the shade
-    origins = light.position[:, None] + 1.01 * emitter_radius * directions
+    origins = conversion.frame.point(light.position)[:, None] + 1.01 * emitter_radius * directions
     rays = mi.Ray3f(mi.Point3f(origins), mi.Vector3f(directions))
     rays.maxt = 1.01 * shade_radius
     blocked = np.array(loaded.ray_test(rays))
