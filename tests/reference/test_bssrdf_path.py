@@ -77,9 +77,11 @@ def _slab_scene(material, lights, half_width=40.0, thickness=30.0):
 def _orthographic(mi, frame, extent, size, spp=16):
     """A sensor looking straight down on y = 0, seeing [-extent, extent]^2 (mm of the scene,
     put in the conversion's ``frame``)."""
-    to_world = mi.ScalarTransform4f(frame.matrix()) @ mi.ScalarTransform4f().look_at(origin=[0.0, 20.0, 0.0], target=[0.0, 0.0, 0.0],
-                                              up=[0.0, 0.0, 1.0]) \
-        @ mi.ScalarTransform4f().scale([extent, extent, 1.0])
+    transform = mi.ScalarTransform4f
+    to_world = transform(frame.matrix()) \
+        @ transform().look_at(origin=[0.0, 20.0, 0.0], target=[0.0, 0.0, 0.0],
+                              up=[0.0, 0.0, 1.0]) \
+        @ transform().scale([extent, extent, 1.0])
     return {"type": "orthographic", "to_world": to_world,
             "film": {"type": "hdrfilm", "width": size, "height": size,
                      "rfilter": {"type": "box"}},
@@ -330,8 +332,8 @@ def _uniform_light_check(mi, light, expected_factor, spp=64, passes=8, size=8):
 
     conversion = convert_scene(_slab_scene(MEDIUM, [light]), integrator="bssrdf_path",
                                profile="better_dipole")
-    scene = mi.load_dict({**conversion.scene_dict, "sensor": _orthographic(mi, conversion.frame, 4.0,
-                                                                               size)})
+    sensor = _orthographic(mi, conversion.frame, 4.0, size)
+    scene = mi.load_dict({**conversion.scene_dict, "sensor": sensor})
     images = _passes(mi, scene, spp, passes)
     total = profile("better_dipole", MEDIUM).total()
     expected = np.broadcast_to(expected_factor(total), images.shape[1:])

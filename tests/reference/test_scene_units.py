@@ -14,7 +14,6 @@ import math
 
 import numpy as np
 import pytest
-
 from translucent.materials import measured_medium
 from translucent.reference import render
 from translucent.scenes import Camera, Mesh, PointLight, Scene, SceneObject

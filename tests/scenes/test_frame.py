@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from translucent.materials import Lambertian, measured_medium
 from translucent.materials.solid import checker_solid
 from translucent.scenes import (
