@@ -33,8 +33,9 @@ __all__ = ["render", "render_to_target", "reference_settings", "reference_key", 
 #: Bumped whenever the scene conversion or the estimator changes what a reference holds,
 #: so that older cache entries miss (3: ``volpath_mnee`` with a chromatic medium renders
 #: one channel at a time where ``per_channel`` is left to the conversion; 4: it finds the
-#: refraction paths its solve misses on concave boundaries by specular manifold sampling).
-REFERENCE_FORMAT = 4
+#: refraction paths its solve misses on concave boundaries by specular manifold sampling;
+#: 5: rendered in the rendering frame of :mod:`translucent.scenes.frame`).
+REFERENCE_FORMAT = 5
 
 #: Show a progress bar only for renders that last longer than this (seconds).
 PROGRESS_DELAY_SECONDS = 1.0
