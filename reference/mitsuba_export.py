@@ -20,7 +20,6 @@ depend on the scene's unit.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import re
 import xml.etree.ElementTree as ElementTree
@@ -189,9 +188,8 @@ def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None,
         The sampler's samples per pixel (a renderer may override it).
     integrator : str, optional
         As :func:`~translucent.reference.mitsuba_scene.convert_scene`: default the
-        reference's own choice, except that a chromatic medium the references render one
-        channel at a time with ``volpath`` is written with ``volpathmis``
-        (:data:`RGB_VOLPATH_NOTE`).
+        reference's own choice for one RGB render (``volpathmis`` for a chromatic medium,
+        which the references may render one channel at a time: :data:`RGB_VOLPATH_NOTE`).
     profile : str, optional
         With ``bssrdf_path``: the profile; its tables are written to ``profiles/`` beside
         the XML, which the integrator names.
@@ -243,15 +241,9 @@ def export_mitsuba(scene, out, *, spp: int = 64, integrator: str | None = None,
     conversion = convert_scene(scene, spp=spp, integrator=integrator, profile=profile)
     notes = []
     if integrator is None and conversion.per_channel_recommended \
-            and conversion.integrator == "volpath":
+            and conversion.integrator == "volpathmis":
         # one RGB file cannot be rendered one channel at a time, as the references of such
-        # media are; Mitsuba's RGB volpath is biased for them (see RGB_VOLPATH_NOTE). Only
-        # the integrator's type differs from a volpathmis conversion.
-        scene_dict = {**conversion.scene_dict,
-                      "integrator": {**conversion.scene_dict["integrator"],
-                                     "type": "volpathmis"}}
-        conversion = dataclasses.replace(conversion, scene_dict=scene_dict,
-                                         integrator="volpathmis")
+        # media are: it says which estimator stands in
         notes.append(RGB_VOLPATH_NOTE)
     make_output_folder(out, field="--out", value=str(out))
     staging = Path(tempfile.mkdtemp(prefix=".export-", dir=out))

@@ -1,0 +1,1 @@
+"""Other renderers that check the references: Blender Cycles (:mod:`.blender`)."""
