@@ -226,10 +226,14 @@ class SolidMedium:
         return Dipole(self.sigma_a[index], self.sigma_s_prime[index], eta=self.eta, g=0.0,
                       name=self.name)
 
-    def describe(self) -> str:
-        """One line: what the field is, its grid and voxel size."""
+    def describe(self, units_per_scene_unit: float = 1.0) -> str:
+        """One line: what the field is, its grid and voxel size.
+
+        ``units_per_scene_unit``: the box is in a frame of that many units per scene unit
+        (a rendering frame, :mod:`translucent.scenes.frame`); the line speaks in scene units.
+        """
         z, y, x = self.shape
-        size = ", ".join(f"{s:.4g}" for s in self.voxel_size)
+        size = ", ".join(f"{s / units_per_scene_unit:.4g}" for s in self.voxel_size)
         what = self.description or self.name or "solid medium"
         return f"{what}; grid {x} x {y} x {z} voxels of ({size}) scene units, eta {self.eta:g}"
 

@@ -142,6 +142,9 @@ class ConversionContext:
         every channel should carry; None for an ordinary RGB render.
     brdf_basis : int
         K > 0: an analytic BRDF renders the K-term PCA of its edited term.
+    frame_scale : float
+        ``scene`` is in a rendering frame of this many units per unit of the user's scene
+        (:mod:`translucent.scenes.frame`): what a converter says of lengths divides by it.
     """
 
     scene: Scene
@@ -149,6 +152,7 @@ class ConversionContext:
     channel: int | None = None
     #: K > 0: analytic BRDFs render their K-term PCA (the BRDF-editing method's model)
     brdf_basis: int = 0
+    frame_scale: float = 1.0
 
     def per_channel(self, values) -> list[float]:
         """Return an RGB triple, or channel ``channel`` repeated three times."""
@@ -519,7 +523,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     blocking: list[int] = []
     shape_props: dict[str, dict] = {}
     for index, obj in enumerate(scene.objects):
-        context = ConversionContext(scene, obj.name, channel, brdf_basis)
+        context = ConversionContext(scene, obj.name, channel, brdf_basis, frame.scale)
         parts = material_converter(obj.material, object_name=obj.name)(obj.material, context)
         if bssrdf is not None:  # a translucent object's boundary alone: the profile is inside
             parts = bssrdf.surface_parts(index, obj, parts)

@@ -64,7 +64,8 @@ def _convert_solid(solid: SolidMedium, context: ConversionContext) -> MaterialPa
     sigma_t = _channels(solid.sigma_t, context.channel)
     chromatic = bool(np.any(sigma_t.max(axis=-1) > sigma_t.min(axis=-1)))
     max_albedo = float(albedo.max())
-    description = f"heterogeneous medium, nearest gridvolume: {solid.describe()}"
+    description = ("heterogeneous medium, nearest gridvolume: "
+                   f"{solid.describe(context.frame_scale)}")
     # delta tracking samples one channel's free paths against the RGB majorant and weights
     # the others by ratios of extinctions: rare huge weights (docs/references.md); a grey
     # render per channel has none
