@@ -91,7 +91,7 @@ def _ratio(first, second):
     return ratio, ratio * np.hypot(sa / a, sb / b)
 
 
-@pytest.mark.slow  # about 4 minutes on 2 cores
+@pytest.mark.slow  # about 40 s on 2 cores
 def test_cycles_agrees_with_the_reference_on_the_skin1_sphere():
     """Light units calibrated on a Lambertian sphere, then the volumetric Skin1 sphere.
 
