@@ -357,7 +357,7 @@ def test_a_pass_mitsuba_cannot_number_is_refused_before_work(size, spp, capsys, 
         assert not out.exists()
 
 
-@pytest.mark.slow  # about 40 s
+@pytest.mark.slow  # about a minute
 def test_two_seeds_of_a_chromatic_default_render_agree():
     """The default estimator of a chromatic medium has no heavy tail: two seeds agree.
 
