@@ -60,6 +60,17 @@ def refract_in(d, n, eta):
     cos_t = dr.safe_sqrt(1.0 - sin2_t)
     return r * d + (r * cos_i - cos_t) * n
 
+def skipped_length(ray, si):
+    r"""Length along ``ray`` (just spawned at ``si``) that ``spawn_ray``'s offset skipped.
+
+    The offset moves the origin :math:`\epsilon (1 + \max_k |p_k|)` along the normal, so the
+    ray starts that over :math:`|\cos|` past the crossing: a path entering a medium would
+    skip a shell of it (docs/references.md). 0 at grazing angles, where it is unbounded.
+    """
+    cosine = dr.abs(dr.dot(ray.d, si.n))
+    return dr.select(cosine > 1e-4, dr.norm(ray.o - si.p) / cosine, 0.0)
+
+
 class ManifoldVolpath(ADIntegrator):
     """``volpath`` with manifold next-event estimation (module docstring)."""
 
@@ -123,12 +134,18 @@ class ManifoldVolpath(ADIntegrator):
         medium = dr.select(active, medium, dr.zeros(mi.MediumPtr))
         si = dr.zeros(mi.SurfaceInteraction3f)
         needs_intersection = mi.Bool(True)
+        lead = mi.Float(0.0)  # as in sample(): the shell spawn_ray's offset skipped
         while active:
             remaining = max_dist - total
             ray.maxt = remaining
             active &= remaining > 0.0
             needs_intersection &= active
             si[needs_intersection] = scene.ray_intersect(ray, needs_intersection)
+            # a medium entered at a crossing starts there: measure from it
+            shifted = needs_intersection & (medium != None)  # noqa: E711
+            si.t[shifted] = si.t + lead
+            ray.o[shifted] = ray.o - lead * ray.d
+            lead[needs_intersection] = 0.0
             needs_intersection &= False
             in_medium = active & (medium != None)  # noqa: E711
             on_surface = active & ~in_medium
@@ -151,6 +168,7 @@ class ManifoldVolpath(ADIntegrator):
             factor[on_surface] *= bsdf.eval_null_transmission(si, on_surface)
             tr *= factor
             ray[on_surface] = si.spawn_ray(mi.Vector3f(ray.d))
+            lead[on_surface] = skipped_length(ray, si)
             needs_intersection |= on_surface
             active &= (in_medium | on_surface) & dr.any(tr != 0.0)
             total[active] += dr.select(in_medium, mei.t, si.t)
@@ -474,6 +492,8 @@ class ManifoldVolpath(ADIntegrator):
         n_not_converged, n_not_refraction, n_kept = mi.UInt32(0), mi.UInt32(0), mi.UInt32(0)
         n_seeded, n_capped = mi.UInt32(0), mi.UInt32(0)
         medium_vertex = mi.Point3f(0.0)
+        # what spawn_ray's offset skipped of the medium this ray enters (skipped_length)
+        lead = mi.Float(0.0)
 
         while active:
             active &= dr.any(throughput != 0.0)
@@ -488,10 +508,27 @@ class ManifoldVolpath(ADIntegrator):
 
             # ----------------------------------------------- medium sampling
             u = sampler.next_1d(active_medium)
+            # the medium starts at the crossing, not at the offset origin: sample it from
+            # there, intersect from the offset origin (the crossing would find its own
+            # surface), and measure the hit from the crossing
+            lead[~active_medium] = 0.0
+            offset_origin = mi.Point3f(ray.o)
+            ray.o[active_medium] = offset_origin - lead * ray.d
+            crossing = mi.Point3f(ray.o)
             mei = medium.sample_interaction(ray, u, channel, active_medium)
             ray.maxt[active_medium & medium.is_homogeneous() & mei.is_valid()] = mei.t
-            intersect = needs_intersection & active_medium
+            # a vertex inside the skipped shell lies before the offset origin: no surface
+            # between (the crossing's own surface is behind it)
+            in_shell = active_medium & (ray.maxt <= lead)
+            intersect = needs_intersection & active_medium & ~in_shell
+            ray.o[intersect] = offset_origin
+            ray.maxt[intersect] = ray.maxt - lead
             si[intersect] = scene.ray_intersect(ray, intersect)
+            si.t[intersect] = si.t + lead
+            si.t[needs_intersection & in_shell] = dr.inf
+            ray.o[active_medium] = crossing
+            ray.maxt[intersect] = ray.maxt + lead
+            lead[active_medium] = 0.0
             needs_intersection &= ~active_medium
             mei.t[active_medium & (si.t < mei.t)] = dr.inf
             tr, free_flight_pdf = medium.transmittance_eval_pdf(mei, si, active_medium)
@@ -606,6 +643,7 @@ class ManifoldVolpath(ADIntegrator):
             act_medium_scatter &= phase_pdf > 0.0
             throughput[act_medium_scatter] *= phase_weight
             ray[act_medium_scatter] = mei.spawn_ray(wo)
+            lead[act_medium_scatter] = 0.0
             needs_intersection |= act_medium_scatter
             last_scatter_direction_pdf[act_medium_scatter] = phase_pdf
 
@@ -616,6 +654,7 @@ class ManifoldVolpath(ADIntegrator):
             throughput[active_surface] *= bsdf_weight
             eta_path[active_surface] *= bs.eta
             ray[active_surface] = si.spawn_ray(si.to_world(bs.wo))
+            lead[active_surface] = skipped_length(ray, si)
             needs_intersection |= active_surface
             non_null_bsdf = active_surface & ~mi.has_flag(bs.sampled_type,
                                                           mi.BSDFFlags.Null)

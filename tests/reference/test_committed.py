@@ -339,9 +339,15 @@ def test_the_exported_file_renders_what_the_suite_converts(name, tmp_path,
     from_suite = np.asarray(mi.render(mi.load_dict(converted), spp=4, seed=7))
     assert from_file.any()
     # the same paths, to float32 round-off (the PLY's vertices and the transforms' decimal
-    # digits are read back, not passed in memory)
-    np.testing.assert_allclose(from_file, from_suite, rtol=EXPORT_RTOL,
-                               atol=EXPORT_RTOL * float(from_suite.max()))
+    # digits are read back, not passed in memory). A path on a knife edge (a manifold
+    # solve that converges on one side of its tolerance and not on the other) may take
+    # another turn and change its one pixel: measured on sphere_dielectric over seeds 0-9,
+    # one seed in ten had such a pixel (3 of 27648 values), with the medium sampled from
+    # the offset origin and from the crossing alike
+    close = np.isclose(from_file, from_suite, rtol=EXPORT_RTOL,
+                       atol=EXPORT_RTOL * float(from_suite.max()))
+    pixels_apart = int((~close).any(axis=-1).sum())
+    assert pixels_apart <= 1, f"{pixels_apart} pixels differ"
 
 
 @pytest.mark.parametrize("name", EXPORTED_RGB)

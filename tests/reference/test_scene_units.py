@@ -92,3 +92,30 @@ def test_the_check_tells_the_offset_shell():
     ratio = _object_mean(small)[0] / _object_mean(base)[0]
     assert ratio[2] < 0.95, ratio  # blue lost about 12 %
     assert math.isfinite(ratio.sum())
+
+
+def test_volpath_mnee_starts_the_medium_at_the_crossing():
+    """volpath_mnee samples a medium from where the path crossed into it, not from the
+    offset origin: rendered where the offset is 30 times the frame's (the sphere 30 units
+    off the origin, no rendering frame), it keeps the frame's image; volpath loses blue."""
+    from translucent.reference import mitsuba_scene
+    from translucent.scenes.frame import Frame
+
+    ratios = {}
+    for integrator in ("volpath_mnee", "volpath"):
+        options = dict(spp=512, passes=4, cache=False, progress=False, integrator=integrator,
+                       per_channel=False)
+        framed = render(_sphere(1.0, size=8), **options)
+        original = mitsuba_scene.rendering_frame
+        try:
+            mitsuba_scene.rendering_frame = lambda scene: Frame((-30.0, -30.0, -30.0), 1.0)
+            far = render(_sphere(1.0, size=8), **options)
+        finally:
+            mitsuba_scene.rendering_frame = original
+        (a, sa), (b, sb) = _object_mean(far), _object_mean(framed)
+        ratios[integrator] = a / b
+        if integrator == "volpath_mnee":
+            z = (a - b) / np.hypot(sa, sb)
+            assert np.all(np.abs(z) < Z_LIMIT), (a / b, z)
+            assert np.all(np.abs(a / b - 1.0) < 0.01), (a / b, z)
+    assert ratios["volpath"][2] < 0.98, ratios  # the shell it skips there: about 4 % of blue
