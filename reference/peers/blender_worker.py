@@ -45,12 +45,17 @@ def _look_at(origin, target, up):
     return Matrix.Translation(Vector(origin)) @ rotation.to_4x4()
 
 
-def _medium_material(name, sigma_s, sigma_a, g):
+def _node_material(name):
+    """Return a new material whose node tree holds its output alone, and its parts."""
     material = bpy.data.materials.new(name)
     material.use_nodes = True
     nodes, links = material.node_tree.nodes, material.node_tree.links
     nodes.clear()
-    output = nodes.new("ShaderNodeOutputMaterial")
+    return material, nodes, links, nodes.new("ShaderNodeOutputMaterial")
+
+
+def _medium_material(name, sigma_s, sigma_a, g):
+    material, nodes, links, output = _node_material(name)
     scatter = nodes.new("ShaderNodeVolumeScatter")
     absorb = nodes.new("ShaderNodeVolumeAbsorption")
     add = nodes.new("ShaderNodeAddShader")
@@ -70,11 +75,7 @@ def _medium_material(name, sigma_s, sigma_a, g):
 
 
 def _diffuse_material(name, albedo):
-    material = bpy.data.materials.new(name)
-    material.use_nodes = True
-    nodes, links = material.node_tree.nodes, material.node_tree.links
-    nodes.clear()
-    output = nodes.new("ShaderNodeOutputMaterial")
+    material, nodes, links, output = _node_material(name)
     diffuse = nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Color"].default_value = list(albedo) + [1.0]
     links.new(diffuse.outputs[0], output.inputs["Surface"])
