@@ -57,7 +57,7 @@ class ReferencePlan:
         Passes at least, whatever the noise: the per-pixel variance is read from them.
     integrator : str, optional
         The Mitsuba integrator (default: the reference's own choice, ``volpath`` with
-        media).
+        media, ``volpathmis`` with chromatic media rendered in RGB).
     """
 
     spp: int

@@ -199,7 +199,8 @@ def render(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
         Look the reference up in, and store it into, the ``"reference"`` cache.
     integrator : {"volpath", "volpathmis", "volpath_mnee", "path", "bssrdf_path"}, optional
         Default ``volpath_mnee`` where a delta light meets a dielectric boundary around a
-        medium, ``volpath`` with other media, ``path`` without
+        medium, ``volpathmis`` with other chromatic media rendered in RGB, ``volpath``
+        with other media, ``path`` without
         (:func:`~translucent.reference.mitsuba_scene.convert_scene`); ``bssrdf_path``
         renders each translucent object by ``profile`` (:mod:`.bssrdf_path`).
     max_depth, rr_depth : int, optional

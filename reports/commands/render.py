@@ -44,7 +44,8 @@ def add_arguments(parser):
     parser.add_argument("--integrator", choices=INTEGRATORS, default=None,
                         help="default: volpath_mnee where a point, spot or directional "
                         "light meets a dielectric boundary around a medium (manifold "
-                        "next-event estimation), volpath with other media, path without; "
+                        "next-event estimation), volpathmis with other chromatic media in RGB, "
+                        "volpath with other media, path without; "
                         "volpath there replaces such lights by small emitters; bssrdf_path "
                         "renders translucent objects by --profile")
     parser.add_argument("--profile", default=None, metavar="NAME",
