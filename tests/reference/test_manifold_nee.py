@@ -141,6 +141,7 @@ def _area_limit(mi, size, spp_plain, spp_manifold, passes, reflective=True, reso
            _passes(mi, plain, spp_plain, passes, seed=100), passes, resolution)
 
 
+@pytest.mark.slow  # 20 s; the point-light and chromatic agreements above stay fast
 def test_a_small_sphere_light_gives_what_volpath_gives(mi):
     _area_limit(mi, 8, 4096, 128, 16, reflective=False, resolution=0.1)
 

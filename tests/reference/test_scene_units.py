@@ -56,7 +56,9 @@ def _check_same(first, second, what):
 
 
 @pytest.mark.parametrize("integrator,profile,spp,size", [
-    ("volpath", None, 32, 12), ("volpathmis", None, 32, 12), ("volpath_mnee", None, 4, 6),
+    ("volpath", None, 32, 12), ("volpathmis", None, 32, 12),
+    # the Python integrator: 17 s; its own crossing test below stays in the fast tier
+    pytest.param("volpath_mnee", None, 4, 6, marks=pytest.mark.slow),
     ("bssrdf_path", "better_dipole", 16, 12)])
 def test_the_unit_does_not_change_the_image(integrator, profile, spp, size):
     # in RGB: volpath_mnee would render one channel at a time, three times the cost
