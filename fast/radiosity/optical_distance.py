@@ -33,7 +33,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from ...compiled import parallel_njit
-from ...errors import InputError
+from ...scenes.voxels import subdivision_barycentrics, surface_voxels
 
 __all__ = [
     "VoxelGrid",
@@ -43,38 +43,11 @@ __all__ = [
     "voxelize",
 ]
 
-#: Surface points per voxel edge when the surface is voxelised: spacing a third of a voxel
-#: leaves no 6-connected gap for the fill to leak through.
-SURFACE_POINTS_PER_VOXEL = 3
-
 #: Points per voxel edge along a segment when testing whether it stays inside.
 SEGMENT_POINTS_PER_VOXEL = 2
 
 #: Dijkstra sources per batch: the distance block is sources x voxels float64.
 DIJKSTRA_BATCH_BYTES = 64 * 2**20
-
-
-def subdivision_barycentrics(m: int) -> np.ndarray:
-    """Centroids of the m^2 equal-area sub-triangles of a triangle split m times per edge.
-
-    The midpoint rule on them integrates a smooth function over the triangle with weights
-    ``area / m^2`` each; ``m = 1`` is the centroid alone. Used for the distance-dependent
-    sampling of the scattering factors (Sheng et al. 2014, Sect. 5.2).
-
-    Returns
-    -------
-    ndarray, shape (m*m, 3)
-        Barycentric coordinates (rows sum to 1).
-    """
-    if int(m) != m or m < 1:
-        raise InputError("must be an integer >= 1", field="m", value=m)
-    m = int(m)
-    a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
-    up = (a + b) <= m - 1
-    down = (a + b) <= m - 2
-    first = np.concatenate([(a[up] + 1 / 3) / m, (a[down] + 2 / 3) / m])
-    second = np.concatenate([(b[up] + 1 / 3) / m, (b[down] + 2 / 3) / m])
-    return np.stack([1.0 - first - second, first, second], axis=1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,40 +139,6 @@ def _compiled_segment_test():
                     break
 
     return segment_test
-
-
-def surface_voxels(triangles, voxel_size: float) -> tuple[np.ndarray, np.ndarray]:
-    """Mark the voxels a surface passes through (dense point samples of every triangle).
-
-    Parameters
-    ----------
-    triangles : ndarray, shape (F, 3, 3)
-        Triangle corners, mm.
-    voxel_size : float
-        mm, > 0.
-
-    Returns
-    -------
-    origin : ndarray, shape (3,)
-        Corner of voxel (0, 0, 0), mm: one voxel of margin below the surface's box.
-    occupied : ndarray of bool, shape (nx, ny, nz)
-    """
-    triangles = np.asarray(triangles, dtype=np.float64)
-    if not voxel_size > 0:
-        raise InputError("must be > 0 mm", field="voxel_size", value=voxel_size)
-    lower = triangles.reshape(-1, 3).min(axis=0) - voxel_size
-    upper = triangles.reshape(-1, 3).max(axis=0) + voxel_size
-    shape = np.ceil((upper - lower) / voxel_size).astype(np.int64) + 1
-    occupied = np.zeros(tuple(shape), dtype=bool)
-    edge = np.linalg.norm(triangles - np.roll(triangles, 1, axis=1), axis=2).max(axis=1)
-    splits = np.maximum(1, np.ceil(edge / voxel_size * SURFACE_POINTS_PER_VOXEL)).astype(int)
-    for m in np.unique(splits):
-        rows = triangles[splits == m]
-        weights = np.concatenate([subdivision_barycentrics(int(m)), np.eye(3)])
-        points = np.einsum("sk,fkd->fsd", weights, rows).reshape(-1, 3)
-        ijk = np.floor((points - lower) / voxel_size).astype(np.int64)
-        occupied[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = True
-    return lower, occupied
 
 
 def voxelize(triangles, voxel_size: float, *, fill: bool = True) -> VoxelGrid:
