@@ -41,7 +41,14 @@ The checks, and why each matters to a user of the report:
     a finite image, and one that differs from the default profile's wherever the profile
     differs on the scene's Dipole materials (the knob is really used); every profile it
     refuses is an :class:`~translucent.errors.InputError` naming the profile
-    (:func:`check_profile` checks one).
+    (:func:`check_profile` checks one). With the method's quick knobs this runs with
+    its default ``geometry`` as well: each profile takes the object's shape.
+``geometry``
+    Where the method declares a ``geometry`` knob
+    (:func:`~translucent.fast.object_geometry.geometry_knobs`): the object's shape
+    (``"diffusion"``) renders a finite image that differs from the half-space profile's on
+    the scene's closed Dipole object (the knob is really used), and adds light there
+    (a finite object re-emits more than the half-space, never less, on a sphere).
 """
 
 from __future__ import annotations
@@ -418,11 +425,31 @@ def check_profiles(module, scene, knobs) -> str:
             "name")
 
 
+def check_geometry(module, scene, knobs) -> str:
+    """Check the ``geometry`` knob: the object's shape is taken, used, and adds light."""
+    spec = getattr(module, "KNOBS", None)
+    if spec is None or "geometry" not in spec:
+        raise NotChecked("the method declares no geometry knob")
+    shaped = _pixels(module.precompute(scene, **{**knobs, "geometry": "diffusion"}).render(),
+                     scene, "render() with geometry 'diffusion'")
+    flat = _pixels(module.precompute(scene, **{**knobs, "geometry": "half_space"}).render(),
+                   scene, "render() with geometry 'half_space'")
+    difference = _relative_difference(shaped, flat)
+    if not difference > IMAGE_RTOL:
+        raise ConformanceFailure(f"geometry 'diffusion' renders the half-space's image "
+                                 f"(relative L2 difference {difference:.2g}): not used")
+    gain = shaped.sum() / max(flat.sum(), 1e-300)
+    if not gain > 1.0:
+        raise ConformanceFailure(f"geometry 'diffusion' takes light away on a closed object "
+                                 f"({gain:.4f} of the half-space's)")
+    return f"geometry 'diffusion' renders {gain:.4f} of the half-space's light"
+
+
 #: The checks by name, in the order :func:`check_method` runs them.
 CHECKS = {"contract": check_contract, "refusal": check_refusal, "knobs": check_knobs,
           "render": check_render,
           "determinism": check_determinism, "relighting": check_relighting,
-          "editing": check_editing, "profiles": check_profiles}
+          "editing": check_editing, "profiles": check_profiles, "geometry": check_geometry}
 
 
 def run_check(name: str, check: str, scene=None, knobs: dict | None = None) -> str:

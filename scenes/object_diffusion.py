@@ -200,8 +200,10 @@ class ObjectDiffusion:
         beyond what the half-space profile gives at their distance (module docstring).
         Zero in a channel without absorption or without scattering (no diffusion length:
         the profile already returns all of it, or none) and for a cluster whose dipole
-        image lies inside the object (a fold closer than :math:`z_r + 2z_b`), where the
-        half-space field is not a solution inside it. Kept per material.
+        source lies outside the object (a wall thinner than :math:`z_r = 1/\sigma'_t`, where
+        diffusion does not describe it) or whose image lies inside (a fold closer than
+        :math:`z_r + 2z_b`): there the half-space field is not a solution inside the
+        object, and the profile is left as it is. Kept per material.
 
         Parameters
         ----------
@@ -236,20 +238,26 @@ class ObjectDiffusion:
                                         self.cluster_point, self.cluster_normal, sigma_a,
                                         sigma_s_prime, eta)
         _, _, extrapolation, _, _ = diffusion_terms([sigma_a], [sigma_s_prime], eta)
-        response[:, ~self._image_outside(float(extrapolation[0]), sigma_a,
-                                         sigma_s_prime)] = 0.0
+        response[:, ~self._dipole_applies(float(extrapolation[0]), sigma_a,
+                                          sigma_s_prime)] = 0.0
         return response
 
-    def _image_outside(self, extrapolation, sigma_a, sigma_s_prime) -> np.ndarray:
-        """Whether each cluster's dipole image lies outside the object."""
-        depth = 1.0 / (sigma_a + sigma_s_prime)
-        image = self.cluster_point + (depth + 2.0 * extrapolation) * self.cluster_normal
-        local = np.floor((image - self.grid.origin) / self.grid.voxel_size).astype(np.int64)
+    def _inside(self, points) -> np.ndarray:
+        """Whether each point (mm) lies in one of the grid's interior cells."""
+        local = np.floor((points - self.grid.origin) / self.grid.voxel_size).astype(np.int64)
         shape = np.array(self.grid.node_of.shape)
         valid = ((local >= 0) & (local < shape)).all(axis=1)
-        cell = np.full(len(image), -1)
+        cell = np.full(len(points), -1)
         cell[valid] = self.grid.node_of[tuple(local[valid].T)]
-        return cell < 0
+        return cell >= 0
+
+    def _dipole_applies(self, extrapolation, sigma_a, sigma_s_prime) -> np.ndarray:
+        """Whether each cluster's dipole source lies a voxel inside, its image outside."""
+        depth = 1.0 / (sigma_a + sigma_s_prime)
+        # a voxel below the source still inside: the grid resolves the field around it
+        source = self.cluster_point - (depth + self.grid.voxel_size) * self.cluster_normal
+        image = self.cluster_point + (depth + 2.0 * extrapolation) * self.cluster_normal
+        return self._inside(source) & ~self._inside(image)
 
 
 def object_diffusion(triangles, *, cells: int = DEFAULT_CELLS,

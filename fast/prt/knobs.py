@@ -22,6 +22,7 @@ from ..knobs import (
     directional_profile_names,
     profile_knob,
 )
+from ..object_geometry import QUICK_GEOMETRY_KNOBS, geometry_knobs
 from .profile_basis import family_basis
 
 
@@ -105,6 +106,9 @@ KNOBS = KnobSpec([
     # the light the scene's diffuse surfaces bounce onto the object, gathered at the
     # illumination samples (fast.indirect_light); "off" is Eq. 6 as the paper
     *indirect_light_knobs(),
+    # the object's own shape: diffusion's correction of the half-space profile
+    # (fast.object_geometry); "half_space" is the paper's profile alone
+    *geometry_knobs(),
     # rendering only: profiles the illumination samples cannot resolve go to the local
     # vector (SAMPLING_BLEND_START); False: Eq. 5-7 as the paper sums them
     Knob("sampling_blend", True, "blend profiles the samples cannot resolve into the local "
@@ -133,7 +137,7 @@ LADDERS: dict = KNOBS.ladders
 #: illumination samples (4 parts x 8 x 8) on one core, and a basis over a 16 x 16 grid
 #: of media (another profile's basis then builds in about a second).
 QUICK_KNOBS: dict = {"samples": 256, "workers": 1, "basis_samples": 16, "indirect_rays": 16,
-                     "indirect_patch_rays": 64}
+                     "indirect_patch_rays": 64, **QUICK_GEOMETRY_KNOBS}
 
 #: Knobs read when rendering, or that change how and not what is computed: left out of
 #: the cache key.

@@ -19,6 +19,7 @@ from ..base import (
     refuse_inapplicable,
 )
 from ..indirect_light import precompute_indirect_light
+from ..object_geometry import object_geometries
 from .exit_vertices import refined_scene
 from .knobs import KNOBS, basis_and_facts, check_knobs
 from .profile_basis import basis_error_notes
@@ -121,6 +122,13 @@ def precompute(scene, **knobs) -> PRTState:
     indirect = precompute_indirect_light(
         scene, {t.name: (t.samples.positions, t.samples.normals) for t in transfers}, knobs, log)
     log.seconds["indirect light"] = time.perf_counter() - started
+    geometry = {}
+    for name, item in object_geometries(scene, [t.name for t in transfers], knobs,
+                                        log).items():
+        samples, mesh = next(t.samples for t in transfers if t.name == name), \
+            scene.object(name).mesh
+        geometry[name] = (item, item.weights(samples.positions, samples.normals),
+                          item.weights(mesh.vertices, mesh.normals))
     hidden = [o.name for o in scene.objects
               if not isinstance(o.material, Dipole) and o.name not in others]
     if hidden:
@@ -128,7 +136,7 @@ def precompute(scene, **knobs) -> PRTState:
                  "the camera's view: they only cast shadows"
                  + (" and bounce light" if indirect is not None else ""))
     log.seconds["precompute"] = time.perf_counter() - start
-    return PRTState(scene, knobs, transfers, log, indirect)
+    return PRTState(scene, knobs, transfers, log, indirect, geometry)
 
 
 

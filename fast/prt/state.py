@@ -237,6 +237,9 @@ class PRTState:
     log: StageLog = field(default_factory=StageLog)
     #: the light the scene's diffuse surfaces bounce onto the objects (None: lights alone)
     indirect: IndirectLight | None = None
+    #: each object's geometry correction (fast.object_geometry) with its samples' and
+    #: vertices' cluster weights; an object without one keeps the half-space profile
+    geometry: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self.basis = pca_basis_for(self.knobs)
@@ -245,6 +248,7 @@ class PRTState:
             ProfileFamily(self.knobs["profile"])
         self._profiles: dict = {}
         self._lighting: dict = {}
+        self._entry_power: dict = {}
         self._vertex_vectors: dict = {}
         self._product_buffers: dict = {}
         self._frames_lit: dict = {}
@@ -352,6 +356,8 @@ class PRTState:
         self.log.seconds["irradiance"] = middle - start
         self.log.seconds["transfer product"] = time.perf_counter() - middle
         self._lighting[transfer.name] = (lights, float(eta), vectors)
+        # E A at the samples, for the geometry correction's entry clusters
+        self._entry_power[transfer.name] = irradiance * transfer.samples.area
         self._vertex_vectors.pop(transfer.name, None)
         self._frames_lit[transfer.name] = 0
 
@@ -500,6 +506,12 @@ class PRTState:
                         for t in self.transfers}
                     self.relight(transfer, wanted, chosen.eta)
                 radiance = self.vertex_radiance(transfer, chosen)
+                if transfer.name in self.geometry:
+                    geometry, entry, exit_weights = self.geometry[transfer.name]
+                    profile = self.profile_of(chosen)
+                    radiance = radiance + geometry.exitance(
+                        entry, self._entry_power[transfer.name], exit_weights, chosen,
+                        None if profile is None else profile.total()).astype(np.float32)
                 pixel_map = maps["maps"][transfer.name]
                 exit_factor = self._exit_factor(transfer.name, pixel_map, chosen.eta)
                 gathered = np.einsum("pk,pkc->pc", pixel_map.barycentrics,

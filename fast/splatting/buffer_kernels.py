@@ -731,7 +731,7 @@ def exitant_radiance(exitance, position, normal, valid, origin, eta):
 
     ``exitance`` :math:`B` (H, W, 3), ``origin`` the camera's centre (scene units); zero
     at invalid pixels, NaN read as 0 and infinities as the largest float64 (see
-    :func:`translucent.fast.splatting._exitant_radiance`). Rows in parallel.
+    :func:`translucent.fast.splatting.frame.exitant_radiance_of`). Rows in parallel.
     """
     height, width = valid.shape
     radiance = np.empty((height, width, 3))

@@ -199,7 +199,7 @@ def splat_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list[
 
             accumulated = add_scaled_by_texel(exitance[k], upsampled, factors, texels[k])
     lap("accumulation")
-    radiance = _exitant_radiance(accumulated, camera_buffer, camera, material.eta)
+    radiance = exitant_radiance_of(accumulated, camera_buffer, camera, material.eta)
     lap("radiance")
     return radiance
 
@@ -224,10 +224,10 @@ def gather_frame(camera_buffer: SurfaceBuffer, camera: CameraModel, lights: list
                                        view.flux[rows, cols], np.zeros(len(rows), np.int64)))
     exitance = brute_force_exitance(IrradianceSamples.concatenate(parts), camera_buffer,
                                     material, mm_per_unit=mm_per_unit)
-    return _exitant_radiance(exitance, camera_buffer, camera, material.eta)
+    return exitant_radiance_of(exitance, camera_buffer, camera, material.eta)
 
 
-def _exitant_radiance(exitance, buffer: SurfaceBuffer, camera: CameraModel, eta: float):
+def exitant_radiance_of(exitance, buffer: SurfaceBuffer, camera: CameraModel, eta: float):
     r"""Eq. 7 of Chen et al. 2012: :math:`L = F_t(\omega_o) B / \pi` at valid pixels.
 
     One compiled pass over the pixels

@@ -12,6 +12,7 @@ from ..knobs import (
     directional_profile_names,
     profile_knob,
 )
+from ..object_geometry import QUICK_GEOMETRY_KNOBS, geometry_knobs
 
 #: The splatting kernels: compiled loops (numba, the default: measured fastest on the CPU,
 #: see reports/bench/splatting.py), CUDA (numba.cuda, :mod:`.backend_cuda`: the same tiles
@@ -80,6 +81,9 @@ KNOBS = KnobSpec([
     # the light the scene's diffuse surfaces bounce onto the object (fast.indirect_light),
     # splatted from six axis views of the object; "off" is Eq. 5-6 as the paper
     *indirect_light_knobs(),
+    # the object's own shape: diffusion's correction of the half-space profile
+    # (fast.object_geometry); "half_space" is the paper's profile alone
+    *geometry_knobs(),
     Knob("indirect_resolution", 128, "side in pixels of the six axis views that carry the "
          "indirect light", kind="int", low=1, high=8192),
 ], ladders={
@@ -103,7 +107,8 @@ LADDERS: dict = {"irradiance resolution": KNOBS.ladders["irradiance_resolution"]
 
 #: Cheap knobs for smoke runs and the conformance checks (fast.conformance).
 QUICK_KNOBS: dict = {"irradiance_resolution": 64, "indirect_resolution": 32,
-                     "indirect_rays": 16, "indirect_patch_rays": 64}
+                     "indirect_rays": 16, "indirect_patch_rays": 64,
+                     **QUICK_GEOMETRY_KNOBS}
 
 
 #: Pairs evaluated at once by the numpy splatting kernel (bounds its memory to ~1 GB).

@@ -16,6 +16,7 @@ from ..base import (
     refuse_inapplicable,
 )
 from ..indirect_light import precompute_indirect_light
+from ..object_geometry import object_geometries
 from .emitters import AREA_LIGHTS
 from .knobs import KNOBS
 from .state import SplattingState, translucent_objects
@@ -74,7 +75,8 @@ def precompute(scene, **knobs) -> SplattingState:
     alone and are built on first use. Where the scene has Lambertian surfaces and the knob
     ``indirect_light`` is ``"diffuse"`` (the default), the light they bounce is gathered
     at each translucent triangle (:mod:`translucent.fast.indirect_light`, cached on disk):
-    that part is for the mesh given here.
+    that part is for the mesh given here, and so is the geometry correction of a
+    homogeneous object's profile (knob ``geometry``, :mod:`translucent.fast.object_geometry`).
     """
     _check_scene(scene)
     resolved = _check_knobs(knobs)
@@ -85,7 +87,9 @@ def precompute(scene, **knobs) -> SplattingState:
                  for i in translucent_objects(scene)}
     indirect = precompute_indirect_light(scene, receivers, resolved, log)
     log.seconds["indirect light"] = time.perf_counter() - started
-    return SplattingState(scene, resolved, log, check_scene=_check_scene, indirect=indirect)
+    geometry = object_geometries(scene, list(receivers), resolved, log)
+    return SplattingState(scene, resolved, log, check_scene=_check_scene, indirect=indirect,
+                          geometry=geometry)
 
 
 def add_approx_arguments(parser) -> None:

@@ -18,11 +18,18 @@ from ...scenes.frame import translucent_object_indices
 from ...scenes.scene import DirectionalLight
 from ..base import StageLog
 from ..indirect_light import IndirectLight, reflectance_of
-from ..knobs import DEFAULT_PROFILE
+from ..knobs import DEFAULT_PROFILE, radial_profile
 from ..solid_inputs import subedit_from_solid
 from .buffers import CameraModel, SurfaceBuffer
 from .emitters import PointEmitter, point_emitters
-from .frame import LightView, as_subedit, gather_frame, light_view, splat_frame
+from .frame import (
+    LightView,
+    as_subedit,
+    exitant_radiance_of,
+    gather_frame,
+    light_view,
+    splat_frame,
+)
 
 #: Widest irradiance-buffer cone for a point light (degrees): a light inside the object's
 #: bounding sphere sees only this cone of it.
@@ -157,6 +164,9 @@ class SplattingState:
     check_scene: Callable[[object], None] | None = None
     #: the light the scene's diffuse surfaces bounce onto the objects (None: lights alone)
     indirect: IndirectLight | None = None
+    #: each homogeneous object's geometry correction (fast.object_geometry), for the
+    #: meshes given to precompute
+    geometry: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self._precompute_log = self.log
@@ -364,11 +374,51 @@ class SplattingState:
             log.skip(f"object '{scene.objects[index].name}' is out of view: nothing to splat")
             return np.zeros(camera_buffer.shape + (3,))
         if ground_truth:
-            return gather_frame(camera_buffer, camera, views, material,
-                                mm_per_unit=scene.mm_per_unit)
-        return splat_frame(camera_buffer, camera, views, material,
-                           mm_per_unit=scene.mm_per_unit, sphere_radius=radius,
-                           knobs=self.knobs, log=log)
+            radiance = gather_frame(camera_buffer, camera, views, material,
+                                    mm_per_unit=scene.mm_per_unit)
+        else:
+            radiance = splat_frame(camera_buffer, camera, views, material,
+                                   mm_per_unit=scene.mm_per_unit, sphere_radius=radius,
+                                   knobs=self.knobs, log=log)
+        return radiance + self._geometry_radiance(scene, index, camera_buffer, camera, views,
+                                                  material, log)
+
+    def _geometry_radiance(self, scene, index, camera_buffer, camera, views, material, log):
+        """Radiance of the geometry correction (fast.object_geometry) at the object's pixels.
+
+        Its entry points are the light views' texels with their flux (the same light the
+        splats carry), its exit points the camera buffer's pixels; Eq. 7 turns it into
+        radiance as the splats' exitance.
+        """
+        item = scene.objects[index]
+        geometry = self.geometry.get(item.name)
+        if geometry is None:
+            return 0.0
+        if item.mesh is not self.scene.object(item.name).mesh or \
+                not isinstance(item.material, Dipole):
+            log.skip(f"geometry: '{item.name}' is not the mesh and homogeneous material the "
+                     "correction was made for: its profile is the half-space's this frame")
+            return 0.0
+        start = time.perf_counter()
+        mm2 = scene.mm_per_unit**2
+        points, normals, power = [], [], []
+        for view in views:
+            valid = view.buffer.valid
+            points.append(view.buffer.position[valid])
+            normals.append(view.buffer.normal[valid])
+            power.append(view.flux[valid] * mm2)
+        valid = camera_buffer.valid
+        total = None if self.knobs["profile"] == DEFAULT_PROFILE else \
+            radial_profile(self.knobs["profile"], item.material).total()
+        exitance = np.zeros(camera_buffer.shape + (3,))
+        exitance[valid] = geometry.exitance(
+            geometry.weights(np.concatenate(points), np.concatenate(normals)),
+            np.concatenate(power), geometry.weights(camera_buffer.position[valid],
+                                                    camera_buffer.normal[valid]),
+            item.material, total)
+        radiance = exitant_radiance_of(exitance, camera_buffer, camera, material.eta)
+        log.seconds["geometry"] = log.seconds.get("geometry", 0.0) + time.perf_counter() - start
+        return radiance
 
     def _light_view(self, scene, index, light, centre, radius, eta) -> LightView:
         from ...scenes.gbuffer import default_up, gbuffer_from_point, gbuffer_orthographic
