@@ -30,6 +30,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..image import Image, read_exr
+from .geometry_term import GEOMETRY_SUFFIX, geometry_settings, model_key
 
 __all__ = ["REFERENCE_FOLDER", "PLANS", "MODEL_PLANS", "MODEL_PROFILES", "ReferencePlan",
            "CommittedReference", "committed_path", "committed_reference",
@@ -102,20 +103,17 @@ MODEL_INTEGRATOR = "bssrdf_path"
 #: heterogeneous medium has no radial profile) with the profile every method uses unless
 #: told otherwise (:data:`translucent.fast.knobs.DEFAULT_PROFILE`, the classical dipole),
 #: by the BSSRDF path tracer, which needs no manifold search behind a dielectric and no
-#: per-channel walks; and the glossy scene with the BRDF-editing method's default model,
+#: per-channel walks, with the half-space profile alone (``dipole``) and with the object's
+#: geometry (``dipole+geometry``, :mod:`.geometry_term`: the model of PRT and splatting by
+#: default); and the glossy scene with the BRDF-editing method's default model,
 #: the 6-term PCA of its BRDFs (:func:`~translucent.materials.brdf_pca.pca_model_name`),
 #: by Mitsuba's path tracer with the PCA BRDF plugin (:mod:`.brdf_plugins`).
 MODEL_PLANS: dict[str, dict[str, ReferencePlan]] = {
-    "sphere": {"dipole": ReferencePlan(spp=256, budget_seconds=1200.0,
-                                       integrator=MODEL_INTEGRATOR)},
-    "bowl": {"dipole": ReferencePlan(spp=256, budget_seconds=1200.0,
-                                     integrator=MODEL_INTEGRATOR)},
-    "cornell_block": {"dipole": ReferencePlan(spp=64, budget_seconds=1200.0,
-                                              integrator=MODEL_INTEGRATOR)},
-    "sphere_dielectric": {"dipole": ReferencePlan(spp=256, budget_seconds=1200.0,
-                                                  integrator=MODEL_INTEGRATOR)},
-    "dielectric_on_floor": {"dipole": ReferencePlan(spp=256, budget_seconds=1200.0,
-                                                    integrator=MODEL_INTEGRATOR)},
+    name: {model: ReferencePlan(spp=spp, budget_seconds=1200.0, integrator=MODEL_INTEGRATOR)
+           for model in ("dipole", "dipole" + GEOMETRY_SUFFIX)}
+    for name, spp in (("sphere", 256), ("bowl", 256), ("cornell_block", 64),
+                      ("sphere_dielectric", 256), ("dielectric_on_floor", 256))
+} | {
     "glossy": {"brdf_pca_k6": ReferencePlan(spp=1024, budget_seconds=900.0,
                                             integrator="path")},
 }
@@ -265,10 +263,16 @@ def committed_reference(name: str, scene=None, profile: str | None = None
         meta = image.metadata
         made = (meta.get("profile") or {}).get("name") if isinstance(
             meta.get("profile"), dict) else None
+        if made is not None:
+            made = model_key(made, isinstance(meta.get("geometry"), dict))
         if meta.get("integrator") != plan.integrator or made != profile:
             return unusable(f"the committed reference is not the {plan.integrator} render of "
                             f"profile {profile!r} (integrator {meta.get('integrator')!r}, "
                             f"profile {made!r})", image)
+        if isinstance(meta.get("geometry"), dict) and meta["geometry"] != geometry_settings():
+            return unusable(f"the committed reference is stale: its geometry correction was "
+                            f"rendered with {meta['geometry']}, the suite's is "
+                            f"{geometry_settings()}", image)
     return CommittedReference(name, path, image, True, profile=profile)
 
 

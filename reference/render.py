@@ -24,6 +24,7 @@ from ..errors import InputError, check_count
 from ..image import Image, read_exr
 from ..scenes import Scene
 from .delta_lights import DEFAULT_SIZE
+from .geometry_term import geometry_settings, parse_model_key
 from .mitsuba_scene import convert_scene
 
 __all__ = ["render", "render_to_target", "reference_settings", "reference_key", "load_scenes",
@@ -106,6 +107,8 @@ def load_scenes(scene: Scene, *, spp: int, per_channel: bool | None = None,
     """
     mi = mitsuba()
 
+    profile = None if profile is None else parse_model_key(profile)[0]
+
     def convert(channel):
         return convert_scene(scene, integrator=integrator, max_depth=max_depth, spp=spp,
                              channel=channel, rr_depth=rr_depth,
@@ -121,15 +124,42 @@ def load_scenes(scene: Scene, *, spp: int, per_channel: bool | None = None,
     return channels, conversions, [mi.load_dict(c.scene_dict) for c in conversions]
 
 
-def render_sample(channels, mitsuba_scenes, spp: int, seed: int, on_render=None) -> np.ndarray:
+def geometry_term_of(scene: Scene, profile: str | None, channels, conversions, mitsuba_scenes):
+    """Return the geometry term a model key asks for (:mod:`.geometry_term`), or None.
+
+    None where the key has no geometry, or no object of the scene has a correction in view.
+
+    Raises
+    ------
+    InputError
+        The key asks for the geometry with an integrator other than ``bssrdf_path``, or a
+        render made one channel at a time.
+    """
+    from .geometry_term import GeometryTerm
+
+    if profile is None or not parse_model_key(profile)[1]:
+        return None
+    if conversions[0].integrator != "bssrdf_path" or channels != (None,):
+        raise InputError("the geometry term is rendered with bssrdf_path in RGB only",
+                         field="profile", value=profile)
+    term = GeometryTerm(scene, conversions[0], mitsuba_scenes[0], parse_model_key(profile)[0])
+    return None if term.empty else term
+
+
+def render_sample(channels, mitsuba_scenes, spp: int, seed: int, on_render=None,
+                  geometry=None) -> np.ndarray:
     """Render one sample image of scenes loaded by :func:`load_scenes`, float64 ``H x W x 3``.
 
     Per channel, each channel of the image comes from its own scene's render.
-    ``on_render`` (optional) is called after each Mitsuba render.
+    ``on_render`` (optional) is called after each Mitsuba render. ``geometry`` (a
+    :class:`~translucent.reference.geometry_term.GeometryTerm`) adds one estimate of the
+    geometry correction, seeded with the pass.
     """
     signals.check()  # a signal a plugin's caller swallowed still ends the render here
     if channels == (None,):
         sample = _render_pass(mitsuba_scenes[0], spp, seed)
+        if geometry is not None:
+            sample = sample + geometry.sample(seed)
         if on_render is not None:
             on_render()
         return sample
@@ -297,6 +327,8 @@ def _render_passes(scene, store, key, settings, *, spp, passes, seed, progress, 
         scene, spp=spp, per_channel=per_channel, integrator=integrator, max_depth=max_depth,
         rr_depth=rr_depth, substitute_delta_lights=substitute_delta_lights,
         delta_light_size=delta_light_size, profile=settings.get("profile"))
+    geometry = geometry_term_of(scene, settings.get("profile"), channels, conversions,
+                                mitsuba_scenes)
 
     from ..progress import progress_bar
 
@@ -307,7 +339,7 @@ def _render_passes(scene, store, key, settings, *, spp, passes, seed, progress, 
     try:
         for k in range(passes):
             passes_done.add(render_sample(channels, mitsuba_scenes, spp, seed * passes + k,
-                                          bar.update))
+                                          bar.update, geometry))
     finally:
         bar.close()
     _check_finite_render(scene, passes_done.mean)
@@ -473,6 +505,8 @@ def _metadata(scene, key, settings, conversions, channels, mitsuba_scenes=(),
         **({"media": dict(first.media)} if first.media else {}),
         **({"manifold_nee": manifold} if manifold is not None else {}),
         **({"profile": dict(first.profile)} if first.profile else {}),
+        **({"geometry": geometry_settings()} if parse_model_key(settings.get("profile") or "")[1]
+           else {}),
     }
 
 
@@ -628,6 +662,7 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
             scene, spp=spp, per_channel=per_channel, integrator=integrator, max_depth=max_depth,
             rr_depth=rr_depth, substitute_delta_lights=substitute_delta_lights,
             delta_light_size=delta_light_size, profile=profile)
+        geometry = geometry_term_of(scene, profile, channels, conversions, mitsuba_scenes)
 
         def summary():
             if accumulator.count < 2:
@@ -658,7 +693,8 @@ def render_to_target(scene: Scene, *, target_rse: float = 0.01,
                         break
                 accumulator.add(render_sample(
                     channels, mitsuba_scenes, spp,
-                    PROGRESSIVE_SEED_OFFSET + seed * PROGRESSIVE_SEED_STRIDE + accumulator.count))
+                    PROGRESSIVE_SEED_OFFSET + seed * PROGRESSIVE_SEED_STRIDE + accumulator.count,
+                    geometry=geometry))
                 if partial is not None:
                     _save_partial(store, partial, partial_key, accumulator, elapsed(),
                                   _manifold_counts(mitsuba_scenes, manifold_before))

@@ -401,6 +401,21 @@ class PRTState:
             combined = self._wavelets[transfer.name].inverse(combined)
         return combined
 
+    def exit_radiance(self, transfer: ObjectTransfer, material: Dipole) -> np.ndarray:
+        r"""Per-vertex exitance before :math:`F_t/\pi`, (V, 3): the profile's and the geometry's.
+
+        :meth:`vertex_radiance` plus, where the object has one, the geometry correction
+        of the last lighting (:mod:`translucent.fast.object_geometry`).
+        """
+        radiance = self.vertex_radiance(transfer, material)
+        if transfer.name not in self.geometry:
+            return radiance
+        geometry, entry, exit_weights = self.geometry[transfer.name]
+        profile = self.profile_of(material)
+        return radiance + geometry.exitance(
+            entry, self._entry_power[transfer.name], exit_weights, material,
+            None if profile is None else profile.total()).astype(np.float32)
+
     def coefficients(self, material: Dipole, sample_spacing: float | None = None) -> np.ndarray:
         r"""Weights of the K basis vectors and of the local vector, per channel, (3, K + 1).
 
@@ -505,13 +520,7 @@ class PRTState:
                         t.name: material or self.scene.object(t.name).material
                         for t in self.transfers}
                     self.relight(transfer, wanted, chosen.eta)
-                radiance = self.vertex_radiance(transfer, chosen)
-                if transfer.name in self.geometry:
-                    geometry, entry, exit_weights = self.geometry[transfer.name]
-                    profile = self.profile_of(chosen)
-                    radiance = radiance + geometry.exitance(
-                        entry, self._entry_power[transfer.name], exit_weights, chosen,
-                        None if profile is None else profile.total()).astype(np.float32)
+                radiance = self.exit_radiance(transfer, chosen)
                 pixel_map = maps["maps"][transfer.name]
                 exit_factor = self._exit_factor(transfer.name, pixel_map, chosen.eta)
                 gathered = np.einsum("pk,pkc->pc", pixel_map.barycentrics,

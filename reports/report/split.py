@@ -303,7 +303,9 @@ def unrendered_profile(profile: str) -> str:
     """
     from ...materials.brdf_pca import pca_model_basis
     from ...materials.profiles import PROFILE_NAMES
+    from ...reference.geometry_term import parse_model_key
 
+    profile = parse_model_key(profile)[0]
     if profile in PROFILE_NAMES or pca_model_basis(profile) is not None:
         return ""
     return (f"{profile!r} is the radial average of a directional profile; the BSSRDF path "
@@ -312,7 +314,13 @@ def unrendered_profile(profile: str) -> str:
 
 
 def split_profile(name: str, knobs: dict | None) -> tuple[str | None, str]:
-    """Return the profile a report entry rendered, or why it has none.
+    """Return the model a report entry rendered (its model reference's key), or why none.
+
+    The key is the profile's name, with :data:`~translucent.reference.geometry_term.GEOMETRY_SUFFIX`
+    where the method adds the object's geometry to it (its knob ``geometry`` is
+    ``"diffusion"``, :mod:`translucent.fast.object_geometry`): the model reference then
+    renders the same correction (:mod:`translucent.reference.geometry_term`), so that the
+    method is not credited with its model's gain.
 
     Parameters
     ----------
@@ -323,6 +331,7 @@ def split_profile(name: str, knobs: dict | None) -> tuple[str | None, str]:
     """
     from ...fast.base import method
     from ...fast.knobs import DEFAULT_PROFILE
+    from ...reference.geometry_term import model_key
 
     method_name, asked = entry_parts(name)
     try:
@@ -334,7 +343,11 @@ def split_profile(name: str, knobs: dict | None) -> tuple[str | None, str]:
     if profile_knob_of(method_name) is None:
         return None, (f"{method_name} names no model (no model_name, no profile knob): its "
                       "error cannot be split")
-    return (knobs or {}).get("profile", asked or DEFAULT_PROFILE), ""
+    chosen = (knobs or {}).get("profile", asked or DEFAULT_PROFILE)
+    spec = getattr(module, "KNOBS", None)
+    geometry = spec is not None and "geometry" in spec and \
+        (knobs or {}).get("geometry", spec["geometry"].default) == "diffusion"
+    return model_key(chosen, geometry), ""
 
 
 def score_splits(report) -> None:

@@ -155,7 +155,8 @@ def test_the_cornell_block_lit_by_its_walls_follows_the_model_reference(method):
     scene = load_scene("cornell_block")
     model = committed_reference("cornell_block", scene, profile="dipole").require()
     mask = object_mask(scene, "block")
-    quick = translucent.method(method).QUICK_KNOBS
+    # the half-space profile: the model reference's model
+    quick = {**translucent.method(method).QUICK_KNOBS, "geometry": "half_space"}
     errors = {mode: object_metrics(model, translucent.approx(method, scene, **quick,
                                                              indirect_light=mode), mask)
               for mode in INDIRECT_LIGHT}

@@ -224,7 +224,7 @@ def test_render_is_an_image_through_the_camera(state):
 
     view = gbuffer(state.scene)
     transfer = state.transfers[0]
-    radiance = state.vertex_radiance(transfer, material)
+    radiance = state.exit_radiance(transfer, material)
     cosine = np.clip(np.einsum("...d,...d->...", view.normal, view.view_direction), 0, 1)
     expected = view.interpolate("sphere", radiance) * (
         fresnel_transmittance(material.eta, cosine) / np.pi)[..., None]

@@ -35,6 +35,7 @@ from translucent.reference.committed import (
     committed_reference,
     rerender_command,
 )
+from translucent.reference.geometry_term import model_key
 from translucent.reference.render import render
 from translucent.reports.cli import main
 from translucent.reports.metrics.statistics import block_means, z_test_known_variance
@@ -137,7 +138,8 @@ def test_committed_model_reference_is_current_and_meets_its_noise_target(name, p
     assert entry.current, entry.problem
     meta = entry.image.metadata
     plan = MODEL_PLANS[name][profile]
-    assert meta["integrator"] == plan.integrator and meta["profile"]["name"] == profile
+    assert meta["integrator"] == plan.integrator
+    assert model_key(meta["profile"]["name"], isinstance(meta.get("geometry"), dict)) == profile
     summary = noise_summary(entry.image.rgb, entry.image.variance)
     assert summary.median <= plan.target_rse, summary.text()
     assert summary.p99 <= plan.target_p99_rse, summary.text()
@@ -149,7 +151,8 @@ def test_every_default_scene_of_a_homogeneous_medium_has_a_committed_model_refer
     from translucent.reports.report.split import model_reference_refusal
 
     names, _ = default_scenes()
-    for model in ("dipole", "brdf_pca_k6"):  # the default models of the methods
+    # the default models of the methods: PRT's and splatting's with the geometry
+    for model in ("dipole", "dipole+geometry", "brdf_pca_k6"):
         splittable = [name for name in names
                       if not model_reference_refusal(load_scene(name), model)]
         assert splittable and sorted(splittable) == sorted(committed_model_scene_names(model))
@@ -160,6 +163,18 @@ def test_a_fresh_bssrdf_render_is_consistent_with_the_committed_model_reference(
     fresh = render(load_scene("sphere"), spp=16, passes=8, seed=1, cache=False,
                    progress=False, integrator="bssrdf_path", profile="dipole")
     _assert_consistent_and_sensitive("sphere (model)", fresh, committed)
+
+
+def test_a_fresh_render_with_the_geometry_is_consistent_with_its_committed_model_reference():
+    """The geometry term (reference/geometry_term.py) rendered again with other seeds; and
+    the half-space's committed model reference is not it (the term is seen)."""
+    committed = committed_reference("sphere_dielectric", profile="dipole+geometry").require()
+    fresh = render(load_scene("sphere_dielectric"), spp=16, passes=8, seed=1, cache=False,
+                   progress=False, integrator="bssrdf_path", profile="dipole+geometry")
+    _assert_consistent_and_sensitive("sphere_dielectric (model with geometry)", fresh,
+                                     committed)
+    half_space = committed_reference("sphere_dielectric", profile="dipole").require()
+    assert np.abs(_global_z(fresh, half_space)).max() > GLOBAL_Z
 
 
 def test_a_fresh_pca_brdf_render_is_consistent_with_the_committed_model_reference():
