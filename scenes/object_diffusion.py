@@ -42,6 +42,7 @@ the unit of :math:`R(r)`.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 
@@ -51,6 +52,7 @@ from scipy.cluster.vq import kmeans2
 from scipy.sparse import linalg as sparse_linalg
 from scipy.spatial import cKDTree
 
+from ..cache import Cache, content_hash
 from ..errors import InputError, check_count
 from ..materials.dipole import dipole_boundary_factor
 from .diffusion_grid import DiffusionGrid, boundary_conductance, diffusion_grid, diffusion_terms
@@ -74,6 +76,10 @@ NEIGHBOURS = 4
 #: Responses kept per object (one per material: editing back and forth solves each once).
 KEPT_RESPONSES = 8
 
+#: The disk cache's namespace, and the layout of its entries.
+CACHE_NAMESPACE = "object_diffusion"
+CACHE_FORMAT = 1
+
 
 def dipole_fluence(points, source, normal, sigma_a, sigma_s_prime, eta,
                    ) -> tuple[np.ndarray, np.ndarray]:
@@ -86,19 +92,19 @@ def dipole_fluence(points, source, normal, sigma_a, sigma_s_prime, eta,
 
     Parameters
     ----------
-    points : ndarray, shape (P, 3)
+    points : ndarray, shape (..., 3)
         mm.
-    source, normal : ndarray, shape (3,) or (P, 3)
-        The entry point (mm) and its outward unit normal.
+    source, normal : ndarray, shape (..., 3)
+        The entry point (mm) and its outward unit normal; broadcast with ``points``.
     sigma_a, sigma_s_prime : float
         mm^-1, > 0.
     eta : float
 
     Returns
     -------
-    fluence : ndarray, shape (P,)
+    fluence : ndarray, shape (...)
         mm^-2.
-    gradient : ndarray, shape (P, 3)
+    gradient : ndarray, shape (..., 3)
         mm^-3.
     """
     _, diffusion, extrapolation, depth, sigma_tr = (
@@ -108,8 +114,9 @@ def dipole_fluence(points, source, normal, sigma_a, sigma_s_prime, eta,
     source = np.asarray(source, dtype=np.float64)
     normal = np.asarray(normal, dtype=np.float64)
     scale = albedo / (4.0 * math.pi * diffusion)
-    fluence = np.zeros(points.shape[:-1])
-    gradient = np.zeros(points.shape)
+    shape = np.broadcast_shapes(points.shape, source.shape, normal.shape)
+    fluence = np.zeros(shape[:-1])
+    gradient = np.zeros(shape)
     for sign, centre in ((1.0, source - depth * normal),
                          (-1.0, source + (depth + 2.0 * extrapolation) * normal)):
         offset = points - centre
@@ -161,6 +168,9 @@ class ObjectDiffusion:
     cluster_point: np.ndarray
     cluster_normal: np.ndarray
     spacing: float
+    #: the content hash of what built it (the disk cache's key of its responses; "" keeps
+    #: them in memory only)
+    key: str = ""
     _responses: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -224,10 +234,23 @@ class ObjectDiffusion:
         held = self._responses.get(key)
         if held is not None:
             return held
-        out = np.zeros((self.clusters, self.clusters, len(sigma_a)))
-        for c in np.flatnonzero((sigma_a > 0) & (sigma_s_prime > 0)):
-            out[:, :, c] = self._channel_response(float(sigma_a[c]), float(sigma_s_prime[c]),
-                                                  float(eta))
+
+        def make():
+            made = np.zeros((self.clusters, self.clusters, len(sigma_a)))
+            for c in np.flatnonzero((sigma_a > 0) & (sigma_s_prime > 0)):
+                made[:, :, c] = self._channel_response(float(sigma_a[c]),
+                                                       float(sigma_s_prime[c]), float(eta))
+            return made
+
+        if self.key:
+            shape = (self.clusters, self.clusters, len(sigma_a))
+            out, _ = Cache(CACHE_NAMESPACE).load_or_make(
+                content_hash("object diffusion response", self.key, sigma_a.tolist(),
+                             sigma_s_prime.tolist(), float(eta)), make,
+                valid=lambda value: isinstance(value, np.ndarray) and value.shape == shape,
+                what="the geometry correction of an object")
+        else:
+            out = make()
         if len(self._responses) >= KEPT_RESPONSES:
             self._responses.pop(next(iter(self._responses)))
         self._responses[key] = out
@@ -261,7 +284,8 @@ class ObjectDiffusion:
 
 
 def object_diffusion(triangles, *, cells: int = DEFAULT_CELLS,
-                     clusters: int = DEFAULT_CLUSTERS, seed: int = 0) -> ObjectDiffusion:
+                     clusters: int = DEFAULT_CLUSTERS, seed: int = 0,
+                     cache: bool = True) -> ObjectDiffusion:
     """Build an object's grid and surface clusters for the geometry correction.
 
     Parameters
@@ -275,6 +299,9 @@ def object_diffusion(triangles, *, cells: int = DEFAULT_CELLS,
         Source and exit clusters K (>= 1; fewer where the surface has fewer triangles).
     seed : int
         Of the k-means that places the clusters.
+    cache : bool
+        Keep the grid, the clusters and every material's response in the disk cache
+        (namespace ``object_diffusion``), keyed by the triangles and these settings.
 
     Returns
     -------
@@ -287,7 +314,35 @@ def object_diffusion(triangles, *, cells: int = DEFAULT_CELLS,
     """
     check_count(cells, "geometry_cells", minimum=8)
     check_count(clusters, "geometry_clusters", minimum=1)
+    check_count(seed, "seed", minimum=0)
     triangles = np.ascontiguousarray(triangles, dtype=np.float64)
+    if not cache:
+        return _build(triangles, int(cells), int(clusters), int(seed))
+    key = content_hash("object diffusion", CACHE_FORMAT, hashlib.sha256(
+        triangles.tobytes()).hexdigest(), list(triangles.shape), int(cells), int(clusters),
+        int(seed))
+    parts, _ = Cache(CACHE_NAMESPACE).load_or_make(
+        key, lambda: _parts(_build(triangles, int(cells), int(clusters), int(seed))),
+        valid=lambda value: isinstance(value, dict) and set(value) == set(_PARTS),
+        what="the diffusion grid of an object")
+    return ObjectDiffusion(**parts, key=key)
+
+
+#: What of an ObjectDiffusion the disk cache keeps.
+_PARTS = ("grid", "cluster_point", "cluster_normal", "spacing")
+
+
+def _parts(diffusion: ObjectDiffusion) -> dict:
+    grid = diffusion.grid
+    bare = DiffusionGrid(grid.origin, grid.voxel_size, grid.node_of, grid.centers, grid.pairs,
+                         grid.boundary_area, grid.face_cell, grid.face_point,
+                         grid.face_normal, grid.face_area)
+    return {"grid": bare, "cluster_point": diffusion.cluster_point,
+            "cluster_normal": diffusion.cluster_normal, "spacing": float(diffusion.spacing)}
+
+
+def _build(triangles, cells: int, clusters: int, seed: int) -> ObjectDiffusion:
+    """Make the grid and the clusters (:func:`object_diffusion` without the cache)."""
     extent = float(np.ptp(triangles.reshape(-1, 3), axis=0).max())
     volume = abs(float(np.einsum("fd,fd->", triangles[:, 0],
                                  np.cross(triangles[:, 1], triangles[:, 2])))) / 6.0
@@ -319,16 +374,14 @@ def _robin_data(points, normals, sources, source_normals, sigma_a, sigma_s_prime
                 plane_residual: bool) -> np.ndarray:
     """Minus the dipole's Robin residual at ``points`` (less its plane's), shape (P, S)."""
     factor = _residual_factor(sigma_a, sigma_s_prime, eta)
-    out = np.empty((len(points), len(sources)))
-    for k, (source, normal) in enumerate(zip(sources, source_normals, strict=True)):
-        fluence, gradient = dipole_fluence(points, source, normal, sigma_a, sigma_s_prime, eta)
-        residual = fluence + factor * np.einsum("pd,pd->p", gradient, normals)
-        if plane_residual:
-            _, plane = _plane_terms(np.linalg.norm(points - source, axis=1), sigma_a,
-                                    sigma_s_prime, eta)
-            residual = residual - plane
-        out[:, k] = -residual
-    return out
+    fluence, gradient = dipole_fluence(points[:, None, :], sources[None], source_normals[None],
+                                       sigma_a, sigma_s_prime, eta)
+    residual = fluence + factor * np.einsum("psd,pd->ps", gradient, normals)
+    if plane_residual:
+        _, plane = _plane_terms(np.linalg.norm(points[:, None, :] - sources[None], axis=-1),
+                                sigma_a, sigma_s_prime, eta)
+        residual = residual - plane
+    return -residual
 
 
 def diffusion_correction(grid: DiffusionGrid, sources, source_normals, exits, exit_normals,
@@ -387,9 +440,8 @@ def diffusion_correction(grid: DiffusionGrid, sources, source_normals, exits, ex
                       eta, plane_residual)
     ratio = 2.0 * extrapolation / h
     face = (own + ratio * inner) / (1.0 + ratio)
-    fluence = np.empty((len(exits), len(sources)))
-    for k, (source, normal) in enumerate(zip(sources, source_normals, strict=True)):
-        fluence[:, k], _ = dipole_fluence(exits, source, normal, sigma_a, sigma_s_prime, eta)
+    fluence, _ = dipole_fluence(exits[:, None, :], sources[None], source_normals[None],
+                                sigma_a, sigma_s_prime, eta)
     distance = np.linalg.norm(exits[:, None] - sources[None], axis=2)
     plane, _ = _plane_terms(distance, sigma_a, sigma_s_prime, eta)
     return (fluence - plane + face) / (2.0 * float(dipole_boundary_factor(eta)))

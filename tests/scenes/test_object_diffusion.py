@@ -177,3 +177,26 @@ def test_bad_counts_are_input_errors(options):
     mesh = icosphere(2, RADIUS)
     with pytest.raises(InputError):
         object_diffusion(mesh.vertices[mesh.faces], **options)
+
+
+def test_the_grid_clusters_and_responses_are_kept_in_the_disk_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("TRANSLUCENT_CACHE", str(tmp_path / "cache"))
+    mesh = icosphere(3, RADIUS)
+    triangles = mesh.vertices[mesh.faces]
+    first = object_diffusion(triangles, cells=1000, clusters=32)
+    made = first.response(SIGMA_A, SIGMA_S_PRIME, ETA)
+
+    def refuse(*_):
+        raise AssertionError("solved again")
+
+    monkeypatch.setattr(type(first), "_channel_response", refuse)
+    again = object_diffusion(triangles, cells=1000, clusters=32)
+    assert again.key == first.key and again is not first
+    np.testing.assert_array_equal(again.cluster_point, first.cluster_point)
+    np.testing.assert_array_equal(again.response(SIGMA_A, SIGMA_S_PRIME, ETA), made)
+    # another material, or no cache: solved
+    with pytest.raises(AssertionError, match="solved again"):
+        again.response(SIGMA_A * 2, SIGMA_S_PRIME, ETA)
+    with pytest.raises(AssertionError, match="solved again"):
+        object_diffusion(triangles, cells=1000, clusters=32, cache=False).response(
+            SIGMA_A, SIGMA_S_PRIME, ETA)
