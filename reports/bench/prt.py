@@ -195,7 +195,7 @@ def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -
     scene = bench_scene(mesh, args.size)
     start_wall, start_cpu = time.perf_counter(), time.process_time()
     with private_cache(prefix="bench_prt_"):
-        state = prt.precompute(scene, samples=samples)
+        state = prt.precompute(scene, samples=samples, geometry="half_space")
     precompute_wall = time.perf_counter() - start_wall
     precompute_cpu = time.process_time() - start_cpu
     transfer = state.transfers[0]
@@ -236,6 +236,7 @@ def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -
     bound_seconds = frame_bytes / (bandwidth["read_gb_per_s"] * 1e9)
     errors = {name: brute_force_error(state, measured_medium(name), args.error_vertices)
               for name in ("Skin1", "Marble")}
+    geometry = _geometry_costs(scene, samples, materials[:2])
     return {
         "label": label, "vertices": statistics["vertices"], "samples": samples,
         "spatial": transfer.spatial_shape is not None,
@@ -259,7 +260,34 @@ def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -
         "relative_l2_vs_brute_force": errors,
         "layout": statistics.get("layout", "rows"), "product_channels": channels,
         "load_average": [load_before, os.getloadavg()[0]],
+        "geometry": geometry,
     }
+
+
+def _geometry_costs(scene, samples: int, materials) -> dict:
+    """Measure what ``geometry = "diffusion"`` adds: its precomputation, a frame, an edit.
+
+    The rest of the bench measures the paper's method (``half_space``): its editing
+    re-weights cached vectors, while the geometry correction solves once per new material
+    (fast/object_geometry.py), kept for the next edits back to it.
+    """
+    with private_cache(prefix="bench_prt_"):
+        state = prt.precompute(scene, samples=samples)
+        state.render()
+        start = time.perf_counter()
+        state.render()
+        frame = time.perf_counter() - start
+        start = time.perf_counter()
+        for material in materials:
+            state.render(material=material)
+        first_edit = (time.perf_counter() - start) / max(1, len(materials))
+        start = time.perf_counter()
+        for material in materials:
+            state.render(material=material)
+        again = (time.perf_counter() - start) / max(1, len(materials))
+    return {"precompute_seconds": state.log.seconds.get("geometry"), "frame_seconds": frame,
+            "new_material_edit_seconds": first_edit, "cached_material_edit_seconds": again,
+            "notes": state.log.notes.get("geometry")}
 
 
 def transfer_eta(state) -> float:
@@ -285,13 +313,14 @@ def error_sweep(samples: int = 4096) -> dict:
             rows = []
             for count in (2, 4, 6, 8, 10, 12, 14, 16):
                 state = prt.precompute(bench_scene(mesh, 32), samples=samples, basis=basis,
-                                       basis_terms=count)
+                                       basis_terms=count, geometry="half_space")
                 rows.append((count, max(brute_force_error(state, measured_medium(n), 642)
                                         for n in names)))
             result["basis_terms"][basis] = rows
         rows = []
         for terms in (32, 64, 128, 256, 512, 1024):
-            state = prt.precompute(bench_scene(mesh, 32), samples=samples, terms=terms)
+            state = prt.precompute(bench_scene(mesh, 32), samples=samples, terms=terms,
+                                   geometry="half_space")
             rows.append((terms, max(brute_force_error(state, measured_medium(n), 642)
                                     for n in names),
                          state.transfers[0].statistics["megabytes"]))
@@ -397,6 +426,14 @@ def run(args) -> int:
               f"bandwidth fraction {r['bandwidth_fraction']:.2f} "
               f"({_status(r['bandwidth_fraction'], TARGET_BANDWIDTH_FRACTION)} "
               f"{TARGET_BANDWIDTH_FRACTION})")
+    for r in results:
+        cost = r["geometry"]
+        print(f"{r['label']} / {r['samples']}: with geometry = diffusion (the default; the "
+              f"figures above are the paper's half_space): its solve "
+              f"{cost['precompute_seconds']:.2f} s at precomputation, a frame "
+              f"{1e3 * cost['frame_seconds']:.1f} ms, an edit to a new material "
+              f"{cost['new_material_edit_seconds']:.2f} s (one solve), back to a solved one "
+              f"{1e3 * cost['cached_material_edit_seconds']:.1f} ms")
     output = {"bandwidth": bandwidth, "configurations": results, "shadow_rays": rays,
               "targets": {"edit_fps": TARGET_EDIT_FPS, "relight_fps": TARGET_RELIGHT_FPS,
                           "bandwidth_fraction": TARGET_BANDWIDTH_FRACTION}}
