@@ -264,6 +264,17 @@ def bench_configuration(mesh, samples: int, args, bandwidth: dict, label: str) -
     }
 
 
+def _print_geometry_costs(results) -> None:
+    for r in results:
+        cost = r["geometry"]
+        print(f"{r['label']} / {r['samples']}: with geometry = diffusion (the default; the "
+              f"figures above are the paper's half_space): its solve "
+              f"{cost['precompute_seconds']:.2f} s at precomputation, a frame "
+              f"{1e3 * cost['frame_seconds']:.1f} ms, an edit to a new material "
+              f"{cost['new_material_edit_seconds']:.2f} s (one solve), back to a solved one "
+              f"{1e3 * cost['cached_material_edit_seconds']:.1f} ms")
+
+
 def _geometry_costs(scene, samples: int, materials) -> dict:
     """Measure what ``geometry = "diffusion"`` adds: its precomputation, a frame, an edit.
 
@@ -426,14 +437,7 @@ def run(args) -> int:
               f"bandwidth fraction {r['bandwidth_fraction']:.2f} "
               f"({_status(r['bandwidth_fraction'], TARGET_BANDWIDTH_FRACTION)} "
               f"{TARGET_BANDWIDTH_FRACTION})")
-    for r in results:
-        cost = r["geometry"]
-        print(f"{r['label']} / {r['samples']}: with geometry = diffusion (the default; the "
-              f"figures above are the paper's half_space): its solve "
-              f"{cost['precompute_seconds']:.2f} s at precomputation, a frame "
-              f"{1e3 * cost['frame_seconds']:.1f} ms, an edit to a new material "
-              f"{cost['new_material_edit_seconds']:.2f} s (one solve), back to a solved one "
-              f"{1e3 * cost['cached_material_edit_seconds']:.1f} ms")
+    _print_geometry_costs(results)
     output = {"bandwidth": bandwidth, "configurations": results, "shadow_rays": rays,
               "targets": {"edit_fps": TARGET_EDIT_FPS, "relight_fps": TARGET_RELIGHT_FPS,
                           "bandwidth_fraction": TARGET_BANDWIDTH_FRACTION}}
