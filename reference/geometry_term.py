@@ -35,7 +35,12 @@ from ..materials.fresnel import fresnel_transmittance
 from ..materials.homogeneous import Dipole
 from ..materials.profiles import profile as named_profile
 from ..scenes.mesh_shape import closed_surface
-from ..scenes.object_diffusion import DEFAULT_CELLS, DEFAULT_CLUSTERS, object_diffusion
+from ..scenes.object_diffusion import (
+    CACHE_FORMAT,
+    DEFAULT_CELLS,
+    DEFAULT_CLUSTERS,
+    object_diffusion,
+)
 from .bssrdf_tables import exit_normalisation
 
 __all__ = ["GEOMETRY_SUFFIX", "GeometryTerm", "geometry_settings", "model_key",
@@ -57,8 +62,8 @@ ORIGIN_OFFSET = 1e-5
 
 def geometry_settings() -> dict:
     """Return what a model reference with the geometry was rendered with (its header's)."""
-    return {"model": "diffusion", "cells": DEFAULT_CELLS, "clusters": DEFAULT_CLUSTERS,
-            "points": POINTS, "rays": RAYS}
+    return {"model": "diffusion", "version": CACHE_FORMAT, "cells": DEFAULT_CELLS,
+            "clusters": DEFAULT_CLUSTERS, "points": POINTS, "rays": RAYS}
 
 
 def model_key(profile: str, geometry: bool) -> str:

@@ -42,6 +42,7 @@ the unit of :math:`R(r)`.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 from dataclasses import dataclass, field
@@ -58,6 +59,7 @@ from ..materials.dipole import dipole_boundary_factor
 from .diffusion_grid import DiffusionGrid, boundary_conductance, diffusion_grid, diffusion_terms
 
 __all__ = [
+    "CACHE_FORMAT",
     "DEFAULT_CELLS",
     "DEFAULT_CLUSTERS",
     "ObjectDiffusion",
@@ -76,9 +78,11 @@ NEIGHBOURS = 4
 #: Responses kept per object (one per material: editing back and forth solves each once).
 KEPT_RESPONSES = 8
 
-#: The disk cache's namespace, and the layout of its entries.
+#: The disk cache's namespace, and the version of the correction's discretisation (the
+#: grid, the clusters' placement): a change makes every cached entry, and every committed
+#: model reference rendered with the geometry, stale.
 CACHE_NAMESPACE = "object_diffusion"
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2
 
 
 def dipole_fluence(points, source, normal, sigma_a, sigma_s_prime, eta,
@@ -355,7 +359,7 @@ def _build(triangles, cells: int, clusters: int, seed: int) -> ObjectDiffusion:
     spacing = math.sqrt(area.sum() / count)
     # k-means over area-weighted draws of the triangles, in position and normal
     rng = np.random.default_rng(seed)
-    draws = rng.choice(len(triangles), size=max(20 * count, 2000), p=area / area.sum())
+    draws = rng.choice(len(triangles), size=max(8 * count, 1000), p=area / area.sum())
     features = np.concatenate([centroid[draws], spacing * normal[draws]], axis=1)
     centres, label = kmeans2(features, count, seed=rng, minit="++")
     used = np.unique(label)
@@ -370,18 +374,59 @@ def _build(triangles, cells: int, clusters: int, seed: int) -> ObjectDiffusion:
     return ObjectDiffusion(grid, point, normal[nearest].copy(), spacing)
 
 
+@functools.lru_cache(maxsize=1)
+def _compiled_robin_data():
+    import numba
+
+    from ..compiled import parallel_njit
+
+    @parallel_njit(cache=True)
+    def robin(points, normals, sources, source_normals, depth, image, sigma_tr, scale, factor,
+              plane_residual, out):  # pragma: no cover - compiled
+        for p in numba.prange(len(points)):
+            for k in range(len(sources)):
+                residual = 0.0
+                for sign, offset in ((1.0, -depth), (-1.0, image)):
+                    dx = points[p, 0] - sources[k, 0] - offset * source_normals[k, 0]
+                    dy = points[p, 1] - sources[k, 1] - offset * source_normals[k, 1]
+                    dz = points[p, 2] - sources[k, 2] - offset * source_normals[k, 2]
+                    d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                    decay = math.exp(-sigma_tr * d)
+                    radial = -(sigma_tr * d + 1.0) * decay / (d * d * d)
+                    along = dx * normals[p, 0] + dy * normals[p, 1] + dz * normals[p, 2]
+                    residual += sign * scale * (decay / d + factor * radial * along)
+                if plane_residual:
+                    rx = points[p, 0] - sources[k, 0]
+                    ry = points[p, 1] - sources[k, 1]
+                    rz = points[p, 2] - sources[k, 2]
+                    r2 = rx * rx + ry * ry + rz * rz
+                    for sign, height in ((1.0, depth), (-1.0, -image)):
+                        d = math.sqrt(r2 + height * height)
+                        decay = math.exp(-sigma_tr * d)
+                        radial = -(sigma_tr * d + 1.0) * decay / (d * d * d)
+                        residual -= sign * scale * (decay / d + factor * radial * height)
+                out[p, k] = -residual
+
+    return robin
+
+
 def _robin_data(points, normals, sources, source_normals, sigma_a, sigma_s_prime, eta,
                 plane_residual: bool) -> np.ndarray:
-    """Minus the dipole's Robin residual at ``points`` (less its plane's), shape (P, S)."""
-    factor = _residual_factor(sigma_a, sigma_s_prime, eta)
-    fluence, gradient = dipole_fluence(points[:, None, :], sources[None], source_normals[None],
-                                       sigma_a, sigma_s_prime, eta)
-    residual = fluence + factor * np.einsum("psd,pd->ps", gradient, normals)
-    if plane_residual:
-        _, plane = _plane_terms(np.linalg.norm(points[:, None, :] - sources[None], axis=-1),
-                                sigma_a, sigma_s_prime, eta)
-        residual = residual - plane
-    return -residual
+    """Minus the dipole's Robin residual at ``points`` (less its plane's), shape (P, S).
+
+    Compiled; :func:`dipole_fluence` is the same formula in numpy (a test compares them).
+    """
+    _, diffusion, extrapolation, depth, sigma_tr = (
+        float(np.ravel(v)[0]) for v in diffusion_terms([sigma_a], [sigma_s_prime], eta))
+    scale = sigma_s_prime / (sigma_a + sigma_s_prime) / (4.0 * math.pi * diffusion)
+    out = np.empty((len(points), len(sources)))
+    _compiled_robin_data()(np.ascontiguousarray(points, np.float64),
+                           np.ascontiguousarray(normals, np.float64),
+                           np.ascontiguousarray(sources, np.float64),
+                           np.ascontiguousarray(source_normals, np.float64), depth,
+                           depth + 2.0 * extrapolation, sigma_tr, scale, extrapolation,
+                           bool(plane_residual), out)
+    return out
 
 
 def diffusion_correction(grid: DiffusionGrid, sources, source_normals, exits, exit_normals,
@@ -431,8 +476,10 @@ def diffusion_correction(grid: DiffusionGrid, sources, source_normals, exits, ex
     to_cells = sparse.csr_matrix((conductance * grid.face_area,
                                   (grid.face_cell, np.arange(len(grid.face_cell)))),
                                  shape=(grid.cells, len(grid.face_cell)))
-    # minimum degree on A + A^T: a third of the default ordering's fill on a 3D grid
-    factor = sparse_linalg.splu(matrix, permc_spec="MMD_AT_PLUS_A")
+    # symmetric positive definite: minimum degree on A + A^T and pivots on the diagonal
+    # (a third of the default ordering's fill on a 3D grid, and no row exchanges)
+    factor = sparse_linalg.splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                                options={"SymmetricMode": True})
     solution = factor.solve(np.asarray(to_cells @ data))
     # the exit points' face values: u_f + z_b (u_f - u_c) / (h/2) = g
     inner = grid.interpolate(solution, exits - 0.5 * h * exit_normals)

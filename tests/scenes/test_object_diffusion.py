@@ -200,3 +200,27 @@ def test_the_grid_clusters_and_responses_are_kept_in_the_disk_cache(tmp_path, mo
     with pytest.raises(AssertionError, match="solved again"):
         object_diffusion(triangles, cells=1000, clusters=32, cache=False).response(
             SIGMA_A, SIGMA_S_PRIME, ETA)
+
+
+@pytest.mark.parametrize("plane_residual", [True, False])
+def test_the_compiled_robin_data_is_the_dipoles_formula(plane_residual, rng):
+    from translucent.scenes.object_diffusion import _robin_data
+
+    points = rng.normal(size=(40, 3)) * 5.0
+    normals = rng.normal(size=(40, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    sources, source_normals = points[:7] + 0.3, normals[:7]
+    sigma_a, sigma_s_prime = 0.05, 1.2
+    factor = 2.0 * float(dipole_boundary_factor(ETA)) / (3.0 * (sigma_a + sigma_s_prime))
+    fluence, gradient = dipole_fluence(points[:, None], sources[None], source_normals[None],
+                                       sigma_a, sigma_s_prime, ETA)
+    expected = fluence + factor * np.einsum("psd,pd->ps", gradient, normals)
+    if plane_residual:
+        distance = np.linalg.norm(points[:, None] - sources[None], axis=-1)
+        flat = np.stack([distance, 0 * distance, 0 * distance], axis=-1)
+        plane, plane_gradient = dipole_fluence(flat, np.zeros(3), np.array([0.0, 0.0, 1.0]),
+                                               sigma_a, sigma_s_prime, ETA)
+        expected -= plane + factor * plane_gradient[..., 2]
+    np.testing.assert_allclose(_robin_data(points, normals, sources, source_normals, sigma_a,
+                                           sigma_s_prime, ETA, plane_residual), -expected,
+                               rtol=1e-10, atol=1e-14)
