@@ -282,8 +282,11 @@ def _geometry_costs(scene, samples: int, materials) -> dict:
     re-weights cached vectors, while the geometry correction solves once per new material
     (fast/object_geometry.py), kept for the next edits back to it.
     """
+    from ...fast.object_geometry import QUICK_GEOMETRY_KNOBS
+
+    knobs = QUICK_GEOMETRY_KNOBS if is_quick() else {}
     with private_cache(prefix="bench_prt_"):
-        state = prt.precompute(scene, samples=samples)
+        state = prt.precompute(scene, samples=samples, **knobs)
         state.render()
         start = time.perf_counter()
         state.render()

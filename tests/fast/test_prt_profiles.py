@@ -8,6 +8,7 @@ from translucent.errors import InputError
 from translucent.fast import prt
 from translucent.fast.conformance import tiny_sphere_text
 from translucent.fast.knobs import radial_profile
+from translucent.fast.object_geometry import QUICK_GEOMETRY_KNOBS
 from translucent.fast.prt.profile_basis import ProfileFamily, basis_sampling, family_basis
 from translucent.materials import measured_medium
 from translucent.materials.dipole_pca import decompose_family, dipole_pca_basis
@@ -27,7 +28,7 @@ PROFILE_CHANGE = 0.1
 #: conditioning of the trailing singular vectors.
 SAME_PROCEDURE_ATOL = 1e-9
 
-QUICK = {"samples": 256, "workers": 1, "basis_samples": 16}
+QUICK = {"samples": 256, "workers": 1, "basis_samples": 16, **QUICK_GEOMETRY_KNOBS}
 LIGHT = PointLight([3.0, 4.0, 4.0], 100.0)
 
 
@@ -43,7 +44,7 @@ def _relative(approximation, reference) -> float:
 
 def test_the_dipole_profile_is_the_default_bit_for_bit():
     scene = _sphere()
-    knobs = {"samples": 256, "workers": 1}
+    knobs = {"samples": 256, "workers": 1, **QUICK_GEOMETRY_KNOBS}
     with private_cache():
         default = prt.precompute(scene, **knobs)
         named = prt.precompute(scene, profile="dipole", **knobs)
@@ -64,8 +65,10 @@ def test_the_generic_procedure_on_the_dipole_family_is_the_dipoles():
 def test_prt_matches_the_brute_force_with_the_chosen_profile(name):
     material = measured_medium("Skin1")
     with private_cache():
+        # the profile's own part (vertex_radiance): the geometry is not asked for
         state = prt.precompute(_sphere(material, subdivisions=3), samples=1024, workers=1,
-                               basis_samples=16, profile=name, sampling_blend=False)
+                               basis_samples=16, profile=name, sampling_blend=False,
+                               geometry="half_space")
     transfer = state.transfers[0]
     state.relight(transfer, [LIGHT], material.eta)
     radiance = state.vertex_radiance(transfer, material)

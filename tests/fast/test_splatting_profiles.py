@@ -6,13 +6,14 @@ from translucent.errors import InputError
 from translucent.fast import splatting
 from translucent.fast.conformance import tiny_sphere_text
 from translucent.fast.knobs import radial_profile, radial_profile_names
+from translucent.fast.object_geometry import QUICK_GEOMETRY_KNOBS
 from translucent.fast.splatting.frame import as_subedit
 from translucent.materials import measured_medium
 from translucent.materials.subedit import subedit_from_dipole, subedit_from_profile
 from translucent.reports.cli import main
 from translucent.scenes import loads_scene
 
-QUICK = {"irradiance_resolution": 32}
+QUICK = {"irradiance_resolution": 32, **QUICK_GEOMETRY_KNOBS}
 
 #: A converted profile's energy against the profile's: it is matched inside r_s, so what
 #: is left is the energy beyond r_s (0.1 %) and the quadrature of a profile that peaks at

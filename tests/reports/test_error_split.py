@@ -241,3 +241,15 @@ def test_a_report_splits_each_profiles_error_against_its_model_reference(tmp_pat
     page = (out / "index.html").read_text()
     assert page.count("Why: the error split") == 1 + len(profiles)
     assert all(f"flatprofile@{p}" in page for p in profiles)
+
+
+@pytest.mark.parametrize("name, knobs, model", [
+    ("prt", {}, "dipole+geometry"), ("splatting", None, "dipole+geometry"),
+    ("prt", {"geometry": "half_space"}, "dipole"),
+    ("splatting@better_dipole", {"profile": "better_dipole"}, "better_dipole+geometry"),
+    ("radiosity", {}, "dipole")])
+def test_a_method_with_the_geometry_is_split_against_the_model_with_the_geometry(name, knobs,
+                                                                               model):
+    from translucent.reports.report.split import split_profile
+
+    assert split_profile(name, knobs) == (model, "")
