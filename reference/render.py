@@ -64,7 +64,9 @@ def reference_settings(*, spp: int, passes: int, seed: int, integrator: str | No
             "substitute_delta_lights": substitute_delta_lights,
             "delta_light_size": float(delta_light_size), "mitsuba": mi.__version__,
             "drjit": dr.__version__, "variant": mi.variant(),
-            **({"profile": profile} if profile is not None else {})}
+            **({"profile": profile} if profile is not None else {}),
+            **({"geometry": geometry_settings()}
+               if profile is not None and parse_model_key(profile)[1] else {})}
 
 
 def reference_key(scene: Scene, settings: dict) -> str:
