@@ -39,6 +39,13 @@ def run(args) -> int:
     if args.format not in FORMATS:
         raise InputError(f"unknown format; valid: {', '.join(FORMATS)}", field="--format",
                          value=args.format)
+    from ...reference.geometry_term import parse_model_key
+
+    if args.profile is not None and parse_model_key(args.profile)[1]:
+        raise InputError("the object's geometry is added by the suite's own render "
+                         "(translucent render --integrator bssrdf_path), not by a Mitsuba "
+                         f"file: export --profile {parse_model_key(args.profile)[0]}",
+                         field="--profile", value=args.profile)
     import os
     from pathlib import Path
 

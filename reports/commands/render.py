@@ -51,7 +51,8 @@ def add_arguments(parser):
     parser.add_argument("--profile", default=None, metavar="NAME",
                         help="with --integrator bssrdf_path: the radial profile each "
                         "translucent object is rendered with (translucent profiles lists "
-                        "them)")
+                        "them); NAME+geometry adds the object's own shape as PRT and "
+                        "splatting do (docs/geometry.md)")
     parser.add_argument("--per-channel", action=argparse.BooleanOptionalAction, default=None,
                         help="render R, G and B separately (media of one channel each); "
                         "default: where a medium is chromatic and of albedo near 1, as the "
@@ -123,7 +124,8 @@ def _render_and_write(args, scene, out: Path, progressive: bool) -> int:
           f"{meta['seconds']:.3g} s)")
     if meta.get("profile"):
         objects = ", ".join(f"{k}: {v}" for k, v in meta["profile"]["objects"].items())
-        print(f"  profile {meta['profile']['name']} ({objects})")
+        shape = " with the object's geometry" if meta.get("geometry") else ""
+        print(f"  profile {meta['profile']['name']}{shape} ({objects})")
     if progressive:
         from ...noise import NoiseSummary
 

@@ -59,6 +59,21 @@ def test_render_names_the_profile_in_the_header(scene_file, tmp_path, capsys):
     assert "profile better_dipole (ball: better_dipole (Skin1))" in capsys.readouterr().out
 
 
+def test_render_adds_the_objects_geometry_where_the_profile_asks(scene_file, tmp_path, capsys):
+    out = tmp_path / "shaped.exr"
+    assert main(["render", str(scene_file), "--integrator", "bssrdf_path", "--profile",
+                 "dipole+geometry", "--spp", "4", "--passes", "2", "--out", str(out)]) == 0
+    meta = read_exr(out).metadata
+    assert meta["profile"]["name"] == "dipole" and meta["geometry"]["model"] == "diffusion"
+    assert "profile dipole with the object's geometry" in capsys.readouterr().out
+    # a Mitsuba file cannot carry it: export says so and writes nothing
+    folder = tmp_path / "exported"
+    assert main(["export", str(scene_file), "--integrator", "bssrdf_path", "--profile",
+                 "dipole+geometry", "--out", str(folder)]) == 2
+    assert "export --profile dipole" in capsys.readouterr().err
+    assert not folder.exists()
+
+
 def test_render_progressively_to_a_target(scene_file, tmp_path):
     out = tmp_path / "tiny.exr"
     assert main(["render", str(scene_file), "--integrator", "bssrdf_path", "--profile",
