@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from translucent.errors import InputError
 from translucent.materials import Lambertian
@@ -128,12 +128,17 @@ def test_trace_tmax_and_bad_input(sphere_scene):
 
 @settings(max_examples=30, deadline=None)
 @given(st.floats(-0.6, 0.6), st.floats(-0.6, 0.6), st.floats(-0.4, 0.4), st.floats(-0.4, 0.4))
+@example(0.0, 0.3, 0.0, 0.3)  # inside, near the edge
 def test_trace_barycentrics_match_a_plane_point(x, z, tilt_x, tilt_z):
     scene = PLANE_SCENE
     origin = np.array([x, 2.0, z])
     hits = trace(scene, origin, [tilt_x, -1.0, tilt_z])
     expected = origin + 2.0 * np.array([tilt_x, -1.0, tilt_z])  # reaches y = 0 at t' = 2
-    assert hits.hit[0] == (max(abs(expected[0]), abs(expected[2])) < 1.0)
+    edge = max(abs(expected[0]), abs(expected[2]))
+    # a ray through the plane's very edge (x = 0, z = 1/3, tilt 1/3 reaches z = 1) may hit
+    # or miss in float32: either answer is right there
+    assume(abs(edge - 1.0) > FLOAT32)
+    assert hits.hit[0] == (edge < 1.0)
     if hits.hit[0]:
         mesh = scene.objects[0].mesh
         corners = mesh.vertices[mesh.faces[hits.triangle_id[0]]]
