@@ -224,3 +224,19 @@ def test_the_compiled_robin_data_is_the_dipoles_formula(plane_residual, rng):
     np.testing.assert_allclose(_robin_data(points, normals, sources, source_normals, sigma_a,
                                            sigma_s_prime, ETA, plane_residual), -expected,
                                rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("scale", [0.1, 3.0])
+def test_the_correction_has_the_units_of_a_profile(scale):
+    """An object s times larger with coefficients s times smaller is the same optical
+    object: its correction, an exitance per unit power (mm^-2), is 1 / s^2 of the other's."""
+    mesh = icosphere(3, RADIUS)
+    triangles = mesh.vertices[mesh.faces]
+    first = object_diffusion(triangles, cells=800, clusters=24, cache=False)
+    scaled = object_diffusion(triangles * scale, cells=800, clusters=24, cache=False)
+    np.testing.assert_allclose(scaled.cluster_point, first.cluster_point * scale, rtol=1e-9,
+                               atol=1e-9 * scale)
+    response = first.response(SIGMA_A, SIGMA_S_PRIME, ETA)
+    np.testing.assert_allclose(scaled.response(SIGMA_A / scale, SIGMA_S_PRIME / scale, ETA),
+                               response / scale**2, rtol=1e-6,
+                               atol=1e-9 * np.abs(response).max() / scale**2)
