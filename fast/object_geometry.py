@@ -25,14 +25,12 @@ half-space, said in the method's log.
 
 from __future__ import annotations
 
-import functools
 import time
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
 
-from ..materials.dipole import total_diffuse_reflectance
 from ..materials.homogeneous import Dipole
 from ..scenes.mesh_shape import closed_surface
 from ..scenes.object_diffusion import (
@@ -40,6 +38,7 @@ from ..scenes.object_diffusion import (
     DEFAULT_CLUSTERS,
     ObjectDiffusion,
     object_diffusion,
+    profile_scale,
 )
 from .knobs import Knob
 
@@ -52,11 +51,6 @@ GEOMETRY = ("diffusion", "half_space")
 #: Cheap geometry knobs for smoke runs and the conformance checks (a coarse grid and few
 #: clusters: the correction in well under a second).
 QUICK_GEOMETRY_KNOBS = {"geometry_cells": 1000, "geometry_clusters": 48}
-
-#: Objects whose diffusion grid is kept in memory (a method's precomputation and the next
-#: one of the same object share it).
-KEPT_OBJECTS = 8
-
 
 def geometry_knobs() -> list[Knob]:
     """Return the knobs every method with the geometry correction declares.
@@ -124,19 +118,8 @@ class ObjectGeometry:
         power = np.asarray(entry.T @ np.asarray(entry_power, dtype=np.float64))
         clusters = np.einsum("mkc,kc->mc", response, power)
         if profile_total is not None:
-            dipole = np.asarray(total_diffuse_reflectance(
-                material.sigma_a, material.sigma_s_prime, material.eta), dtype=np.float64)
-            scale = np.divide(np.asarray(profile_total, np.float64), dipole,
-                              out=np.ones(3), where=dipole > 0)
-            clusters = clusters * scale
+            clusters = clusters * profile_scale(material, profile_total)
         return np.asarray(exit @ clusters)
-
-
-@functools.lru_cache(maxsize=KEPT_OBJECTS)
-def _diffusion_of(triangles_key: bytes, shape: tuple, cells: int, clusters: int,
-                  seed: int) -> ObjectDiffusion:
-    triangles = np.frombuffer(triangles_key, dtype=np.float64).reshape(shape)
-    return object_diffusion(triangles, cells=cells, clusters=clusters, seed=seed)
 
 
 def object_geometries(scene, names, knobs: dict, log=None) -> dict:
@@ -175,9 +158,10 @@ def object_geometries(scene, names, knobs: dict, log=None) -> dict:
                          "diffuse in: its profile stays the half-space's")
             continue
         triangles = np.ascontiguousarray(mesh.vertices[mesh.faces] * mm, dtype=np.float64)
-        diffusion = _diffusion_of(triangles.tobytes(), triangles.shape,
-                                  int(knobs["geometry_cells"]), int(knobs["geometry_clusters"]),
-                                  int(knobs.get("seed", 0)))
+        # the disk cache keeps the grid, the clusters and the material's response
+        diffusion = object_diffusion(triangles, cells=int(knobs["geometry_cells"]),
+                                     clusters=int(knobs["geometry_clusters"]),
+                                     seed=int(knobs.get("seed", 0)))
         material = item.material
         diffusion.response(material.sigma_a, material.sigma_s_prime, material.eta)
         out[name] = ObjectGeometry(diffusion, mm)

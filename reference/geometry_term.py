@@ -30,16 +30,16 @@ import numpy as np
 
 from ..backend import mitsuba
 from ..errors import InputError
-from ..materials.dipole import total_diffuse_reflectance
 from ..materials.fresnel import fresnel_transmittance
 from ..materials.homogeneous import Dipole
 from ..materials.profiles import profile as named_profile
-from ..scenes.mesh_shape import closed_surface
+from ..scenes.mesh_shape import closed_surface, stratified_surface_points
 from ..scenes.object_diffusion import (
     CACHE_FORMAT,
     DEFAULT_CELLS,
     DEFAULT_CLUSTERS,
     object_diffusion,
+    profile_scale,
 )
 from .bssrdf_tables import exit_normalisation
 
@@ -84,22 +84,6 @@ def parse_model_key(key: str) -> tuple[str, bool]:
     if key.endswith(GEOMETRY_SUFFIX):
         return key[:-len(GEOMETRY_SUFFIX)], True
     return key, False
-
-
-def _surface_points(mesh, count: int, rng) -> tuple[np.ndarray, np.ndarray, float]:
-    """Area-uniform points with interpolated normals; the area each stands for."""
-    triangles = mesh.vertices[mesh.faces]
-    area = 0.5 * np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0],
-                                         triangles[:, 2] - triangles[:, 0]), axis=1)
-    face = rng.choice(len(area), size=count, p=area / area.sum())
-    u, v = rng.random(count), rng.random(count)
-    flip = u + v > 1.0
-    u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
-    weights = np.stack([1.0 - u - v, u, v], axis=1)
-    points = np.einsum("pk,pkd->pd", weights, triangles[face])
-    normals = np.einsum("pk,pkd->pd", weights, mesh.normals[mesh.faces[face]])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    return points, normals, float(area.sum()) / count
 
 
 def _rgb(values, count: int) -> np.ndarray:
@@ -152,11 +136,8 @@ class GeometryTerm:
                                          cells=DEFAULT_CELLS, clusters=DEFAULT_CLUSTERS)
             response = diffusion.response(material.sigma_a, material.sigma_s_prime,
                                           material.eta)
-            dipole = np.asarray(total_diffuse_reflectance(
-                material.sigma_a, material.sigma_s_prime, material.eta), dtype=np.float64)
-            total = np.asarray(named_profile(profile, material).total(), dtype=np.float64)
-            response = response * np.divide(total, dipole, out=np.ones(3),
-                                            where=dipole > 0)[None, None, :]
+            response = response * profile_scale(
+                material, named_profile(profile, material).total())[None, None, :]
             cosine = np.clip(np.einsum("...d,...d->...", view.normal, view.view_direction)
                              [where], 0.0, 1.0)
             exit_factor = fresnel_transmittance(material.eta, cosine) / float(
@@ -178,10 +159,11 @@ class GeometryTerm:
         image = np.zeros((height * width, 3))
         rng = np.random.default_rng([int(seed), 0x6E0])
         for index, item in enumerate(self.objects):
-            points, normals, area = _surface_points(item["mesh"], self.points, rng)
+            points, normals, total = stratified_surface_points(item["mesh"], self.points,
+                                                               rng)
             irradiance = self._irradiance(points, normals, item["eta"],
                                           int(seed) * 64 + index, rng)
-            power = irradiance * area * item["mm"] ** 2
+            power = irradiance * (total / self.points) * item["mm"] ** 2
             diffusion = item["diffusion"]
             entry = diffusion.weights(points * item["mm"], normals)
             clusters = np.einsum("mkc,kc->mc", item["response"],

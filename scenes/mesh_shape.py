@@ -1,4 +1,4 @@
-"""Shape facts of a triangle mesh: welded seams, closedness, enclosed volume, convexity.
+"""Shape facts of a triangle mesh: seams, closedness, volume, convexity, points on its area.
 
 Used where a method or a reference needs to know whether an object is closed (an inside is
 defined) or convex (a straight segment between two surface points stays inside, and no
@@ -11,7 +11,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 __all__ = ["CONVEX_VOLUME_TOLERANCE", "WELD_TOLERANCE", "closed_surface", "is_convex",
-           "mesh_volume", "welded_faces"]
+           "mesh_volume", "stratified_surface_points", "welded_faces"]
 
 #: A closed mesh is convex when its volume is within this fraction of its convex hull's:
 #: flat-faced meshes reach 1e-12; a dent of one face in a 1000-face sphere changes the
@@ -71,3 +71,41 @@ def is_convex(vertices, faces) -> bool:
     except Exception:  # flat or degenerate point sets have no hull volume
         return False
     return abs(hull - volume) <= CONVEX_VOLUME_TOLERANCE * hull
+
+
+def stratified_surface_points(mesh, count: int, rng) -> tuple[np.ndarray, np.ndarray, float]:
+    """Spread ``count`` points uniformly over a mesh's area, stratified along its faces.
+
+    One point in each of ``count`` equal strata of the faces' cumulative area, uniform
+    within its triangle, with the interpolated vertex normal (the face's where that
+    vanishes).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    count : int
+    rng : numpy.random.Generator
+        Three arrays of ``count`` draws, in this order.
+
+    Returns
+    -------
+    positions, normals : ndarray, shape (count, 3)
+        The mesh's units; unit normals.
+    total : float
+        The mesh's area, its units squared (each point stands for ``total / count``).
+    """
+    areas = mesh.face_areas
+    cumulative = np.cumsum(areas)
+    total = float(cumulative[-1])
+    strata = (np.arange(count) + rng.random(count)) * (total / count)
+    face = np.minimum(np.searchsorted(cumulative, strata, side="right"), len(areas) - 1)
+    root = np.sqrt(rng.random(count))
+    second = rng.random(count)
+    weights = np.stack([1.0 - root, root * (1.0 - second), root * second], axis=1)
+    corners = mesh.faces[face]
+    positions = np.einsum("nk,nkd->nd", weights, mesh.vertices[corners])
+    normals = np.einsum("nk,nkd->nd", weights, mesh.normals[corners])
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300),
+                       mesh.face_normals[face])
+    return positions, normals, total

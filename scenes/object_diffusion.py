@@ -55,7 +55,7 @@ from scipy.spatial import cKDTree
 
 from ..cache import Cache, content_hash
 from ..errors import InputError, check_count
-from ..materials.dipole import dipole_boundary_factor
+from ..materials.dipole import dipole_boundary_factor, total_diffuse_reflectance
 from .diffusion_grid import DiffusionGrid, boundary_conductance, diffusion_grid, diffusion_terms
 
 __all__ = [
@@ -65,6 +65,7 @@ __all__ = [
     "ObjectDiffusion",
     "diffusion_correction",
     "dipole_fluence",
+    "profile_scale",
     "object_diffusion",
 ]
 
@@ -83,6 +84,18 @@ KEPT_RESPONSES = 8
 #: model reference rendered with the geometry, stale.
 CACHE_NAMESPACE = "object_diffusion"
 CACHE_FORMAT = 2
+
+
+def profile_scale(material, profile_total) -> np.ndarray:
+    """Per channel, another profile's half-space total over the dipole's (1 where none).
+
+    The correction is diffusion's, in the dipole's units; a method (or model reference) of
+    another profile scales it by this so that the profile carries its own energy.
+    """
+    dipole = np.asarray(total_diffuse_reflectance(material.sigma_a, material.sigma_s_prime,
+                                                  material.eta), dtype=np.float64)
+    return np.divide(np.asarray(profile_total, np.float64), dipole, out=np.ones(len(dipole)),
+                     where=dipole > 0)
 
 
 def dipole_fluence(points, source, normal, sigma_a, sigma_s_prime, eta,

@@ -122,13 +122,11 @@ def precompute(scene, **knobs) -> PRTState:
     indirect = precompute_indirect_light(
         scene, {t.name: (t.samples.positions, t.samples.normals) for t in transfers}, knobs, log)
     log.seconds["indirect light"] = time.perf_counter() - started
-    geometry = {}
-    for name, item in object_geometries(scene, [t.name for t in transfers], knobs,
-                                        log).items():
-        samples, mesh = next(t.samples for t in transfers if t.name == name), \
-            scene.object(name).mesh
-        geometry[name] = (item, item.weights(samples.positions, samples.normals),
-                          item.weights(mesh.vertices, mesh.normals))
+    samples = {t.name: t.samples for t in transfers}
+    geometry = {name: (item, item.weights(samples[name].positions, samples[name].normals),
+                       item.weights(scene.object(name).mesh.vertices,
+                                    scene.object(name).mesh.normals))
+                for name, item in object_geometries(scene, list(samples), knobs, log).items()}
     hidden = [o.name for o in scene.objects
               if not isinstance(o.material, Dipole) and o.name not in others]
     if hidden:

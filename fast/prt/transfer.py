@@ -18,6 +18,7 @@ from ...compiled import parallel_njit
 from ...materials.dipole_pca import (
     DipolePCABasis,
 )
+from ...scenes.mesh_shape import stratified_surface_points
 from ..base import StageLog
 from ..sparse_transport import (
     QuantisedRows,
@@ -100,21 +101,8 @@ def illumination_samples(mesh, count: int, parts: int, *, mm_per_unit: float = 1
     IlluminationSamples
     """
     level = quadtree_level(count, parts)
-    rng = np.random.default_rng(seed)
-    areas = mesh.face_areas
-    cumulative = np.cumsum(areas)
-    total = float(cumulative[-1])
-    strata = (np.arange(count) + rng.random(count)) * (total / count)
-    face = np.minimum(np.searchsorted(cumulative, strata, side="right"), len(areas) - 1)
-    root = np.sqrt(rng.random(count))
-    second = rng.random(count)
-    weights = np.stack([1.0 - root, root * (1.0 - second), root * second], axis=1)
-    corners = mesh.faces[face]
-    positions = np.einsum("nk,nkd->nd", weights, mesh.vertices[corners])
-    normals = np.einsum("nk,nkd->nd", weights, mesh.normals[corners])
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300),
-                       mesh.face_normals[face])
+    positions, normals, total = stratified_surface_points(mesh, count,
+                                                          np.random.default_rng(seed))
     order = np.concatenate([group[quadtree_layout(positions[group], level).ravel()]
                             for group in balanced_split(positions, parts)])
     return IlluminationSamples(positions[order], normals[order],

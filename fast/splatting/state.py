@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 from collections.abc import Callable
@@ -171,6 +172,7 @@ class SplattingState:
     def __post_init__(self):
         self._precompute_log = self.log
         self._ranged: dict = {}
+        self._camera_weights: dict = {}  # object -> (its pixels' key, cluster weights)
         # the six axis views of each object the indirect light reaches: geometry only, made
         # with the precomputation, not in a frame
         self._indirect_views = {} if self.indirect is None else {
@@ -383,6 +385,22 @@ class SplattingState:
         return radiance + self._geometry_radiance(scene, index, camera_buffer, camera, views,
                                                   material, log)
 
+    def _exit_weights(self, name: str, geometry, camera_buffer):
+        """Return the camera pixels' cluster weights, kept while their surface points stay.
+
+        A relighting or editing frame sees the same points: only a moved camera (or
+        another image) maps them again.
+        """
+        valid = camera_buffer.valid
+        position, normal = camera_buffer.position[valid], camera_buffer.normal[valid]
+        key = hashlib.sha1(np.ascontiguousarray(position).tobytes()
+                           + np.ascontiguousarray(normal).tobytes()).hexdigest()
+        held = self._camera_weights.get(name)
+        if held is None or held[0] != key:
+            held = (key, geometry.weights(position, normal))
+            self._camera_weights[name] = held
+        return held[1]
+
     def _geometry_radiance(self, scene, index, camera_buffer, camera, views, material, log):
         """Radiance of the geometry correction (fast.object_geometry) at the object's pixels.
 
@@ -413,8 +431,7 @@ class SplattingState:
         exitance = np.zeros(camera_buffer.shape + (3,))
         exitance[valid] = geometry.exitance(
             geometry.weights(np.concatenate(points), np.concatenate(normals)),
-            np.concatenate(power), geometry.weights(camera_buffer.position[valid],
-                                                    camera_buffer.normal[valid]),
+            np.concatenate(power), self._exit_weights(item.name, geometry, camera_buffer),
             item.material, total)
         radiance = exitant_radiance_of(exitance, camera_buffer, camera, material.eta)
         log.seconds["geometry"] = log.seconds.get("geometry", 0.0) + time.perf_counter() - start
