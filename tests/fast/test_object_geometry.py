@@ -20,7 +20,8 @@ MEDIA = {"Marble": ([0.0021, 0.0041, 0.0071], [2.19, 2.62, 3.0]),
          "Skin1": ([0.032, 0.17, 0.48], [0.74, 0.88, 1.01])}
 
 
-@pytest.mark.parametrize("medium", list(MEDIA))
+@pytest.mark.parametrize("medium", [
+    "Marble", pytest.param("Skin1", marks=pytest.mark.slow)])  # one medium fast: 2 s each
 def test_the_energy_it_adds_is_the_escape_probabilitys_gain(medium):
     """A second estimator: radiosity's finite-object gain solves the adjoint problem (the
     escape probability from the dipole's source, not the field from it) on its own."""

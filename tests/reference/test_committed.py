@@ -165,6 +165,7 @@ def test_a_fresh_bssrdf_render_is_consistent_with_the_committed_model_reference(
     _assert_consistent_and_sensitive("sphere (model)", fresh, committed)
 
 
+@pytest.mark.slow  # 5-11 s; the geometry term renders in the fast tier by the command's test
 def test_a_fresh_render_with_the_geometry_is_consistent_with_its_committed_model_reference():
     """The geometry term (reference/geometry_term.py) rendered again with other seeds; and
     the half-space's committed model reference is not it (the term is seen)."""

@@ -96,6 +96,7 @@ def test_the_check_tells_the_offset_shell():
     assert math.isfinite(ratio.sum())
 
 
+@pytest.mark.slow  # 10-17 s of the fast tier; the frame's own sweeps above stay fast
 def test_volpath_mnee_starts_the_medium_at_the_crossing():
     """volpath_mnee samples a medium from where the path crossed into it, not from the
     offset origin: rendered where the offset is 30 times the frame's (the sphere 30 units
