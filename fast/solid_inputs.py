@@ -219,12 +219,6 @@ def _compiled_counts_along():
     return counts_along
 
 
-def _voxel_centres(solid: SolidMedium) -> np.ndarray:
-    z, y, x = np.meshgrid(*(np.arange(n) for n in solid.shape), indexing="ij")
-    index = np.stack([x, y, z], axis=-1).reshape(-1, 3)
-    return solid.bounds[0] + (index + 0.5) * solid.voxel_size
-
-
 def mixed_profiles_from_solid(solid: SolidMedium, mesh, *,
                               max_media: int = RADIOSITY_MAX_MEDIA) -> SurfaceConversion:
     """Derive radiosity's labelled profiles from the medium, voxel by voxel.
@@ -237,7 +231,7 @@ def mixed_profiles_from_solid(solid: SolidMedium, mesh, *,
     def build() -> SurfaceConversion:
         if solid.is_uniform:
             return SurfaceConversion(solid.dipole(), 1, 0.0, 0.0)
-        quantised = quantise_media(solid, _voxel_centres(solid), max_media=max_media)
+        quantised = quantise_media(solid, solid.voxel_centres(), max_media=max_media)
         volume = VoxelLabels(solid, quantised.labels)
         material = MixedProfiles(quantised.media, volume(mesh.face_centroids),
                                  name=solid.name, volume_labels=volume,

@@ -193,6 +193,16 @@ class SolidMedium:
         index = np.clip(np.floor(fraction * sizes).astype(np.int64), 0, sizes - 1)
         return index[..., 2], index[..., 1], index[..., 0]
 
+    def voxel_centres(self) -> np.ndarray:
+        """Return the centre of every voxel (scene units), shape (Z * Y * X, 3), [z, y, x] order.
+
+        Row ``(z * Y + y) * X + x`` is voxel ``[z, y, x]``: labels of these points reshape
+        to :attr:`shape`.
+        """
+        z, y, x = np.meshgrid(*(np.arange(n) for n in self.shape), indexing="ij")
+        index = np.stack([x, y, z], axis=-1).reshape(-1, 3)
+        return self.bounds[0] + (index + 0.5) * self.voxel_size
+
     def coefficients_at(self, points) -> tuple[np.ndarray, np.ndarray]:
         """Return ``(sigma_a, sigma_s_prime)`` at ``points`` (shape (..., 3)), mm^-1 RGB.
 

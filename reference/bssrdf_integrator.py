@@ -267,8 +267,8 @@ class BSSRDFPath(ADIntegrator):
             next_delta[reflect] = True
             # transmission, chosen with probability F_t(wo): the exit term's F_t cancels
             xi, found, exit_weight = self.sample_exit(sampler, si, obj, transmit)
-            radial = self.lookup.reflectance(obj, dr.norm(si.p - xi.p) * self.mm_per_unit,
-                                             found)
+            radial = self.lookup.mixed_reflectance(
+                obj, si.p, xi.p, dr.norm(si.p - xi.p) * self.mm_per_unit, found)
             # next-event estimation at the exit point (every kind of emitter)
             active_e = mi.Bool(found)
             ds, em_weight = scene.sample_emitter_direction(xi, sampler.next_2d(active_e),

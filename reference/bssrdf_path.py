@@ -81,6 +81,8 @@ from dataclasses import dataclass, field
 from ..backend import mitsuba
 from ..errors import InputError
 from ..materials import Dipole
+from ..materials.profiles import HETEROGENEOUS_RULES
+from ..materials.solid import SolidMedium
 from .bssrdf_tables import (
     ProfileTables,
     TranslucentObject,
@@ -129,6 +131,8 @@ class BSSRDFConversion:
     scene: object
     profile: str
     channel: int | None = None
+    #: how a heterogeneous object's media are mixed (HETEROGENEOUS_RULES); None: refused
+    rule: str | None = None
     objects: list[TranslucentObject] = field(default_factory=list)
     tables: ProfileTables | None = None
 
@@ -144,16 +148,21 @@ class BSSRDFConversion:
             An interior medium that is not a Dipole's (a heterogeneous medium has no
             radial profile).
         """
-        if isinstance(obj.material, Dipole):
+        if isinstance(obj.material, Dipole) or (
+                isinstance(obj.material, SolidMedium) and
+                (self.rule is not None or obj.material.is_uniform)):
             boundary = {"type": "dielectric", "int_ior": obj.material.eta, "ext_ior": 1.0}
             return dataclasses.replace(parts, bsdf=boundary, interior=None,
                                        blocks_delta_lights=False, max_albedo=0.0,
                                        chromatic=False, description="",
                                        prefers_per_channel=False)
         if parts.interior is not None:
+            hint = (f" (a heterogeneous medium: add the rule that mixes its media, "
+                    f"'{self.profile}+RULE', RULE one of {', '.join(HETEROGENEOUS_RULES)})"
+                    if isinstance(obj.material, SolidMedium) else "")
             raise InputError(f"{INTEGRATOR_NAME} renders homogeneous media (Dipole "
                              "materials) by their radial profile; this medium is "
-                             f"{type(obj.material).__name__}, which has none",
+                             f"{type(obj.material).__name__}, which has none{hint}",
                              file=self.scene.source, field=f"objects[{index}].material",
                              value=obj.name)
         return parts
@@ -167,7 +176,8 @@ class BSSRDFConversion:
             What :func:`~.bssrdf_tables.translucent_objects` refuses, or a scene with no
             translucent object at all.
         """
-        self.objects = translucent_objects(self.scene, self.profile, shape_ids, self.channel)
+        self.objects = translucent_objects(self.scene, self.profile, shape_ids, self.channel,
+                                           self.rule)
         if not self.objects:
             raise InputError(f"{INTEGRATOR_NAME} renders translucent objects by a profile; "
                              "this scene has none (no Dipole material)", file=self.scene.source,
@@ -178,7 +188,7 @@ class BSSRDFConversion:
 
     def description(self) -> dict:
         """Return what the image header says of the profile: its name and each object's."""
-        return {"name": self.profile,
+        return {"name": self.profile if self.rule is None else f"{self.profile}+{self.rule}",
                 "objects": {obj.name: obj.description() for obj in self.objects},
                 "bssrdf": "F_t(eta, cos theta_i) R(r) F_t(eta, cos theta_o) / "
                           "(pi (1 - F_dr(eta)))"}
@@ -192,10 +202,16 @@ def bssrdf_conversion(scene, integrator: str | None, profile: str | None,
     ------
     InputError
         ``bssrdf_path`` without a profile or with an unknown one (the valid ones listed),
-        or a profile with another integrator.
+        or a profile with another integrator. ``profile`` may end in ``+RULE``, the rule
+        that mixes a heterogeneous object's media
+        (:data:`~translucent.materials.profiles.HETEROGENEOUS_RULES`).
     """
     from ..materials.profiles import PROFILE_NAMES
 
+    rule = None
+    for name in HETEROGENEOUS_RULES:
+        if profile is not None and profile.endswith(f"+{name}"):
+            profile, rule = profile[:-len(name) - 1], name
     if integrator != INTEGRATOR_NAME:
         if profile is not None:
             raise InputError(f"a profile goes with integrator {INTEGRATOR_NAME} (the "
@@ -206,4 +222,4 @@ def bssrdf_conversion(scene, integrator: str | None, profile: str | None,
         what = f"{INTEGRATOR_NAME} needs a profile" if profile is None else "unknown profile"
         raise InputError(f"{what}; valid: {', '.join(PROFILE_NAMES)}",
                          file=scene.source, field="profile", value=profile)
-    return BSSRDFConversion(scene, profile, channel)
+    return BSSRDFConversion(scene, profile, channel, rule)

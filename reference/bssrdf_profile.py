@@ -22,6 +22,8 @@ mi = mitsuba()
 
 import drjit as dr  # noqa: E402  (after mitsuba(): it points Dr.Jit at a working libLLVM)
 
+from .bssrdf_tables import RULE_CODES, SEGMENT_POINTS  # noqa: E402
+
 __all__ = ["ProfileLookup"]
 
 #: Radii below this (mm) are taken as this where the disk density divides by 2 pi r.
@@ -61,6 +63,21 @@ class ProfileLookup:
         self.dd_boundary = _floats(tables.dd_boundary)
         self.dd_c_phi = _floats(tables.dd_c_phi)
         self.dd_c_e = _floats(tables.dd_c_e)
+        # heterogeneous objects: the rule, the media's entries, the voxels' labels
+        rules = tables.rule.astype(int)
+        self.any_geometric_mean = bool((rules == RULE_CODES["geometric_mean"]).any())
+        self.any_segment_mix = bool((rules == RULE_CODES["segment_mix"]).any())
+        self.most_media = int(tables.media_count[rules == RULE_CODES["segment_mix"]].max(
+            initial=0))
+        self.rule = mi.UInt32(rules.astype("uint32"))
+        self.media_first = mi.UInt32(tables.media_first.astype("uint32"))
+        self.media_count = mi.UInt32(tables.media_count.astype("uint32"))
+        self.label_first = mi.UInt32(tables.label_first.astype("uint32"))
+        self.label_lower = _floats(tables.label_lower)
+        self.label_extent = _floats(tables.label_extent)
+        self.label_shape = mi.UInt32(tables.label_shape.astype("uint32"))
+        self.labels = mi.UInt32(tables.labels.astype("uint32"))
+        self.value_at_zero = _floats(tables.value_at_zero)
 
     # ------------------------------------------------------------ one row
     def segment(self, row, r, active):
@@ -133,6 +150,67 @@ class ProfileLookup:
         scale = 1.0 / (2.0 * math.pi * dr.maximum(r, SMALLEST_RADIUS))
         values = [self.density_at(3 * obj + c, r, active) * scale for c in range(3)]
         return dr.select(active, mi.Spectrum(*values), 0.0)
+
+    # ------------------------------------------------------- heterogeneous objects
+    def label_at(self, obj, p, active):
+        """Return the medium label of the voxel holding ``p`` (rendering-frame units).
+
+        Clamped into the box, as :meth:`~translucent.materials.solid.SolidMedium.voxel_index`.
+        """
+        index = []
+        for axis, coordinate in enumerate((p.x, p.y, p.z)):
+            lower = dr.gather(mi.Float, self.label_lower, 3 * obj + axis, active)
+            extent = dr.gather(mi.Float, self.label_extent, 3 * obj + axis, active)
+            size = dr.gather(mi.UInt32, self.label_shape, 3 * obj + axis, active)
+            cell = mi.Int32(dr.floor((coordinate - lower) / extent * mi.Float(size)))
+            index.append(mi.UInt32(dr.clip(cell, 0, mi.Int32(size) - 1)))
+        nx = dr.gather(mi.UInt32, self.label_shape, 3 * obj, active)
+        ny = dr.gather(mi.UInt32, self.label_shape, 3 * obj + 1, active)
+        flat = (index[2] * ny + index[1]) * nx + index[0]
+        first = dr.gather(mi.UInt32, self.label_first, obj, active)
+        return dr.gather(mi.UInt32, self.labels, first + flat, active)
+
+    def mixed_reflectance(self, obj, xo, xi, r, active):
+        r"""Return the BSSRDF's :math:`R` between ``xi`` and ``xo`` (mm^-2) by the object's rule.
+
+        A homogeneous object reads its own profile (:meth:`reflectance`). ``geometric_mean``
+        (Chen et al. 2012, Eq. 8): :math:`\sqrt{P_{l(x_i)}(r) P_{l(x_o)}(r)}` with
+        :math:`l` the label of the voxel at each point. ``segment_mix`` (Sheng et al. 2014,
+        Eq. 16, as :func:`~translucent.materials.profiles.mixed_profile`): the fractions
+        :math:`f_m` of :data:`~.bssrdf_tables.SEGMENT_POINTS` midpoints of the straight
+        segment in each medium, then :math:`(\sum_m S_m(0) f_m)\prod_m S_m(f_m r)/S_m(0)`.
+        """
+        rule = dr.gather(mi.UInt32, self.rule, obj, active)
+        value = self.reflectance(obj, r, active & (rule == 0))
+        if self.any_geometric_mean:
+            mean = active & (rule == RULE_CODES["geometric_mean"])
+            first = dr.gather(mi.UInt32, self.media_first, obj, mean)
+            at_entry = self.reflectance(first + self.label_at(obj, xi, mean), r, mean)
+            at_exit = self.reflectance(first + self.label_at(obj, xo, mean), r, mean)
+            value[mean] = dr.sqrt(at_entry * at_exit)
+        if self.any_segment_mix:
+            mix = active & (rule == RULE_CODES["segment_mix"])
+            first = dr.gather(mi.UInt32, self.media_first, obj, mix)
+            count = dr.gather(mi.UInt32, self.media_count, obj, mix)
+            labels = [self.label_at(obj, xi + (xo - xi) * ((k + 0.5) / SEGMENT_POINTS), mix)
+                      for k in range(SEGMENT_POINTS)]
+            zero_mix = mi.Spectrum(0.0)
+            ratio = mi.Spectrum(1.0)
+            for m in range(self.most_media):
+                present = mix & (mi.UInt32(m) < count)
+                hits = mi.Float(0.0)
+                for label in labels:
+                    hits += dr.select(label == m, 1.0, 0.0)
+                fraction = hits / SEGMENT_POINTS
+                crossed = present & (hits > 0.0)
+                entry = first + m
+                zero = mi.Spectrum(*[dr.gather(mi.Float, self.value_at_zero, 3 * entry + c,
+                                               crossed) for c in range(3)])
+                zero_mix += dr.select(crossed, zero * fraction, 0.0)
+                partial = self.reflectance(entry, fraction * r, crossed)
+                ratio *= dr.select(crossed, partial / zero, 1.0)
+            value[mix] = zero_mix * ratio
+        return value
 
     def is_directional(self, obj, active):
         """Whether object ``obj`` evaluates the directional dipole."""

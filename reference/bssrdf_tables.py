@@ -38,11 +38,14 @@ import numpy as np
 from ..errors import InputError
 from ..materials import Dipole
 from ..materials.profiles import (
+    HETEROGENEOUS_RULES,
     PROFILE_NAMES,
+    RadialProfile,
     diffuse_entry_transmittance,
     profile,
     require_radial,
 )
+from ..materials.solid import SolidMedium, quantise_media
 
 __all__ = [
     "AXIS_PROBABILITIES",
@@ -68,7 +71,21 @@ AXIS_PROBABILITIES = (0.25, 0.25, 0.5)
 ARRAY_FIELDS = ("eta", "exit_normalisation", "radius", "density", "cumulative", "energy",
                 "max_radius", "channel_probability", "first_node", "inverse_log_step",
                 "directional", "dd_diffusion", "dd_sigma_tr", "dd_extrapolation",
-                "dd_boundary", "dd_c_phi", "dd_c_e")
+                "dd_boundary", "dd_c_phi", "dd_c_e", "rule", "media_first", "media_count",
+                "label_first", "label_lower", "label_extent", "label_shape", "labels",
+                "value_at_zero")
+
+#: The heterogeneous rules' codes in the tables (0: a homogeneous object).
+RULE_CODES = {"geometric_mean": 1, "segment_mix": 2}
+
+#: Points along the segment from the entry to the exit point at which ``segment_mix``
+#: reads the medium (midpoints of equal parts): each fraction of Eq. 16 within 1/32 of the
+#: segment per boundary it crosses.
+SEGMENT_POINTS = 32
+
+#: Media a heterogeneous object is reduced to, per rule: as many as the method that follows
+#: the rule derives (fast/solid_inputs.py: splatting's texture, radiosity's labels).
+RULE_MAX_MEDIA = {"geometric_mean": 64, "segment_mix": 16}
 
 
 def exit_normalisation(eta) -> np.ndarray:
@@ -118,15 +135,25 @@ class TranslucentObject:
     medium: Dipole
     profile: object
     directional: object = None
+    #: a heterogeneous object's rule (:data:`RULE_CODES`), its media's profiles, the
+    #: label of each voxel of its medium (index ``[z, y, x]``) and the box the voxels fill
+    #: (rendering-frame units); ``profile`` is then their mean, which the probes sample
+    rule: str | None = None
+    media: tuple = ()
+    labels: np.ndarray | None = None
+    bounds: np.ndarray | None = None
 
     def description(self) -> str:
         """Return the profile's name and model, as the image header says it."""
+        if self.rule is not None:
+            return (f"{len(self.media)} media, each {self.media[0].model or 'profile'}, "
+                    f"mixed by {self.rule} ({HETEROGENEOUS_RULES[self.rule]})")
         made = self.directional if self.directional is not None else self.profile
         return getattr(made, "name", type(made).__name__)
 
 
-def translucent_objects(scene, profile_name: str, shape_ids, channel: int | None = None
-                        ) -> list[TranslucentObject]:
+def translucent_objects(scene, profile_name: str, shape_ids, channel: int | None = None,
+                        rule: str | None = None) -> list[TranslucentObject]:
     """Return the objects of ``scene`` that ``bssrdf_path`` renders with ``profile_name``.
 
     Parameters
@@ -138,42 +165,54 @@ def translucent_objects(scene, profile_name: str, shape_ids, channel: int | None
         The Mitsuba shape id of each object of the scene, in order.
     channel : {0, 1, 2}, optional
         Give every channel this channel's coefficients (a monochrome render).
+    rule : str, optional
+        How a heterogeneous object's media are mixed (a key of
+        :data:`~translucent.materials.profiles.HETEROGENEOUS_RULES`): its solid medium is
+        reduced to at most :data:`RULE_MAX_MEDIA` homogeneous media per voxel, as the
+        method that follows the rule reduces it, and each medium gets ``profile_name``.
+        A uniform solid medium is its one Dipole.
 
     Raises
     ------
     InputError
         An unknown profile (the valid ones listed), a profile that is neither radial nor
         the directional dipole, a translucent object whose mesh is not closed (probe rays
-        count its crossings), or what the profile refuses of the medium; each naming the
-        scene file, the field and the value.
+        count its crossings), what the profile refuses of the medium, a heterogeneous
+        medium without a rule or with a directional profile; each naming the scene file,
+        the field and the value.
     """
     from .manifold_nee import boundary_edge_count
 
     if profile_name not in PROFILE_NAMES:
         raise InputError(f"unknown profile; valid: {', '.join(PROFILE_NAMES)}",
                          file=scene.source, field="profile", value=profile_name)
+    if rule is not None and rule not in HETEROGENEOUS_RULES:
+        raise InputError(f"unknown heterogeneous rule; valid: {', '.join(HETEROGENEOUS_RULES)}",
+                         file=scene.source, field="rule", value=rule)
     found = []
     for index, obj in enumerate(scene.objects):
         medium = obj.material
-        if not isinstance(medium, Dipole):
+        solid = None
+        if isinstance(medium, SolidMedium):
+            if medium.is_uniform:
+                medium = medium.dipole()
+            else:
+                solid = medium
+        elif not isinstance(medium, Dipole):
             continue
         field = f"objects[{index}]"
-        if channel is not None:
-            medium = dataclasses.replace(
-                medium, sigma_a=np.full(3, medium.sigma_a[channel]),
-                sigma_s_prime=np.full(3, medium.sigma_s_prime[channel]))
         open_edges = boundary_edge_count(obj.mesh.vertices, obj.mesh.faces)
         if open_edges:
             raise InputError(
                 f"bssrdf_path finds exit points by probe rays that count the crossings of "
                 f"a closed surface; this mesh has {open_edges} open or inconsistently "
                 f"oriented edges", file=scene.source, field=f"{field}.mesh", value=obj.name)
-        try:
-            made = profile(profile_name, medium)
-        except InputError as error:
-            raise InputError(f"profile {profile_name!r} refuses this medium: {error.reason}",
-                             file=scene.source, field=f"{field}.material",
-                             value=obj.name) from None
+        if solid is not None:
+            found.append(_heterogeneous_object(scene, index, obj, str(shape_ids[index]),
+                                               solid, profile_name, channel, rule))
+            continue
+        medium = _one_channel(medium, channel)
+        made = _made(scene, field, obj.name, profile_name, medium)
         directional = None
         if getattr(made, "directional", False):
             if getattr(made, "model", "") != "directional_dipole":
@@ -182,6 +221,69 @@ def translucent_objects(scene, profile_name: str, shape_ids, channel: int | None
         found.append(TranslucentObject(index, obj.name, str(shape_ids[index]), medium, made,
                                        directional))
     return found
+
+
+def _one_channel(medium: Dipole, channel: int | None) -> Dipole:
+    """Return ``medium`` with every channel given ``channel``'s coefficients (None: as is)."""
+    if channel is None:
+        return medium
+    return dataclasses.replace(medium, sigma_a=np.full(3, medium.sigma_a[channel]),
+                               sigma_s_prime=np.full(3, medium.sigma_s_prime[channel]))
+
+
+def _made(scene, field: str, name: str, profile_name: str, medium: Dipole):
+    """Return ``profile(profile_name, medium)``, its refusal naming the scene's object."""
+    try:
+        return profile(profile_name, medium)
+    except InputError as error:
+        raise InputError(f"profile {profile_name!r} refuses this medium: {error.reason}",
+                         file=scene.source, field=f"{field}.material", value=name) from None
+
+
+def _heterogeneous_object(scene, index: int, obj, shape_id: str, solid: SolidMedium,
+                          profile_name: str, channel: int | None,
+                          rule: str | None) -> TranslucentObject:
+    """Return the :class:`TranslucentObject` of a solid medium mixed by ``rule``."""
+    field = f"objects[{index}]"
+    if rule is None:
+        raise InputError(f"a heterogeneous medium has no one radial profile: render it with "
+                         f"a rule that mixes its media (profile '{profile_name}+RULE', RULE "
+                         f"one of {', '.join(HETEROGENEOUS_RULES)})", file=scene.source,
+                         field=f"{field}.material", value=obj.name)
+    quantised = quantise_media(solid, solid.voxel_centres(), max_media=RULE_MAX_MEDIA[rule])
+    media = tuple(_made(scene, field, obj.name, profile_name, _one_channel(medium, channel))
+                  for medium in quantised.media)
+    if any(getattr(made, "directional", False) for made in media):
+        raise InputError(f"profile {profile_name!r} depends on the incident direction; a "
+                         "heterogeneous rule mixes radial profiles", file=scene.source,
+                         field="profile", value=profile_name)
+    mean = MeanProfile(media)
+    return TranslucentObject(index, obj.name, shape_id, _one_channel(quantised.media[0],
+                                                                    channel), mean,
+                             rule=rule, media=media,
+                             labels=quantised.labels.reshape(solid.shape),
+                             bounds=np.asarray(solid.bounds, dtype=np.float64))
+
+
+class MeanProfile(RadialProfile):
+    """The mean of a heterogeneous object's media's profiles: what its probes sample.
+
+    Every medium's profile is positive wherever the mean is, so exit points drawn from
+    it reach every pair a rule gives light to.
+    """
+
+    def __init__(self, media):
+        self.media = tuple(media)
+        self.name = f"mean of {len(self.media)} media"
+
+    def reflection(self, r) -> np.ndarray:
+        """Return the media's mean profile at ``r`` (mm), mm^-2."""
+        return np.mean([medium.reflection(r) for medium in self.media], axis=0)
+
+    def length_scale(self) -> np.ndarray:
+        """Return the geometric mean of the media's length scales, mm (tables span 12 decades)."""
+        return np.exp(np.mean([np.log(medium.length_scale()) for medium in self.media],
+                              axis=0))
 
 
 @dataclass(frozen=True, eq=False)
@@ -214,6 +316,22 @@ class ProfileTables:
         Its D (mm), sigma_tr (mm^-1) and d_e (mm) per row.
     dd_boundary, dd_c_phi, dd_c_e : ndarray (n,)
         Its A, C_phi and C_E.
+    rule : ndarray (n,)
+        :data:`RULE_CODES` of a heterogeneous object, 0 for a homogeneous one.
+    media_first, media_count : ndarray (n,)
+        A heterogeneous object's media: entries ``media_first ..`` (rows ``3 e + c``).
+    label_first : ndarray (n,)
+        Where its voxels' labels start in ``labels``.
+    label_lower, label_extent, label_shape : ndarray (3n,)
+        Its voxel box (rendering-frame units: corner and size) and voxels along x, y, z.
+    labels : ndarray
+        Every heterogeneous object's voxel labels, ``[z, y, x]`` flattened, in turn.
+    value_at_zero : ndarray (3 entries,)
+        Each entry's profile at r = 0, mm^-2 (Eq. 16's :math:`S_m(0)`; may be Inf for
+        profiles no ``segment_mix`` object uses).
+
+    The rows past ``3n`` (the entries past the objects) are the heterogeneous objects'
+    media, which their rules evaluate.
     """
 
     shape_ids: tuple
@@ -235,6 +353,15 @@ class ProfileTables:
     dd_boundary: np.ndarray
     dd_c_phi: np.ndarray
     dd_c_e: np.ndarray
+    rule: np.ndarray
+    media_first: np.ndarray
+    media_count: np.ndarray
+    label_first: np.ndarray
+    label_lower: np.ndarray
+    label_extent: np.ndarray
+    label_shape: np.ndarray
+    labels: np.ndarray
+    value_at_zero: np.ndarray
 
     @property
     def count(self) -> int:
@@ -311,24 +438,36 @@ def _row_arrays(sampler, fraction: float):
 def build_tables(objects: list[TranslucentObject], mm_per_unit: float) -> ProfileTables:
     """Gather the tables of ``objects`` (:func:`translucent_objects`) into one set.
 
+    Entries ``0 .. n-1`` are the objects (what their probes sample); a heterogeneous
+    object's media follow as further entries, which only its rule evaluates.
+
     Raises
     ------
     InputError
-        A profile that reflects nothing in every channel (nothing could be sampled).
+        A profile that reflects nothing in every channel (nothing could be sampled), or a
+        ``segment_mix`` medium whose profile is not finite and positive at r = 0 (Eq. 16
+        divides by it).
     """
     rows = {name: [] for name in ("radius", "density", "cumulative", "energy", "max_radius",
                                   "channel_probability", "first_node", "inverse_log_step",
-                                  "dd_diffusion", "dd_sigma_tr", "dd_extrapolation")}
+                                  "dd_diffusion", "dd_sigma_tr", "dd_extrapolation",
+                                  "value_at_zero")}
     per_object = {name: [] for name in ("eta", "directional", "dd_boundary", "dd_c_phi",
-                                        "dd_c_e")}
-    for obj in objects:
+                                        "dd_c_e", "rule", "media_first", "media_count",
+                                        "label_first", "label_lower", "label_extent",
+                                        "label_shape")}
+    labels = []
+
+    def add_entry(made, obj, dd=None, reach=None):
         radius, density, cumulative, energy, max_radius = _row_arrays(
-            obj.profile.sampler, PROBE_ENERGY_FRACTION)
+            made.sampler, PROBE_ENERGY_FRACTION)
         present = energy > 0
         if not present.any():
             raise InputError("the profile reflects nothing in any channel: nothing leaves "
                              "the object", field=f"objects[{obj.index}].material",
                              value=obj.name)
+        if reach is not None:
+            max_radius = np.maximum(max_radius, reach)
         rows["radius"].append(radius)
         rows["density"].append(density)
         rows["cumulative"].append(cumulative)
@@ -340,29 +479,60 @@ def build_tables(objects: list[TranslucentObject], mm_per_unit: float) -> Profil
         steps = np.log(last / first) / (radius.shape[1] - 2)
         rows["first_node"].append(first)
         rows["inverse_log_step"].append(1.0 / steps)
+        with np.errstate(all="ignore"):
+            rows["value_at_zero"].append(np.asarray(made.reflection(np.zeros(1)),
+                                                    dtype=np.float64).reshape(3))
+        for name in ("dd_diffusion", "dd_sigma_tr", "dd_extrapolation"):
+            rows[name].append(np.zeros(3) if dd is None else getattr(dd, name[3:]))
+        return max_radius
+
+    media_entries = []  # (object, its media, reach), as their entries follow the objects
+    for obj in objects:
+        reach = None
+        if obj.rule is not None:
+            # the object's probe balls, and its media's cut, hold every medium's reach
+            reach = np.max([_row_arrays(made.sampler, PROBE_ENERGY_FRACTION)[4]
+                            for made in obj.media], axis=0)
+        add_entry(obj.profile, obj, obj.directional, reach)
         dd = obj.directional
         per_object["eta"].append(obj.medium.eta)
         per_object["directional"].append(0.0 if dd is None else 1.0)
-        if dd is None:
-            for name in ("dd_diffusion", "dd_sigma_tr", "dd_extrapolation"):
-                rows[name].append(np.zeros(3))
-            for name in ("dd_boundary", "dd_c_phi", "dd_c_e"):
-                per_object[name].append(0.0)
+        for name in ("boundary", "c_phi", "c_e"):
+            per_object["dd_" + name].append(0.0 if dd is None else getattr(dd, name))
+        per_object["rule"].append(0.0 if obj.rule is None else RULE_CODES[obj.rule])
+        first_medium = len(objects) + sum(len(media) for _, media, _ in media_entries)
+        per_object["media_first"].append(first_medium if obj.rule is not None else 0)
+        per_object["media_count"].append(len(obj.media))
+        per_object["label_first"].append(sum(len(chunk) for chunk in labels))
+        if obj.rule is None:
+            per_object["label_lower"].append(np.zeros(3))
+            per_object["label_extent"].append(np.ones(3))
+            per_object["label_shape"].append(np.ones(3))
         else:
-            rows["dd_diffusion"].append(dd.diffusion)
-            rows["dd_sigma_tr"].append(dd.sigma_tr)
-            rows["dd_extrapolation"].append(dd.extrapolation)
-            per_object["dd_boundary"].append(dd.boundary)
-            per_object["dd_c_phi"].append(dd.c_phi)
-            per_object["dd_c_e"].append(dd.c_e)
+            per_object["label_lower"].append(obj.bounds[0])
+            per_object["label_extent"].append(obj.bounds[1] - obj.bounds[0])
+            per_object["label_shape"].append(np.array(obj.labels.shape[::-1], np.float64))
+            labels.append(np.asarray(obj.labels, dtype=np.float64).ravel())
+            media_entries.append((obj, obj.media, reach))
+    for obj, media, reach in media_entries:
+        for made in media:
+            add_entry(made, obj, reach=reach)
+        if obj.rule == "segment_mix":
+            zero = np.array(rows["value_at_zero"][-len(media):])
+            if not (np.all(np.isfinite(zero)) and np.all(zero > 0)):
+                raise InputError("segment_mix (Eq. 16) divides by each medium's profile at "
+                                 f"r = 0, which is {zero.min()} here: use a profile finite "
+                                 "there (the dipole)", field=f"objects[{obj.index}].material",
+                                 value=obj.name)
     stacked = {name: (np.concatenate(values, axis=0) if values else np.zeros((0,)))
                for name, values in rows.items()}
-    eta = np.asarray(per_object["eta"], dtype=np.float64)
+    eta = np.asarray(per_object.pop("eta"), dtype=np.float64)
     return ProfileTables(
         shape_ids=tuple(obj.shape_id for obj in objects), mm_per_unit=float(mm_per_unit),
         eta=eta, exit_normalisation=exit_normalisation(eta), **stacked,
-        **{name: np.asarray(values, dtype=np.float64)
-           for name, values in per_object.items() if name != "eta"})
+        labels=np.concatenate(labels) if labels else np.zeros(1),
+        **{name: np.asarray(values, dtype=np.float64).ravel()
+           for name, values in per_object.items()})
 
 
 #: Tables of the scenes converted in this process, by token.

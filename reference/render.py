@@ -24,7 +24,7 @@ from ..errors import InputError, check_count
 from ..image import Image, read_exr
 from ..scenes import Scene
 from .delta_lights import DEFAULT_SIZE
-from .geometry_term import geometry_settings, parse_model_key
+from .geometry_term import geometry_settings, model_key, model_rule, parse_model_key
 from .mitsuba_scene import convert_scene
 
 __all__ = ["render", "render_to_target", "reference_settings", "reference_key", "load_scenes",
@@ -109,7 +109,8 @@ def load_scenes(scene: Scene, *, spp: int, per_channel: bool | None = None,
     """
     mi = mitsuba()
 
-    profile = None if profile is None else parse_model_key(profile)[0]
+    if profile is not None:  # the geometry is rendered beside (geometry_term_of)
+        profile = model_key(parse_model_key(profile)[0], False, model_rule(profile))
 
     def convert(channel):
         return convert_scene(scene, integrator=integrator, max_depth=max_depth, spp=spp,

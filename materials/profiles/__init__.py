@@ -26,7 +26,13 @@ from .better_dipole import BetterDipoleProfile
 from .burley import BurleyProfile
 from .classical_dipole import DipoleProfile
 from .directional_dipole import DirectionalDipoleAverage, DirectionalDipoleProfile
-from .mixed import MixedProfiles, mixed_profile, profile_for
+from .mixed import (
+    HETEROGENEOUS_RULES,
+    MixedProfiles,
+    geometric_mean_profile,
+    mixed_profile,
+    profile_for,
+)
 from .photon_beam_diffusion import PhotonBeamDiffusionProfile
 from .quantized_diffusion import QuantizedDiffusionProfile
 from .random_walk import RandomWalkProfile
@@ -58,6 +64,8 @@ __all__ = [
     "check_profile_values",
     "diffuse_entry_transmittance",
     "mixed_profile",
+    "geometric_mean_profile",
+    "HETEROGENEOUS_RULES",
     "profile",
     "profile_descriptions",
     "profile_for",

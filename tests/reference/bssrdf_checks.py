@@ -20,6 +20,9 @@ import numpy as np
 #: Radius, in element spacings, of the disk about an exit point integrated in polar form.
 NEAR_FIELD = 4.0
 
+#: Directions of the near field's polar quadrature of a heterogeneous BSSRDF.
+NEAR_ANGLES = 16
+
 #: Cosine nodes of the exit normalisation's quadrature (midpoint rule; the integrand is
 #: smooth in the cosine: 1e-9 against 4x the nodes).
 NORMALISATION_NODES = 200_000
@@ -90,14 +93,18 @@ def slab_exitance(radii, profile, spot, eta, reach, radial_nodes: int = 400,
 
 
 def sphere_radiance(scene, obj_index, profile_values, eta, light, subdivide, supersample,
-                    cut):
+                    cut, pair_values=None):
     """Per-pixel radiance of a convex translucent mesh under a point light, and coverage.
 
     Returns the radiance (H, W, 3) and the fraction of each pixel's rays that see the
     object (H, W).
 
     ``profile_values(r)`` gives R (mm^-2, shape ``r.shape + (3,)``) at r mm; nothing beyond
-    ``cut`` mm. Every face is split into ``subdivide``^2 triangles whose centroids carry
+    ``cut`` mm. A heterogeneous BSSRDF gives ``pair_values(xo, xi, r)`` instead (exit points
+    (K, 3) and entry points (P, 3) in scene units, their distances (K, P) in mm: R of shape
+    (K, P, 3)); its near field is then integrated over :data:`NEAR_ANGLES` directions of
+    the exit point's tangent disk (the rule may change across it). Every face is split into
+    ``subdivide``^2 triangles whose centroids carry
     their area; a centroid is lit where the light lies outside its face's plane and in
     front of its interpolated normal. Near the exit point, where a profile that goes as
     1/r defeats the centroid rule, R is split by a smooth step w(r) rising from 0 at half
@@ -146,8 +153,12 @@ def sphere_radiance(scene, obj_index, profile_values, eta, light, subdivide, sup
         return t * t * (3.0 - 2.0 * t)
 
     s = np.concatenate([[0.0], np.geomspace(1e-7 * near, near, 4000)])  # mm
-    inner = np.trapezoid(2.0 * math.pi * s[:, None] * (1.0 - step(s))[:, None] * np.where(
-        (s <= cut)[:, None], profile_values(s), 0.0), s, axis=0)  # energy near the point
+
+    def near_energy(values):  # the energy of (1 - w) R about the exit point
+        return np.trapezoid(2.0 * math.pi * s[:, None] * (1.0 - step(s))[:, None] * np.where(
+            (s <= cut)[:, None], values(s), 0.0), s, axis=0)
+
+    inner = None if pair_values is not None else near_energy(profile_values)
 
     camera = scene.camera
     forward, left, up = camera_frame(camera)
@@ -178,10 +189,13 @@ def sphere_radiance(scene, obj_index, profile_values, eta, light, subdivide, sup
         chunk = slice(start, start + 64)
         xo = xo_all[chunk]
         r = np.linalg.norm(xo[:, None, :] - points[None, :, :], axis=-1) * mpu
-        values = np.where((r <= cut)[..., None], profile_values(r), 0.0) \
-            * (step(r) * mpu**2)[..., None]
+        at = profile_values(r) if pair_values is None else pair_values(xo, points, r)
+        values = np.where((r <= cut)[..., None], at, 0.0) * (step(r) * mpu**2)[..., None]
         exitance = np.einsum("kp,kpc->kc", np.broadcast_to(entering, r.shape), values)
-        exitance += density[chunk, None] * inner[None, :]
+        near_field = inner[None, :] if pair_values is None else _near_disk(
+            xo, hits.shading_normal[seen][chunk], pair_values, s[s <= near][::10], step,
+            cut, mpu)
+        exitance += density[chunk, None] * near_field
         radiance[seen[chunk]] = exitance * intensity * (
             exit_term(cos_o[chunk], eta) * outside[chunk])[:, None]
     image = radiance.reshape(camera.height, supersample, camera.width, supersample, 3)
@@ -189,3 +203,27 @@ def sphere_radiance(scene, obj_index, profile_values, eta, light, subdivide, sup
     seen_here[seen] = 1.0
     coverage = seen_here.reshape(camera.height, supersample, camera.width, supersample)
     return image.mean(axis=(1, 3)), coverage.mean(axis=(1, 3))
+
+
+def _near_disk(xo, normals, pair_values, radii, step, cut, mpu):
+    """The energy of (1 - w) R over each exit point's tangent disk, (K, 3), by polar quadrature.
+
+    ``radii`` in mm (from 0); :data:`NEAR_ANGLES` midpoint directions about the normal.
+    """
+    out = np.zeros((len(xo), 3))
+    angles = (np.arange(NEAR_ANGLES) + 0.5) / NEAR_ANGLES * 2.0 * math.pi
+    for k in range(len(xo)):
+        n = normals[k]
+        helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        t1 = np.cross(n, helper)
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(n, t1)
+        directions = np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2
+        points = xo[k] + (radii[:, None, None] / mpu) * directions[None]  # (S, A, 3)
+        r = np.repeat(radii, NEAR_ANGLES)[None, :]
+        values = pair_values(xo[k:k + 1], points.reshape(-1, 3), r)[0]
+        mean = values.reshape(len(radii), NEAR_ANGLES, 3).mean(axis=1)
+        mean = np.where((radii <= cut)[:, None], mean, 0.0)
+        out[k] = np.trapezoid(2.0 * math.pi * radii[:, None] * (1.0 - step(radii))[:, None]
+                              * mean, radii, axis=0)
+    return out
