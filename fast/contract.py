@@ -36,10 +36,11 @@ class ContractPart:
     ----------
     name : str
         The attribute's name on the method's module or object.
-    kind : {"function", "dict", "knob spec", "state"}
+    kind : {"function", "dict", "knob spec", "rule", "state"}
         What it must be: a callable, a dict with str keys, a
-        :class:`~translucent.fast.knobs.KnobSpec`, or a part of the state ``precompute``
-        returns (documented, checked by the conformance suite).
+        :class:`~translucent.fast.knobs.KnobSpec`, a key of
+        :data:`~translucent.materials.profiles.HETEROGENEOUS_RULES`, or a part of the state
+        ``precompute`` returns (documented, checked by the conformance suite).
     required : bool
     signature : str
         How it is called or what it holds, as the tables show it.
@@ -98,6 +99,14 @@ CONTRACT: tuple[ContractPart, ...] = (
         "own against that render (docs/report.md). Without it a method with a `profile` "
         "knob stands on its profile (a radial profile, rendered by the BSSRDF path "
         "tracer); BRDF editing returns `brdf_pca_kK`, its K-term PCA BRDF."),
+    ContractPart(
+        "HETEROGENEOUS_RULE", "rule", False, "HETEROGENEOUS_RULE",
+        "a key of translucent.materials.profiles.HETEROGENEOUS_RULES",
+        "how the method mixes the media of a heterogeneous (solid) object into the profile "
+        "between two points, a key of `translucent.materials.profiles.HETEROGENEOUS_RULES` "
+        "(`geometric_mean`: Chen et al. 2012, Eq. 8; `segment_mix`: Sheng et al. 2014, "
+        "Eq. 16): the report renders the rule exactly (the BSSRDF path tracer) and splits "
+        "the method's error on a solid scene into the rule's and the method's own."),
     ContractPart(
         "KNOBS", "knob spec", False, "KNOBS",
         "a translucent.fast.knobs.KnobSpec declaring the knobs (validation, flags, cache "

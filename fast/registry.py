@@ -69,6 +69,8 @@ def contract_problems(target) -> list[str]:
     >>> contract_problems(types.SimpleNamespace(DEFAULT_KNOBS={}, applies_to=print))
     ['precompute: missing (a function precompute(scene, **knobs) returning a state)']
     """
+    from ..materials.profiles import HETEROGENEOUS_RULES
+
     problems = []
     for name, what in REQUIRED.items():
         if not hasattr(target, name):
@@ -82,6 +84,9 @@ def contract_problems(target) -> list[str]:
         elif part.kind == "dict" and (not isinstance(value, dict)
                                       or not all(isinstance(k, str) for k in value)):
             problems.append(f"{name}: not a dict with str keys ({part.summary})")
+        elif part.kind == "rule" and value not in HETEROGENEOUS_RULES:
+            problems.append(f"{name}: {value!r} is not one of {', '.join(HETEROGENEOUS_RULES)} "
+                            f"({part.summary})")
     quick = getattr(target, "QUICK_KNOBS", {})
     defaults = getattr(target, "DEFAULT_KNOBS", {})
     if hasattr(target, "KNOBS"):

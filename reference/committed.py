@@ -30,6 +30,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..image import Image, read_exr
+from ..materials.profiles import HETEROGENEOUS_RULES
 from .geometry_term import GEOMETRY_SUFFIX, geometry_settings, model_key
 
 __all__ = ["REFERENCE_FOLDER", "PLANS", "MODEL_PLANS", "MODEL_PROFILES", "ReferencePlan",
@@ -99,20 +100,28 @@ PLANS: dict[str, ReferencePlan] = {
 MODEL_INTEGRATOR = "bssrdf_path"
 
 #: The built-in scenes whose model references are committed, per model, and how each is
-#: rendered: every default scene whose translucent objects are homogeneous (a
-#: heterogeneous medium has no radial profile) with the profile every method uses unless
-#: told otherwise (:data:`translucent.fast.knobs.DEFAULT_PROFILE`, the classical dipole),
-#: by the BSSRDF path tracer, which needs no manifold search behind a dielectric and no
-#: per-channel walks, with the half-space profile alone (``dipole``) and with the object's
-#: geometry (``dipole+geometry``, :mod:`.geometry_term`: the model of PRT and splatting by
-#: default); and the glossy scene with the BRDF-editing method's default model,
-#: the 6-term PCA of its BRDFs (:func:`~translucent.materials.brdf_pca.pca_model_name`),
-#: by Mitsuba's path tracer with the PCA BRDF plugin (:mod:`.brdf_plugins`).
+#: rendered: every default scene whose translucent objects are homogeneous with the
+#: profile every method uses unless told otherwise
+#: (:data:`translucent.fast.knobs.DEFAULT_PROFILE`, the classical dipole), by the BSSRDF
+#: path tracer, which needs no manifold search behind a dielectric and no per-channel
+#: walks, with the half-space profile alone (``dipole``) and with the object's geometry
+#: (``dipole+geometry``, :mod:`.geometry_term`: the model of PRT and splatting by
+#: default); every default scene with a heterogeneous (solid) medium with the dipole of
+#: each of its media mixed by each method's rule (``dipole+geometric_mean``: splatting's,
+#: ``dipole+segment_mix``: radiosity's; :mod:`.bssrdf_tables`); and the glossy scene with
+#: the BRDF-editing method's default model, the 6-term PCA of its BRDFs
+#: (:func:`~translucent.materials.brdf_pca.pca_model_name`), by Mitsuba's path tracer with
+#: the PCA BRDF plugin (:mod:`.brdf_plugins`).
 MODEL_PLANS: dict[str, dict[str, ReferencePlan]] = {
     name: {model: ReferencePlan(spp=spp, budget_seconds=1200.0, integrator=MODEL_INTEGRATOR)
            for model in ("dipole", "dipole" + GEOMETRY_SUFFIX)}
     for name, spp in (("sphere", 256), ("bowl", 256), ("cornell_block", 64),
                       ("sphere_dielectric", 256), ("dielectric_on_floor", 256))
+} | {
+    name: {f"dipole+{rule}": ReferencePlan(spp=256, budget_seconds=1200.0,
+                                          integrator=MODEL_INTEGRATOR)
+           for rule in HETEROGENEOUS_RULES}
+    for name in ("solid_checker", "solid_gradient", "solid_veins")
 } | {
     "glossy": {"brdf_pca_k6": ReferencePlan(spp=1024, budget_seconds=900.0,
                                             integrator="path")},

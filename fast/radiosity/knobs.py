@@ -168,3 +168,7 @@ class ConvergenceError(RuntimeError):
         self.iterations = iterations
 
 
+
+#: How a heterogeneous object's media are mixed between two points: the media along the
+#: segment between them, by the fraction of its length in each (Sheng et al. 2014, Eq. 16).
+HETEROGENEOUS_RULE = "segment_mix"

@@ -91,7 +91,15 @@ from .buffers import (
 )
 from .frame import LightView, gather_frame, light_view, rendering_radius_table, splat_frame
 from .ground_truth import brute_force_exitance
-from .knobs import BACKENDS, DEFAULT_KNOBS, KNOBS, LADDERS, QUICK_KNOBS, SAMPLING_RANGES
+from .knobs import (
+    BACKENDS,
+    DEFAULT_KNOBS,
+    HETEROGENEOUS_RULE,
+    KNOBS,
+    LADDERS,
+    QUICK_KNOBS,
+    SAMPLING_RANGES,
+)
 from .method import add_approx_arguments, applies_to, approx, precompute, scored_objects
 from .radius_table import MIN_LEVEL_RESOLUTION, RenderingRadiusTable, minimal_rendering_radius_table
 from .selection import (
@@ -108,6 +116,7 @@ __all__ = [
     "BACKENDS",
     "CameraModel",
     "DEFAULT_KNOBS",
+    "HETEROGENEOUS_RULE",
     "KNOBS",
     "LADDERS",
     "QUICK_KNOBS",

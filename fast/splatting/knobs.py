@@ -118,3 +118,7 @@ PAIR_CHUNK = 1 << 21
 BUCKET_RATIO = 1.25
 
 
+
+#: How a heterogeneous object's media are mixed between two points: the geometric mean of
+#: the profiles of the media at the entry and the exit point (Chen et al. 2012, Eq. 8).
+HETEROGENEOUS_RULE = "geometric_mean"

@@ -71,7 +71,7 @@ DEFAULT_CELLS = (2, 4, 8, 16)
 CONTRAST_CELLS = 4
 JSON_NAME = "heterogeneous.json"
 MARKDOWN_NAME = "heterogeneous.md"
-FORMAT = 1
+FORMAT = 2
 
 
 def diffusion_lengths(medium: Dipole) -> np.ndarray:
@@ -120,14 +120,31 @@ def checker_scene(first: Dipole, second: Dipole, cells: int, *, size: int = DEFA
 
 def measure_checker(scene, *, spp: int = DEFAULT_SPP, passes: int = DEFAULT_PASSES,
                     methods=METHODS, mask=None) -> dict:
-    """Return one row: the reference's noise and each method's error on ``scene``."""
+    """Return one row: the reference's noise, each rule's and each method's error on ``scene``.
+
+    Each mixing rule (:data:`~translucent.materials.profiles.HETEROGENEOUS_RULES`) is
+    rendered exactly by the BSSRDF path tracer with the dipole of each medium (``spp`` x
+    ``passes``): its error against the volumetric reference is the rule's (the *model*,
+    both renders' variances discounted), and a method's error against its own rule's
+    render is the method's own (the *approximation*).
+    """
+    from ...fast.base import method as method_module
+    from ...materials.profiles import HETEROGENEOUS_RULES
     from ...reference import render
     from ..report.runs import run_method
+    from ..report.split import with_both_variances
 
     mask = object_mask(scene, OBJECT) if mask is None else mask
     started = time.perf_counter()
     reference = render(scene, spp=spp, passes=passes, progress=False)
     noise = reference_noise(reference, mask)
+    models, rules = {}, {}
+    for rule in HETEROGENEOUS_RULES:
+        models[rule] = render(scene, spp=spp, passes=passes, progress=False,
+                              integrator="bssrdf_path", profile=f"dipole+{rule}")
+        rules[rule] = {"seconds": models[rule].metadata.get("seconds"),
+                       **object_metrics(with_both_variances(reference, models[rule]),
+                                        models[rule], mask)}
     results = {}
     knobs = quick_knobs(methods) or {}
     for name in methods:
@@ -140,9 +157,16 @@ def measure_checker(scene, *, spp: int = DEFAULT_SPP, passes: int = DEFAULT_PASS
             entry["dominated_by"] = ("model" if entry["relative_mse"]
                                      > noise["noise_relative_mse"] else "noise")
             entry["solid_medium"] = (run.notes or {}).get("solid medium", {}).get(OBJECT)
+            rule = method_module(name).HETEROGENEOUS_RULE
+            own = object_metrics(models[rule], run.image, mask)
+            entry["rule"] = rule
+            entry["approximation"] = {key: own[key] for key in
+                                      ("relative_mse", "hdr_flip", "luminance_ratio")}
+            entry["dominant"] = ("model" if rules[rule]["relative_mse"]
+                                 >= own["relative_mse"] else "approximation")
         results[name] = entry
     return {"reference": {"seconds": reference.metadata.get("seconds"), **noise},
-            "methods": results, "seconds": time.perf_counter() - started}
+            "rules": rules, "methods": results, "seconds": time.perf_counter() - started}
 
 
 def _check(size, spp, passes, rows, methods, contrasts, cells):
@@ -255,10 +279,16 @@ def markdown(result: dict) -> str:
              "media. Metrics over the object's pixels; relMSE with the reference's noise "
              "discounted, * where it is below what the noise alone gives.", "",
              f"Complete: {'yes' if result['complete'] else 'no (a partial table)'}.", ""]
+    rules = list(result["rows"][0].get("rules", {})) if result["rows"] else []
     header = ["sweep", "t", "cells", "cell mm", "cell / l_d", "contrast", "ref SE",
               "noise relMSE"]
+    header += [f"{rule} relMSE" for rule in rules]
     for name in methods:
-        header += [f"{name} FLIP", f"{name} relMSE", f"{name} Y ratio"]
+        header += [f"{name} FLIP", f"{name} relMSE", f"{name} Y ratio", f"{name} own relMSE"]
+    lines += ["Each rule's relMSE: the rule rendered exactly (BSSRDF path tracer, the dipole of "
+              "each medium) against the reference, the model's error; a method's own relMSE: "
+              "the method against its own rule's render (splatting: geometric_mean, Eq. 8; "
+              "radiosity: segment_mix, Eq. 16), its approximation's error.", ""]
     lines += ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
     for row in result["rows"]:
         noise = row["reference"]
@@ -266,8 +296,12 @@ def markdown(result: dict) -> str:
                  table_cell(row["cell_mm"]), table_cell(row["cell_over_diffusion_length"]),
                  table_cell(row["contrast"]), table_cell(noise["relative_standard_error"]),
                  table_cell(noise["noise_relative_mse"])]
+        cells += [table_cell(row.get("rules", {}).get(rule, {}).get("relative_mse"))
+                  for rule in rules]
         for name in methods:
-            cells += method_cells(row["methods"].get(name, {}))
+            entry = row["methods"].get(name, {})
+            cells += method_cells(entry)
+            cells.append(table_cell((entry.get("approximation") or {}).get("relative_mse")))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

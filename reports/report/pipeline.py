@@ -590,9 +590,9 @@ def _plan_model_references(plan: _Plan, report: SceneReport, portable, spp, pass
     """
     if report.reference_error:
         return
-    wanted = {split_profile(name, run.knobs)[0] for name, run in report.runs.items()
-              if run.status == "ok"}
-    wanted |= {split_profile(p.owner, p.task.knobs)[0] for p in plan.tasks
+    wanted = {split_profile(name, run.knobs, report.scene)[0]
+              for name, run in report.runs.items() if run.status == "ok"}
+    wanted |= {split_profile(p.owner, p.task.knobs, report.scene)[0] for p in plan.tasks
                if p.report is report and isinstance(p.owner, str) and p.owner != PATH_TRACING}
     for profile in sorted(wanted - {None}):
         refusal = unrendered_profile(profile) or model_reference_refusal(report.scene, profile)

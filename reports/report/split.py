@@ -271,19 +271,20 @@ def model_reference_refusal(scene, profile: str | None = None) -> str:
     from ...materials import Dipole
     from ...materials.brdf_pca import pca_model_basis
     from ...materials.brdfs import AnalyticBRDF
-    from ...materials.solid import SolidMedium
+    from ...reference.geometry_term import model_rule
 
     if pca_model_basis(profile) is not None:
         if not any(isinstance(item.material, AnalyticBRDF) for item in scene.objects):
             return "the scene has no analytic BRDF: no PCA BRDF is rendered"
         return ""
 
-    heterogeneous = [item.name for item in scene.objects
-                     if isinstance(item.material, SolidMedium)]
-    if heterogeneous:
+    heterogeneous = heterogeneous_objects(scene)
+    if heterogeneous and model_rule(profile or "") is None:
         return (f"the translucent object {', '.join(heterogeneous)} is a heterogeneous "
-                "medium, which has no radial profile (the BSSRDF path tracer renders "
-                "homogeneous media)")
+                "medium, which has no one radial profile: the method names no rule that "
+                "mixes its media (HETEROGENEOUS_RULE)")
+    if heterogeneous:
+        return ""
     if not any(isinstance(item.material, Dipole) for item in scene.objects):
         return "the scene has no homogeneous translucent object: no profile is rendered"
     return ""
@@ -313,7 +314,15 @@ def unrendered_profile(profile: str) -> str:
             "incident direction), not its average")
 
 
-def split_profile(name: str, knobs: dict | None) -> tuple[str | None, str]:
+def heterogeneous_objects(scene) -> list[str]:
+    """Return the names of ``scene``'s heterogeneous translucent objects (solid media)."""
+    from ...materials.solid import SolidMedium
+
+    return [item.name for item in scene.objects
+            if isinstance(item.material, SolidMedium) and not item.material.is_uniform]
+
+
+def split_profile(name: str, knobs: dict | None, scene=None) -> tuple[str | None, str]:
     """Return the model a report entry rendered (its model reference's key), or why none.
 
     The key is the profile's name, with :data:`~translucent.reference.geometry_term.GEOMETRY_SUFFIX`
@@ -328,6 +337,10 @@ def split_profile(name: str, knobs: dict | None) -> tuple[str | None, str]:
         The entry (:func:`entry_name`).
     knobs : dict or None
         The knobs of its run (besides the defaults).
+    scene : Scene, optional
+        The scene it rendered: on a heterogeneous one the key names the method's
+        ``HETEROGENEOUS_RULE`` (``dipole+segment_mix``), the rule the model reference
+        renders the media by.
     """
     from ...fast.base import method
     from ...fast.knobs import DEFAULT_PROFILE
@@ -347,7 +360,20 @@ def split_profile(name: str, knobs: dict | None) -> tuple[str | None, str]:
     spec = getattr(module, "KNOBS", None)
     geometry = spec is not None and "geometry" in spec and \
         (knobs or {}).get("geometry", spec["geometry"].default) == "diffusion"
+    if scene is not None and heterogeneous_objects(scene):
+        rule = getattr(module, "HETEROGENEOUS_RULE", None)
+        if rule is None:
+            return None, (f"{method_name} names no rule that mixes a heterogeneous medium "
+                          "(HETEROGENEOUS_RULE): its error cannot be split")
+        # the geometry correction is made for homogeneous (Dipole) objects only
+        return model_key(chosen, geometry and _has_dipole(scene), rule), ""
     return model_key(chosen, geometry), ""
+
+
+def _has_dipole(scene) -> bool:
+    from ...materials import Dipole
+
+    return any(isinstance(item.material, Dipole) for item in scene.objects)
 
 
 def score_splits(report) -> None:
@@ -360,7 +386,7 @@ def score_splits(report) -> None:
 def _split(report, name: str, cache: dict) -> ErrorSplit:
     from ..metrics.compute import evaluate_on, noise_verdicts
 
-    profile, reason = split_profile(name, report.runs[name].knobs)
+    profile, reason = split_profile(name, report.runs[name].knobs, report.scene)
     if reason:
         return ErrorSplit(profile, reason)
     model = report.model_references.get(profile)

@@ -68,6 +68,22 @@ def test_the_table_has_both_sweeps_with_noise_beside_every_error(tiny_table):
     assert "| contrast |" in (out / "heterogeneous.md").read_text()
 
 
+def test_each_method_is_split_against_its_own_rule_rendered_exactly(tiny_table):
+    out, result = tiny_table
+    homogeneous, fine = result["rows"]
+    rules = {"splatting": "geometric_mean", "radiosity": "segment_mix"}
+    for row in result["rows"]:
+        assert set(row["rules"]) == set(rules.values())
+        for name, entry in row["methods"].items():
+            assert entry["rule"] == rules[name]
+            assert entry["approximation"]["relative_mse"] >= 0
+            assert entry["dominant"] in ("model", "approximation")
+    # the homogeneous limit: one medium, so both rules are the same model, bit for bit
+    first, second = (homogeneous["rules"][rule] for rule in rules.values())
+    assert first["relative_mse"] == second["relative_mse"]
+    assert "own relMSE" in (out / "heterogeneous.md").read_text()
+
+
 @pytest.mark.parametrize("arguments, field", [
     (["--contrasts", "0,2"], "--contrasts"), (["--contrasts", "x"], "--contrasts"),
     (["--rows", "8"], "--rows"), (["--pair", "Skin1,Jelly"], "--pair"),

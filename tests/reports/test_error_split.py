@@ -253,3 +253,18 @@ def test_a_method_with_the_geometry_is_split_against_the_model_with_the_geometry
     from translucent.reports.report.split import split_profile
 
     assert split_profile(name, knobs) == (model, "")
+
+
+@pytest.mark.parametrize("name, model", [("splatting", "dipole+geometric_mean"),
+                                         ("radiosity", "dipole+segment_mix")])
+def test_on_a_solid_medium_a_method_is_split_against_its_own_mixing_rule(name, model):
+    from translucent.reports.report.split import model_reference_refusal, split_profile
+    from translucent.scenes import load_scene
+
+    scene = load_scene("solid_checker")
+    assert split_profile(name, {}, scene) == (model, "")
+    assert model_reference_refusal(scene, model) == ""
+    assert "rule" in model_reference_refusal(scene, "dipole")
+    # a method that names no rule is not split there, and says why
+    profile, reason = split_profile("prt", {}, scene)
+    assert profile is None and "HETEROGENEOUS_RULE" in reason
