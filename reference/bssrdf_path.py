@@ -58,10 +58,21 @@ boundary is inside the BSSRDF) with
 heuristic with the cosine-distributed continuation that carries the path on for
 inter-reflection; Russian roulette as Mitsuba's ``path`` and ``volpath``.
 
+**Heterogeneous objects.** A solid medium (:class:`~translucent.materials.solid.SolidMedium`)
+has no one profile; with a rule (``PROFILE+RULE``, a key of
+:data:`~translucent.materials.profiles.HETEROGENEOUS_RULES`) it is reduced to the media a
+method derives from it (:data:`~.bssrdf_tables.RULE_MAX_MEDIA`), each gets the named
+profile, and :math:`R` between two points is the rule's mix of them: the geometric mean of
+the media's profiles at the two points (``geometric_mean``, splatting's Eq. 8 of Chen et al.
+2012) or Eq. 16 of Sheng et al. 2014 over the media along the straight segment
+(``segment_mix``, radiosity's). The probes sample the media's mean profile, whose support
+holds every rule's. So each method's rule is rendered exactly, and a method's error on a
+solid medium splits into its rule's and its own.
+
 **What it does not do.** Light is not transmitted through a translucent object (its
 transport is the profile's, of a half-space); the profile is cut beyond the largest probe
 ball (:data:`~.bssrdf_tables.PROBE_ENERGY_FRACTION`); interior media other than a
-:class:`~translucent.materials.Dipole` are refused.
+:class:`~translucent.materials.Dipole` or a solid medium with a rule are refused.
 
 References
 ----------

@@ -67,8 +67,12 @@ class ProfileLookup:
         rules = tables.rule.astype(int)
         self.any_geometric_mean = bool((rules == RULE_CODES["geometric_mean"]).any())
         self.any_segment_mix = bool((rules == RULE_CODES["segment_mix"]).any())
-        self.most_media = int(tables.media_count[rules == RULE_CODES["segment_mix"]].max(
-            initial=0))
+        self.any_segment_average = bool((rules == RULE_CODES["segment_average"]).any())
+        along = (rules == RULE_CODES["segment_mix"]) | (rules == RULE_CODES["segment_average"])
+        self.most_media = int(tables.media_count[along].max(initial=0))
+        self.sigma_a = _floats(tables.sigma_a)
+        self.sigma_s_prime = _floats(tables.sigma_s_prime)
+        self.boundary = _floats(tables.boundary)
         self.rule = mi.UInt32(rules.astype("uint32"))
         self.media_first = mi.UInt32(tables.media_first.astype("uint32"))
         self.media_count = mi.UInt32(tables.media_count.astype("uint32"))
@@ -179,6 +183,8 @@ class ProfileLookup:
         Eq. 16, as :func:`~translucent.materials.profiles.mixed_profile`): the fractions
         :math:`f_m` of :data:`~.bssrdf_tables.SEGMENT_POINTS` midpoints of the straight
         segment in each medium, then :math:`(\sum_m S_m(0) f_m)\prod_m S_m(f_m r)/S_m(0)`.
+        ``segment_average`` (:func:`~translucent.materials.profiles.segment_average_profile`):
+        the dipole, in closed form, of the coefficients averaged with the same fractions.
         """
         rule = dr.gather(mi.UInt32, self.rule, obj, active)
         value = self.reflectance(obj, r, active & (rule == 0))
@@ -188,29 +194,49 @@ class ProfileLookup:
             at_entry = self.reflectance(first + self.label_at(obj, xi, mean), r, mean)
             at_exit = self.reflectance(first + self.label_at(obj, xo, mean), r, mean)
             value[mean] = dr.sqrt(at_entry * at_exit)
-        if self.any_segment_mix:
+        if self.any_segment_mix or self.any_segment_average:
             mix = active & (rule == RULE_CODES["segment_mix"])
-            first = dr.gather(mi.UInt32, self.media_first, obj, mix)
-            count = dr.gather(mi.UInt32, self.media_count, obj, mix)
-            labels = [self.label_at(obj, xi + (xo - xi) * ((k + 0.5) / SEGMENT_POINTS), mix)
+            average = active & (rule == RULE_CODES["segment_average"])
+            along = mix | average
+            first = dr.gather(mi.UInt32, self.media_first, obj, along)
+            count = dr.gather(mi.UInt32, self.media_count, obj, along)
+            labels = [self.label_at(obj, xi + (xo - xi) * ((k + 0.5) / SEGMENT_POINTS), along)
                       for k in range(SEGMENT_POINTS)]
-            zero_mix = mi.Spectrum(0.0)
-            ratio = mi.Spectrum(1.0)
+            zero_mix, ratio = mi.Spectrum(0.0), mi.Spectrum(1.0)
+            mean_a, mean_s = mi.Spectrum(0.0), mi.Spectrum(0.0)
             for m in range(self.most_media):
-                present = mix & (mi.UInt32(m) < count)
                 hits = mi.Float(0.0)
                 for label in labels:
                     hits += dr.select(label == m, 1.0, 0.0)
                 fraction = hits / SEGMENT_POINTS
-                crossed = present & (hits > 0.0)
+                crossed = along & (mi.UInt32(m) < count) & (hits > 0.0)
                 entry = first + m
-                zero = mi.Spectrum(*[dr.gather(mi.Float, self.value_at_zero, 3 * entry + c,
-                                               crossed) for c in range(3)])
-                zero_mix += dr.select(crossed, zero * fraction, 0.0)
-                partial = self.reflectance(entry, fraction * r, crossed)
-                ratio *= dr.select(crossed, partial / zero, 1.0)
-            value[mix] = zero_mix * ratio
+                if self.any_segment_mix:
+                    mixed = crossed & mix
+                    zero = self._rgb(self.value_at_zero, entry, mixed)
+                    zero_mix += dr.select(mixed, zero * fraction, 0.0)
+                    partial = self.reflectance(entry, fraction * r, mixed)
+                    ratio *= dr.select(mixed, partial / zero, 1.0)
+                if self.any_segment_average:
+                    averaged = crossed & average
+                    mean_a += dr.select(averaged, self._rgb(self.sigma_a, entry, averaged)
+                                        * fraction, 0.0)
+                    mean_s += dr.select(averaged, self._rgb(self.sigma_s_prime, entry,
+                                                            averaged) * fraction, 0.0)
+            if self.any_segment_mix:
+                value[mix] = zero_mix * ratio
+            if self.any_segment_average:
+                cut = dr.gather(mi.Float, self.cut_radius, obj, average)
+                boundary = dr.gather(mi.Float, self.boundary, obj, average)
+                value[average] = dr.select(r <= cut, _dipole(mean_a, mean_s, boundary, r),
+                                           0.0)
         return value
+
+    @staticmethod
+    def _rgb(array, entry, active):
+        """Return the three channels of ``entry`` in a per-entry RGB array."""
+        return mi.Spectrum(*[dr.gather(mi.Float, array, 3 * entry + c, active)
+                             for c in range(3)])
 
     def is_directional(self, obj, active):
         """Whether object ``obj`` evaluates the directional dipole."""
@@ -256,6 +282,23 @@ class ProfileLookup:
             present = active & (diffusion > 0.0)
             values.append(dr.select(present & dr.isfinite(value), value, 0.0))
         return mi.Spectrum(*values)
+
+
+def _dipole(sigma_a, sigma_s_prime, boundary, r):
+    r"""The classical dipole :math:`R_d(r)` (mm^-2) of per-lane coefficients (Jensen et al. 2001).
+
+    As :func:`~translucent.materials.dipole_reflectance_profile`, with ``boundary`` its A.
+    """
+    sigma_t = sigma_a + sigma_s_prime
+    albedo = sigma_s_prime / dr.maximum(sigma_t, 1e-30)
+    sigma_tr = dr.sqrt(3.0 * sigma_a * sigma_t)
+    z_r = 1.0 / dr.maximum(sigma_t, 1e-30)
+    total = mi.Spectrum(0.0)
+    for z in (z_r, z_r * (1.0 + 4.0 * boundary / 3.0)):
+        d = dr.sqrt(dr.square(r) + dr.square(z))
+        total += z * (sigma_tr + 1.0 / d) * dr.exp(-sigma_tr * d) / dr.square(d)
+    value = albedo / (4.0 * math.pi) * total
+    return dr.select(dr.isfinite(value) & (sigma_t > 0.0), value, 0.0)
 
 
 def _source_term(x_dot_w, w_dot_n, x_dot_n, d, diffusion, sigma_tr, c_phi, c_e):

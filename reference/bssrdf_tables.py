@@ -37,6 +37,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..materials import Dipole
+from ..materials.dipole import dipole_boundary_factor
 from ..materials.profiles import (
     HETEROGENEOUS_RULES,
     PROFILE_NAMES,
@@ -73,10 +74,10 @@ ARRAY_FIELDS = ("eta", "exit_normalisation", "radius", "density", "cumulative", 
                 "directional", "dd_diffusion", "dd_sigma_tr", "dd_extrapolation",
                 "dd_boundary", "dd_c_phi", "dd_c_e", "rule", "media_first", "media_count",
                 "label_first", "label_lower", "label_extent", "label_shape", "labels",
-                "value_at_zero")
+                "value_at_zero", "sigma_a", "sigma_s_prime", "boundary")
 
 #: The heterogeneous rules' codes in the tables (0: a homogeneous object).
-RULE_CODES = {"geometric_mean": 1, "segment_mix": 2}
+RULE_CODES = {"geometric_mean": 1, "segment_mix": 2, "segment_average": 3}
 
 #: Points along the segment from the entry to the exit point at which ``segment_mix``
 #: reads the medium (midpoints of equal parts): each fraction of Eq. 16 within 1/32 of the
@@ -85,7 +86,7 @@ SEGMENT_POINTS = 32
 
 #: Media a heterogeneous object is reduced to, per rule: as many as the method that follows
 #: the rule derives (fast/solid_inputs.py: splatting's texture, radiosity's labels).
-RULE_MAX_MEDIA = {"geometric_mean": 64, "segment_mix": 16}
+RULE_MAX_MEDIA = {"geometric_mean": 64, "segment_mix": 16, "segment_average": 16}
 
 
 def exit_normalisation(eta) -> np.ndarray:
@@ -142,6 +143,8 @@ class TranslucentObject:
     media: tuple = ()
     labels: np.ndarray | None = None
     bounds: np.ndarray | None = None
+    #: the media themselves (Dipoles, one a profile of ``media``)
+    media_coefficients: tuple = ()
 
     def description(self) -> str:
         """Return the profile's name and model, as the image header says it."""
@@ -250,9 +253,14 @@ def _heterogeneous_object(scene, index: int, obj, shape_id: str, solid: SolidMed
                          f"a rule that mixes its media (profile '{profile_name}+RULE', RULE "
                          f"one of {', '.join(HETEROGENEOUS_RULES)})", file=scene.source,
                          field=f"{field}.material", value=obj.name)
+    if rule == "segment_average" and profile_name != "dipole":
+        raise InputError("segment_average evaluates the classical dipole of the averaged "
+                         "medium: use profile 'dipole'", file=scene.source, field="profile",
+                         value=profile_name)
     quantised = quantise_media(solid, solid.voxel_centres(), max_media=RULE_MAX_MEDIA[rule])
-    media = tuple(_made(scene, field, obj.name, profile_name, _one_channel(medium, channel))
-                  for medium in quantised.media)
+    coefficients = tuple(_one_channel(medium, channel) for medium in quantised.media)
+    media = tuple(_made(scene, field, obj.name, profile_name, medium)
+                  for medium in coefficients)
     if any(getattr(made, "directional", False) for made in media):
         raise InputError(f"profile {profile_name!r} depends on the incident direction; a "
                          "heterogeneous rule mixes radial profiles", file=scene.source,
@@ -262,7 +270,8 @@ def _heterogeneous_object(scene, index: int, obj, shape_id: str, solid: SolidMed
                                                                     channel), mean,
                              rule=rule, media=media,
                              labels=quantised.labels.reshape(solid.shape),
-                             bounds=np.asarray(solid.bounds, dtype=np.float64))
+                             bounds=np.asarray(solid.bounds, dtype=np.float64),
+                             media_coefficients=coefficients)
 
 
 class MeanProfile(RadialProfile):
@@ -329,6 +338,10 @@ class ProfileTables:
     value_at_zero : ndarray (3 entries,)
         Each entry's profile at r = 0, mm^-2 (Eq. 16's :math:`S_m(0)`; may be Inf for
         profiles no ``segment_mix`` object uses).
+    sigma_a, sigma_s_prime : ndarray (3 entries,)
+        Each entry's medium, mm^-1 (``segment_average`` averages its media's).
+    boundary : ndarray (n,)
+        The dipole's internal-reflection factor A of each object's eta.
 
     The rows past ``3n`` (the entries past the objects) are the heterogeneous objects'
     media, which their rules evaluate.
@@ -362,6 +375,9 @@ class ProfileTables:
     label_shape: np.ndarray
     labels: np.ndarray
     value_at_zero: np.ndarray
+    sigma_a: np.ndarray
+    sigma_s_prime: np.ndarray
+    boundary: np.ndarray
 
     @property
     def count(self) -> int:
@@ -451,14 +467,14 @@ def build_tables(objects: list[TranslucentObject], mm_per_unit: float) -> Profil
     rows = {name: [] for name in ("radius", "density", "cumulative", "energy", "max_radius",
                                   "channel_probability", "first_node", "inverse_log_step",
                                   "dd_diffusion", "dd_sigma_tr", "dd_extrapolation",
-                                  "value_at_zero")}
+                                  "value_at_zero", "sigma_a", "sigma_s_prime")}
     per_object = {name: [] for name in ("eta", "directional", "dd_boundary", "dd_c_phi",
                                         "dd_c_e", "rule", "media_first", "media_count",
                                         "label_first", "label_lower", "label_extent",
-                                        "label_shape")}
+                                        "label_shape", "boundary")}
     labels = []
 
-    def add_entry(made, obj, dd=None, reach=None):
+    def add_entry(made, obj, dd=None, reach=None, medium=None):
         radius, density, cumulative, energy, max_radius = _row_arrays(
             made.sampler, PROBE_ENERGY_FRACTION)
         present = energy > 0
@@ -484,6 +500,9 @@ def build_tables(objects: list[TranslucentObject], mm_per_unit: float) -> Profil
                                                     dtype=np.float64).reshape(3))
         for name in ("dd_diffusion", "dd_sigma_tr", "dd_extrapolation"):
             rows[name].append(np.zeros(3) if dd is None else getattr(dd, name[3:]))
+        medium = obj.medium if medium is None else medium
+        rows["sigma_a"].append(np.asarray(medium.sigma_a, dtype=np.float64))
+        rows["sigma_s_prime"].append(np.asarray(medium.sigma_s_prime, dtype=np.float64))
         return max_radius
 
     media_entries = []  # (object, its media, reach), as their entries follow the objects
@@ -496,6 +515,7 @@ def build_tables(objects: list[TranslucentObject], mm_per_unit: float) -> Profil
         add_entry(obj.profile, obj, obj.directional, reach)
         dd = obj.directional
         per_object["eta"].append(obj.medium.eta)
+        per_object["boundary"].append(float(dipole_boundary_factor(obj.medium.eta)))
         per_object["directional"].append(0.0 if dd is None else 1.0)
         for name in ("boundary", "c_phi", "c_e"):
             per_object["dd_" + name].append(0.0 if dd is None else getattr(dd, name))
@@ -515,8 +535,8 @@ def build_tables(objects: list[TranslucentObject], mm_per_unit: float) -> Profil
             labels.append(np.asarray(obj.labels, dtype=np.float64).ravel())
             media_entries.append((obj, obj.media, reach))
     for obj, media, reach in media_entries:
-        for made in media:
-            add_entry(made, obj, reach=reach)
+        for made, medium in zip(media, obj.media_coefficients):
+            add_entry(made, obj, reach=reach, medium=medium)
         if obj.rule == "segment_mix":
             zero = np.array(rows["value_at_zero"][-len(media):])
             if not (np.all(np.isfinite(zero)) and np.all(zero > 0)):

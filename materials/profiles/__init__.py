@@ -32,6 +32,7 @@ from .mixed import (
     geometric_mean_profile,
     mixed_profile,
     profile_for,
+    segment_average_profile,
 )
 from .photon_beam_diffusion import PhotonBeamDiffusionProfile
 from .quantized_diffusion import QuantizedDiffusionProfile
@@ -65,6 +66,7 @@ __all__ = [
     "diffuse_entry_transmittance",
     "mixed_profile",
     "geometric_mean_profile",
+    "segment_average_profile",
     "HETEROGENEOUS_RULES",
     "profile",
     "profile_descriptions",
