@@ -285,7 +285,7 @@ class ProfileLookup:
 
 
 def _dipole(sigma_a, sigma_s_prime, boundary, r):
-    r"""The classical dipole :math:`R_d(r)` (mm^-2) of per-lane coefficients (Jensen et al. 2001).
+    r"""Return the classical dipole :math:`R_d(r)` (mm^-2) of per-lane coefficients.
 
     As :func:`~translucent.materials.dipole_reflectance_profile`, with ``boundary`` its A.
     """

@@ -535,7 +535,7 @@ def build_tables(objects: list[TranslucentObject], mm_per_unit: float) -> Profil
             labels.append(np.asarray(obj.labels, dtype=np.float64).ravel())
             media_entries.append((obj, obj.media, reach))
     for obj, media, reach in media_entries:
-        for made, medium in zip(media, obj.media_coefficients):
+        for made, medium in zip(media, obj.media_coefficients, strict=True):
             add_entry(made, obj, reach=reach, medium=medium)
         if obj.rule == "segment_mix":
             zero = np.array(rows["value_at_zero"][-len(media):])

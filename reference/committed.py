@@ -30,7 +30,6 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..image import Image, read_exr
-from ..materials.profiles import HETEROGENEOUS_RULES
 from .geometry_term import GEOMETRY_SUFFIX, geometry_settings, model_key
 
 __all__ = ["REFERENCE_FOLDER", "PLANS", "MODEL_PLANS", "MODEL_PROFILES", "ReferencePlan",
@@ -112,6 +111,9 @@ MODEL_INTEGRATOR = "bssrdf_path"
 #: the BRDF-editing method's default model, the 6-term PCA of its BRDFs
 #: (:func:`~translucent.materials.brdf_pca.pca_model_name`), by Mitsuba's path tracer with
 #: the PCA BRDF plugin (:mod:`.brdf_plugins`).
+#: The heterogeneous rules the built-in methods follow (splatting's, radiosity's).
+METHOD_RULES = ("geometric_mean", "segment_mix")
+
 MODEL_PLANS: dict[str, dict[str, ReferencePlan]] = {
     name: {model: ReferencePlan(spp=spp, budget_seconds=1200.0, integrator=MODEL_INTEGRATOR)
            for model in ("dipole", "dipole" + GEOMETRY_SUFFIX)}
@@ -120,7 +122,7 @@ MODEL_PLANS: dict[str, dict[str, ReferencePlan]] = {
 } | {
     name: {f"dipole+{rule}": ReferencePlan(spp=256, budget_seconds=1200.0,
                                           integrator=MODEL_INTEGRATOR)
-           for rule in HETEROGENEOUS_RULES}
+           for rule in METHOD_RULES}
     for name in ("solid_checker", "solid_gradient", "solid_veins")
 } | {
     "glossy": {"brdf_pca_k6": ReferencePlan(spp=1024, budget_seconds=900.0,

@@ -33,7 +33,7 @@ HETEROGENEOUS_RULES = {
 
 
 def segment_average_profile(sigma_a, sigma_s_prime, fractions, r, eta) -> np.ndarray:
-    r"""The ``segment_average`` rule: the dipole of the segment's length-averaged medium.
+    r"""Mix by the ``segment_average`` rule: the dipole of the length-averaged medium.
 
     .. math:: R(r) = R_d\Big(r;\ \sum_m f_m \sigma_{a,m},\ \sum_m f_m \sigma'_{s,m}\Big)
 

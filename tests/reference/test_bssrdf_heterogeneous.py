@@ -269,7 +269,7 @@ def test_a_two_media_sphere_is_the_surface_integral_of_the_rule(mi, rule):
 @pytest.mark.slow
 @pytest.mark.parametrize("rule", list(HETEROGENEOUS_RULES))
 def test_a_two_media_sphere_is_the_surface_integral_of_the_rule_converged(mi, rule):
-    _surface_integral_check(mi, rule, 16, 1024, 16, 3, 3)
+    _surface_integral_check(mi, rule, 16, 1024, 16, 4, 4)
 
 
 def test_the_methods_rules_render_differently(mi):

@@ -268,3 +268,13 @@ def test_on_a_solid_medium_a_method_is_split_against_its_own_mixing_rule(name, m
     # a method that names no rule is not split there, and says why
     profile, reason = split_profile("prt", {}, scene)
     assert profile is None and "HETEROGENEOUS_RULE" in reason
+
+
+def test_the_committed_rules_are_the_built_in_methods_own():
+    from translucent.fast.base import method
+    from translucent.fast.registry import BUILTIN_METHODS
+    from translucent.reference.committed import METHOD_RULES
+
+    rules = {getattr(method(name), "HETEROGENEOUS_RULE", None) for name in
+             BUILTIN_METHODS} - {None}
+    assert rules == set(METHOD_RULES)
