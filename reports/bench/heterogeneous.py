@@ -306,8 +306,8 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: ``--quick``: a 12-pixel image, a 9-row sphere, two contrasts, one cell size, 4 x 2 spp.
-QUICK_ARGUMENTS: dict = {"size": 12, "rows": 9, "contrasts": "0,1", "cells": "2", "spp": 4,
+#: ``--quick``: a 12-pixel image, a 9-row sphere, one contrast, one cell size, 4 x 2 spp.
+QUICK_ARGUMENTS: dict = {"size": 12, "rows": 9, "contrasts": "1", "cells": "2", "spp": 4,
                          "passes": 2}
 
 
