@@ -7,12 +7,15 @@ its exit code and its standard streams are what is checked.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+from translucent.materials.profiles import HETEROGENEOUS_RULES
 
 #: Seconds after which a smoke run is a failure (a hang, not a slow machine).
 TIMEOUT_SECONDS = 300
@@ -116,9 +119,14 @@ def _method_rows(figures):
 
 
 def _heterogeneous(figures):
-    assert [row["sweep"] for row in figures["rows"]] == ["contrast", "contrast", "cell size"]
+    assert [row["sweep"] for row in figures["rows"]] == ["contrast", "cell size"]
     assert all(row["methods"][name]["status"] == "ok" for row in figures["rows"]
                for name in figures["methods"])
+    # each rule rendered exactly beside the reference, each method split against its own
+    assert all(set(row["rules"]) == set(HETEROGENEOUS_RULES) for row in figures["rows"])
+    # noise-discounted: may fall below 0 at a quick run's few samples, never NaN
+    assert all(math.isfinite(row["methods"][name]["approximation"]["relative_mse"])
+               for row in figures["rows"] for name in figures["methods"])
     return _method_rows(figures)
 
 
