@@ -11,7 +11,9 @@ output file left behind.
 
 ``--integrator bssrdf_path --profile NAME`` renders each translucent object by a radial
 profile instead of its medium (:mod:`translucent.reference.bssrdf_path`: the profile's own
-exact image); the header names the profile and each object's.
+exact image); the header names the profile and each object's. ``NAME+RULE`` renders a
+solid medium by a rule that mixes its media's profiles
+(:data:`~translucent.materials.profiles.HETEROGENEOUS_RULES`).
 
 ``--target-rse R [--target-p99 P] [--budget SECONDS]`` renders progressively instead:
 independent passes of ``--spp`` samples are added until the median relative standard error
@@ -52,7 +54,9 @@ def add_arguments(parser):
                         help="with --integrator bssrdf_path: the radial profile each "
                         "translucent object is rendered with (translucent profiles lists "
                         "them); NAME+geometry adds the object's own shape as PRT and "
-                        "splatting do (docs/geometry.md)")
+                        "splatting do (docs/geometry.md); NAME+geometric_mean, "
+                        "NAME+segment_mix or NAME+segment_average mixes the media of a "
+                        "solid (heterogeneous) object by that rule (docs/heterogeneous.md)")
     parser.add_argument("--per-channel", action=argparse.BooleanOptionalAction, default=None,
                         help="render R, G and B separately (media of one channel each); "
                         "default: where a medium is chromatic and of albedo near 1, as the "

@@ -145,3 +145,25 @@ def test_bench_reference_compares_bssrdf_path_with_volpath_mnee(scene_file, tmp_
     assert figures["estimators"]["volpath_mnee"]["efficiency_ratio"] == 1.0
     assert figures["target"]["cpu_seconds"] == 60.0
     assert "bssrdf_path at 60 CPU seconds" in capsys.readouterr().out
+
+
+def test_render_a_solid_medium_by_a_rule_names_it_and_without_one_says_how(tmp_path, capsys,
+                                                                          monkeypatch):
+    from translucent.backend import mitsuba
+
+    if not mitsuba().variant().startswith(("llvm_", "cuda_")):
+        pytest.skip("bssrdf_path needs a JIT variant")
+    monkeypatch.setenv("TRANSLUCENT_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "solid.exr"
+    assert main(["render", "solid_checker", "--integrator", "bssrdf_path", "--profile",
+                 "dipole+segment_mix", "--spp", "2", "--passes", "2", "--out", str(out)]) == 0
+    meta = read_exr(out).metadata
+    assert meta["profile"]["name"] == "dipole+segment_mix"
+    assert "mixed by segment_mix" in meta["profile"]["objects"]["sphere"]
+    capsys.readouterr()
+    assert main(["render", "solid_checker", "--integrator", "bssrdf_path", "--profile",
+                 "dipole", "--spp", "2", "--passes", "2",
+                 "--out", str(tmp_path / "none.exr")]) == 2
+    error = capsys.readouterr().err
+    assert "segment_mix" in error and "Traceback" not in error
+    assert not (tmp_path / "none.exr").exists()

@@ -74,8 +74,9 @@ def _translucent(*arguments, env=None, **options):
                             env=environment, **options)
 
 
-@pytest.mark.parametrize("signal_name, code, word", [("SIGINT", 130, "interrupted"),
-                                                      ("SIGTERM", 143, "terminated")])
+@pytest.mark.parametrize("signal_name, code, word", [
+    ("SIGINT", 130, "interrupted"),
+    pytest.param("SIGTERM", 143, "terminated", marks=pytest.mark.slow)])  # same path, 6 s
 def test_a_signal_ends_a_render_with_one_line_and_nothing_left(tmp_path, signal_name, code,
                                                                word):
     import signal
