@@ -227,3 +227,34 @@ def _near_disk(xo, normals, pair_values, radii, step, cut, mpu):
         out[k] = np.trapezoid(2.0 * math.pi * radii[:, None] * (1.0 - step(radii))[:, None]
                               * mean, radii, axis=0)
     return out
+
+
+def assert_images_match_quadrature(images, expected, coverage, *, global_z: float = 4.0):
+    """Assert that a tracer's passes agree with a quadrature's image, within their noise.
+
+    ``images``: the passes (P, H, W, 3); ``expected`` and ``coverage`` from
+    :func:`sphere_radiance`. Over the pixels the object covers whole (the silhouette's
+    partial coverage is the camera's business, not the BSSRDF's): a per-pixel z-test, the
+    summed difference of the lit pixels within ``global_z`` standard errors per channel, and
+    a 5 % drift of the expectation outside them (the check can tell it). Returns the masked
+    ``(mean, expected, variance)``.
+    """
+    from translucent.image import Image
+    from translucent.reports.metrics.statistics import z_test_known_variance
+
+    passes = len(images)
+    inside = coverage == 1.0
+    assert inside.sum() >= 16
+    mean = np.where(inside[..., None], images.mean(axis=0), 0.0)
+    variance = np.where(inside[..., None], images.var(axis=0, ddof=1) / passes, 0.0)
+    expected = np.where(inside[..., None], expected, 0.0)
+    result = z_test_known_variance(Image(mean, variance), Image(expected, np.zeros_like(mean)),
+                                   passes=(passes, None))
+    assert result.passed, result.summary()
+    lit = inside & (expected[..., 1] > 1e-3 * expected[..., 1].max())
+    spread = np.sqrt(variance[lit].sum(axis=0))
+    z = (mean[lit] - expected[lit]).sum(axis=0) / spread
+    assert np.abs(z).max() < global_z, (z, mean[lit].sum(axis=0) / expected[lit].sum(axis=0))
+    drifted = (mean[lit] - 1.05 * expected[lit]).sum(axis=0) / spread
+    assert np.abs(drifted).min() > global_z, drifted
+    return mean, expected, variance

@@ -218,9 +218,6 @@ def _sphere_scene(material, size, subdivisions=4):
 
 
 def _sphere_check(mi, name, size, spp, passes, subdivide, supersample):
-    from translucent.image import Image
-    from translucent.reports.metrics.statistics import z_test_known_variance
-
     scene = _sphere_scene(MEDIUM, size)
     conversion = convert_scene(scene, integrator="bssrdf_path", profile=name)
     images = _passes(mi, mi.load_dict(conversion.scene_dict), spp, passes)
@@ -228,23 +225,8 @@ def _sphere_check(mi, name, size, spp, passes, subdivide, supersample):
     cut = radial.radius_containing(PROBE_ENERGY_FRACTION).max()
     expected, coverage = bssrdf_checks.sphere_radiance(
         scene, 0, radial.reflection, MEDIUM.eta, scene.lights[0], subdivide, supersample, cut)
-    # pixels the object covers whole: the silhouette's partial coverage is the camera's
-    # business, not the BSSRDF's
-    inside = coverage == 1.0
-    assert inside.sum() >= 16
-    mean = np.where(inside[..., None], images.mean(axis=0), 0.0)
-    variance = np.where(inside[..., None], images.var(axis=0, ddof=1) / passes, 0.0)
-    expected = np.where(inside[..., None], expected, 0.0)
-    result = z_test_known_variance(Image(mean, variance), Image(expected, np.zeros_like(mean)),
-                                   passes=(passes, None))
-    assert result.passed, result.summary()
-    lit = inside & (expected[..., 1] > 1e-3 * expected[..., 1].max())
-    z = (mean[lit] - expected[lit]).sum(axis=0) / np.sqrt(variance[lit].sum(axis=0))
-    assert np.abs(z).max() < GLOBAL_Z, (z, mean[lit].sum(axis=0) / expected[lit].sum(axis=0))
-    # and the test can tell a 5 % error
-    drifted = (mean[lit] - 1.05 * expected[lit]).sum(axis=0) / np.sqrt(variance[lit].sum(axis=0))
-    assert np.abs(drifted).min() > GLOBAL_Z, drifted
-    return mean, expected, variance
+    return bssrdf_checks.assert_images_match_quadrature(images, expected, coverage,
+                                                        global_z=GLOBAL_Z)
 
 
 def test_a_sphere_under_a_point_light_is_the_surface_integral(mi):
