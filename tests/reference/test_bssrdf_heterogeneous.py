@@ -32,8 +32,6 @@ from translucent.materials.solid import SolidMedium, quantise_media
 
 pytest.importorskip("mitsuba")
 
-from translucent.backend import mitsuba  # noqa: E402
-from translucent.reference import bssrdf_path  # noqa: E402
 from translucent.reference.bssrdf_tables import (  # noqa: E402
     PROBE_ENERGY_FRACTION,
     RULE_MAX_MEDIA,
@@ -58,12 +56,8 @@ SECOND = Dipole(sigma_a=[0.01, 0.02, 0.05], sigma_s_prime=[10.0, 10.0, 10.0], et
 
 
 @pytest.fixture(scope="module")
-def mi():
-    module = mitsuba()
-    if not module.variant().startswith(("llvm_", "cuda_")):
-        pytest.skip("bssrdf_path needs a JIT variant")
-    bssrdf_path.register()
-    return module
+def mi(bssrdf_mi):
+    return bssrdf_mi
 
 
 def _halves(first: Dipole, second: Dipole, cells: int = 8) -> SolidMedium:

@@ -29,8 +29,6 @@ from translucent.materials.profiles import PROFILE_NAMES, profile
 
 mi_module = pytest.importorskip("mitsuba")
 
-from translucent.backend import mitsuba  # noqa: E402
-from translucent.reference import bssrdf_path  # noqa: E402
 from translucent.reference.bssrdf_tables import (  # noqa: E402
     PROBE_ENERGY_FRACTION,
     build_tables,
@@ -54,12 +52,8 @@ MEDIUM = Dipole(sigma_a=[0.05, 0.1, 0.2], sigma_s_prime=[1.0, 1.0, 1.0], eta=1.3
 
 
 @pytest.fixture(scope="module")
-def mi():
-    module = mitsuba()
-    if not module.variant().startswith(("llvm_", "cuda_")):
-        pytest.skip("bssrdf_path needs a JIT variant")
-    bssrdf_path.register()
-    return module
+def mi(bssrdf_mi):
+    return bssrdf_mi
 
 
 def _camera():
