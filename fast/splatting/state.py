@@ -421,10 +421,10 @@ class SplattingState:
         mm2 = scene.mm_per_unit**2
         points, normals, power = [], [], []
         for view in views:
-            valid = view.buffer.valid
-            points.append(view.buffer.position[valid])
-            normals.append(view.buffer.normal[valid])
-            power.append(view.flux[valid] * mm2)
+            chosen, flux = _entry_blocks(view.buffer.valid, view.flux, ENTRY_BLOCK)
+            points.append(view.buffer.position[chosen])
+            normals.append(view.buffer.normal[chosen])
+            power.append(flux * mm2)
         valid = camera_buffer.valid
         total = None if self.knobs["profile"] == DEFAULT_PROFILE else \
             radial_profile(self.knobs["profile"], item.material).total()
@@ -492,3 +492,39 @@ class SplattingState:
         return light_view(buffer, to_light, irradiance, eta)
 
 
+
+
+#: Light-view texels per side of a block whose flux enters the geometry correction at one
+#: texel: the correction's cluster weights vary on the clusters' spacing (about 2 mm on a
+#: 10 mm sphere), a 2 x 2 block of a 512 x 512 view spans 0.08 mm there. It maps a quarter
+#: of the texels to the clusters (the sphere's frame 215 -> 155 ms); the report's relative
+#: MSE moves by at most 1 % (cornell_block 0.00774 -> 0.00782, its floor 0.00015). 4 x 4
+#: blocks moved it by 3 %.
+ENTRY_BLOCK = 2
+
+
+def _entry_blocks(valid: np.ndarray, flux: np.ndarray, block: int):
+    """Sum a light view's flux over ``block`` x ``block`` texels; each sum enters at one texel.
+
+    Returns the flat indices of the texels that stand for their blocks (each block's valid
+    texel of the most flux, so that a block across a silhouette enters on the surface that
+    carries most of its light) and the blocks' flux, shape (B, 3). The flux is kept whole;
+    only where it enters moves, by less than a block.
+    """
+    height, width = valid.shape
+    rows, cols = -(-height // block) * block, -(-width // block) * block
+    padded_flux = np.zeros((rows, cols, 3))
+    padded_flux[:height, :width] = np.where(valid[..., None], flux, 0.0)
+    weight = padded_flux.sum(axis=2)
+    weight[:height, :width][~valid] = -1.0
+    weight[height:, :] = -1.0
+    weight[:, width:] = -1.0
+    blocks = (rows // block, block, cols // block, block)
+    tiles = weight.reshape(blocks).transpose(0, 2, 1, 3).reshape(-1, block * block)
+    best = tiles.argmax(axis=1)
+    keep = tiles[np.arange(len(tiles)), best] >= 0.0
+    sums = padded_flux.reshape(*blocks, 3).sum(axis=(1, 3)).reshape(-1, 3)[keep]
+    tile_row, tile_col = np.divmod(np.flatnonzero(keep), cols // block)
+    within_row, within_col = np.divmod(best[keep], block)
+    row, col = tile_row * block + within_row, tile_col * block + within_col
+    return (row, col), sums

@@ -818,3 +818,24 @@ def test_a_fine_checker_of_unlike_media_keeps_its_energy_through_the_levels():
                       for on in (True, False))
     ratio = levels.sum(axis=0) / single.sum(axis=0)
     assert np.all(ratio < FINE_CHECKER_RATIO) and np.all(ratio > 1 / FINE_CHECKER_RATIO), ratio
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 9), st.integers(1, 9), st.integers(1, 4), st.integers(0, 2**31 - 1))
+def test_entry_blocks_keep_every_texels_flux_and_enter_it_at_a_valid_texel_of_its_block(
+        height, width, block, seed):
+    from translucent.fast.splatting.state import _entry_blocks
+
+    rng = np.random.default_rng(seed)
+    valid = rng.random((height, width)) < 0.7
+    flux = rng.random((height, width, 3))
+    (row, col), sums = _entry_blocks(valid, flux, block)
+    assert np.allclose(sums.sum(axis=0), flux[valid].sum(axis=0))
+    assert np.all(valid[row, col])
+    # one texel per block that has a valid texel, and it carries that block's flux
+    blocks = set(zip((row // block).tolist(), (col // block).tolist(), strict=True))
+    assert len(blocks) == len(row)
+    for r, c, total in zip(row, col, sums, strict=True):
+        tile = np.s_[r // block * block:(r // block + 1) * block,
+                     c // block * block:(c // block + 1) * block]
+        assert np.allclose(total, (flux[tile] * valid[tile][..., None]).sum(axis=(0, 1)))
