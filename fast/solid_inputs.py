@@ -34,7 +34,7 @@ import numpy as np
 
 from ..cache import content_hash
 from ..errors import InputError, check_count
-from ..materials.profiles import MixedProfiles
+from ..materials.profiles import RULE_MAX_MEDIA, MixedProfiles
 from ..materials.solid import SolidMedium, quantise_media
 from ..materials.subedit import DEFAULT_SEGMENTS, SubEditProfiles, convert_media
 
@@ -55,9 +55,9 @@ SURFACE_ASSUMPTIONS = {
 }
 
 #: Distinct media a SubEdit texture is made from (a texture lookup per texel: many are cheap).
-SPLATTING_MAX_MEDIA = 64
+SPLATTING_MAX_MEDIA = RULE_MAX_MEDIA["geometric_mean"]
 #: Distinct media of radiosity's labels (Eq. 16 multiplies one factor per medium per pair).
-RADIOSITY_MAX_MEDIA = 16
+RADIOSITY_MAX_MEDIA = RULE_MAX_MEDIA["segment_mix"]
 #: Texels along each side of the derived SubEdit texture.
 DEFAULT_TEXTURE_RESOLUTION = 128
 

@@ -61,7 +61,7 @@ inter-reflection; Russian roulette as Mitsuba's ``path`` and ``volpath``.
 **Heterogeneous objects.** A solid medium (:class:`~translucent.materials.solid.SolidMedium`)
 has no one profile; with a rule (``PROFILE+RULE``, a key of
 :data:`~translucent.materials.profiles.HETEROGENEOUS_RULES`) it is reduced to the media a
-method derives from it (:data:`~.bssrdf_tables.RULE_MAX_MEDIA`), each gets the named
+method derives from it (:data:`~translucent.materials.profiles.RULE_MAX_MEDIA`), each gets the named
 profile, and :math:`R` between two points is the rule's mix of them: the geometric mean of
 the media's profiles at the two points (``geometric_mean``, splatting's Eq. 8 of Chen et al.
 2012) or Eq. 16 of Sheng et al. 2014 over the media along the straight segment
@@ -101,6 +101,7 @@ from .bssrdf_tables import (
     register_tables,
     translucent_objects,
 )
+from .model_keys import model_rule, without_rule
 
 __all__ = ["INTEGRATOR_NAME", "BSSRDFConversion", "register", "bssrdf_conversion"]
 
@@ -219,10 +220,9 @@ def bssrdf_conversion(scene, integrator: str | None, profile: str | None,
     """
     from ..materials.profiles import PROFILE_NAMES
 
-    rule = None
-    for name in HETEROGENEOUS_RULES:
-        if profile is not None and profile.endswith(f"+{name}"):
-            profile, rule = profile[:-len(name) - 1], name
+    rule = None if profile is None else model_rule(profile)
+    if rule is not None:
+        profile = without_rule(profile)
     if integrator != INTEGRATOR_NAME:
         if profile is not None:
             raise InputError(f"a profile goes with integrator {INTEGRATOR_NAME} (the "

@@ -41,6 +41,7 @@ from ..materials.dipole import dipole_boundary_factor
 from ..materials.profiles import (
     HETEROGENEOUS_RULES,
     PROFILE_NAMES,
+    RULE_MAX_MEDIA,
     RadialProfile,
     diffuse_entry_transmittance,
     profile,
@@ -83,10 +84,6 @@ RULE_CODES = {"geometric_mean": 1, "segment_mix": 2, "segment_average": 3}
 #: reads the medium (midpoints of equal parts): each fraction of Eq. 16 within 1/32 of the
 #: segment per boundary it crosses.
 SEGMENT_POINTS = 32
-
-#: Media a heterogeneous object is reduced to, per rule: as many as the method that follows
-#: the rule derives (fast/solid_inputs.py: splatting's texture, radiosity's labels).
-RULE_MAX_MEDIA = {"geometric_mean": 64, "segment_mix": 16, "segment_average": 16}
 
 
 def exit_normalisation(eta) -> np.ndarray:
@@ -171,8 +168,9 @@ def translucent_objects(scene, profile_name: str, shape_ids, channel: int | None
     rule : str, optional
         How a heterogeneous object's media are mixed (a key of
         :data:`~translucent.materials.profiles.HETEROGENEOUS_RULES`): its solid medium is
-        reduced to at most :data:`RULE_MAX_MEDIA` homogeneous media per voxel, as the
-        method that follows the rule reduces it, and each medium gets ``profile_name``.
+        reduced, voxel by voxel, to at most
+        :data:`~translucent.materials.profiles.RULE_MAX_MEDIA` media, as the method that
+        follows the rule reduces it, and each medium gets ``profile_name``.
         A uniform solid medium is its one Dipole.
 
     Raises

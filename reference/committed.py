@@ -30,7 +30,8 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..image import Image, read_exr
-from .geometry_term import GEOMETRY_SUFFIX, geometry_settings, model_key
+from .geometry_term import geometry_settings
+from .model_keys import GEOMETRY_SUFFIX, model_key
 
 __all__ = ["REFERENCE_FOLDER", "PLANS", "MODEL_PLANS", "MODEL_PROFILES", "ReferencePlan",
            "CommittedReference", "committed_path", "committed_reference",

@@ -32,7 +32,6 @@ from ..backend import mitsuba
 from ..errors import InputError
 from ..materials.fresnel import fresnel_transmittance
 from ..materials.homogeneous import Dipole
-from ..materials.profiles import HETEROGENEOUS_RULES
 from ..materials.profiles import profile as named_profile
 from ..scenes.mesh_shape import closed_surface, stratified_surface_points
 from ..scenes.object_diffusion import (
@@ -44,12 +43,7 @@ from ..scenes.object_diffusion import (
 )
 from .bssrdf_tables import exit_normalisation
 
-__all__ = ["GEOMETRY_SUFFIX", "GeometryTerm", "geometry_settings", "model_key",
-           "model_rule", "parse_model_key"]
-
-#: A model reference's key is the profile's name, plus this where the model includes the
-#: object's geometry (``dipole+geometry``).
-GEOMETRY_SUFFIX = "+geometry"
+__all__ = ["GeometryTerm", "geometry_settings"]
 
 #: Surface points per object and estimate.
 POINTS = 2048
@@ -65,51 +59,6 @@ def geometry_settings() -> dict:
     """Return what a model reference with the geometry was rendered with (its header's)."""
     return {"model": "diffusion", "version": CACHE_FORMAT, "cells": DEFAULT_CELLS,
             "clusters": DEFAULT_CLUSTERS, "points": POINTS, "rays": RAYS}
-
-
-def model_key(profile: str, geometry: bool, rule: str | None = None) -> str:
-    """Return the model reference's key of ``profile``, with the geometry or without.
-
-    ``rule``: how a heterogeneous object's media are mixed (a key of
-    :data:`~translucent.materials.profiles.HETEROGENEOUS_RULES`), added as ``+rule``.
-
-    Examples
-    --------
-    >>> model_key("dipole", True)
-    'dipole+geometry'
-    >>> parse_model_key(model_key("better_dipole", False))
-    ('better_dipole', False)
-    >>> model_key("dipole", False, "segment_mix")
-    'dipole+segment_mix'
-    """
-    return profile + (GEOMETRY_SUFFIX if geometry else "") + (f"+{rule}" if rule else "")
-
-
-def model_rule(key: str) -> str | None:
-    """Return the heterogeneous rule a model key names (None: none).
-
-    Examples
-    --------
-    >>> model_rule("dipole+geometric_mean"), model_rule("dipole+geometry")
-    ('geometric_mean', None)
-    """
-    for rule in HETEROGENEOUS_RULES:
-        if key.endswith(f"+{rule}"):
-            return rule
-    return None
-
-
-def parse_model_key(key: str) -> tuple[str, bool]:
-    """Return ``(profile, geometry)`` of a model reference's key (:func:`model_key`).
-
-    A heterogeneous rule (:func:`model_rule`) is left out of ``profile``.
-    """
-    rule = model_rule(key)
-    if rule is not None:
-        key = key[:-len(rule) - 1]
-    if key.endswith(GEOMETRY_SUFFIX):
-        return key[:-len(GEOMETRY_SUFFIX)], True
-    return key, False
 
 
 def _rgb(values, count: int) -> np.ndarray:

@@ -24,8 +24,9 @@ from ..errors import InputError, check_count
 from ..image import Image, read_exr
 from ..scenes import Scene
 from .delta_lights import DEFAULT_SIZE
-from .geometry_term import geometry_settings, model_key, model_rule, parse_model_key
+from .geometry_term import geometry_settings
 from .mitsuba_scene import convert_scene
+from .model_keys import model_key, model_rule, parse_model_key
 
 __all__ = ["render", "render_to_target", "reference_settings", "reference_key", "load_scenes",
            "read_cached_reference",

@@ -94,7 +94,7 @@ def _profile_factors(material: SubEditProfiles, inner: float) -> np.ndarray:
     typical_range = float(np.median(material.effective_scattering_range))
     texels = np.arange(material.texel_count)
     if inner >= 1.0:  # an empty interval: the ratios of its limit, the integrand at u = 1
-        nodes, weights, half, u = np.zeros(1), np.full(1, 2.0), 0.5, np.ones(1)
+        u, weights, half = np.ones(1), np.full(1, 2.0), 0.5
     else:
         nodes, weights = np.polynomial.legendre.leggauss(FACTOR_NODES)
         half = 0.5 * (1.0 - inner)

@@ -492,8 +492,6 @@ class SplattingState:
         return light_view(buffer, to_light, irradiance, eta)
 
 
-
-
 #: Light-view texels per side of a block whose flux enters the geometry correction at one
 #: texel: the correction's cluster weights vary on the clusters' spacing (about 2 mm on a
 #: 10 mm sphere), a 2 x 2 block of a 512 x 512 view spans 0.08 mm there. It maps a quarter
@@ -506,7 +504,7 @@ ENTRY_BLOCK = 2
 def _entry_blocks(valid: np.ndarray, flux: np.ndarray, block: int):
     """Sum a light view's flux over ``block`` x ``block`` texels; each sum enters at one texel.
 
-    Returns the flat indices of the texels that stand for their blocks (each block's valid
+    Returns the (rows, columns) of the texels that stand for their blocks (each block's valid
     texel of the most flux, so that a block across a silhouette enters on the surface that
     carries most of its light) and the blocks' flux, shape (B, 3). The flux is kept whole;
     only where it enters moves, by less than a block.

@@ -28,6 +28,7 @@ from .classical_dipole import DipoleProfile
 from .directional_dipole import DirectionalDipoleAverage, DirectionalDipoleProfile
 from .mixed import (
     HETEROGENEOUS_RULES,
+    RULE_MAX_MEDIA,
     MixedProfiles,
     geometric_mean_profile,
     mixed_profile,
@@ -68,6 +69,7 @@ __all__ = [
     "geometric_mean_profile",
     "segment_average_profile",
     "HETEROGENEOUS_RULES",
+    "RULE_MAX_MEDIA",
     "profile",
     "profile_descriptions",
     "profile_for",

@@ -14,8 +14,8 @@ from ..homogeneous import Dipole, Lambertian
 from .base import RadialProfile, require_radial
 from .classical_dipole import DipoleProfile
 
-__all__ = ["HETEROGENEOUS_RULES", "MixedProfiles", "geometric_mean_profile", "mixed_profile",
-           "profile_for", "segment_average_profile"]
+__all__ = ["HETEROGENEOUS_RULES", "RULE_MAX_MEDIA", "MixedProfiles", "geometric_mean_profile",
+           "mixed_profile", "profile_for", "segment_average_profile"]
 
 #: The rules by which a method mixes the media of a heterogeneous object into the profile
 #: between an entry and an exit point, by name. Each method says which it follows; the
@@ -66,6 +66,13 @@ def segment_average_profile(sigma_a, sigma_s_prime, fractions, r, eta) -> np.nda
     mean_s = fractions @ np.asarray(sigma_s_prime, dtype=np.float64)
     return dipole_reflectance_profile(np.asarray(r, dtype=np.float64)[..., None], mean_a,
                                       mean_s, eta)
+
+
+#: Homogeneous media a heterogeneous object is reduced to, per rule: as many as the method
+#: that follows the rule derives (splatting: a texture lookup per texel, many are cheap;
+#: radiosity: Eq. 16 multiplies one factor per medium per pair). The BSSRDF path tracer
+#: reduces a solid medium as the method does.
+RULE_MAX_MEDIA = {"geometric_mean": 64, "segment_mix": 16, "segment_average": 16}
 
 
 def geometric_mean_profile(values_at_entry, values_at_exit) -> np.ndarray:

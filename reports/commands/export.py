@@ -39,7 +39,7 @@ def run(args) -> int:
     if args.format not in FORMATS:
         raise InputError(f"unknown format; valid: {', '.join(FORMATS)}", field="--format",
                          value=args.format)
-    from ...reference.geometry_term import parse_model_key
+    from ...reference.model_keys import parse_model_key
 
     if args.profile is not None and parse_model_key(args.profile)[1]:
         raise InputError("the object's geometry is added by the suite's own render "

@@ -268,10 +268,9 @@ def model_reference_refusal(scene, profile: str | None = None) -> str:
     heterogeneous medium has none. A PCA BRDF model (``brdf_pca_kK``) needs an analytic
     BRDF.
     """
-    from ...materials import Dipole
     from ...materials.brdf_pca import pca_model_basis
     from ...materials.brdfs import AnalyticBRDF
-    from ...reference.geometry_term import model_rule
+    from ...reference.model_keys import model_rule
 
     if pca_model_basis(profile) is not None:
         if not any(isinstance(item.material, AnalyticBRDF) for item in scene.objects):
@@ -285,7 +284,7 @@ def model_reference_refusal(scene, profile: str | None = None) -> str:
                 "mixes its media (HETEROGENEOUS_RULE)")
     if heterogeneous:
         return ""
-    if not any(isinstance(item.material, Dipole) for item in scene.objects):
+    if not _has_dipole(scene):
         return "the scene has no homogeneous translucent object: no profile is rendered"
     return ""
 
@@ -304,7 +303,7 @@ def unrendered_profile(profile: str) -> str:
     """
     from ...materials.brdf_pca import pca_model_basis
     from ...materials.profiles import PROFILE_NAMES
-    from ...reference.geometry_term import parse_model_key
+    from ...reference.model_keys import parse_model_key
 
     profile = parse_model_key(profile)[0]
     if profile in PROFILE_NAMES or pca_model_basis(profile) is not None:
@@ -325,7 +324,7 @@ def heterogeneous_objects(scene) -> list[str]:
 def split_profile(name: str, knobs: dict | None, scene=None) -> tuple[str | None, str]:
     """Return the model a report entry rendered (its model reference's key), or why none.
 
-    The key is the profile's name, with :data:`~translucent.reference.geometry_term.GEOMETRY_SUFFIX`
+    The key is the profile's name, with :data:`~translucent.reference.model_keys.GEOMETRY_SUFFIX`
     where the method adds the object's geometry to it (its knob ``geometry`` is
     ``"diffusion"``, :mod:`translucent.fast.object_geometry`): the model reference then
     renders the same correction (:mod:`translucent.reference.geometry_term`), so that the
@@ -344,7 +343,7 @@ def split_profile(name: str, knobs: dict | None, scene=None) -> tuple[str | None
     """
     from ...fast.base import method
     from ...fast.knobs import DEFAULT_PROFILE
-    from ...reference.geometry_term import model_key
+    from ...reference.model_keys import model_key
 
     method_name, asked = entry_parts(name)
     try:

@@ -35,7 +35,7 @@ from translucent.reference.committed import (
     committed_reference,
     rerender_command,
 )
-from translucent.reference.geometry_term import model_key
+from translucent.reference.model_keys import model_key
 from translucent.reference.render import render
 from translucent.reports.cli import main
 from translucent.reports.metrics.statistics import block_means, z_test_known_variance
