@@ -37,6 +37,7 @@ from ..errors import InputError, check_count
 from ..materials.profiles import RULE_MAX_MEDIA, MixedProfiles
 from ..materials.solid import SolidMedium, quantise_media
 from ..materials.subedit import DEFAULT_SEGMENTS, SubEditProfiles, convert_media
+from .knobs import DEFAULT_PROFILE, radial_profile
 
 __all__ = ["SurfaceConversion", "SURFACE_ASSUMPTIONS", "SPLATTING_MAX_MEDIA", "RADIOSITY_MAX_MEDIA",
            "DEFAULT_TEXTURE_RESOLUTION", "subedit_from_solid", "mixed_profiles_from_solid",
@@ -135,20 +136,28 @@ def _remembered(key: str, build) -> SurfaceConversion:
 def subedit_from_solid(solid: SolidMedium, mesh, *,
                        resolution: int = DEFAULT_TEXTURE_RESOLUTION,
                        max_media: int = SPLATTING_MAX_MEDIA,
-                       segments: int = DEFAULT_SEGMENTS) -> SurfaceConversion:
+                       segments: int = DEFAULT_SEGMENTS,
+                       profile: str = DEFAULT_PROFILE) -> SurfaceConversion:
     """Derive splatting's SubEdit texture from the medium at the surface (module docstring).
 
     A uniform medium gives a 1 x 1 texture: the homogeneous SubEdit conversion of its
     dipole, so the homogeneous limit renders as the homogeneous material does.
+    ``profile`` (a value of the ``profile`` knob): the radial profile of each medium that
+    is converted, the dipole by default.
     """
+    def converted(media):
+        profiles = None if profile == DEFAULT_PROFILE else \
+            [radial_profile(profile, medium) for medium in media]
+        return convert_media(media, segments=segments, profiles=profiles)
+
     def build() -> SurfaceConversion:
         if solid.is_uniform:
-            conversion = convert_media([solid.dipole()], segments=segments)[0]
+            conversion = converted([solid.dipole()])[0]
             return SurfaceConversion(conversion.profiles.with_name(solid.name), 1, 0.0,
                                      float(np.max(conversion.relative_error)))
         points = texel_positions(mesh, resolution)
         quantised = quantise_media(solid, points, max_media=max_media)
-        conversions = convert_media(quantised.media, segments=segments)
+        conversions = converted(quantised.media)
         tables = np.stack([c.profiles.log_profile[0, 0] for c in conversions])
         texture = tables[quantised.labels].reshape(resolution, resolution, segments + 1, 3)
         profiles = SubEditProfiles(texture, conversions[0].profiles.r_s, solid.eta,
@@ -157,7 +166,7 @@ def subedit_from_solid(solid: SolidMedium, mesh, *,
                                  float(max(np.max(c.relative_error) for c in conversions)))
 
     return _remembered(content_hash("subedit_from_solid", solid, mesh.cache_key(), resolution,
-                                    max_media, segments), build)
+                                    max_media, segments, profile), build)
 
 
 class VoxelLabels:

@@ -488,6 +488,16 @@ def _entering(dipole: Dipole) -> DipoleProfile:
     return DipoleProfile(dipole, entry_fresnel=False)
 
 
+def _default_radius(profile) -> float:
+    """Return the radius (mm) a profile's SubEdit conversion keeps by default (99.9 %)."""
+    if isinstance(profile, DipoleProfile):
+        return _energy_radius(profile, DEFAULT_RADIUS_ENERGY)
+    # the profile's own inverse CDF: a uniform trapezoid misses the energy of a profile
+    # that peaks (or diverges, as 1/r) at r = 0 and walks r_s out to its cap
+    return min(float(np.max(profile.radius_containing(DEFAULT_RADIUS_ENERGY))),
+               MAX_DEFAULT_RADIUS)
+
+
 def _energy_radius(profile, fraction: float) -> float:
     """Radius (mm) within which every channel of ``profile`` keeps ``fraction`` of its energy."""
     total = profile.total() / (2.0 * np.pi)
@@ -588,14 +598,7 @@ def subedit_from_profile(profile, eta: float, *, segments: int = DEFAULT_SEGMENT
     if int(segments) != segments or not 1 <= int(segments) <= 1024:
         raise InputError("must be an integer in [1, 1024]", field="segments", value=segments)
     segments = int(segments)
-    if r_s is None and isinstance(profile, DipoleProfile):
-        r_s = _energy_radius(profile, DEFAULT_RADIUS_ENERGY)
-    elif r_s is None:
-        # the profile's own inverse CDF: a uniform trapezoid misses the energy of a profile
-        # that peaks (or diverges, as 1/r) at r = 0 and walks r_s out to its cap
-        r_s = min(float(np.max(profile.radius_containing(DEFAULT_RADIUS_ENERGY))),
-                  MAX_DEFAULT_RADIUS)
-    r_s = _checked_radius(r_s)
+    r_s = _checked_radius(_default_radius(profile) if r_s is None else r_s)
     scale = profile.length_scale()
     grid = _quadrature_grid(r_s, segments,
                             0.01 * float(np.min(scale[np.isfinite(scale)], initial=1.0)))
@@ -654,17 +657,27 @@ def _value_noise(u, v, frequency: int, rng) -> np.ndarray:
     return (1 - sy) * top + sy * bottom
 
 
-def convert_media(media, *, segments: int = DEFAULT_SEGMENTS) -> list[DipoleConversion]:
+def convert_media(media, *, segments: int = DEFAULT_SEGMENTS,
+                  profiles=None) -> list[DipoleConversion]:
     """Convert several dipole media to SubEdit profiles that share one ``r_s``.
 
     ``r_s`` is the largest of their radii keeping :data:`DEFAULT_RADIUS_ENERGY` of the
-    energy, so that the profiles can share a texture (blend, per-texel lookup).
+    energy (each as :func:`subedit_from_profile` takes it alone), so that the profiles can
+    share a texture (blend, per-texel lookup).
+
+    ``profiles``: one radial profile per medium, per unit power entering (a registered
+    profile of it), converted instead of the medium's dipole.
     """
     media = list(media)
     if not media:
         raise InputError("needs at least one medium", field="media", value=[])
-    r_s = max(_energy_radius(_entering(medium), DEFAULT_RADIUS_ENERGY) for medium in media)
-    return [subedit_from_dipole(medium, segments=segments, r_s=r_s) for medium in media]
+    made = [_entering(medium) for medium in media] if profiles is None else list(profiles)
+    if len(made) != len(media):
+        raise InputError("needs one profile per medium", field="profiles", value=len(made))
+    r_s = max(_default_radius(profile) for profile in made)
+    return [subedit_from_profile(profile, medium.eta, segments=segments, r_s=r_s,
+                                 name=medium.name) for profile, medium in zip(made, media,
+                                                                              strict=True)]
 
 
 def _converted_pair(first: str, second: str, segments: int):

@@ -245,7 +245,8 @@ def as_subedit(material, mesh=None, profile: str = DEFAULT_PROFILE) -> SubEditPr
 
     Itself, a converted :class:`Dipole` (its radial profile ``profile``, a value of the
     knob, :func:`~translucent.fast.knobs.radial_profile`; the classical dipole by default),
-    or the texture derived from a solid medium on ``mesh`` (:mod:`.solid_inputs`).
+    or the texture derived from a solid medium on ``mesh`` (:mod:`.solid_inputs`, each
+    medium's radial profile ``profile``).
     """
     if isinstance(material, SubEditProfiles):
         return material
@@ -255,7 +256,7 @@ def as_subedit(material, mesh=None, profile: str = DEFAULT_PROFILE) -> SubEditPr
         if mesh is None:
             raise InputError("a solid medium becomes a SubEdit texture on its object's mesh",
                              field="material", value=material.name)
-        return subedit_from_solid(material, mesh).material
+        return subedit_from_solid(material, mesh, profile=profile).material
     raise InputError("the splatting method renders Dipole, SubEdit or solid materials",
                      field="material", value=type(material).__name__)
 

@@ -76,8 +76,9 @@ KNOBS = KnobSpec([
          positive=True, high=1.0),
     Knob("area_light_points", 4, "point emitters an area light becomes (emitters.py)",
          kind="int", low=1, high=MAX_AREA_LIGHT_POINTS),
-    profile_knob(PROFILE_REFUSALS, keyed=False, help="radial profile a Dipole material is "
-                 "converted to SubEdit from (SubEdit and solid materials keep theirs)"),
+    profile_knob(PROFILE_REFUSALS, keyed=False, help="radial profile a Dipole material, or "
+                 "each medium of a solid one, is converted to SubEdit from (SubEdit "
+                 "materials keep theirs)"),
     # the light the scene's diffuse surfaces bounce onto the object (fast.indirect_light),
     # splatted from six axis views of the object; "off" is Eq. 5-6 as the paper
     *indirect_light_knobs(),

@@ -365,13 +365,14 @@ class SplattingState:
                                                                       camera_view)
         log.seconds["buffer generation"] += time.perf_counter() - start
         item = scene.objects[index]
-        if self.knobs["profile"] != DEFAULT_PROFILE and not isinstance(item.material, Dipole):
+        if self.knobs["profile"] != DEFAULT_PROFILE and \
+                not isinstance(item.material, (Dipole, SolidMedium)):
             log.skip(f"profile {self.knobs['profile']!r}: object '{item.name}' keeps the "
                      f"profiles of its {type(item.material).__name__} material (the knob "
-                     "converts Dipole materials)")
+                     "converts Dipole and solid materials)")
         if isinstance(item.material, SolidMedium):
-            log.notes.setdefault("solid medium", {})[item.name] = \
-                subedit_from_solid(item.material, item.mesh).note()
+            log.notes.setdefault("solid medium", {})[item.name] = subedit_from_solid(
+                item.material, item.mesh, profile=self.knobs["profile"]).note()
         if not camera_buffer.valid.any():
             log.skip(f"object '{scene.objects[index].name}' is out of view: nothing to splat")
             return np.zeros(camera_buffer.shape + (3,))

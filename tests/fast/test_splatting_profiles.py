@@ -82,3 +82,23 @@ def test_approx_takes_the_profile_flag(tmp_path, capsys):
     assert main(["approx", "splatting", str(scene), "--out", str(tmp_path / "no.exr"),
                  "--profile", "directional_dipole"]) == 2
     assert "splatting cannot take profile 'directional_dipole'" in capsys.readouterr().err
+
+
+def test_a_solid_medium_converts_each_of_its_media_with_the_profile():
+    from translucent.fast.solid_inputs import subedit_from_solid
+    from translucent.materials.solid import checker_solid
+    from translucent.scenes.meshes import geometry_image
+
+    mesh = geometry_image(9, shape="sphere", radius=1.0)
+    skin, ketchup = measured_medium("Skin1"), measured_medium("Ketchup")
+    # the homogeneous limit: the medium's own conversion with that profile
+    uniform = subedit_from_solid(checker_solid(skin, skin, cells=2, eta=1.0), mesh,
+                                 resolution=8, profile="better_dipole").material
+    alone = as_subedit(checker_solid(skin, skin, cells=2, eta=1.0).dipole(),
+                       profile="better_dipole")
+    assert np.allclose(uniform.log_profile, alone.log_profile, rtol=1e-12, atol=1e-12)
+    # two media: each texel is its medium's profile, not the dipole's
+    solid = checker_solid(skin, ketchup, cells=2, eta=1.0)
+    dipole, better = (subedit_from_solid(solid, mesh, resolution=8, profile=name).material
+                      for name in ("dipole", "better_dipole"))
+    assert not np.allclose(dipole.log_profile, better.log_profile, rtol=1e-3)
