@@ -379,20 +379,42 @@ def _quantise(indptr, indices, values, index_bits, value_max, packed, scales):  
             packed[j] = (level << index_bits) | np.int32(indices[j])
 
 
+@numba.njit(inline="always", fastmath=True)
+def _row_rgb(packed, start, stop, index_bits, vector):  # pragma: no cover
+    mask = (1 << index_bits) - 1
+    red = np.float32(0.0)
+    green = np.float32(0.0)
+    blue = np.float32(0.0)
+    for j in range(start, stop):
+        word = packed[j]
+        level = np.float32(word >> index_bits)
+        column = word & mask
+        red += level * vector[column, 0]
+        green += level * vector[column, 1]
+        blue += level * vector[column, 2]
+    return red, green, blue
+
+
 @parallel_njit(cache=True, fastmath=True)
 def product_rgb(indptr, packed, scales, index_bits, vector, out):  # pragma: no cover
-    mask = (1 << index_bits) - 1
     for r in numba.prange(len(indptr) - 1):
-        red = np.float32(0.0)
-        green = np.float32(0.0)
-        blue = np.float32(0.0)
-        for j in range(indptr[r], indptr[r + 1]):
-            word = packed[j]
-            level = np.float32(word >> index_bits)
-            column = word & mask
-            red += level * vector[column, 0]
-            green += level * vector[column, 1]
-            blue += level * vector[column, 2]
+        red, green, blue = _row_rgb(packed, indptr[r], indptr[r + 1], index_bits, vector)
+        scale = scales[r]
+        out[r, 0] = red * scale
+        out[r, 1] = green * scale
+        out[r, 2] = blue * scale
+
+
+@numba.njit(cache=True, fastmath=True)
+def product_rgb_per_row(indptr, packed, scales, index_bits, vectors, vector_of_row,
+                        out):  # pragma: no cover
+    """As :func:`product_rgb`, row ``r`` by ``vectors[vector_of_row[r]].T`` (serial).
+
+    ``vectors`` is (V, 3, columns): channels first, as transformed per channel.
+    """
+    for r in range(len(indptr) - 1):
+        red, green, blue = _row_rgb(packed, indptr[r], indptr[r + 1], index_bits,
+                                    vectors[vector_of_row[r]].T)
         scale = scales[r]
         out[r, 0] = red * scale
         out[r, 1] = green * scale

@@ -34,6 +34,7 @@ from ..errors import InputError
 
 __all__ = [
     "haar2d_forward",
+    "haar2d_forward_in_place",
     "haar2d_inverse",
     "haar2d_inplace",
     "haar2d_support_weights",
@@ -135,13 +136,25 @@ def _haar2d_many(images, inverse):  # pragma: no cover - compiled
             haar2d_inplace(images[index], scratch)
 
 
-def _haar2d(array, inverse: bool) -> np.ndarray:
+def _haar2d(array, inverse: bool, copy: bool = True) -> np.ndarray:
     dtype = np.float32 if np.asarray(array).dtype == np.float32 else np.float64
-    out = np.array(array, dtype=dtype, copy=True, order="C")
+    out = np.array(array, dtype=dtype, copy=True, order="C") if copy else array
     side = _square_side(out)
     if side > 1 and out.size:
         _haar2d_many(out.reshape(-1, side, side), inverse)
     return out
+
+
+def haar2d_forward_in_place(image: np.ndarray) -> np.ndarray:
+    """:func:`haar2d_forward` overwriting ``image`` (C-contiguous float32 or float64); return it.
+
+    For large per-frame arrays, where the copy costs as much as the transform.
+    """
+    if not (isinstance(image, np.ndarray) and image.flags.c_contiguous
+            and image.dtype in (np.float32, np.float64)):
+        raise InputError("must be a C-contiguous float32 or float64 array", field="image",
+                         value=getattr(image, "dtype", type(image).__name__))
+    return _haar2d(image, inverse=False, copy=False)
 
 
 def haar2d_forward(image) -> np.ndarray:

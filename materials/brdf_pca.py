@@ -44,6 +44,10 @@ __all__ = [
     "PCA_MODEL_PREFIX",
     "pca_model_name",
     "pca_model_basis",
+    "pca_model_gather",
+    "GATHER_TRANSPORTS",
+    "GLOSSY_GATHER",
+    "LAMBERTIAN_GATHER",
     "DEFAULT_BASIS_SIZE",
     "DEFAULT_DELTA_SAMPLES",
     "DEFAULT_GAMMA_SAMPLES",
@@ -69,10 +73,55 @@ DEFAULT_DELTA_SAMPLES = 1024
 #: The name of the K-term PCA BRDF as a model the reference renders: ``brdf_pca_k6``.
 PCA_MODEL_PREFIX = "brdf_pca_k"
 
+#: After a PCA BRDF model's name, ``+lambertian_gatherN``: the transport of Nguyen et al.
+#: 2010, Sect. 5.2, that the method converges to: the first surface seen reflects with its
+#: (PCA) BRDF, the next ``N + 1`` diffusely (Lambertian gather samples, ``N`` bounces of
+#: Eq. 17 among them).
+LAMBERTIAN_GATHER = "lambertian_gather"
 
-def pca_model_name(n_basis: int) -> str:
-    """Return the model name of the K-term PCA BRDF (``pca_model_name(6) == "brdf_pca_k6"``)."""
-    return f"{PCA_MODEL_PREFIX}{int(n_basis)}"
+#: ``+glossy_gatherN``: as :data:`LAMBERTIAN_GATHER`, but the second surface (a gather
+#: sample) reflects the light that reaches it directly by its whole BRDF (the method's
+#: ``gather_reflection="brdf"``); its light from other surfaces stays diffuse.
+GLOSSY_GATHER = "glossy_gather"
+
+#: The gather transports a model name may carry, and the surfaces along a path (from the
+#: eye) that reflect the direct light by their whole BRDF.
+GATHER_TRANSPORTS = {LAMBERTIAN_GATHER: 1, GLOSSY_GATHER: 2}
+
+
+def pca_model_name(n_basis: int, gather_bounces: int | None = None,
+                   transport: str = LAMBERTIAN_GATHER) -> str:
+    """Return the model name of the K-term PCA BRDF, carried by a gather transport if asked.
+
+    Examples
+    --------
+    >>> pca_model_name(6), pca_model_name(6, 2)
+    ('brdf_pca_k6', 'brdf_pca_k6+lambertian_gather2')
+    >>> pca_model_name(6, 2, GLOSSY_GATHER)
+    'brdf_pca_k6+glossy_gather2'
+    """
+    name = f"{PCA_MODEL_PREFIX}{int(n_basis)}"
+    if gather_bounces is None:
+        return name
+    if transport not in GATHER_TRANSPORTS:
+        raise InputError(f"must be one of {', '.join(GATHER_TRANSPORTS)}", field="transport",
+                         value=transport)
+    return f"{name}+{transport}{int(gather_bounces)}"
+
+
+def _pca_model_parts(name) -> tuple[int, str | None, int | None] | None:
+    if not isinstance(name, str) or not name.startswith(PCA_MODEL_PREFIX):
+        return None
+    digits, _, transport = name[len(PCA_MODEL_PREFIX):].partition("+")
+    kind = next((k for k in GATHER_TRANSPORTS if transport.startswith(k)), None)
+    bounces = transport[len(kind):] if kind else ""
+    if not digits.isdigit() or not 1 <= int(digits) <= 64 or (transport and not (
+            kind and bounces.isdigit() and int(bounces) <= 64)):
+        raise InputError(f"a PCA BRDF model is {PCA_MODEL_PREFIX}K with K in [1, 64], "
+                         f"optionally +TRANSPORTN with TRANSPORT one of "
+                         f"{', '.join(GATHER_TRANSPORTS)} and N in [0, 64]",
+                         field="profile", value=name)
+    return int(digits), kind, (int(bounces) if kind else None)
 
 
 def pca_model_basis(name) -> int | None:
@@ -82,14 +131,23 @@ def pca_model_basis(name) -> int | None:
     --------
     >>> pca_model_basis("brdf_pca_k6"), pca_model_basis("dipole"), pca_model_basis(None)
     (6, None, None)
+    >>> pca_model_basis("brdf_pca_k6+lambertian_gather2")
+    6
     """
-    if not isinstance(name, str) or not name.startswith(PCA_MODEL_PREFIX):
-        return None
-    digits = name[len(PCA_MODEL_PREFIX):]
-    if not digits.isdigit() or not 1 <= int(digits) <= 64:
-        raise InputError(f"a PCA BRDF model is {PCA_MODEL_PREFIX}K with K in [1, 64]",
-                         field="profile", value=name)
-    return int(digits)
+    parts = _pca_model_parts(name)
+    return None if parts is None else parts[0]
+
+
+def pca_model_gather(name) -> tuple[str, int] | None:
+    """Return the gather transport and bounces N of ``brdf_pca_kK+TRANSPORTN`` (None: exact).
+
+    Examples
+    --------
+    >>> pca_model_gather("brdf_pca_k6+lambertian_gather2"), pca_model_gather("brdf_pca_k6")
+    (('lambertian_gather', 2), None)
+    """
+    parts = _pca_model_parts(name)
+    return None if parts is None or parts[1] is None else (parts[1], parts[2])
 
 
 def _check_count(value, field_name: str, minimum: int, maximum: int) -> int:

@@ -57,6 +57,7 @@ import time
 from types import SimpleNamespace
 
 from ..backend import mitsuba
+from ..materials.brdf_pca import GATHER_TRANSPORTS, LAMBERTIAN_GATHER
 from ..materials.brdfs import (
     AnalyticBRDF,
     canonical_model,
@@ -65,16 +66,16 @@ from ..materials.brdfs import (
     pca_variable,
     uses_half_angle,
 )
-from .mitsuba_scene import MaterialParts, register_material_converter
+from .mitsuba_scene import GATHER_INTEGRATOR, MaterialParts, register_material_converter
 
-__all__ = ["INTEGRATOR_NAME", "PLUGIN_NAME", "bsdf_dict", "drjit_ops", "register_plugin",
-           "render_lambertian_gather"]
+__all__ = ["INTEGRATOR_NAME", "PLUGIN_NAME", "bsdf_dict", "drjit_ops", "gather_integrator",
+           "register_plugin", "render_lambertian_gather"]
 
 #: The name the plugin is registered under (``{"type": PLUGIN_NAME, ...}``).
 PLUGIN_NAME = "translucent_analytic_brdf"
 
 #: The integrator of :func:`render_lambertian_gather`.
-INTEGRATOR_NAME = "translucent_lambertian_gather"
+INTEGRATOR_NAME = GATHER_INTEGRATOR
 
 
 @functools.lru_cache(maxsize=None)
@@ -299,6 +300,22 @@ def register_plugin():
     return _register("bsdf", mitsuba().variant())
 
 
+def gather_integrator(transport: str, bounces: int) -> dict:
+    """Return the Mitsuba integrator entry of a gather transport (registering the integrator).
+
+    Parameters
+    ----------
+    transport : str
+        A key of :data:`~translucent.materials.brdf_pca.GATHER_TRANSPORTS`: how many
+        surfaces from the eye reflect the direct light by their whole BRDF.
+    bounces : int
+        n of Eq. 17 (>= 0): paths have ``bounces + 2`` surface vertices at most.
+    """
+    _register("integrator", mitsuba().variant())
+    return {"type": INTEGRATOR_NAME, "max_depth": int(bounces) + 2,
+            "brdf_light_vertices": GATHER_TRANSPORTS[transport]}
+
+
 def bsdf_dict(material: AnalyticBRDF, pca_basis: int = 0) -> dict:
     """Return the Mitsuba ``load_dict`` entry of ``material`` (registering the plugin).
 
@@ -345,12 +362,17 @@ def _integrator_class(mi):
         only, and paths have at most ``max_depth`` surface vertices. Light is gathered by
         emitter sampling only, which is unbiased for every light type. This is the
         transport of Nguyen et al. 2010 (Sect. 5.2: Lambertian gather samples and
-        Lambertian bounces among them) without its discretisation.
+        Lambertian bounces among them) without its discretisation. With
+        ``brdf_light_vertices`` 2, the second surface (a gather sample) reflects the light
+        it receives directly by its whole BSDF too (the method's ``gather_reflection``
+        "brdf").
         """
 
         def __init__(self, props):
             mi.SamplingIntegrator.__init__(self, props)
             self.max_depth = int(props["max_depth"]) if "max_depth" in props else 4
+            self.brdf_light_vertices = (int(props["brdf_light_vertices"])
+                                        if "brdf_light_vertices" in props else 1)
 
         def sample(self, scene, sampler, ray, medium=None, active=True):
             result = mi.Color3f(0.0)
@@ -362,14 +384,12 @@ def _integrator_class(mi):
                 alive &= si.is_valid()
                 if depth == 0:
                     result += dr.select(alive, si.emitter(scene).eval(si, alive), 0.0)
-                context = mi.BSDFContext()
-                if depth > 0:
-                    context.type_mask = +mi.BSDFFlags.DiffuseReflection
                 bsdf = si.bsdf(ray)
                 emitted, emitter_weight = scene.sample_emitter_direction(
                     si, sampler.next_2d(alive), True, alive)
                 wo = si.to_local(emitted.d)
-                value = bsdf.eval(context, si, wo, alive)
+                value = bsdf.eval(self._context(depth, self.brdf_light_vertices), si, wo, alive)
+                context = self._context(depth, 1)
                 result += dr.select(alive & (emitted.pdf > 0), throughput * value
                                     * emitter_weight, 0.0)
                 sample, weight = bsdf.sample(context, si, sampler.next_1d(alive),
@@ -379,11 +399,19 @@ def _integrator_class(mi):
                 ray = si.spawn_ray(si.to_world(sample.wo))
             return result, mi.Bool(True), []
 
+        @staticmethod
+        def _context(depth: int, whole_brdf_vertices: int):
+            context = mi.BSDFContext()
+            if depth >= whole_brdf_vertices:
+                context.type_mask = +mi.BSDFFlags.DiffuseReflection
+            return context
+
         def aov_names(self):
             return []
 
         def to_string(self):
-            return f"LambertianGatherIntegrator[max_depth={self.max_depth}]"
+            return (f"LambertianGatherIntegrator[max_depth={self.max_depth}, "
+                    f"brdf_light_vertices={self.brdf_light_vertices}]")
 
     return LambertianGatherIntegrator
 
@@ -424,10 +452,9 @@ def render_lambertian_gather(scene, *, bounces: int = 2, spp: int = 64, passes: 
         check_count(value, name, low)
     mi = mitsuba()
     register_plugin()
-    _register("integrator", mi.variant())
     started = time.perf_counter()
     description = to_mitsuba_dict(scene, spp=spp)
-    description["integrator"] = {"type": INTEGRATOR_NAME, "max_depth": int(bounces) + 2}
+    description["integrator"] = gather_integrator(LAMBERTIAN_GATHER, bounces)
     loaded = mi.load_dict(description)
     images = np.stack([np.array(mi.render(loaded, spp=spp, seed=seed * passes + k))
                        .astype(np.float64)[..., :3] for k in range(passes)])

@@ -31,6 +31,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..image import Image, read_exr
 from .geometry_term import geometry_settings
+from .mitsuba_scene import GATHER_INTEGRATOR
 from .model_keys import GEOMETRY_SUFFIX, model_key
 
 __all__ = ["REFERENCE_FOLDER", "PLANS", "MODEL_PLANS", "MODEL_PROFILES", "ReferencePlan",
@@ -111,7 +112,10 @@ MODEL_INTEGRATOR = "bssrdf_path"
 #: ``dipole+segment_mix``: radiosity's; :mod:`.bssrdf_tables`); and the glossy scene with
 #: the BRDF-editing method's default model, the 6-term PCA of its BRDFs
 #: (:func:`~translucent.materials.brdf_pca.pca_model_name`), by Mitsuba's path tracer with
-#: the PCA BRDF plugin (:mod:`.brdf_plugins`).
+#: the PCA BRDF plugin (:mod:`.brdf_plugins`), and with the method's full model, that PCA
+#: carried by its Lambertian-gather transport (``brdf_pca_k6+lambertian_gather2``), and by
+#: the transport of its knob ``gather_reflection="brdf"`` (``brdf_pca_k6+glossy_gather2``),
+#: by the gather integrator of the same module.
 #: The heterogeneous rules the built-in methods follow (splatting's, radiosity's).
 METHOD_RULES = ("geometric_mean", "segment_mix")
 
@@ -127,7 +131,10 @@ MODEL_PLANS: dict[str, dict[str, ReferencePlan]] = {
     for name in ("solid_checker", "solid_gradient", "solid_veins")
 } | {
     "glossy": {"brdf_pca_k6": ReferencePlan(spp=1024, budget_seconds=900.0,
-                                            integrator="path")},
+                                            integrator="path"),
+               **{f"brdf_pca_k6+{transport}2": ReferencePlan(
+                   spp=1024, budget_seconds=900.0, integrator=GATHER_INTEGRATOR)
+                  for transport in ("lambertian_gather", "glossy_gather")}},
 }
 
 #: Every model whose references are committed (for some scene).

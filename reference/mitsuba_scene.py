@@ -56,7 +56,7 @@ import numpy as np
 from ..backend import mitsuba
 from ..errors import InputError, check_count
 from ..materials import Dipole, Lambertian
-from ..materials.brdf_pca import pca_model_basis
+from ..materials.brdf_pca import GLOSSY_GATHER, pca_model_basis, pca_model_gather
 from ..materials.brdfs import AnalyticBRDF
 from ..scenes import (
     ConstantEnvironment,
@@ -91,6 +91,10 @@ __all__ = [
 #: estimation through a dielectric boundary (:mod:`translucent.reference.manifold_nee`);
 #: ``bssrdf_path`` renders translucent objects by a profile (:mod:`.bssrdf_path`).
 INTEGRATORS = ("volpath", "volpathmis", "volpath_mnee", "path", "bssrdf_path")
+
+#: The integrator of a PCA BRDF model carried by the Lambertian gather
+#: (``brdf_pca_kK+lambertian_gatherN``, :mod:`.brdf_plugins`): chosen by that model's name.
+GATHER_INTEGRATOR = "translucent_lambertian_gather"
 
 #: The lights of zero size that a path cannot hit.
 DELTA_LIGHTS = (PointLight, SpotLight, DirectionalLight)
@@ -422,10 +426,15 @@ def _light_entries(light, index: int, substitute: bool, scene: Scene, size: floa
 
 def _brdf_model(scene: Scene, integrator, profile, brdf_basis: int) -> dict:
     """Check a PCA BRDF model asked of ``scene``; return what the image header says of it."""
+    gather = pca_model_gather(profile) if brdf_basis else None
+    if integrator == GATHER_INTEGRATOR and gather is None:
+        raise InputError("renders a model brdf_pca_kK+lambertian_gatherN only",
+                         file=scene.source, field="integrator", value=integrator)
     if not brdf_basis:
         return {}
-    if integrator not in (None, "path"):
-        raise InputError(f"the PCA BRDF model {profile} renders with the path integrator",
+    if integrator not in (None, "path" if gather is None else GATHER_INTEGRATOR):
+        raise InputError(f"the PCA BRDF model {profile} renders with the path integrator "
+                         "(or the Lambertian gather its name asks for)",
                          file=scene.source, field="integrator", value=integrator)
     objects = {obj.name: f"{obj.material.model} gamma {obj.material.gamma:g}"
                for obj in scene.objects if isinstance(obj.material, AnalyticBRDF)}
@@ -433,7 +442,16 @@ def _brdf_model(scene: Scene, integrator, profile, brdf_basis: int) -> dict:
         raise InputError(f"the PCA BRDF model {profile} needs an analytic BRDF; the scene "
                          "has none", file=scene.source, field="profile", value=profile)
     return {"name": profile, "objects": objects,
-            "brdf": f"edited term by its {brdf_basis}-term PCA (Nguyen et al. 2010, Eq. 10)"}
+            "brdf": f"edited term by its {brdf_basis}-term PCA (Nguyen et al. 2010, Eq. 10)",
+            **({} if gather is None else {"transport": _gather_text(*gather)})}
+
+
+def _gather_text(transport: str, bounces: int) -> str:
+    if transport == GLOSSY_GATHER:
+        return (f"first surface by its BRDF, the next {bounces + 1} diffusely but for the "
+                "second's direct light, by its BRDF (gather_reflection 'brdf')")
+    return (f"first surface by its BRDF, the next {bounces + 1} diffusely (Lambertian gather "
+            "samples, Sect. 5.2)")
 
 
 def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int | None = None,
@@ -476,7 +494,9 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         (:data:`~translucent.materials.profiles.PROFILE_NAMES`). Or ``brdf_pca_kK``
         (:func:`~translucent.materials.brdf_pca.pca_model_name`), with ``path``: every
         analytic BRDF renders the K-term PCA of its edited term, the BRDF-editing method's
-        model (:mod:`.brdf_plugins`).
+        model (:mod:`.brdf_plugins`); ``brdf_pca_kK+lambertian_gatherN`` renders it by the
+        method's Lambertian-gather transport with N bounces
+        (:func:`~.brdf_plugins.gather_integrator`) whatever ``max_depth``.
 
     Returns
     -------
@@ -488,7 +508,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
         Unknown integrator or material type, ``path`` for a scene with media, a bad
         ``channel``, ``spp`` or ``max_depth``.
     """
-    if integrator is not None and integrator not in INTEGRATORS:
+    if integrator is not None and integrator not in (*INTEGRATORS, GATHER_INTEGRATOR):
         raise InputError(f"unknown integrator; valid: {', '.join(INTEGRATORS)}",
                          field="integrator", value=integrator)
     if channel is not None and (not isinstance(channel, (int, np.integer))
@@ -600,12 +620,18 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
     if env_entry is not None:
         emitters["environment"] = env_entry
 
+    integrator_entry = {"type": integrator, "max_depth": int(max_depth),
+                        "rr_depth": int(rr_depth),
+                        **({"seeded_solutions": True} if seeded_solutions else {}),
+                        **integrator_props}
+    if pca_model_gather(profile) is not None:
+        from .brdf_plugins import gather_integrator
+
+        integrator_entry = gather_integrator(*pca_model_gather(profile))
+        integrator, max_depth = integrator_entry["type"], integrator_entry["max_depth"]
     scene_dict = {
         "type": "scene",
-        "integrator": {"type": integrator, "max_depth": int(max_depth),
-                       "rr_depth": int(rr_depth),
-                       **({"seeded_solutions": True} if seeded_solutions else {}),
-                       **integrator_props},
+        "integrator": integrator_entry,
         # the sensor of the G-buffers in translucent.scenes.raycast: same pixels
         "sensor": perspective_sensor_dict(scene.camera, spp=spp, frame_scale=frame.scale),
         **shapes,

@@ -346,3 +346,58 @@ def transfer_rows(x, n_x, out, positions, normals, area, first, second, starts, 
                 for j in range(bases):
                     glossy_rows[b, j, g] = factor * values[j]
         used[b] = total_used
+
+
+# ---------------------------------------------------------------------------------------
+# the gather samples' BRDF reflection of their direct light (gather_reflection "brdf")
+
+
+@parallel_njit(cache=True)
+def block_reflection(centres, block_radius, positions, normals, disk, columns, light, brought,
+                     coefficients, guard, model, f0, c_xy, c_z, grid0, step, matrix,
+                     out):  # pragma: no cover - compiled
+    """Add each gather sample's glossy reflection of its direct light towards each block.
+
+    ``out[b, c, columns[n]] += sum_s sum_j c_j f_F b_j(light[n, s], towards b) brought[n, s, c]``
+    for the gather samples ``n`` of one object (``brought``: irradiance times rho_s), the
+    direction towards block ``b`` being its centre's. A gather sample closer to the centre
+    than ``guard`` times the block's radius plus its disk's radius sends nothing: there the
+    direction to the centre stands for none of the block's view samples.
+    """
+    count = coefficients.shape[0]
+    for b in numba.prange(centres.shape[0]):
+        values = np.empty(count)
+        for n in range(positions.shape[0]):
+            dx = centres[b, 0] - positions[n, 0]
+            dy = centres[b, 1] - positions[n, 1]
+            dz = centres[b, 2] - positions[n, 2]
+            distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if distance <= guard * (block_radius[b] + disk[n]) or distance == 0.0:
+                continue
+            dx /= distance
+            dy /= distance
+            dz /= distance
+            cos_v = dx * normals[n, 0] + dy * normals[n, 1] + dz * normals[n, 2]
+            if cos_v <= 0.0:
+                continue
+            red = 0.0
+            green = 0.0
+            blue = 0.0
+            for s in range(light.shape[1]):
+                cos_l = (light[n, s, 0] * normals[n, 0] + light[n, s, 1] * normals[n, 1]
+                         + light[n, s, 2] * normals[n, 2])
+                if cos_l <= 0.0:
+                    continue
+                l_dot_v = light[n, s, 0] * dx + light[n, s, 1] * dy + light[n, s, 2] * dz
+                _glossy_basis(model, cos_l, cos_v, l_dot_v, f0, c_xy, c_z, grid0, step,
+                              matrix, values)
+                lobe = 0.0
+                for j in range(count):
+                    lobe += coefficients[j] * values[j]
+                red += lobe * brought[n, s, 0]
+                green += lobe * brought[n, s, 1]
+                blue += lobe * brought[n, s, 2]
+            column = columns[n]
+            out[b, 0, column] += red
+            out[b, 1, column] += green
+            out[b, 2, column] += blue

@@ -61,6 +61,15 @@ KNOBS = KnobSpec([
     Knob("block_pairs", 1 << 22, "(view sample, gather sample) pairs per block of the "
          "transfer computation", kind="int", low=1 << 10, high=1 << 26),
     Knob("seed", 0, "random seed of the samples", kind="int", low=0, high=2**31 - 1),
+    # run time only (not in the cache key): how the light that reaches a gather sample
+    # directly leaves it (docs/brdf_pca.md, "Gather samples that reflect by their BRDF")
+    Knob("gather_reflection", "lambertian", "how a gather sample reflects the light that "
+         "reaches it directly: 'lambertian', its diffuse term (Sect. 5.2), or 'brdf', its "
+         "whole BRDF towards each block of pixels", kind="choice",
+         choices=("lambertian", "brdf"), keyed=False),
+    Knob("reflection_blocks", 256, "blocks of pixels towards which a gather sample's BRDF "
+         "is evaluated (gather_reflection 'brdf'): squares of about view samples / blocks "
+         "pixels, split by object", kind="int", low=1, high=1 << 20, keyed=False),
 ], ladders={
     # gather samples (Sect. 5.1), PCA basis BRDFs (Sect. 4) and Haar coefficients kept per
     # transfer row (Sect. 3.4)
@@ -69,6 +78,13 @@ KNOBS = KnobSpec([
         {"gather_samples": 4096, "n_basis": 2, "transfer_coefficients": 128},
         {"gather_samples": 4096, "n_basis": 4, "transfer_coefficients": 256},
         {},
+    ],
+    # beyond the paper: gather samples that reflect their direct light by their BRDF, the
+    # model that removes most of the Lambertian gather's error (docs/brdf_pca.md)
+    "gather reflection": [
+        {},
+        {"gather_reflection": "brdf"},
+        {"gather_reflection": "brdf", "reflection_blocks": 1024},
     ],
 })
 

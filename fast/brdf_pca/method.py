@@ -49,16 +49,23 @@ def applies_to(scene) -> Refusal | None:
 
 
 def model_name(knobs: dict) -> str:
-    """Return the model the method approximates: the K-term PCA of its BRDFs (Eq. 10).
+    """Return the model the method approximates: its PCA BRDF carried by its gather transport.
 
-    The reference renders it exactly (``brdf_pca_kK``,
+    The K-term PCA of its BRDFs (Eq. 10) with the transport it converges to: the first
+    surface by its (PCA) BRDF, the next ``bounces + 1`` diffusely (Sect. 5.2, Eq. 17). The
+    reference renders it exactly (``brdf_pca_kK+lambertian_gatherN``,
     :func:`~translucent.materials.brdf_pca.pca_model_name`): against the exact-BRDF
-    reference that is the PCA's error; the method against it, the gathering's, the
-    wavelets' and the sub-areas'.
+    reference that is the PCA's and the Lambertian gather's error (the report splits the
+    two where ``brdf_pca_kK`` is committed); the method against it, the gather samples',
+    the wavelets', the sub-areas' and the one-ray G-buffer's. With ``gather_reflection``
+    "brdf" the gather samples reflect their direct light by their BRDF
+    (``brdf_pca_kK+glossy_gatherN``).
     """
-    from ...materials.brdf_pca import pca_model_name
+    from ...materials.brdf_pca import GLOSSY_GATHER, LAMBERTIAN_GATHER, pca_model_name
 
-    return pca_model_name(KNOBS.resolve(knobs)["n_basis"])
+    resolved = KNOBS.resolve(knobs)
+    transport = GLOSSY_GATHER if resolved["gather_reflection"] == "brdf" else LAMBERTIAN_GATHER
+    return pca_model_name(resolved["n_basis"], resolved["bounces"], transport)
 
 
 def _resolve_knobs(knobs: dict) -> dict:
@@ -110,7 +117,7 @@ def precompute(scene, **knobs) -> BRDFPCAState:
                         "the BRDF-editing method does not apply")
     resolved = _resolve_knobs(knobs)
     key = content_hash("brdf_pca", FORMAT_VERSION, scene.geometry_key(),
-                       scene.camera.cache_key(), resolved, _structure_key(scene))
+                       scene.camera.cache_key(), KNOBS.keyed(resolved), _structure_key(scene))
 
     def make():
         started = time.perf_counter()
@@ -121,7 +128,7 @@ def precompute(scene, **knobs) -> BRDFPCAState:
     data, _ = load_or_precompute("brdf_pca", key, make, what="the BRDF-editing precomputation",
                                  log_of=lambda value: value.log,
                                  valid=lambda value: isinstance(value, Precomputation))
-    return BRDFPCAState(scene, data)
+    return BRDFPCAState(scene, data, run_knobs={name: resolved[name] for name in KNOBS.unkeyed})
 
 
 # ---------------------------------------------------------------------------------------

@@ -19,18 +19,69 @@ from ...materials.brdfs import (
     pca_variable,
     uses_half_angle,
 )
+from ..sparse_transport import product_rgb_per_row
+from ..wavelets import haar2d_forward_in_place
+from .kernels import block_reflection
 from .lighting import check_lights, direct_samples
 from .transfer import (
     Precomputation,
     diffuse_albedo,
     haar_rows,
     is_glossy_material,
+    material_parameters,
     quantised_product,
     sparse_to_scipy,
     truncate_rows,
 )
 
+#: A gather sample closer to a block's centre than this many times the block's radius plus
+#: its disk's sends the block no glossy light (:func:`~.kernels.block_reflection`): there
+#: the direction to the centre stands for none of the block's pixels. Measured on
+#: ``glossy`` (docs/brdf_pca.md): without it the box's and the floor's pixels where they
+#: meet came out up to 5x too bright.
+REFLECTION_GUARD = 2.0
+
 __all__ = ["BRDFPCAState"]
+
+
+def _lobe(material, variable) -> np.ndarray:
+    """Return the edited term f_E(gamma) of ``material`` at its PCA variable."""
+    if uses_half_angle(material.model):
+        return edited_term(material.model, material.gamma, None, cos_delta=variable)
+    return edited_term(material.model, material.gamma, variable)
+
+
+def _glossy_weight(material, cos_l, cos_v, l_dot_v) -> np.ndarray:
+    """Return f_F f_E(gamma) of ``material``, zero where either cosine is not positive."""
+    fixed = fixed_term(material.model, cos_l, cos_v, l_dot_v, f0=material.f0)
+    variable = pca_variable(material.model, cos_l, cos_v, l_dot_v,
+                            lafortune_c=material.lafortune_c)
+    return np.where((cos_l > 0) & (cos_v > 0), fixed * _lobe(material, variable), 0.0)
+
+
+def reflection_blocks(shape, pixel, view_object, view_position, size: int):
+    """Return the block of each view sample and each block's centre (the mean position).
+
+    A block is a ``size`` x ``size`` square of pixels and one object in it: a gather
+    sample's BRDF is evaluated towards the centre for every view sample of the block.
+
+    Returns
+    -------
+    block : ndarray of int64, (P,)
+    centre : ndarray, (B, 3)
+    """
+    width = shape[1]
+    rows, columns = np.divmod(np.asarray(pixel, dtype=np.int64), width)
+    square = (rows // size) * (-(-width // size)) + columns // size
+    view_object = np.asarray(view_object, dtype=np.int64)
+    keys = square * (int(view_object.max(initial=0)) + 1) + view_object
+    _, block = np.unique(keys, return_inverse=True)
+    counts = np.bincount(block)
+    centre = np.stack([np.bincount(block, weights=view_position[:, k]) for k in range(3)],
+                      axis=1) / counts[:, None]
+    radius = np.zeros(len(centre))
+    np.maximum.at(radius, block, np.linalg.norm(view_position - centre[block], axis=1))
+    return block.astype(np.int64), centre, radius
 
 
 def _combine(matrices, coefficients) -> scipy.sparse.csr_matrix:
@@ -49,6 +100,9 @@ class BRDFPCAState:
     scene : Scene
         Its lights and materials are the starting point of editing.
     data : Precomputation
+    run_knobs : dict, optional
+        The knobs that are not part of the precomputation (``gather_reflection``,
+        ``reflection_tile``): they override those stored with ``data``.
 
     Attributes
     ----------
@@ -60,11 +114,16 @@ class BRDFPCAState:
     log : StageLog
     """
 
-    def __init__(self, scene, data: Precomputation):
+    def __init__(self, scene, data: Precomputation, run_knobs: dict | None = None):
+        from .knobs import KNOBS
+
         self.scene = scene
         self.data = data
         self.log = data.log
-        self.knobs = data.knobs
+        self.knobs = {**{name: KNOBS.knobs[name].default for name in KNOBS.unkeyed},
+                      **data.knobs, **(run_knobs or {})}
+        self._blocks = None
+        self._reflection_w = None
         self.materials = {o.name: o.material for o in scene.objects}
         self.frozen: dict = {}
         self._transfer = {scene.objects[i].name: matrices
@@ -114,8 +173,8 @@ class BRDFPCAState:
         """Compute direct lighting, the Eq. 17 series and the view-sample caches (relight)."""
         data = self.data
         samples, seed = self.knobs["light_samples"], self.knobs["seed"]
-        _, gather_e = direct_samples(self.scene, self.lights, data.gather_position,
-                                      data.gather_normal, samples, seed)
+        gather_wi, gather_e = direct_samples(self.scene, self.lights, data.gather_position,
+                                             data.gather_normal, samples, seed)
         albedo_g = self._albedo("gather")
         direct_g = albedo_g * gather_e.sum(axis=1).astype(np.float32)
         total, current = direct_g.copy(), direct_g
@@ -128,7 +187,9 @@ class BRDFPCAState:
                                      data.view_normal, samples, seed + 1)
         albedo_x = self._albedo("view")
         direct = albedo_x * view_e.sum(axis=1)
-        indirect = albedo_x * quantised_product(data.diffuse, self._radiance_w)
+        self._reflection_w = (self._brdf_reflection(gather_wi, gather_e)
+                              if self.knobs["gather_reflection"] == "brdf" else None)
+        indirect = albedo_x * self._product(data.diffuse, slice(None))
         self._parts = {"direct": direct, "indirect": indirect, "all": direct + indirect}
         self._view_lighting = {}
         for name, rows in self._members.items():
@@ -146,6 +207,58 @@ class BRDFPCAState:
         self._glossy_parts = {}
         self._lit = True
 
+    def _product(self, matrix, rows) -> np.ndarray:
+        """Return rows of ``matrix`` (view samples ``rows``) times the gather radiance.
+
+        L^w, plus with ``gather_reflection`` "brdf" the vector of each row's block: the
+        gather samples' BRDF reflection of their direct light (:meth:`_brdf_reflection`).
+        """
+        product = quantised_product(matrix, self._radiance_w)
+        if self._reflection_w is not None:
+            reflected = np.empty_like(product)
+            product_rgb_per_row(matrix.indptr, matrix.packed, matrix.scales, matrix.index_bits,
+                                self._reflection_w, self._blocks[0][rows], reflected)
+            product += reflected
+        return product
+
+    def _brdf_reflection(self, wi, irradiance) -> np.ndarray:
+        """Return, per block of pixels, the glossy radiance the gather samples send it (Haar).
+
+        Each gather sample on an object with an analytic BRDF reflects the light that
+        reaches it directly towards the block's centre by rho_s f_F f_E(gamma), f_E by its
+        PCA (Eq. 10; its diffuse term is in L^w already): a (B, G, 3) array of Haar
+        coefficients over the gather square, one vector a block
+        (:func:`reflection_blocks`, :func:`~.kernels.block_reflection`).
+        """
+        data = self.data
+        if self._blocks is None:
+            self._blocks = reflection_blocks(data.shape, data.pixel, data.view_object,
+                                             data.view_position, self._reflection_tile())
+        block, centre, radius = self._blocks
+        radiance = np.zeros((len(centre), 3, len(data.gather_position)), dtype=np.float32)
+        for name in self._members:
+            material = self.materials[name]
+            # the gather samples of this object that the lights reach
+            found = np.flatnonzero((data.gather_object == self._index[name])
+                                   & (irradiance.max(axis=(1, 2), initial=0.0) > 0))
+            if not len(found):
+                continue
+            basis = self.data.bases[self._index[name]]
+            block_reflection(centre, radius, data.gather_position[found],
+                             data.gather_normal[found],
+                             np.sqrt(data.gather_area[found] / math.pi), found,
+                             np.ascontiguousarray(wi[found]),
+                             np.ascontiguousarray(irradiance[found] * material.rho_s),
+                             self.coefficients(name), REFLECTION_GUARD,
+                             *material_parameters(material, basis), radiance)
+        side = int(round(math.sqrt(radiance.shape[2])))
+        haar2d_forward_in_place(radiance.reshape(-1, side, side))
+        return radiance
+
+    def _reflection_tile(self) -> int:
+        """Pixels on a side of a block: about ``reflection_blocks`` blocks over the view samples."""
+        return max(1, round(math.sqrt(len(self.data.pixel) / self.knobs["reflection_blocks"])))
+
     def _glossy(self, name) -> dict:
         """Glossy radiance of object ``name``'s view samples: exact direct, and Eq. 9.
 
@@ -159,17 +272,13 @@ class BRDFPCAState:
         if cached is not None and cached[0] == key:
             return cached[1]
         variable, weight = self._view_lighting[name]
-        if uses_half_angle(material.model):
-            lobe = edited_term(material.model, material.gamma, None, cos_delta=variable)
-        else:
-            lobe = edited_term(material.model, material.gamma, variable)
-        direct = np.einsum("ps,psc->pc", lobe, weight)
+        direct = np.einsum("ps,psc->pc", _lobe(material, variable), weight)
         frozen = name in self.frozen
         products = self._products.get(name)
         if products is None:
-            products = (quantised_product(self.frozen[name][1], self._radiance_w) if frozen
-                        else np.stack([quantised_product(m, self._radiance_w)
-                                       for m in self._transfer[name]]))
+            rows = self._members[name]
+            products = (self._product(self.frozen[name][1], rows) if frozen
+                        else np.stack([self._product(m, rows) for m in self._transfer[name]]))
             self._products[name] = products
         indirect = (products if frozen else
                     np.einsum("j,jpc->pc", self.coefficients(name), products))
@@ -216,6 +325,9 @@ class BRDFPCAState:
                                  "fixed terms)", field=f"material[{name!r}]",
                                  value=getattr(new, "model", type(new).__name__))
             albedo_changed |= not np.array_equal(diffuse_albedo(old), diffuse_albedo(new))
+            # gather samples that reflect by their BRDF send every pixel new light
+            albedo_changed |= glossy and self.knobs["gather_reflection"] == "brdf" and (
+                old.gamma != new.gamma or not np.array_equal(old.rho_s, new.rho_s))
             self.materials[name] = new
             if name in self.frozen and self.frozen[name][0] != new.gamma:
                 self.unfreeze(name)

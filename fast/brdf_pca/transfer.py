@@ -119,7 +119,7 @@ def truncate_rows(matrix: scipy.sparse.csr_matrix, keep: int) -> SparseRows:
     return SparseRows.concatenate(parts)
 
 
-def _material_parameters(material, basis: PCABasis):
+def material_parameters(material, basis: PCABasis):
     """Return the scalars and tables a compiled kernel needs for one glossy material."""
     grid = basis.delta
     return (MODEL_CODES[material.model], float(material.f0), float(material.lafortune_c[0]),
@@ -158,7 +158,7 @@ def disk_transfer(material: AnalyticBRDF, basis: PCABasis, x, n_x, out, position
     -------
     ndarray, shape (K + 1,)
     """
-    model, f0, c_xy, c_z, grid0, step, matrix = _material_parameters(material, basis)
+    model, f0, c_xy, c_z, grid0, step, matrix = material_parameters(material, basis)
     normal = np.asarray(normal, dtype=np.float64)
     first, second = (v[0] for v in tangent_frames(normal[None]))
     sums = np.empty(matrix.shape[1])
@@ -402,7 +402,7 @@ def _transfer(scene, view, gather, columns, knobs, bases, log):
         if glossy:
             basis = bases[index]
             budgets[index] = _budgets(basis, knobs["transfer_coefficients"])
-            parameters = _material_parameters(obj.material, basis)
+            parameters = material_parameters(obj.material, basis)
             lobe = _narrowest_lobe(basis)
             pieces = [[] for _ in range(basis.size + 1)]
         else:

@@ -20,7 +20,8 @@ Targets of the task on this machine: editing >= 20 fps, relighting >= 10 fps.
 first basis vectors, the error along gamma with K = 6) and a figure; ``--validate`` adds
 the comparison with exact-BRDF references (FLIP and relative MSE for three gammas per
 model, error maps) and with the path-traced limit of the method's own transport, and the
-effect of sub-area sampling.
+effect of sub-area sampling; ``--split`` the split of the error on ``glossy`` into its
+parts (:mod:`._brdf_pca_split`).
 """
 
 from __future__ import annotations
@@ -45,6 +46,9 @@ TARGET_RELIGHT_FPS = 10.0
 
 #: Fig. 5 of the paper: 6 basis vectors reach an RMS error of 1e-5 for Blinn-Phong.
 PAPER_RMS = 1e-5
+
+#: A run with at most this many gather samples (``--quick``) measures the split with few.
+QUICK_GATHERS_LIMIT = 256
 
 #: Floor materials of the validation scene, one per model (gamma set per run).
 VALIDATION_FLOORS = {
@@ -85,6 +89,9 @@ def add_arguments(parser):
     parser.add_argument("--validation-gather-samples", type=int, default=4096)
     parser.add_argument("--validation-spp", type=int, default=256,
                         help="samples per pixel per reference pass (default 256)")
+    parser.add_argument("--split", action="store_true",
+                        help="add the split of the error on 'glossy' into its parts (the "
+                             "PCA, the gather transport, the method's own, by part)")
     parser.add_argument("--out", default="bench_brdf_pca",
                         help="folder for figures and error maps (default bench_brdf_pca)")
 
@@ -335,6 +342,10 @@ def run(args) -> int:
         sections["analysis"] = lambda: _analysis(folder)
     if args.validate:
         sections["validation"] = lambda: _validate(args, folder)
+    if args.split:
+        from ._brdf_pca_split import split
+
+        sections["split"] = lambda: split(quick=args.gather_samples <= QUICK_GATHERS_LIMIT)
     out = {}
     with steps_bar("bench brdf_pca", len(sections), unit="section") as bar:
         for section, measure in sections.items():

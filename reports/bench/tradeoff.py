@@ -26,6 +26,14 @@ interpolated on its log-log curve (extrapolated along the fitted power law beyon
 spp, and flagged so), giving the speedup at equal error: per frame (the interactive path,
 ``state.render``) and for the first image (precomputation + frame).
 
+Each method point's error is also split through the model it renders (its ``model_name``
+or profile knob, :func:`translucent.reports.report.split.split_profile`), rendered exactly
+once per scene and model at the reference's samples: the model's error against the
+reference, the method's own against the model, and which dominates
+(:func:`~translucent.reports.report.split.dominant_part`); the table names it at each
+method's defaults. A knob that changes the model (BRDF editing's ``gather_reflection``)
+moves the floor its ladder can reach; the others cannot go below it.
+
 Every sweep point is an independent task (:func:`translucent.reports.report.distributed.run_tasks`):
 local processes by default, ``--scheduler`` for a Dask cluster, ``--serial`` in this process.
 Writes the figures as JSON (``--json``, default ``bench_tradeoff.json``) and the curves as
@@ -108,11 +116,14 @@ def add_arguments(parser):
 
 
 def _task(kind: str, scene, *arguments):
-    """Run one sweep point: the converged reference, a path-traced render or a method run."""
+    """Run one sweep point: a (model) reference, a path-traced render or a method run."""
     from ..report.runs import render_reference, run_method
 
     if kind == "reference":
         return render_reference(scene, *arguments)
+    if kind == "model":
+        model, spp, passes = arguments
+        return render_reference(scene, spp, passes, profile=model)
     if kind == "path tracing":
         return path_tracing_point(scene, *arguments)
     method_name, knobs = arguments
@@ -276,8 +287,13 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
                 if cheap is not None:  # a quick run: the cheapest point, on cheap knobs
                     points = [{**cheap, **points[0]}]
                 for knobs in points[-ladder_points:] if ladder_points else points:
+                    model = _model_of(name, knobs, scene)
                     tasks.append(("method", scene, name, knobs))
-                    owners.append((scene.name, "method", name, ladder))
+                    owners.append((scene.name, "method", name, (ladder, model)))
+                    if model is not None and model not in entry.setdefault("models", {}):
+                        entry["models"][model] = {}
+                        tasks.append(("model", scene, model, reference_spp, reference_passes))
+                        owners.append((scene.name, "model", model, None))
 
     answers = run_tasks(_task, tasks, scheduler=scheduler, local=serial, progress=progress)
     _score_answers(owners, answers, results, progress)
@@ -292,12 +308,40 @@ def sweep(scenes, *, methods=None, scheduler=None, serial=False, size: int = 48,
             "scenes": results}
 
 
+def _model_of(name: str, knobs: dict, scene) -> str | None:
+    """Return the model a method's point renders, where a model reference can be made."""
+    from ..report.split import model_reference_refusal, split_profile, unrendered_profile
+
+    model, reason = split_profile(name, knobs, scene)
+    if reason or model is None or unrendered_profile(model) or \
+            model_reference_refusal(scene, model):
+        return None
+    return model
+
+
+def _split_point(point: dict, reference, model, image, cache: dict) -> None:
+    """Add the point's error split through its model (model and own part, which dominates)."""
+    from ..report.split import ErrorSplit, split_images
+
+    try:
+        parts = split_images(reference, model, image, cache=cache, key=point["model"])
+    except (InputError, TypeError) as error:
+        point["split_error"] = str(error)
+        return
+    split = ErrorSplit(point["model"], "", *parts)
+    point.update(model_relative_mse=split.model.get("relative_mse"),
+                 own_relative_mse=split.approximation.get("relative_mse"),
+                 dominant=split.dominant)
+
+
 def _score_answers(owners: list, answers: list, results: dict, progress: bool) -> None:
     """Score every task's answer against its scene's reference into ``results``."""
-    references = {}
-    for (scene_name, kind, _, _), answer in zip(owners, answers, strict=True):
+    references, models, split_cache = {}, {}, {}
+    for (scene_name, kind, name, _), answer in zip(owners, answers, strict=True):
         if kind == "reference":
             references[scene_name] = answer
+        elif kind == "model":
+            models[scene_name, name] = answer
     scoring = steps_bar("scoring", len(answers), unit="image", enabled=progress)
     for (scene_name, kind, name, ladder), answer in zip(owners, answers, strict=True):
         scoring.update()
@@ -308,6 +352,10 @@ def _score_answers(owners: list, answers: list, results: dict, progress: bool) -
                 entry["reference"]["error"] = answer
             else:
                 entry["reference"]["seconds"] = answer.metadata.get("seconds")
+            continue
+        if kind == "model":
+            entry["models"][name] = ({"error": answer} if isinstance(answer, str) else
+                                     {"seconds": answer.metadata.get("seconds")})
             continue
         if kind == "path tracing":
             point = {k: v for k, v in answer.items() if k != "images"}
@@ -323,9 +371,15 @@ def _score_answers(owners: list, answers: list, results: dict, progress: bool) -
                          total_seconds=answer.precompute_seconds + first_frame)
             if not isinstance(reference, str):
                 point.update(_metrics(reference, answer.image))
+            point["model"] = ladder[1]
+            model = models.get((scene_name, point["model"]))
+            if model is not None and not isinstance(model, str) \
+                    and not isinstance(reference, str):
+                _split_point(point, reference, model, answer.image,
+                             split_cache.setdefault(scene_name, {}))
         else:
             point["reason"] = answer.reason
-        entry["methods"][name]["ladders"][ladder].append(point)
+        entry["methods"][name]["ladders"][ladder[0]].append(point)
     scoring.close()
 
 
@@ -446,7 +500,30 @@ def _print_table(figures: dict) -> None:
                     print(f"    {knobs}: precompute {point['precompute_seconds']:.3g} s, frame "
                           f"{point['frame_seconds']:.3g} s (x{point['frame_ratio']:.3g}), "
                           f"relMSE {point.get('relative_mse', math.nan):.4g}, speedup at equal "
-                          f"error: frame {_times(speedup)}, first image {_times(total)}{flag}")
+                          f"error: frame {_times(speedup)}, first image {_times(total)}{flag}"
+                          + _split_text(point))
+            defaults = next((p for points in method_entry["ladders"].values() for p in points
+                             if p.get("knobs") == {} and "dominant" in p), None)
+            if defaults is not None:
+                print(f"  {method_name} at its defaults: {DOMINANT_WORDS[defaults['dominant']]} "
+                      f"(model {defaults['model']}: {defaults['model_relative_mse']:.4g}, "
+                      f"own {defaults['own_relative_mse']:.4g})")
+
+
+#: How the table names the part of a method's error that dominates at its defaults.
+DOMINANT_WORDS = {"model": "its model's error dominates: knobs that keep the model cannot "
+                           "go below it",
+                  "approximation": "its own approximation dominates: its knobs hold it",
+                  "both": "model and approximation share the error",
+                  "within noise": "neither part clears the reference's noise",
+                  "unknown": "no split"}
+
+
+def _split_text(point: dict) -> str:
+    if "dominant" not in point:
+        return ""
+    return (f"; model {point['model_relative_mse']:.4g}, own {point['own_relative_mse']:.4g}"
+            f" ({point['dominant']})")
 
 
 def _times(value) -> str:

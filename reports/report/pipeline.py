@@ -89,6 +89,7 @@ from .split import (
     entry_parts,
     model_reference_info,
     model_reference_refusal,
+    model_steps,
     profile_knob_of,
     refused_profile,
     requested_profiles,
@@ -600,6 +601,12 @@ def _plan_model_references(plan: _Plan, report: SceneReport, portable, spp, pass
             report.model_reference_errors[profile] = refusal
             continue
         committed = committed_reference_for(report.scene, profile) if spp is None else None
+        # the simpler models a key builds on split the model's error where committed
+        for simpler in model_steps(profile)[:-1] if spp is None else ():
+            found = committed_reference_for(report.scene, simpler)
+            if found is not None and simpler not in wanted:
+                report.model_references[simpler] = found
+                report.model_reference_info[simpler] = model_reference_info(found, "committed")
         if committed is not None:
             report.model_references[profile] = committed
             report.model_reference_info[profile] = model_reference_info(committed, "committed")

@@ -24,10 +24,17 @@ the other does not; when both do, the larger if it is at least :data:`DOMINANCE_
 times the other, else "both"; "within noise" when neither does.
 
 BRDF editing has the same split with its own model: the K-term PCA of its BRDFs (Nguyen et
-al. 2010, Eq. 10; the method's ``model_name``), rendered exactly by Mitsuba's path tracer
-with the PCA BRDF plugin (:mod:`translucent.reference.brdf_plugins`), against the
-exact-BRDF reference. Another renderer's image, and a scene whose translucent objects are
-heterogeneous (no radial profile), have no split; each says why.
+al. 2010, Eq. 10) carried by its Lambertian-gather transport (Sect. 5.2; the method's
+``model_name``, ``brdf_pca_k6+lambertian_gather2``), rendered exactly by Mitsuba with the
+PCA BRDF plugin and the gather integrator (:mod:`translucent.reference.brdf_plugins`),
+against the exact-BRDF reference. Another renderer's image, and a scene whose translucent
+objects are heterogeneous (no radial profile), have no split; each says why.
+
+A model named by parts (``dipole+geometry``, ``brdf_pca_k6+lambertian_gather2``) is also
+split into its *steps* (:func:`model_steps`) where the reference of every simpler model is
+committed: the first part against the volumetric reference, each further part against the
+model without it, so that the model's error is attributed too (the PCA of the BRDFs, or the
+Lambertian gather).
 
 Examples
 --------
@@ -46,8 +53,9 @@ from dataclasses import dataclass, field
 from ...errors import InputError
 from ...image import Image
 
-__all__ = ["DOMINANCE_RATIO", "ENTRY_SEPARATOR", "MODEL", "ErrorSplit", "dominant_part",
-           "entry_name", "entry_parts", "model_reference_info", "model_reference_refusal",
+__all__ = ["DOMINANCE_RATIO", "ENTRY_SEPARATOR", "MODEL", "ErrorSplit", "ModelStep",
+           "dominant_part", "entry_name", "entry_parts", "model_reference_info",
+           "model_reference_refusal", "model_steps", "split_images",
            "profile_knob_of", "refused_profile", "requested_profiles", "score_splits",
            "split_profile", "unrendered_profile", "with_both_variances"]
 
@@ -155,6 +163,56 @@ def entry_parts(name: str) -> tuple[str, str | None]:
     return method, profile or None
 
 
+def model_steps(key: str) -> list[str]:
+    """Return the models a key named by parts builds on, simplest first, ``key`` last.
+
+    Examples
+    --------
+    >>> model_steps("brdf_pca_k6+lambertian_gather2")
+    ['brdf_pca_k6', 'brdf_pca_k6+lambertian_gather2']
+    >>> model_steps("dipole")
+    ['dipole']
+    """
+    parts = key.split("+")
+    return ["+".join(parts[:count]) for count in range(1, len(parts) + 1)]
+
+
+@dataclass
+class ModelStep:
+    """One step of a model named by parts: the error its last part adds.
+
+    Attributes
+    ----------
+    model : str
+        The model with this step (:func:`model_steps`).
+    against : str or None
+        The model without it (None: the volumetric reference).
+    metrics, floor : dict
+        Every metric of the step over the method's pixels, and its noise floor.
+    verdicts : dict
+        Each metric's noise verdict.
+    """
+
+    model: str
+    against: str | None
+    metrics: dict
+    floor: dict | None
+    verdicts: dict
+
+    @property
+    def label(self) -> str:
+        """The part this step adds (``+lambertian_gather2``), or the first model's name."""
+        return self.model if self.against is None else self.model[len(self.against):]
+
+    def as_dict(self) -> dict:
+        """Return the step as a block of ``metrics.json``'s ``model_steps``."""
+        from .runs import json_safe
+
+        return {"model": self.model, "against": self.against,
+                "metrics": json_safe(self.metrics), "noise_floor": json_safe(self.floor),
+                "noise_verdicts": dict(self.verdicts)}
+
+
 def dominant_part(model: float | None, approximation: float | None, *,
                   resolved: tuple[bool, bool]) -> str:
     """Return which part holds the error: "model", "approximation", "both" or "within noise".
@@ -196,6 +254,8 @@ class ErrorSplit:
         Each metric's noise verdict.
     model_reference : dict
         Where the model reference came from (source, spp, passes, noise).
+    steps : list of ModelStep
+        The model's error by its parts (empty where a simpler model has no reference).
     """
 
     profile: str | None
@@ -207,6 +267,7 @@ class ErrorSplit:
     model_verdicts: dict = field(default_factory=dict)
     approximation_verdicts: dict = field(default_factory=dict)
     model_reference: dict = field(default_factory=dict)
+    steps: list = field(default_factory=list)
 
     @property
     def dominant(self) -> str:
@@ -231,7 +292,7 @@ class ErrorSplit:
         numbers = (f"relative MSE of the model {self.profile!r} against the reference "
                    f"(model) {model}, of the method against its model rendered exactly "
                    f"(approximation) {approximation}")
-        return {
+        sentence = {
             "model": f"The model's error dominates: {numbers}. A better method of this "
                      "model cannot do much better; another model may.",
             "approximation": f"The method's own error dominates: {numbers}. Its knobs, not "
@@ -239,6 +300,18 @@ class ErrorSplit:
             "both": f"Model and method share the error: {numbers}.",
             "within noise": f"Neither part clears its noise floor: {numbers}.",
         }.get(self.dominant, numbers + ".")
+        return sentence + self._steps_sentence()
+
+    def _steps_sentence(self) -> str:
+        from ..metrics.compute import RESOLVED
+        from .formatting import format_value
+
+        if len(self.steps) < 2:
+            return ""
+        parts = [f"{step.label} {format_value(step.metrics.get('relative_mse'), 3)}"
+                 + ("" if step.verdicts.get("relative_mse") == RESOLVED else " (within noise)")
+                 for step in self.steps]
+        return " The model's error by its parts (relative MSE): " + ", ".join(parts) + "."
 
     def as_dict(self) -> dict:
         """Return the ``model_error`` and ``approximation_error`` blocks of ``metrics.json``."""
@@ -256,6 +329,7 @@ class ErrorSplit:
                 "dominant": None if self.reason else self.dominant,
                 "sentence": self.sentence(), "model_reference": json_safe(self.model_reference),
                 "model_error": block(self.model, self.model_floor, self.model_verdicts),
+                "model_steps": [step.as_dict() for step in self.steps],
                 "approximation_error": block(self.approximation, self.approximation_floor,
                                              self.approximation_verdicts)}
 
@@ -383,8 +457,6 @@ def score_splits(report) -> None:
 
 
 def _split(report, name: str, cache: dict) -> ErrorSplit:
-    from ..metrics.compute import evaluate_on, noise_verdicts
-
     profile, reason = split_profile(name, report.runs[name].knobs, report.scene)
     if reason:
         return ErrorSplit(profile, reason)
@@ -395,17 +467,67 @@ def _split(report, name: str, cache: dict) -> ErrorSplit:
     mask = report.mask_of(name)
     key = (profile, tuple(sorted(report.scored_objects.get(name, ()))))
     try:
-        if key not in cache:  # one per profile and set of pixels, whatever the method
-            cache[key] = (*_model_error(report.reference, model, mask), _floor(model, mask))
-        model_metrics, model_floor, approximation_floor = cache[key]
-        approximation = evaluate_on(model, report.runs[name].image, [mask])[0].metrics.as_dict()
+        found = split_images(report.reference, model, report.runs[name].image, mask,
+                             cache=cache, key=key)
     except InputError as error:
         return ErrorSplit(profile, f"the model reference cannot be compared: {error.reason}")
-    return ErrorSplit(
-        profile, "", model_metrics, approximation, model_floor, approximation_floor,
-        noise_verdicts(model_metrics, model_floor),
-        noise_verdicts(approximation, approximation_floor),
-        report.model_reference_info.get(profile, {}))
+    return ErrorSplit(profile, "", *found, report.model_reference_info.get(profile, {}),
+                      _steps(report, profile, mask, key[1], cache))
+
+
+def split_images(reference: Image, model: Image, image: Image, mask=None, *,
+                 cache: dict | None = None, key=None) -> tuple:
+    """Return the split of ``image``'s error against ``reference`` through ``model``.
+
+    Parameters
+    ----------
+    reference, model, image : Image
+        The volumetric (or exact) reference, the model reference, the method's image.
+    mask : ndarray of bool, optional
+        The pixels scored (None: all).
+    cache, key : dict and hashable, optional
+        Where the model's part is kept for other images of the same model and pixels.
+
+    Returns
+    -------
+    tuple
+        ``(model metrics, approximation metrics, model floor, approximation floor, model
+        verdicts, approximation verdicts)``, as :class:`ErrorSplit` takes them.
+
+    Raises
+    ------
+    InputError
+        Images that cannot be compared (another size).
+    """
+    from ..metrics.compute import evaluate_on, noise_verdicts
+
+    cache = {} if cache is None else cache
+    if key not in cache:  # one per model and set of pixels, whatever the method
+        cache[key] = (*_model_error(reference, model, mask), _floor(model, mask))
+    model_metrics, model_floor, approximation_floor = cache[key]
+    approximation = evaluate_on(model, image, [mask])[0].metrics.as_dict()
+    return (model_metrics, approximation, model_floor, approximation_floor,
+            noise_verdicts(model_metrics, model_floor),
+            noise_verdicts(approximation, approximation_floor))
+
+
+def _steps(report, profile: str, mask, objects: tuple, cache: dict) -> list[ModelStep]:
+    """Return the steps of ``profile`` (:func:`model_steps`), [] when one has no reference."""
+    from ..metrics.compute import noise_verdicts
+
+    chain = model_steps(profile)
+    if len(chain) < 2 or any(key not in report.model_references for key in chain):
+        return []
+    steps = []
+    for before, key in zip([None, *chain[:-1]], chain, strict=True):
+        cache_key = ("step", key, before, objects)
+        if cache_key not in cache:
+            earlier = report.reference if before is None else report.model_references[before]
+            metrics, floor = _model_error(earlier, report.model_references[key], mask)
+            cache[cache_key] = (metrics, floor)
+        metrics, floor = cache[cache_key]
+        steps.append(ModelStep(key, before, metrics, floor, noise_verdicts(metrics, floor)))
+    return steps
 
 
 def with_both_variances(reference: Image, model: Image) -> Image:

@@ -123,7 +123,7 @@ def test_compiled_terms_match_the_materials(model, cos_l, cos_v, azimuth):
 def test_compiled_basis_matches_interpolated_pca(model, rng):
     material = AnalyticBRDF(model, GAMMA_RANGES[model][0], f0=0.3, lafortune_c=(-0.8, 1.0))
     basis = build_pca_basis(model, 4, gamma_samples=50, delta_samples=128)
-    parameters = bt._material_parameters(material, basis)
+    parameters = bt.material_parameters(material, basis)
     out = np.empty(5)
     for _ in range(50):
         cos_l, cos_v = rng.uniform(0.01, 1, 2)
@@ -398,6 +398,99 @@ def test_bad_edits(state, scene):
         state.render(component="glossy")
     with pytest.raises(InputError, match=r"lights\[0\] = 'ConstantEnvironment': environment"):
         state.relight([ConstantEnvironment(1.0)])
+
+
+# -- gather samples that reflect by their BRDF ----------------------------------------------
+
+
+def test_each_gather_reflection_comes_closest_to_its_own_transport(scene):
+    """'lambertian' renders the paper's transport (+lambertian_gather1), 'brdf' the one whose
+    gather samples reflect their direct light by their whole BRDF (+glossy_gather1): each
+    is nearer its own path-traced model than the other's image is."""
+    from translucent.reference import render
+    from translucent.reports.metrics.compute import relative_mse
+    from translucent.scenes.gbuffer import gbuffer
+
+    modes = ("lambertian", "brdf")
+    names = {mode: bp.model_name({**TINY, "gather_reflection": mode}) for mode in modes}
+    assert names == {"lambertian": "brdf_pca_k6+lambertian_gather1",
+                     "brdf": "brdf_pca_k6+glossy_gather1"}
+    models = {mode: render(scene, spp=256, passes=4, cache=False, progress=False,
+                           profile=names[mode]) for mode in modes}
+    images = {mode: bp.precompute(scene, **TINY, gather_reflection=mode).render()
+              for mode in modes}
+    hit = gbuffer(scene).hit
+
+    def error(model, image):
+        return relative_mse(models[model].rgb[hit], images[image].rgb[hit],
+                            reference_variance=models[model].variance[hit])
+
+    assert error("brdf", "brdf") < error("brdf", "lambertian")
+    assert error("lambertian", "lambertian") < error("lambertian", "brdf")
+
+
+def test_an_edit_with_brdf_gather_reflection_relights_the_other_objects(scene):
+    """With 'brdf' the floor's gamma shapes the light its gather samples send the sphere and
+    the box: an edit changes their pixels too, and equals rendering the edited scene."""
+    state = bp.precompute(scene, **TINY, gather_reflection="brdf")
+    before = state.render().rgb
+    after = state.edit("floor", 250.0).rgb
+    others = np.zeros(before.shape[:2], dtype=bool).reshape(-1)
+    others[state.data.pixel[state.data.view_object != 0]] = True
+    others = others.reshape(before.shape[:2])
+    assert np.abs(after[others] - before[others]).max() > 0
+    other = scene.with_material("floor", scene.object("floor").material.with_gamma(250.0))
+    fresh = bp.precompute(other, **TINY, gather_reflection="brdf")
+    assert fresh.log.notes["cache"] == "hit"  # a run-time knob: the same precomputation
+    np.testing.assert_array_equal(fresh.render().rgb, after)
+
+
+def test_block_reflection_is_the_pca_brdf_times_the_irradiance(rng):
+    """The compiled reflection towards a block equals rho_s f_F sum_j c_j b_j E written
+    with materials.brdfs' numpy terms and the basis' own interpolation; a gather sample
+    within the guard, behind its surface from the block, or unlit sends nothing."""
+    material = AnalyticBRDF("ward", 0.2, rho_s=[0.4, 0.3, 0.2], rho_d=[0.1, 0.1, 0.1])
+    basis = build_pca_basis("ward", 4, gamma_samples=50, delta_samples=128)
+    coefficients = basis.coefficients(material.gamma)
+    positions = rng.uniform(-1, 1, (6, 3)) * [1, 0, 1]
+    normals = np.tile([0.0, 1.0, 0.0], (6, 1))
+    disk = np.full(6, 0.01)
+    light = rng.normal(size=(6, 2, 3))
+    light[..., 1] = np.abs(light[..., 1])
+    light /= np.linalg.norm(light, axis=-1, keepdims=True)
+    brought = rng.uniform(0.5, 1.0, (6, 2, 3))
+    brought[5] = 0.0                                  # unlit
+    centres = np.array([[0.3, 2.0, 0.1], [0.0, -1.0, 0.0], positions[0] + [0, 0.01, 0]])
+    radius = np.array([0.1, 0.1, 0.05])
+    out = np.zeros((3, 3, 8))
+    columns = np.arange(6) + 2
+    bk.block_reflection(centres, radius, positions, normals, disk, columns, light,
+                        brought * material.rho_s, coefficients, 2.0,
+                        *bt.material_parameters(material, basis), out)
+    towards = centres[0] - positions
+    towards /= np.linalg.norm(towards, axis=1, keepdims=True)
+    cos_l, cos_v = light[..., 1], towards[:, 1][:, None]
+    l_dot_v = np.einsum("nsd,nd->ns", light, towards)
+    variable = pca_variable("ward", cos_l, cos_v, l_dot_v)
+    lobe = basis.basis_values(variable) @ coefficients
+    weight = np.where(cos_l > 0, fixed_term("ward", cos_l, cos_v, l_dot_v) * lobe, 0.0)
+    expected = np.einsum("ns,nsc->cn", weight, brought * material.rho_s)
+    np.testing.assert_allclose(out[0][:, 2:], expected, rtol=KERNEL_RTOL)
+    assert np.all(out[0][:, 2 + 5] == 0) and np.all(out[:, :, :2] == 0)
+    assert np.all(out[1] == 0)                        # below the floor: behind every sample
+    assert np.all(out[2][:, 2] == 0) and np.any(out[2][:, 3:] > 0)
+
+
+def test_reflection_blocks_split_squares_by_object():
+    pixel = np.array([0, 1, 4, 5, 2, 3])           # a 2 x 4 image, 2 x 2 squares
+    view_object = np.array([0, 0, 0, 1, 0, 0])
+    position = np.arange(18, dtype=float).reshape(6, 3)
+    block, centre, radius = bp.state.reflection_blocks((2, 4), pixel, view_object, position, 2)
+    assert len(set(block[:3])) == 1 and block[3] != block[0] and block[4] == block[5]
+    assert len(centre) == 3
+    np.testing.assert_allclose(centre[block[0]], position[:3].mean(axis=0))
+    np.testing.assert_allclose(radius[block[3]], 0.0)
+    np.testing.assert_allclose(radius[block[0]], np.linalg.norm(position[0] - position[1]))
 
 
 # -- against path-traced references (slow) -----------------------------------------------

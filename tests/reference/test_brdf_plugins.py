@@ -287,3 +287,62 @@ def test_8_a_pca_model_render_converges_to_the_exact_one_with_many_terms():
     with pytest.raises(InputError, match="needs an analytic BRDF"):
         render(load_scene("sphere"), spp=1, passes=1, cache=False, progress=False,
                profile="brdf_pca_k6")
+
+
+def test_9_a_glossy_gather_without_bounces_is_the_path_tracer_of_two_reflections():
+    """``+glossy_gather0``: the first and second surface reflect the direct light by their
+    whole (PCA) BRDF and nothing goes further: Mitsuba's own path tracer limited to the
+    light's reflection at two surfaces (max_depth 3) renders the same transport."""
+    from translucent.reference import render
+    from translucent.reports.metrics.statistics import z_test_known_variance
+
+    scene = _small_glossy_scene(diffuse=False)
+    gather = render(scene, spp=64, passes=4, cache=False, progress=False,
+                    profile="brdf_pca_k6+glossy_gather0")
+    path = render(scene, spp=64, passes=4, cache=False, progress=False, max_depth=3,
+                  integrator="path", profile="brdf_pca_k6")
+    result = z_test_known_variance(gather, path)
+    assert result.passed, result.summary()
+    assert "by its BRDF" in gather.metadata["profile"]["transport"]
+    # the Lambertian gather drops the second surface's glossy reflection: darker
+    lambertian = render(scene, spp=64, passes=4, cache=False, progress=False,
+                        profile="brdf_pca_k6+lambertian_gather0")
+    difference = gather.rgb.sum() - lambertian.rgb.sum()
+    assert difference > 5 * math.sqrt(gather.variance.sum() + lambertian.variance.sum())
+
+
+def test_9_a_lambertian_gather_model_is_the_methods_limit_rendered_with_the_pca():
+    """The model ``brdf_pca_k48+lambertian_gather1`` is :func:`render_lambertian_gather`
+    with 48 PCA terms, which reproduce the exact lobe closely: equal within the noise."""
+    from translucent.reference import render
+    from translucent.reference.brdf_plugins import render_lambertian_gather
+    from translucent.reports.metrics.statistics import z_test_known_variance
+
+    scene = _small_glossy_scene(diffuse=False)
+    model = render(scene, spp=64, passes=4, cache=False, progress=False,
+                   profile="brdf_pca_k48+lambertian_gather1")
+    limit = render_lambertian_gather(scene, bounces=1, spp=64, passes=4, seed=1)
+    result = z_test_known_variance(model, limit)
+    assert result.passed, result.summary()
+
+
+@pytest.mark.parametrize("name", ["brdf_pca_k6+gather2", "brdf_pca_k6+lambertian_gather",
+                                  "brdf_pca_k6+lambertian_gather65", "brdf_pca_k0"])
+def test_9_a_badly_named_pca_model_names_the_grammar(name):
+    from translucent.materials.brdf_pca import pca_model_basis
+
+    with pytest.raises(InputError, match="lambertian_gather, glossy_gather"):
+        pca_model_basis(name)
+
+
+def test_9_the_gather_integrator_is_only_for_a_gather_model():
+    from translucent.reference import render
+    from translucent.reference.mitsuba_scene import GATHER_INTEGRATOR
+
+    scene = _small_glossy_scene(diffuse=False)
+    with pytest.raises(InputError, match="lambertian_gatherN only"):
+        render(scene, spp=1, passes=1, cache=False, progress=False,
+               integrator=GATHER_INTEGRATOR, profile="brdf_pca_k6")
+    with pytest.raises(InputError, match="renders with the path integrator"):
+        render(scene, spp=1, passes=1, cache=False, progress=False, integrator="path",
+               profile="brdf_pca_k6+lambertian_gather2")

@@ -152,7 +152,7 @@ def test_every_default_scene_of_a_homogeneous_medium_has_a_committed_model_refer
 
     names, _ = default_scenes()
     # the default models of the methods: PRT's and splatting's with the geometry
-    for model in ("dipole", "dipole+geometry", "brdf_pca_k6"):
+    for model in ("dipole", "dipole+geometry", "brdf_pca_k6", "brdf_pca_k6+lambertian_gather2"):
         splittable = [name for name in names
                       if not model_reference_refusal(load_scene(name), model)]
         assert splittable and sorted(splittable) == sorted(committed_model_scene_names(model))
@@ -178,11 +178,12 @@ def test_a_fresh_render_with_the_geometry_is_consistent_with_its_committed_model
     assert np.abs(_global_z(fresh, half_space)).max() > GLOBAL_Z
 
 
-def test_a_fresh_pca_brdf_render_is_consistent_with_the_committed_model_reference():
-    committed = committed_reference("glossy", profile="brdf_pca_k6").require()
+@pytest.mark.parametrize("model", ["brdf_pca_k6", "brdf_pca_k6+lambertian_gather2"])
+def test_a_fresh_pca_brdf_render_is_consistent_with_the_committed_model_reference(model):
+    committed = committed_reference("glossy", profile=model).require()
     fresh = render(load_scene("glossy"), spp=16, passes=8, seed=1, cache=False,
-                   progress=False, profile="brdf_pca_k6")
-    _assert_consistent_and_sensitive("glossy (PCA BRDF)", fresh, committed)
+                   progress=False, profile=model)
+    _assert_consistent_and_sensitive(f"glossy ({model})", fresh, committed)
 
 
 def test_a_volumetric_render_is_not_taken_for_a_model_reference(reference_folder):

@@ -115,11 +115,40 @@ def test_a_missing_model_reference_and_another_renderer_say_why_there_is_no_spli
     report.runs["other"] = MethodRun("other", "synthetic", "ok", image=method)
     report.metrics["other"] = {}
     score_splits(report)
-    # BRDF editing stands on its PCA BRDF (model_name): without that render, it says so
-    assert report.splits["brdf_pca"].profile == "brdf_pca_k6"
-    assert "no model reference of 'brdf_pca_k6'" in report.splits["brdf_pca"].reason
+    # BRDF editing stands on its PCA BRDF carried by its Lambertian gather (model_name):
+    # without that render, it says so
+    model_key = "brdf_pca_k6+lambertian_gather2"
+    assert report.splits["brdf_pca"].profile == model_key
+    assert f"no model reference of '{model_key}'" in report.splits["brdf_pca"].reason
     assert "another renderer" in report.splits["other"].reason
     assert report.splits["other"].sentence().startswith("No split")
+
+
+def test_a_model_named_by_parts_splits_its_error_into_steps():
+    # transport V, the PCA BRDF 1 % bright, its gather transport 20 % darker still, and
+    # the method 1 % off its model: each step is the relative MSE of its own ratio
+    volumetric, pca, method = _images(1.01, 1.0)
+    gather = Image(0.8 * pca.rgb, pca.variance)
+    method = Image(1.01 * gather.rgb)
+    report = _report_of(volumetric, pca, method, method="brdf_pca")
+    report.model_references = {"brdf_pca_k6": pca, "brdf_pca_k6+lambertian_gather2": gather}
+    score_splits(report)
+    split = report.splits["brdf_pca"]
+    assert [(step.model, step.against, step.label) for step in split.steps] == [
+        ("brdf_pca_k6", None, "brdf_pca_k6"),
+        ("brdf_pca_k6+lambertian_gather2", "brdf_pca_k6", "+lambertian_gather2")]
+    first, second = (step.metrics["relative_mse_raw"] for step in split.steps)
+    assert first == pytest.approx(numpy_relative_mse(volumetric.rgb, pca.rgb), rel=1e-9)
+    assert second == pytest.approx(numpy_relative_mse(pca.rgb, gather.rgb), rel=1e-9)
+    assert split.model["relative_mse_raw"] == pytest.approx(
+        numpy_relative_mse(volumetric.rgb, gather.rgb), rel=1e-9)
+    assert "+lambertian_gather2 0.0" in split.sentence()
+    assert [entry["model"] for entry in split.as_dict()["model_steps"]] == [
+        "brdf_pca_k6", "brdf_pca_k6+lambertian_gather2"]
+    # without the simpler model's reference there are no steps, and the split stands
+    del report.model_references["brdf_pca_k6"]
+    score_splits(report)
+    assert report.splits["brdf_pca"].steps == [] and not report.splits["brdf_pca"].reason
 
 
 def test_a_heterogeneous_scene_has_no_model_reference_and_says_why():
