@@ -66,7 +66,12 @@ from ..materials.brdfs import (
     pca_variable,
     uses_half_angle,
 )
-from .mitsuba_scene import GATHER_INTEGRATOR, MaterialParts, register_material_converter
+from .mitsuba_scene import (
+    GATHER_INTEGRATOR,
+    MaterialParts,
+    register_integrator_builder,
+    register_material_converter,
+)
 
 __all__ = ["INTEGRATOR_NAME", "PLUGIN_NAME", "bsdf_dict", "drjit_ops", "gather_integrator",
            "register_plugin", "render_lambertian_gather"]
@@ -345,6 +350,7 @@ def _convert_analytic_brdf(material: AnalyticBRDF, context) -> MaterialParts:
 
 
 register_material_converter(AnalyticBRDF, _convert_analytic_brdf)
+register_integrator_builder(GATHER_INTEGRATOR, gather_integrator)
 
 
 # ---------------------------------------------------------------------------------------

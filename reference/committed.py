@@ -80,6 +80,7 @@ class ReferencePlan:
 #: (8.4 % against 28.5 %), per-channel ``volpath`` 1.1x and 6.4x.
 PLANS: dict[str, ReferencePlan] = {
     "glossy": ReferencePlan(spp=1024, budget_seconds=600.0),
+    "glossy_box": ReferencePlan(spp=1024, budget_seconds=1200.0),
     "bowl": ReferencePlan(spp=1024, budget_seconds=1800.0, integrator="volpathmis"),
     "sphere": ReferencePlan(spp=128, budget_seconds=2400.0),
     "cornell_block": ReferencePlan(spp=32, budget_seconds=3600.0),
@@ -130,11 +131,11 @@ MODEL_PLANS: dict[str, dict[str, ReferencePlan]] = {
            for rule in METHOD_RULES}
     for name in ("solid_checker", "solid_gradient", "solid_veins")
 } | {
-    "glossy": {"brdf_pca_k6": ReferencePlan(spp=1024, budget_seconds=900.0,
-                                            integrator="path"),
-               **{f"brdf_pca_k6+{transport}2": ReferencePlan(
-                   spp=1024, budget_seconds=900.0, integrator=GATHER_INTEGRATOR)
-                  for transport in ("lambertian_gather", "glossy_gather")}},
+    name: {"brdf_pca_k6": ReferencePlan(spp=1024, budget_seconds=900.0, integrator="path"),
+           **{f"brdf_pca_k6+{transport}2": ReferencePlan(
+               spp=1024, budget_seconds=900.0, integrator=GATHER_INTEGRATOR)
+              for transport in ("lambertian_gather", "glossy_gather")}}
+    for name in ("glossy", "glossy_box")
 }
 
 #: Every model whose references are committed (for some scene).

@@ -81,6 +81,7 @@ __all__ = [
     "MitsubaConversion",
     "convert_scene",
     "to_mitsuba_dict",
+    "register_integrator_builder",
     "register_material_converter",
     "material_converter",
     "rgb",
@@ -218,6 +219,25 @@ def register_material_converter(material_type: type, converter: MaterialConverte
     if not callable(converter):
         raise InputError("must be callable", field="converter", value=converter)
     _CONVERTERS[material_type] = converter
+
+
+#: Integrators of the suite's models that other modules of the reference build (the
+#: Lambertian gather of :mod:`.brdf_plugins`), by name: ``builder(*arguments) -> dict``,
+#: the Mitsuba integrator entry. Registered by those modules, as material converters are.
+_INTEGRATOR_BUILDERS: dict[str, Callable[..., dict]] = {}
+
+
+def register_integrator_builder(name: str, builder: Callable[..., dict]) -> None:
+    """Teach the conversion how to build the integrator ``name`` of a model."""
+    if not callable(builder):
+        raise InputError("must be callable", field="builder", value=builder)
+    _INTEGRATOR_BUILDERS[name] = builder
+
+
+def _integrator_builder(name: str) -> Callable[..., dict]:
+    if name not in _INTEGRATOR_BUILDERS:
+        _import_reference_modules()
+    return _INTEGRATOR_BUILDERS[name]
 
 
 def _import_reference_modules() -> None:
@@ -625,9 +645,7 @@ def convert_scene(scene: Scene, *, integrator: str | None = None, max_depth: int
                         **({"seeded_solutions": True} if seeded_solutions else {}),
                         **integrator_props}
     if pca_model_gather(profile) is not None:
-        from .brdf_plugins import gather_integrator
-
-        integrator_entry = gather_integrator(*pca_model_gather(profile))
+        integrator_entry = _integrator_builder(GATHER_INTEGRATOR)(*pca_model_gather(profile))
         integrator, max_depth = integrator_entry["type"], integrator_entry["max_depth"]
     scene_dict = {
         "type": "scene",

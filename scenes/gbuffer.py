@@ -23,7 +23,7 @@ from .raycast import NEAR_CLIP, ray_engine
 from .scene import Camera, Scene
 
 __all__ = ["GBuffer", "camera_frame", "camera_rays", "default_up", "gbuffer",
-           "gbuffer_from_point", "gbuffer_orthographic", "project"]
+           "gbuffer_from_point", "gbuffer_orthographic", "interior_pixels", "project"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -387,3 +387,16 @@ def gbuffer_orthographic(scene: Scene, direction, size, *, center=None, extent=N
                               (height, width), camera=None, pixel_area=pixel_area)
 
 
+def interior_pixels(scene: Scene, camera: Camera | None = None) -> np.ndarray:
+    """Return the pixels whose 3 x 3 neighbourhood sees one object, and an object.
+
+    Edges are anti-aliased by a reference's pixel filter but not by a one-ray G-buffer:
+    metrics over these pixels leave that difference out.
+    """
+    ids = gbuffer(scene, camera).object_id
+    padded = np.pad(ids, 1, mode="edge")
+    same = np.ones(ids.shape, dtype=bool)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            same &= padded[1 + dy:1 + dy + ids.shape[0], 1 + dx:1 + dx + ids.shape[1]] == ids
+    return same & (ids >= 0)

@@ -1,8 +1,9 @@
-"""``translucent bench brdf_pca --split``: where BRDF editing's error on ``glossy`` comes from.
+"""``translucent bench brdf_pca --split``: where BRDF editing's error comes from.
 
-The method's error against the exact-BRDF reference, split along the chain of models it
-stands on, each rendered exactly by Mitsuba with the committed references of ``glossy``
-(:data:`~translucent.reference.committed.MODEL_PLANS`):
+On each scene of :data:`SPLIT_SCENES` (``glossy``, and ``glossy_box``, a glossy sphere
+and block in a Cornell box), the method's error against the exact-BRDF reference, split
+along the chain of models it stands on, each rendered exactly by Mitsuba with the
+scene's committed references (:data:`~translucent.reference.committed.MODEL_PLANS`):
 
 * the PCA of its BRDFs (``brdf_pca_k6`` against the exact BRDFs);
 * its transport: gather samples that reflect diffusely (``+lambertian_gather2`` against
@@ -40,6 +41,10 @@ CONFIGURATIONS = [
                                              "reflection_blocks": 1024}),
 ]
 
+#: The scenes split (their references and model references are committed); ``--quick``
+#: splits the first alone.
+SPLIT_SCENES = ("glossy", "glossy_box")
+
 #: Gather samples of every configuration under ``--quick`` (a smoke run).
 QUICK_GATHERS = 64
 
@@ -70,38 +75,43 @@ def _relit_frame_seconds(state, frames: int = 3) -> float:
 
 
 def split(quick: bool = False) -> dict:
-    """Measure and print the split (see the module); return its figures."""
+    """Measure and print the split of every scene (see the module); return its figures."""
+    return {"scenes": {name: split_scene(name, quick)
+                       for name in (SPLIT_SCENES[:1] if quick else SPLIT_SCENES)}}
+
+
+def split_scene(name: str, quick: bool = False) -> dict:
+    """Measure and print the split on built-in scene ``name``; return its figures."""
     from ...reference.committed import committed_reference
     from ...scenes import load_scene
-    from ...scenes.gbuffer import gbuffer
-    from .brdf_pca import interior_pixels
+    from ...scenes.gbuffer import gbuffer, interior_pixels
 
-    scene = load_scene("glossy")
-    exact = committed_reference("glossy").require()
+    scene = load_scene(name)
+    exact = committed_reference(name).require()
     hit = gbuffer(scene).hit
     interior = interior_pixels(scene)
     masks = {"all": hit, "interior": interior, "edges": hit & ~interior}
     models = {}
-    print(f"\nerror split on 'glossy' ({scene.camera.width} x {scene.camera.height}; relative "
+    print(f"\nerror split on {name!r} ({scene.camera.width} x {scene.camera.height}; relative "
           "MSE over the pixels that see an object, 'edges' those whose 3 x 3 neighbourhood "
           f"sees two objects: {int(masks['edges'].sum())} of {int(hit.sum())})")
 
-    def model(name):
-        if name not in models:
-            models[name] = committed_reference("glossy", profile=name).require()
-        return models[name]
+    def model(key):
+        if key not in models:
+            models[key] = committed_reference(name, profile=key).require()
+        return models[key]
 
     chain = {}
-    for name, against in (("brdf_pca_k6", None),
-                          ("brdf_pca_k6+lambertian_gather2", "brdf_pca_k6"),
-                          ("brdf_pca_k6+glossy_gather2", "brdf_pca_k6")):
+    for key, against in (("brdf_pca_k6", None),
+                         ("brdf_pca_k6+lambertian_gather2", "brdf_pca_k6"),
+                         ("brdf_pca_k6+glossy_gather2", "brdf_pca_k6")):
         earlier = exact if against is None else model(against)
-        both = type(earlier)(earlier.rgb, earlier.variance + model(name).variance)
-        chain[name] = {"against": against or "exact",
-                       "relative_mse": _errors(both, model(name), {"all": hit})["all"],
-                       "to_exact": _errors(exact, model(name), {"all": hit})["all"]}
-        print(f"  model {name:32s} against {against or 'exact BRDFs':32s} "
-              f"{chain[name]['relative_mse']:9.5f}  (to exact {chain[name]['to_exact']:.5f})")
+        both = type(earlier)(earlier.rgb, earlier.variance + model(key).variance)
+        chain[key] = {"against": against or "exact",
+                      "relative_mse": _errors(both, model(key), {"all": hit})["all"],
+                      "to_exact": _errors(exact, model(key), {"all": hit})["all"]}
+        print(f"  model {key:32s} against {against or 'exact BRDFs':32s} "
+              f"{chain[key]['relative_mse']:9.5f}  (to exact {chain[key]['to_exact']:.5f})")
     if quick:
         print(f"  (--quick: every configuration with {QUICK_GATHERS} gather samples)")
     rows = []
@@ -116,10 +126,10 @@ def split(quick: bool = False) -> dict:
         state = brdf_pca.precompute(scene, **knobs)
         image = state.render()
         seconds = time.perf_counter() - started
-        name = brdf_pca.model_name(knobs)
-        row = {"label": label, "knobs": knobs, "model": name,
+        key = brdf_pca.model_name(knobs)
+        row = {"label": label, "knobs": knobs, "model": key,
                "to_exact": _errors(exact, image, {"all": hit})["all"],
-               "to_model": _errors(model(name), image, masks),
+               "to_model": _errors(model(key), image, masks),
                "first_frame_seconds": seconds,
                "relit_frame_seconds": _relit_frame_seconds(state)}
         rows.append(row)
@@ -129,7 +139,7 @@ def split(quick: bool = False) -> dict:
               f"{1e3 * row['relit_frame_seconds']:.1f} ms", flush=True)
     parts = _parts(chain, rows, masks)
     print("  parts of the default's error against the exact BRDFs (relative MSE): " + ", ".join(
-        f"{name} {value:.5f}" for name, value in parts["values"].items())
+        f"{part} {value:.5f}" for part, value in parts["values"].items())
         + f"; dominant: {parts['dominant']}")
     return {"models": chain, "rows": rows, "parts": parts,
             "edge_pixels": int(masks["edges"].sum()), "pixels": int(hit.sum())}

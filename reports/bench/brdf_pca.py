@@ -38,6 +38,7 @@ from ...fast import brdf_pca
 from ...materials.brdf_pca import pca_analysis
 from ...materials.brdfs import GAMMA_RANGES, MODELS, AnalyticBRDF
 from ...scenes import PointLight, load_scene
+from ...scenes.gbuffer import interior_pixels
 from . import steps_bar, with_size, write_figures
 
 #: Targets of the task (frames per second on this machine).
@@ -245,23 +246,6 @@ def _analysis(folder: Path) -> dict:
     atomic_save_figure(path, figure)
     print(f"wrote {path}")
     return results
-
-
-def interior_pixels(scene) -> np.ndarray:
-    """Return the pixels whose 3 x 3 neighbourhood sees one object.
-
-    Edges are anti-aliased by the reference's pixel filter but not by the one-ray
-    G-buffer, so they are left out of the relative MSE.
-    """
-    from ...scenes.gbuffer import gbuffer
-
-    ids = gbuffer(scene).object_id
-    padded = np.pad(ids, 1, mode="edge")
-    same = np.ones(ids.shape, dtype=bool)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            same &= padded[1 + dy:1 + dy + ids.shape[0], 1 + dx:1 + dx + ids.shape[1]] == ids
-    return same & (ids >= 0)
 
 
 def _validate(args, folder: Path) -> dict:

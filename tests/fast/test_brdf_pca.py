@@ -501,8 +501,8 @@ def test_converges_to_the_transport_it_approximates():
     """More gather samples bring the image closer to the path-traced limit of the method's
     own transport (the first surface glossy, every later one Lambertian, Sect. 5.2)."""
     from translucent.reference.brdf_plugins import render_lambertian_gather
-    from translucent.reports.bench.brdf_pca import interior_pixels
     from translucent.reports.metrics.compute import relative_mse
+    from translucent.scenes.gbuffer import interior_pixels
 
     scene = _tiny_scene(48, 36)
     limit = render_lambertian_gather(scene, bounces=2, spp=128, passes=4)
@@ -521,8 +521,8 @@ def test_indirect_light_brings_it_closer_to_the_exact_reference(gamma):
     """Against the exact-BRDF path tracer, the full image beats its own direct lighting:
     the glossy and diffuse transfer carry real light (FLIP and relative MSE)."""
     from translucent.reference import render
-    from translucent.reports.bench.brdf_pca import interior_pixels
     from translucent.reports.metrics.compute import evaluate, relative_mse
+    from translucent.scenes.gbuffer import interior_pixels
 
     scene = _tiny_scene(48, 36)
     scene = scene.with_material("floor", scene.object("floor").material.with_gamma(gamma))

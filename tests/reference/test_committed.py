@@ -52,9 +52,9 @@ FRESH_RENDER_CASES = [pytest.param(name, marks=pytest.mark.slow) if name in SLOW
                       else name for name in NAMES]
 
 #: Samples per pixel of each of the 8 passes of the fresh render, per scene: a few seconds.
-FRESH_SPP = {"glossy": 16, "bowl": 16, "sphere": 4, "cornell_block": 2, "solid_checker": 16,
-             "solid_veins": 8, "solid_gradient": 16, "sphere_dielectric": 4,
-             "dielectric_on_floor": 4}
+FRESH_SPP = {"glossy": 16, "glossy_box": 16, "bowl": 16, "sphere": 4, "cornell_block": 2,
+             "solid_checker": 16, "solid_veins": 8, "solid_gradient": 16,
+             "sphere_dielectric": 4, "dielectric_on_floor": 4}
 
 #: The drift the consistency check must detect in every scene. sphere_dielectric's RGB
 #: render at 4 spp x 8 showed 5 % only at z = 2.9 (its red channel); one channel at a time

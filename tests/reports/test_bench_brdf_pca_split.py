@@ -15,7 +15,9 @@ def test_the_split_names_the_lambertian_gather_as_the_dominant_part(tmp_path):
                          "--json", out, "--out", tmp_path / "figures", cwd=tmp_path)
     assert result.returncode == 0 and "Traceback" not in result.stderr, explain(result)
     assert "dominant: Lambertian gather samples" in result.stdout, explain(result)
-    split = json.loads(out.read_text())["split"]
+    scenes = json.loads(out.read_text())["split"]["scenes"]
+    assert list(scenes) == ["glossy"]  # quick: the first scene alone
+    split = scenes["glossy"]
     models = split["models"]
     assert models["brdf_pca_k6+lambertian_gather2"]["against"] == "brdf_pca_k6"
     # the gather transport holds the model's error; the PCA of the BRDFs does not
