@@ -13,7 +13,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 #: Folders that are not the package.
-NOT_PACKAGE = {"tests", "examples", "docs", "build"}
+NOT_PACKAGE = {"tests", "examples", "docs", "build", "benchmarks"}
 
 #: Concept -> the concepts it may import (the suite's top-level modules, such as errors,
 #: image, cache and backend, are open to all). materials -> scenes -> reference | fast ->

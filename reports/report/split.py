@@ -311,7 +311,11 @@ class ErrorSplit:
         parts = [f"{step.label} {format_value(step.metrics.get('relative_mse'), 3)}"
                  + ("" if step.verdicts.get("relative_mse") == RESOLVED else " (within noise)")
                  for step in self.steps]
-        return " The model's error by its parts (relative MSE): " + ", ".join(parts) + "."
+        resolved = [step for step in self.steps if step.verdicts.get("relative_mse") == RESOLVED]
+        largest = max(resolved, key=lambda step: step.metrics.get("relative_mse") or 0.0,
+                      default=None)
+        return (" The model's error by its parts (relative MSE): " + ", ".join(parts) + "."
+                + ("" if largest is None else f" The largest part: {largest.label}."))
 
     def as_dict(self) -> dict:
         """Return the ``model_error`` and ``approximation_error`` blocks of ``metrics.json``."""

@@ -1,0 +1,1 @@
+"""Benchmarks of translucent for airspeed velocity (asv): see docs/history.md."""

@@ -1,0 +1,146 @@
+"""Each fast method's accuracy and speed on the report's default scenes, commit by commit.
+
+One report per commit (``setup_cache``: ``translucent report`` on the default scenes, in a
+temporary folder, with its own cache) gives every ``track_*`` its number: relative MSE and
+HDR-FLIP against the committed reference, each with the reference's noise floor recorded
+beside it (``track_*_noise_floor``: a change within the floor is noise, not a step), and the
+model and approximation parts of the error split. The warm frame of each method on
+``sphere`` and ``glossy`` is timed by asv itself (``time_frame``). A scene or method a
+commit does not have, or where a method does not apply, is not a number (asv shows n/a).
+
+The report is run through its command line, which every commit of the history has, so that
+these benchmarks run unchanged against old commits. Read in docs/history.md.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+#: The report's default scenes and the built-in methods (a commit without one: n/a).
+SCENES = ["sphere", "bowl", "cornell_block", "sphere_dielectric", "dielectric_on_floor",
+          "glossy", "glossy_box", "solid_checker", "solid_gradient", "solid_veins"]
+METHODS = ["prt", "radiosity", "splatting", "brdf_pca"]
+
+#: A report of the default scenes with an empty cache takes a few minutes on 2 cores.
+REPORT_TIMEOUT_SECONDS = 3600
+
+#: Where each tracked figure lies in a method's block of the report's ``metrics.json``.
+FIGURES = {
+    "relative_mse": ("noise", "relative_mse", "value"),
+    "relative_mse_noise_floor": ("noise", "relative_mse", "noise_floor"),
+    "hdr_flip": ("noise", "hdr_flip", "value"),
+    "hdr_flip_noise_floor": ("noise", "hdr_flip", "noise_floor"),
+    "model_relative_mse": ("model_error", "metrics", "relative_mse"),
+    "approximation_relative_mse": ("approximation_error", "metrics", "relative_mse"),
+}
+
+
+def run_report(folder: Path) -> dict:
+    """Run ``translucent report`` of the default scenes into ``folder``; return metrics.json.
+
+    Exit code 1 (a regression against the commit's own baseline) is a result, not a failure.
+    """
+    environment = {**os.environ, "TRANSLUCENT_CACHE": str(folder / "cache")}
+    code = ("from translucent.reports.cli import main; import sys; "
+            f"sys.exit(main(['report', '--out', {str(folder / 'report')!r}, '--no-progress']))")
+    done = subprocess.run([sys.executable, "-c", code], env=environment, capture_output=True,
+                          text=True, timeout=REPORT_TIMEOUT_SECONDS)
+    if done.returncode not in (0, 1):
+        raise RuntimeError(f"translucent report exited {done.returncode}: "
+                           f"{done.stderr[-2000:]}")
+    return json.loads((folder / "report" / "metrics.json").read_text())
+
+
+def figures_of(metrics: dict) -> dict:
+    """Return ``{scene: {method: {figure: value}}}`` of a report's ``metrics.json``."""
+    found: dict = {}
+    for scene, block in (metrics.get("scenes") or {}).items():
+        for method, entry in (block.get("methods") or {}).items():
+            if entry.get("status") != "ok":
+                continue
+            values = {}
+            for figure, path in FIGURES.items():
+                value = entry
+                for key in path:
+                    value = value.get(key) if isinstance(value, dict) else None
+                if isinstance(value, (int, float)):
+                    values[figure] = float(value)
+            found.setdefault(scene, {})[method] = values
+    return found
+
+
+class Accuracy:
+    """The report's figures per default scene and method (one report a commit)."""
+
+    params = (SCENES, METHODS)
+    param_names = ["scene", "method"]
+    timeout = REPORT_TIMEOUT_SECONDS
+
+    def setup_cache(self):
+        with tempfile.TemporaryDirectory(prefix="translucent-asv-") as folder:
+            return figures_of(run_report(Path(folder)))
+
+    setup_cache.timeout = REPORT_TIMEOUT_SECONDS
+
+    @staticmethod
+    def _figure(figures, scene, method, figure):
+        value = figures.get(scene, {}).get(method, {}).get(figure)
+        if value is None:
+            raise NotImplementedError(f"{method} on {scene}: no {figure} at this commit")
+        return value
+
+    def track_relative_mse(self, figures, scene, method):
+        return self._figure(figures, scene, method, "relative_mse")
+
+    track_relative_mse.unit = "relative MSE"
+
+    def track_relative_mse_noise_floor(self, figures, scene, method):
+        return self._figure(figures, scene, method, "relative_mse_noise_floor")
+
+    track_relative_mse_noise_floor.unit = "relative MSE"
+
+    def track_hdr_flip(self, figures, scene, method):
+        return self._figure(figures, scene, method, "hdr_flip")
+
+    track_hdr_flip.unit = "HDR-FLIP"
+
+    def track_hdr_flip_noise_floor(self, figures, scene, method):
+        return self._figure(figures, scene, method, "hdr_flip_noise_floor")
+
+    track_hdr_flip_noise_floor.unit = "HDR-FLIP"
+
+    def track_model_relative_mse(self, figures, scene, method):
+        return self._figure(figures, scene, method, "model_relative_mse")
+
+    track_model_relative_mse.unit = "relative MSE"
+
+    def track_approximation_relative_mse(self, figures, scene, method):
+        return self._figure(figures, scene, method, "approximation_relative_mse")
+
+    track_approximation_relative_mse.unit = "relative MSE"
+
+
+class Frame:
+    """The warm frame of each method on ``sphere`` and ``glossy`` (its precomputation cached)."""
+
+    params = (["sphere", "glossy"], METHODS)
+    param_names = ["scene", "method"]
+    timeout = 1800
+
+    def setup(self, scene, method):
+        import translucent
+
+        loaded = translucent.load_scene(scene)
+        module = translucent.method(method)
+        if module.applies_to(loaded) is not None:
+            raise NotImplementedError(f"{method} does not apply to {scene}")
+        self.state = module.precompute(loaded)
+        self.state.render()
+
+    def time_frame(self, scene, method):
+        self.state.render()

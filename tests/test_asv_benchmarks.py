@@ -1,0 +1,48 @@
+"""The asv benchmarks (benchmarks/accuracy.py) read the report's figures and cover its scenes."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+from translucent.fast.base import METHODS
+from translucent.reports.report.pipeline import default_scenes
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _benchmarks():
+    spec = importlib.util.spec_from_file_location("asv_accuracy", ROOT / "benchmarks" /
+                                                  "accuracy.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_history_tracks_every_default_scene_and_method():
+    # a new default scene or method without a history fails here
+    accuracy = _benchmarks()
+    assert sorted(accuracy.SCENES) == sorted(default_scenes()[0])
+    assert sorted(accuracy.METHODS) == sorted(METHODS)
+
+
+def test_figures_are_read_from_a_reports_metrics_and_missing_ones_are_not_numbers():
+    accuracy = _benchmarks()
+    metrics = {"scenes": {"sphere": {"methods": {
+        "prt": {"status": "ok",
+                "noise": {"relative_mse": {"value": 0.01, "noise_floor": 2e-4},
+                          "hdr_flip": {"value": 0.1, "noise_floor": 0.01}},
+                "model_error": {"metrics": {"relative_mse": 0.006}},
+                "approximation_error": None},
+        "brdf_pca": {"status": "not applicable"}}}}}
+    figures = accuracy.figures_of(metrics)
+    assert figures == {"sphere": {"prt": {
+        "relative_mse": 0.01, "relative_mse_noise_floor": 2e-4, "hdr_flip": 0.1,
+        "hdr_flip_noise_floor": 0.01, "model_relative_mse": 0.006}}}
+    benchmark = accuracy.Accuracy()
+    assert benchmark.track_relative_mse(figures, "sphere", "prt") == 0.01
+    assert benchmark.track_relative_mse_noise_floor(figures, "sphere", "prt") == 2e-4
+    for track, args in ((benchmark.track_approximation_relative_mse, ("sphere", "prt")),
+                        (benchmark.track_relative_mse, ("sphere", "brdf_pca")),
+                        (benchmark.track_hdr_flip, ("bowl", "prt"))):
+        with pytest.raises(NotImplementedError):
+            track(figures, *args)
