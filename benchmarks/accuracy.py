@@ -5,8 +5,9 @@ temporary folder, with its own cache) gives every ``track_*`` its number: relati
 HDR-FLIP against the committed reference, each with the reference's noise floor recorded
 beside it (``track_*_noise_floor``: a change within the floor is noise, not a step), and the
 model and approximation parts of the error split. The warm frame of each method on
-``sphere`` and ``glossy`` is timed by asv itself (``time_frame``). A scene or method a
-commit does not have, or where a method does not apply, is not a number (asv shows n/a).
+``sphere`` and ``glossy`` (relit with nudged lights, as the report times it) is timed by
+asv itself (``time_frame``). A scene or method a commit does not have, or where a method
+does not apply, is skipped (asv shows n/a); a figure its report lacks is NaN.
 
 The report is run through its command line, which every commit of the history has, so that
 these benchmarks run unchanged against old commits. Read in docs/history.md.
@@ -15,16 +16,35 @@ these benchmarks run unchanged against old commits. Read in docs/history.md.
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-#: The report's default scenes and the built-in methods (a commit without one: n/a).
-SCENES = ["sphere", "bowl", "cornell_block", "sphere_dielectric", "dielectric_on_floor",
-          "glossy", "glossy_box", "solid_checker", "solid_gradient", "solid_veins"]
-METHODS = ["prt", "radiosity", "splatting", "brdf_pca"]
+#: The report's default scenes and the built-in methods, fixed so that every commit of a
+#: history is asked the same (a commit without one: n/a).
+BUILTIN_SCENES = ["sphere", "bowl", "cornell_block", "sphere_dielectric",
+                  "dielectric_on_floor", "glossy", "glossy_box", "solid_checker",
+                  "solid_gradient", "solid_veins"]
+BUILTIN_METHODS = ["prt", "radiosity", "splatting", "brdf_pca"]
+
+
+def _registered_methods() -> list[str]:
+    """Return the methods the installed translucent registers besides the built-ins.
+
+    A user's own, through the ``translucent.methods`` entry point, as the report finds them.
+    """
+    try:
+        from translucent.fast.base import METHODS as registered
+    except Exception:  # noqa: BLE001 - an old commit, or none installed: the built-ins
+        return []
+    return [name for name in registered if name not in BUILTIN_METHODS]
+
+
+SCENES = BUILTIN_SCENES
+METHODS = BUILTIN_METHODS + _registered_methods()
 
 #: A report of the default scenes with an empty cache takes a few minutes on 2 cores.
 REPORT_TIMEOUT_SECONDS = 3600
@@ -82,44 +102,55 @@ class Accuracy:
     timeout = REPORT_TIMEOUT_SECONDS
 
     def setup_cache(self):
+        """Run one report of the default scenes; return its figures."""
         with tempfile.TemporaryDirectory(prefix="translucent-asv-") as folder:
             return figures_of(run_report(Path(folder)))
 
     setup_cache.timeout = REPORT_TIMEOUT_SECONDS
 
+    def setup(self, figures, scene, method):
+        """Skip a scene and method the commit's report has no figures of (asv: n/a)."""
+        if method not in figures.get(scene, {}):
+            raise NotImplementedError(f"{method} on {scene}: not run at this commit")
+
     @staticmethod
     def _figure(figures, scene, method, figure):
+        """Return one figure; NaN where the commit's report has none (asv: n/a)."""
         value = figures.get(scene, {}).get(method, {}).get(figure)
-        if value is None:
-            raise NotImplementedError(f"{method} on {scene}: no {figure} at this commit")
-        return value
+        return math.nan if value is None else value
 
     def track_relative_mse(self, figures, scene, method):
+        """Return the relative MSE against the committed reference (its noise discounted)."""
         return self._figure(figures, scene, method, "relative_mse")
 
     track_relative_mse.unit = "relative MSE"
 
     def track_relative_mse_noise_floor(self, figures, scene, method):
+        """Return the reference's noise floor of the relative MSE."""
         return self._figure(figures, scene, method, "relative_mse_noise_floor")
 
     track_relative_mse_noise_floor.unit = "relative MSE"
 
     def track_hdr_flip(self, figures, scene, method):
+        """Return HDR-FLIP against the committed reference."""
         return self._figure(figures, scene, method, "hdr_flip")
 
     track_hdr_flip.unit = "HDR-FLIP"
 
     def track_hdr_flip_noise_floor(self, figures, scene, method):
+        """Return the reference's noise floor of HDR-FLIP."""
         return self._figure(figures, scene, method, "hdr_flip_noise_floor")
 
     track_hdr_flip_noise_floor.unit = "HDR-FLIP"
 
     def track_model_relative_mse(self, figures, scene, method):
+        """Return the model's part of the error (its model reference against the reference)."""
         return self._figure(figures, scene, method, "model_relative_mse")
 
     track_model_relative_mse.unit = "relative MSE"
 
     def track_approximation_relative_mse(self, figures, scene, method):
+        """Return the method's own part (its image against its model reference)."""
         return self._figure(figures, scene, method, "approximation_relative_mse")
 
     track_approximation_relative_mse.unit = "relative MSE"
@@ -133,6 +164,7 @@ class Frame:
     timeout = 1800
 
     def setup(self, scene, method):
+        """Precompute (or load) the method's state and render a first frame."""
         import translucent
 
         loaded = translucent.load_scene(scene)
@@ -141,6 +173,15 @@ class Frame:
             raise NotImplementedError(f"{method} does not apply to {scene}")
         self.state = module.precompute(loaded)
         self.state.render()
+        self.lights = list(loaded.lights)
+        self.frame = 0
 
     def time_frame(self, scene, method):
-        self.state.render()
+        """Relight a warm state with nudged lights: the interactive path, as the report."""
+        try:
+            from translucent.reports.report.runs import nudged_lights
+        except ImportError:  # an older commit: the scene's own lights again
+            self.state.render(lights=self.lights)
+            return
+        self.frame += 1
+        self.state.render(lights=nudged_lights(self.lights, self.frame))

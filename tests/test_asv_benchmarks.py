@@ -1,6 +1,7 @@
 """The asv benchmarks (benchmarks/accuracy.py) read the report's figures and cover its scenes."""
 
 import importlib.util
+import math
 from pathlib import Path
 
 import pytest
@@ -19,10 +20,12 @@ def _benchmarks():
 
 
 def test_the_history_tracks_every_default_scene_and_method():
-    # a new default scene or method without a history fails here
+    # a new default scene or built-in method without a history fails here: the lists are
+    # fixed, so that old commits are asked the same
     accuracy = _benchmarks()
-    assert sorted(accuracy.SCENES) == sorted(default_scenes()[0])
-    assert sorted(accuracy.METHODS) == sorted(METHODS)
+    assert sorted(accuracy.BUILTIN_SCENES) == sorted(default_scenes()[0])
+    assert sorted(accuracy.BUILTIN_METHODS) == sorted(METHODS)
+    assert accuracy.METHODS[:len(accuracy.BUILTIN_METHODS)] == accuracy.BUILTIN_METHODS
 
 
 def test_figures_are_read_from_a_reports_metrics_and_missing_ones_are_not_numbers():
@@ -41,8 +44,9 @@ def test_figures_are_read_from_a_reports_metrics_and_missing_ones_are_not_number
     benchmark = accuracy.Accuracy()
     assert benchmark.track_relative_mse(figures, "sphere", "prt") == 0.01
     assert benchmark.track_relative_mse_noise_floor(figures, "sphere", "prt") == 2e-4
-    for track, args in ((benchmark.track_approximation_relative_mse, ("sphere", "prt")),
-                        (benchmark.track_relative_mse, ("sphere", "brdf_pca")),
-                        (benchmark.track_hdr_flip, ("bowl", "prt"))):
+    # a figure this commit's report lacks is not a number; a method it did not run is skipped
+    assert math.isnan(benchmark.track_approximation_relative_mse(figures, "sphere", "prt"))
+    benchmark.setup(figures, "sphere", "prt")
+    for args in (("sphere", "brdf_pca"), ("bowl", "prt")):
         with pytest.raises(NotImplementedError):
-            track(figures, *args)
+            benchmark.setup(figures, *args)
