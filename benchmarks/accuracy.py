@@ -119,41 +119,34 @@ class Accuracy:
         value = figures.get(scene, {}).get(method, {}).get(figure)
         return math.nan if value is None else value
 
-    def track_relative_mse(self, figures, scene, method):
-        """Return the relative MSE against the committed reference (its noise discounted)."""
-        return self._figure(figures, scene, method, "relative_mse")
 
-    track_relative_mse.unit = "relative MSE"
+def _tracker(figure: str, unit: str, what: str):
+    def track(self, figures, scene, method):
+        return self._figure(figures, scene, method, figure)
 
-    def track_relative_mse_noise_floor(self, figures, scene, method):
-        """Return the reference's noise floor of the relative MSE."""
-        return self._figure(figures, scene, method, "relative_mse_noise_floor")
+    track.__name__ = track.__qualname__ = f"track_{figure}"
+    track.__doc__ = f"Return {what}."
+    track.unit = unit
+    return track
 
-    track_relative_mse_noise_floor.unit = "relative MSE"
 
-    def track_hdr_flip(self, figures, scene, method):
-        """Return HDR-FLIP against the committed reference."""
-        return self._figure(figures, scene, method, "hdr_flip")
+#: The tracked figures: (unit, what each is), one ``track_<figure>`` of :class:`Accuracy`
+#: a figure.
+TRACKED = {
+    "relative_mse": ("relative MSE", "the relative MSE against the committed reference (its "
+                                     "noise discounted)"),
+    "relative_mse_noise_floor": ("relative MSE", "the reference's noise floor of the "
+                                                 "relative MSE"),
+    "hdr_flip": ("HDR-FLIP", "HDR-FLIP against the committed reference"),
+    "hdr_flip_noise_floor": ("HDR-FLIP", "the reference's noise floor of HDR-FLIP"),
+    "model_relative_mse": ("relative MSE", "the model's part of the error (its model "
+                                           "reference against the reference)"),
+    "approximation_relative_mse": ("relative MSE", "the method's own part (its image "
+                                                   "against its model reference)"),
+}
 
-    track_hdr_flip.unit = "HDR-FLIP"
-
-    def track_hdr_flip_noise_floor(self, figures, scene, method):
-        """Return the reference's noise floor of HDR-FLIP."""
-        return self._figure(figures, scene, method, "hdr_flip_noise_floor")
-
-    track_hdr_flip_noise_floor.unit = "HDR-FLIP"
-
-    def track_model_relative_mse(self, figures, scene, method):
-        """Return the model's part of the error (its model reference against the reference)."""
-        return self._figure(figures, scene, method, "model_relative_mse")
-
-    track_model_relative_mse.unit = "relative MSE"
-
-    def track_approximation_relative_mse(self, figures, scene, method):
-        """Return the method's own part (its image against its model reference)."""
-        return self._figure(figures, scene, method, "approximation_relative_mse")
-
-    track_approximation_relative_mse.unit = "relative MSE"
+for _figure_name, (_unit, _what) in TRACKED.items():
+    setattr(Accuracy, f"track_{_figure_name}", _tracker(_figure_name, _unit, _what))
 
 
 class Frame:

@@ -42,7 +42,10 @@ def test_figures_are_read_from_a_reports_metrics_and_missing_ones_are_not_number
         "relative_mse": 0.01, "relative_mse_noise_floor": 2e-4, "hdr_flip": 0.1,
         "hdr_flip_noise_floor": 0.01, "model_relative_mse": 0.006}}}
     benchmark = accuracy.Accuracy()
+    assert set(accuracy.TRACKED) == set(accuracy.FIGURES)  # one track_ a figure
     assert benchmark.track_relative_mse(figures, "sphere", "prt") == 0.01
+    assert benchmark.track_hdr_flip_noise_floor(figures, "sphere", "prt") == 0.01
+    assert accuracy.Accuracy.track_relative_mse.unit == "relative MSE"
     assert benchmark.track_relative_mse_noise_floor(figures, "sphere", "prt") == 2e-4
     # a figure this commit's report lacks is not a number; a method it did not run is skipped
     assert math.isnan(benchmark.track_approximation_relative_mse(figures, "sphere", "prt"))
