@@ -124,6 +124,7 @@ class BRDFPCAState:
                       **data.knobs, **(run_knobs or {})}
         self._blocks = None
         self._reflection_w = None
+        self._reflection_edits: list = []
         self.materials = {o.name: o.material for o in scene.objects}
         self.frozen: dict = {}
         self._transfer = {scene.objects[i].name: matrices
@@ -187,7 +188,9 @@ class BRDFPCAState:
                                      data.view_normal, samples, seed + 1)
         albedo_x = self._albedo("view")
         direct = albedo_x * view_e.sum(axis=1)
-        self._reflection_w = (self._brdf_reflection(gather_wi, gather_e)
+        self._gather_light = (gather_wi, gather_e)
+        self._reflection_edits = []
+        self._reflection_w = (self._brdf_reflection()
                               if self.knobs["gather_reflection"] == "brdf" else None)
         indirect = albedo_x * self._product(data.diffuse, slice(None))
         self._parts = {"direct": direct, "indirect": indirect, "all": direct + indirect}
@@ -215,32 +218,61 @@ class BRDFPCAState:
         """
         product = quantised_product(matrix, self._radiance_w)
         if self._reflection_w is not None:
-            reflected = np.empty_like(product)
-            product_rgb_per_row(matrix.indptr, matrix.packed, matrix.scales, matrix.index_bits,
-                                self._reflection_w, self._blocks[0][rows], reflected)
-            product += reflected
+            product += self._per_block_product(matrix, self._reflection_w, rows)
         return product
 
-    def _brdf_reflection(self, wi, irradiance) -> np.ndarray:
+    def _per_block_product(self, matrix, vectors, rows) -> np.ndarray:
+        """Return rows of ``matrix`` (view samples ``rows``), each times its block's vector."""
+        out = np.empty((matrix.rows, 3), dtype=np.float32)
+        product_rgb_per_row(matrix.indptr, matrix.packed, matrix.scales, matrix.index_bits,
+                            vectors, self._blocks[0][rows], out)
+        return out
+
+    def _apply_reflection_edits(self) -> None:
+        """Bring the gather samples' BRDF reflection up to edits of gamma or rho_s.
+
+        Only the edited objects' gather samples are evaluated again (their new part less
+        their old one); the products of every row with the change are added to the kept
+        ones. No shadow ray, no Eq. 17 series: an edit is not a relighting.
+        """
+        change = self._brdf_reflection(self._reflection_edits)
+        self._reflection_edits = []
+        self._reflection_w += change
+        added = self._albedo("view") * self._per_block_product(self.data.diffuse, change,
+                                                                 slice(None))
+        indirect = self._parts["indirect"] + added
+        self._parts = {"direct": self._parts["direct"], "indirect": indirect,
+                       "all": self._parts["direct"] + indirect}
+        for name, products in self._products.items():
+            rows = self._members[name]
+            self._products[name] = products + (
+                self._per_block_product(self.frozen[name][1], change, rows)
+                if name in self.frozen else
+                np.stack([self._per_block_product(m, change, rows)
+                          for m in self._transfer[name]]))
+        self._glossy_parts = {}
+
+    def _brdf_reflection(self, edits=None) -> np.ndarray:
         """Return, per block of pixels, the glossy radiance the gather samples send it (Haar).
 
         Each gather sample on an object with an analytic BRDF reflects the light that
         reaches it directly towards the block's centre by rho_s f_F f_E(gamma), f_E by its
-        PCA (Eq. 10; its diffuse term is in L^w already): a (B, G, 3) array of Haar
-        coefficients over the gather square, one vector a block
-        (:func:`reflection_blocks`, :func:`~.kernels.block_reflection`).
+        PCA (Eq. 10; its diffuse term is in L^w already): Haar coefficients over the gather
+        square, channels first (B, 3, G), one vector a block (:func:`reflection_blocks`,
+        :func:`~.kernels.block_reflection`). With ``edits``, ``[(object name, old material,
+        new material), ...]``: the change those edits make, the edited objects alone.
         """
         data = self.data
         if self._blocks is None:
             self._blocks = reflection_blocks(data.shape, data.pixel, data.view_object,
                                              data.view_position, self._reflection_tile())
-        block, centre, radius = self._blocks
+        _, centre, radius = self._blocks
+        wi, irradiance = self._gather_light
         radiance = np.zeros((len(centre), 3, len(data.gather_position)), dtype=np.float32)
-        for name in self._members:
-            material = self.materials[name]
+        lit = irradiance.max(axis=(1, 2), initial=0.0) > 0
+        for name, material, coefficients, rho_s in self._reflection_terms(edits):
             # the gather samples of this object that the lights reach
-            found = np.flatnonzero((data.gather_object == self._index[name])
-                                   & (irradiance.max(axis=(1, 2), initial=0.0) > 0))
+            found = np.flatnonzero((data.gather_object == self._index[name]) & lit)
             if not len(found):
                 continue
             basis = self.data.bases[self._index[name]]
@@ -248,12 +280,34 @@ class BRDFPCAState:
                              data.gather_normal[found],
                              np.sqrt(data.gather_area[found] / math.pi), found,
                              np.ascontiguousarray(wi[found]),
-                             np.ascontiguousarray(irradiance[found] * material.rho_s),
-                             self.coefficients(name), REFLECTION_GUARD,
+                             np.ascontiguousarray(irradiance[found] * rho_s),
+                             coefficients, REFLECTION_GUARD,
                              *material_parameters(material, basis), radiance)
         side = int(round(math.sqrt(radiance.shape[2])))
         haar2d_forward_in_place(radiance.reshape(-1, side, side))
         return radiance
+
+    def _reflection_terms(self, edits=None) -> list:
+        """Return ``(object, material, c, rho_s)`` whose reflections :meth:`_brdf_reflection` sums.
+
+        Every glossy object's, or each edit's change: one term with c(new) - c(old) where
+        rho_s stays (the kernel is linear in c), else the new term and the old one negated.
+        """
+        def basis(name):
+            return self.data.bases[self._index[name]]
+
+        if edits is None:
+            return [(name, self.materials[name],
+                     basis(name).coefficients(self.materials[name].gamma),
+                     self.materials[name].rho_s) for name in self._members]
+        terms = []
+        for name, old, new in edits:
+            new_c, old_c = (basis(name).coefficients(m.gamma) for m in (new, old))
+            if np.array_equal(old.rho_s, new.rho_s):
+                terms.append((name, new, new_c - old_c, new.rho_s))
+            else:
+                terms += [(name, new, new_c, new.rho_s), (name, old, old_c, -old.rho_s)]
+        return terms
 
     def _reflection_tile(self) -> int:
         """Pixels on a side of a block: about ``reflection_blocks`` blocks over the view samples."""
@@ -326,8 +380,9 @@ class BRDFPCAState:
                                  value=getattr(new, "model", type(new).__name__))
             albedo_changed |= not np.array_equal(diffuse_albedo(old), diffuse_albedo(new))
             # gather samples that reflect by their BRDF send every pixel new light
-            albedo_changed |= glossy and self.knobs["gather_reflection"] == "brdf" and (
-                old.gamma != new.gamma or not np.array_equal(old.rho_s, new.rho_s))
+            if glossy and self.knobs["gather_reflection"] == "brdf" and (
+                    old.gamma != new.gamma or not np.array_equal(old.rho_s, new.rho_s)):
+                self._reflection_edits.append((name, old, new))
             self.materials[name] = new
             if name in self.frozen and self.frozen[name][0] != new.gamma:
                 self.unfreeze(name)
@@ -365,6 +420,8 @@ class BRDFPCAState:
         self._set_materials(material)
         if not self._lit:
             self._relight()
+        elif self._reflection_edits:
+            self._apply_reflection_edits()
         rgb = self._compose(component)
         return Image(rgb, metadata={
             "producer": "brdf_pca", "scene": self.scene.name, "component": component,
@@ -378,7 +435,11 @@ class BRDFPCAState:
                              f"{', '.join(self._members)}", field=field_name, value=name)
 
     def edit(self, object_name: str, gamma: float) -> Image:
-        """Set one object's gamma and render: only that object's pixels change (Sect. 6.2)."""
+        """Set one object's gamma and render (Sect. 6.2).
+
+        Only that object's pixels change, but with ``gather_reflection`` "brdf", whose gather
+        samples send every pixel the light the object's BRDF reflects.
+        """
         self._check_editable(object_name, "object")
         material = self.materials[object_name].with_gamma(gamma)
         return self.render(material={object_name: material})
