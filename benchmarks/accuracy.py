@@ -178,3 +178,57 @@ class Frame:
             return
         self.frame += 1
         self.state.render(lights=nudged_lights(self.lights, self.frame))
+
+
+#: Synthetic captures per commit for the fit's interval coverage (48 x 48, dipole-made).
+FIT_CAPTURES = 8
+
+
+def fit_figures(result) -> dict:
+    """Return the tracked figures of a :func:`~translucent.fitting.validation.coverage_study`."""
+    seconds = getattr(result, "fit_seconds", None)
+    per_fit = (float(sum(seconds) / len(seconds)) if seconds is not None and len(seconds)
+               else float(result.seconds) / max(len(result.converged), 1))
+    return {"coverage": float(result.fraction), "seconds": per_fit,
+            "converged": float(sum(bool(c) for c in result.converged)
+                               / max(len(result.converged), 1))}
+
+
+class Fit:
+    """The dipole fit of synthetic captures made by the dipole: coverage and seconds a fit."""
+
+    timeout = 1800
+
+    def setup_cache(self):
+        """Fit :data:`FIT_CAPTURES` captures of random truth; None where the commit cannot."""
+        try:
+            from translucent.fitting.validation import coverage_study
+
+            return fit_figures(coverage_study(captures=FIT_CAPTURES, seed=0, size=48))
+        except (ImportError, TypeError):  # an older commit without this study
+            return None
+
+    setup_cache.timeout = 1800
+
+    def setup(self, figures):
+        """Skip a commit without the study (asv: n/a)."""
+        if figures is None:
+            raise NotImplementedError("no coverage study at this commit")
+
+    def track_interval_coverage(self, figures):
+        """Return the fraction of true coefficients inside their 95 % intervals."""
+        return figures["coverage"]
+
+    track_interval_coverage.unit = "fraction"
+
+    def track_seconds_per_fit(self, figures):
+        """Return the mean wall time of a fit (profile, MAP, chain, goodness of fit)."""
+        return figures["seconds"]
+
+    track_seconds_per_fit.unit = "seconds"
+
+    def track_converged(self, figures):
+        """Return the fraction of chains that converged."""
+        return figures["converged"]
+
+    track_converged.unit = "fraction"

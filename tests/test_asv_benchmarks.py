@@ -53,3 +53,20 @@ def test_figures_are_read_from_a_reports_metrics_and_missing_ones_are_not_number
     for args in (("sphere", "brdf_pca"), ("bowl", "prt")):
         with pytest.raises(NotImplementedError):
             benchmark.setup(figures, *args)
+
+
+def test_the_fits_figures_are_its_coverage_its_mean_seconds_and_its_convergence():
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    accuracy = _benchmarks()
+    result = SimpleNamespace(fraction=5 / 6, fit_seconds=np.array([2.0, 4.0]), seconds=7.0,
+                             converged=np.array([True, False]))
+    figures = accuracy.fit_figures(result)
+    assert figures == {"coverage": 5 / 6, "seconds": 3.0, "converged": 0.5}
+    fit = accuracy.Fit()
+    assert fit.track_interval_coverage(figures) == 5 / 6
+    assert fit.track_seconds_per_fit(figures) == 3.0
+    with pytest.raises(NotImplementedError):
+        fit.setup(None)
