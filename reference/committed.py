@@ -30,7 +30,6 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..image import Image, read_exr
-from .geometry_term import geometry_settings
 from .mitsuba_scene import GATHER_INTEGRATOR
 from .model_keys import GEOMETRY_SUFFIX, model_key
 
@@ -289,10 +288,13 @@ def committed_reference(name: str, scene=None, profile: str | None = None
             return unusable(f"the committed reference is not the {plan.integrator} render of "
                             f"profile {profile!r} (integrator {meta.get('integrator')!r}, "
                             f"profile {made!r})", image)
-        if isinstance(meta.get("geometry"), dict) and meta["geometry"] != geometry_settings():
-            return unusable(f"the committed reference is stale: its geometry correction was "
-                            f"rendered with {meta['geometry']}, the suite's is "
-                            f"{geometry_settings()}", image)
+        if isinstance(meta.get("geometry"), dict):
+            from .geometry_term import geometry_settings  # needs numba: only for such a one
+
+            if meta["geometry"] != geometry_settings():
+                return unusable(f"the committed reference is stale: its geometry correction "
+                                f"was rendered with {meta['geometry']}, the suite's is "
+                                f"{geometry_settings()}", image)
     return CommittedReference(name, path, image, True, profile=profile)
 
 

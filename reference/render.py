@@ -24,7 +24,6 @@ from ..errors import InputError, check_count
 from ..image import Image, read_exr
 from ..scenes import Scene
 from .delta_lights import DEFAULT_SIZE
-from .geometry_term import geometry_settings
 from .mitsuba_scene import convert_scene
 from .model_keys import model_key, model_rule, parse_model_key
 
@@ -66,7 +65,7 @@ def reference_settings(*, spp: int, passes: int, seed: int, integrator: str | No
             "delta_light_size": float(delta_light_size), "mitsuba": mi.__version__,
             "drjit": dr.__version__, "variant": mi.variant(),
             **({"profile": profile} if profile is not None else {}),
-            **({"geometry": geometry_settings()}
+            **({"geometry": _geometry_settings()}
                if profile is not None and parse_model_key(profile)[1] else {})}
 
 
@@ -126,6 +125,14 @@ def load_scenes(scene: Scene, *, spp: int, per_channel: bool | None = None,
     if per_channel:
         conversions = [convert(channel) for channel in channels]
     return channels, conversions, [mi.load_dict(c.scene_dict) for c in conversions]
+
+
+def _geometry_settings() -> dict:
+    # imported here: the geometry's diffusion solve needs numba, which a render without
+    # the geometry does not (the base install names the render extra it lacks first)
+    from .geometry_term import geometry_settings
+
+    return geometry_settings()
 
 
 def geometry_term_of(scene: Scene, profile: str | None, channels, conversions, mitsuba_scenes):
@@ -509,7 +516,7 @@ def _metadata(scene, key, settings, conversions, channels, mitsuba_scenes=(),
         **({"media": dict(first.media)} if first.media else {}),
         **({"manifold_nee": manifold} if manifold is not None else {}),
         **({"profile": dict(first.profile)} if first.profile else {}),
-        **({"geometry": geometry_settings()} if parse_model_key(settings.get("profile") or "")[1]
+        **({"geometry": _geometry_settings()} if parse_model_key(settings.get("profile") or "")[1]
            else {}),
     }
 

@@ -70,3 +70,28 @@ def test_the_fits_figures_are_its_coverage_its_mean_seconds_and_its_convergence(
     assert fit.track_seconds_per_fit(figures) == 3.0
     with pytest.raises(NotImplementedError):
         fit.setup(None)
+
+
+def _publish():
+    spec = importlib.util.spec_from_file_location("asv_publish", ROOT / "benchmarks" /
+                                                  "publish.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_published_pages_load_their_scripts_from_the_copies_beside_them():
+    publish = _publish()
+    page = ('<script src="https://code.jquery.com/jquery-3.3.1.min.js" integrity="sha256-x" '
+            'crossorigin="anonymous" onerror="f()"></script>\n<script src="asv.js"></script>\n'
+            '<link rel="stylesheet" href="https://cdn.jsdelivr.net/npm/bootstrap@3.1.1/dist/css/'
+            'bootstrap.min.css">\n<a href="https://github.com/airspeed-velocity/asv/">asv</a>')
+    local = publish.localise(page)
+    assert '<script src="vendor/jquery.min.js" onerror="f()"></script>' in local
+    assert '<link rel="stylesheet" href="vendor/bootstrap.min.css">' in local
+    assert '<script src="asv.js"></script>' in local            # its own scripts stay
+    assert 'href="https://github.com/airspeed-velocity/asv/"' in local  # a link is no load
+    for name in [*publish.COPIES.values(), "LICENSES.md"]:       # every copy is committed
+        assert (publish.VENDOR / name).is_file(), name
+    with pytest.raises(ValueError, match="no copy of https://example.org/new.js"):
+        publish.localise('<script src="https://example.org/new.js"></script>')
