@@ -38,7 +38,7 @@ COPIES = {
 
 #: A script or stylesheet tag, and the address in it that leaves the folder.
 TAG = re.compile(r"<(?:script|link)\b[^>]*>")
-EXTERNAL = re.compile(r'\b(src|href)="(https?://[^"]+)"')
+EXTERNAL = re.compile(r'\b(src|href)="((?:https?:)?//[^"]+)"')
 
 #: Attributes that pin the CDN's bytes (subresource integrity): the copies are the same
 #: libraries, some unminified, so the browser would refuse them with these.
@@ -71,7 +71,7 @@ def publish(html_dir: Path | None = None) -> Path:
     """Run ``asv publish`` and make its pages self-contained; return the folder."""
     if html_dir is None:
         html_dir = ROOT / json.loads((ROOT / "asv.conf.json").read_text())["html_dir"]
-    html_dir = Path(html_dir)
+    html_dir = Path(html_dir).resolve()  # asv runs in the root; the copies go here too
     done = subprocess.run(["asv", "publish", "--no-pull", "--html-dir", str(html_dir)],
                           cwd=ROOT, capture_output=True, text=True)
     if done.returncode != 0:

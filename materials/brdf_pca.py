@@ -109,14 +109,18 @@ def pca_model_name(n_basis: int, gather_bounces: int | None = None,
     return f"{name}+{transport}{int(gather_bounces)}"
 
 
+def _ascii_digits(text: str) -> bool:
+    return bool(text) and text.isascii() and text.isdigit()
+
+
 def _pca_model_parts(name) -> tuple[int, str | None, int | None] | None:
     if not isinstance(name, str) or not name.startswith(PCA_MODEL_PREFIX):
         return None
-    digits, _, transport = name[len(PCA_MODEL_PREFIX):].partition("+")
+    digits, plus, transport = name[len(PCA_MODEL_PREFIX):].partition("+")
     kind = next((k for k in GATHER_TRANSPORTS if transport.startswith(k)), None)
     bounces = transport[len(kind):] if kind else ""
-    if not digits.isdigit() or not 1 <= int(digits) <= 64 or (transport and not (
-            kind and bounces.isdigit() and int(bounces) <= 64)):
+    if not _ascii_digits(digits) or not 1 <= int(digits) <= 64 or (plus and not (
+            kind and _ascii_digits(bounces) and int(bounces) <= 64)):
         raise InputError(f"a PCA BRDF model is {PCA_MODEL_PREFIX}K with K in [1, 64], "
                          f"optionally +TRANSPORTN with TRANSPORT one of "
                          f"{', '.join(GATHER_TRANSPORTS)} and N in [0, 64]",

@@ -59,6 +59,20 @@ def _glossy_weight(material, cos_l, cos_v, l_dot_v) -> np.ndarray:
     return np.where((cos_l > 0) & (cos_v > 0), fixed * _lobe(material, variable), 0.0)
 
 
+#: The most bytes the blocks' vectors of gather radiance may take (float32, B x 3 x G): a
+#: knob asking for more is refused before anything is allocated.
+REFLECTION_MAX_BYTES = 4 << 30
+
+
+def _check_reflection_bytes(blocks: int, gathers: int) -> None:
+    needed = 4 * 3 * blocks * gathers
+    if needed > REFLECTION_MAX_BYTES:
+        raise InputError(f"{blocks} blocks x {gathers} gather samples need "
+                         f"{needed / 2**30:.1f} GiB of gather radiance (at most "
+                         f"{REFLECTION_MAX_BYTES / 2**30:.0f}): ask for fewer blocks",
+                         field="reflection_blocks", value=blocks)
+
+
 def reflection_blocks(shape, pixel, view_object, view_position, size: int):
     """Return the block of each view sample and each block's centre (the mean position).
 
@@ -69,6 +83,8 @@ def reflection_blocks(shape, pixel, view_object, view_position, size: int):
     -------
     block : ndarray of int64, (P,)
     centre : ndarray, (B, 3)
+    radius : ndarray, (B,)
+        The farthest view sample of each block from its centre.
     """
     width = shape[1]
     rows, columns = np.divmod(np.asarray(pixel, dtype=np.int64), width)
@@ -102,7 +118,7 @@ class BRDFPCAState:
     data : Precomputation
     run_knobs : dict, optional
         The knobs that are not part of the precomputation (``gather_reflection``,
-        ``reflection_tile``): they override those stored with ``data``.
+        ``reflection_blocks``): they override those stored with ``data``.
 
     Attributes
     ----------
@@ -125,6 +141,8 @@ class BRDFPCAState:
         self._blocks = None
         self._reflection_w = None
         self._reflection_edits: list = []
+        # the objects whose gather samples reflect by their BRDF: every one with a basis
+        self._reflecting = [scene.objects[i].name for i in sorted(data.bases)]
         self.materials = {o.name: o.material for o in scene.objects}
         self.frozen: dict = {}
         self._transfer = {scene.objects[i].name: matrices
@@ -267,6 +285,7 @@ class BRDFPCAState:
             self._blocks = reflection_blocks(data.shape, data.pixel, data.view_object,
                                              data.view_position, self._reflection_tile())
         _, centre, radius = self._blocks
+        _check_reflection_bytes(len(centre), len(data.gather_position))
         wi, irradiance = self._gather_light
         radiance = np.zeros((len(centre), 3, len(data.gather_position)), dtype=np.float32)
         lit = irradiance.max(axis=(1, 2), initial=0.0) > 0
@@ -296,10 +315,10 @@ class BRDFPCAState:
         def basis(name):
             return self.data.bases[self._index[name]]
 
-        if edits is None:
+        if edits is None:  # every glossy object, seen by the camera or not
             return [(name, self.materials[name],
                      basis(name).coefficients(self.materials[name].gamma),
-                     self.materials[name].rho_s) for name in self._members]
+                     self.materials[name].rho_s) for name in self._reflecting]
         terms = []
         for name, old, new in edits:
             new_c, old_c = (basis(name).coefficients(m.gamma) for m in (new, old))

@@ -33,8 +33,10 @@ from ...fast import brdf_pca
 CONFIGURATIONS = [
     ("defaults (gather_reflection lambertian)", {}),
     ("4096 gather samples", {"gather_samples": 4096}),
+    # every basis gets at least a budget's 1 / (4 (K + 1)) (transfer._budgets): 28 x 4096
+    # keeps all 4096 coefficients of each of the K + 1 = 7 rows
     ("4096 gather samples, every coefficient", {
-        "gather_samples": 4096, "transfer_coefficients": 4096 * 7,
+        "gather_samples": 4096, "transfer_coefficients": 4096 * 28,
         "diffuse_coefficients": 4096, "gather_coefficients": 4096}),
     ("gather_reflection brdf", {"gather_reflection": "brdf"}),
     ("gather_reflection brdf, 1024 blocks", {"gather_reflection": "brdf",
@@ -121,7 +123,7 @@ def split_scene(name: str, quick: bool = False) -> dict:
             knobs["gather_samples"] = QUICK_GATHERS
             for key in ("transfer_coefficients", "diffuse_coefficients", "gather_coefficients"):
                 if key in knobs:
-                    knobs[key] = QUICK_GATHERS * (7 if key == "transfer_coefficients" else 1)
+                    knobs[key] = QUICK_GATHERS * (28 if key == "transfer_coefficients" else 1)
         started = time.perf_counter()
         state = brdf_pca.precompute(scene, **knobs)
         image = state.render()

@@ -225,7 +225,7 @@ def _split_block(report: SceneReport, name: str) -> str:
               report.floor_of(name), report.verdicts.get(name, {})),
              (f"model (profile {split.profile} rendered exactly, against transport)",
               split.model, split.model_floor, split.model_verdicts),
-             *((f"of which {step.label} (against "
+             *((f"step {step.label} (against "
                 f"{step.against or 'transport'})", step.metrics, step.floor, step.verdicts)
                for step in split.steps),
              ("approximation (method against its profile rendered exactly)",

@@ -603,7 +603,11 @@ def _plan_model_references(plan: _Plan, report: SceneReport, portable, spp, pass
         committed = committed_reference_for(report.scene, profile) if spp is None else None
         # the simpler models a key builds on split the model's error where committed
         for simpler in model_steps(profile)[:-1] if spp is None else ():
-            found = committed_reference_for(report.scene, simpler)
+            try:
+                found = committed_reference_for(report.scene, simpler)
+            except InputError as error:  # a stale step loses the steps, not the report
+                report.model_reference_errors[simpler] = error.reason
+                continue
             if found is not None and simpler not in wanted:
                 report.model_references[simpler] = found
                 report.model_reference_info[simpler] = model_reference_info(found, "committed")

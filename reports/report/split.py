@@ -314,8 +314,9 @@ class ErrorSplit:
         resolved = [step for step in self.steps if step.verdicts.get("relative_mse") == RESOLVED]
         largest = max(resolved, key=lambda step: step.metrics.get("relative_mse") or 0.0,
                       default=None)
-        return (" The model's error by its parts (relative MSE): " + ", ".join(parts) + "."
-                + ("" if largest is None else f" The largest part: {largest.label}."))
+        return (" The model's error step by step, each against the model before it "
+                "(relative MSE, not additive): " + ", ".join(parts) + "."
+                + ("" if largest is None else f" The largest step: {largest.label}."))
 
     def as_dict(self) -> dict:
         """Return the ``model_error`` and ``approximation_error`` blocks of ``metrics.json``."""
@@ -473,10 +474,11 @@ def _split(report, name: str, cache: dict) -> ErrorSplit:
     try:
         found = split_images(report.reference, model, report.runs[name].image, mask,
                              cache=cache, key=key)
+        steps = _steps(report, profile, mask, key[1], cache)
     except InputError as error:
         return ErrorSplit(profile, f"the model reference cannot be compared: {error.reason}")
     return ErrorSplit(profile, "", *found, report.model_reference_info.get(profile, {}),
-                      _steps(report, profile, mask, key[1], cache))
+                      steps)
 
 
 def split_images(reference: Image, model: Image, image: Image, mask=None, *,

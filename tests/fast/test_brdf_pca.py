@@ -494,6 +494,26 @@ def test_block_reflection_is_the_pca_brdf_times_the_irradiance(rng):
     assert np.all(out[2][:, 2] == 0) and np.any(out[2][:, 3:] > 0)
 
 
+def test_glossy_objects_out_of_view_reflect_too_and_the_blocks_memory_is_bounded(
+        scene, monkeypatch):
+    """A glossy object no pixel sees still has gather samples, which reflect by its BRDF
+    (its model, the gather integrator, reflects at every second vertex); and a block
+    count whose vectors would not fit is refused, naming the knob."""
+    from translucent.scenes import Camera
+
+    camera = scene.camera
+    aside = scene.with_camera(Camera([1.8, 0.6, 1.8], [1.9, 0.0, 1.5], camera.up, 20.0, 24, 18))
+    state = bp.precompute(aside, **TINY, gather_reflection="brdf")
+    unseen = set(state._reflecting) - set(state.glossy_objects)
+    assert unseen  # the camera sees the floor alone
+    state.render()
+    assert {term[0] for term in state._reflection_terms()} == set(state._reflecting)
+    monkeypatch.setattr(bp.state, "REFLECTION_MAX_BYTES", 1024)
+    small = bp.precompute(scene, **TINY, gather_reflection="brdf")
+    with pytest.raises(InputError, match="reflection_blocks = .*GiB of gather radiance"):
+        small.render()
+
+
 def test_reflection_blocks_split_squares_by_object():
     pixel = np.array([0, 1, 4, 5, 2, 3])           # a 2 x 4 image, 2 x 2 squares
     view_object = np.array([0, 0, 0, 1, 0, 0])

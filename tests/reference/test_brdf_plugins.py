@@ -327,7 +327,8 @@ def test_9_a_lambertian_gather_model_is_the_methods_limit_rendered_with_the_pca(
 
 
 @pytest.mark.parametrize("name", ["brdf_pca_k6+gather2", "brdf_pca_k6+lambertian_gather",
-                                  "brdf_pca_k6+lambertian_gather65", "brdf_pca_k0"])
+                                  "brdf_pca_k6+lambertian_gather65", "brdf_pca_k0",
+                                  "brdf_pca_k6+", "brdf_pca_k6+lambertian_gather\u00b2"])
 def test_9_a_badly_named_pca_model_names_the_grammar(name):
     from translucent.materials.brdf_pca import pca_model_basis
 

@@ -143,7 +143,7 @@ def test_a_model_named_by_parts_splits_its_error_into_steps():
     assert split.model["relative_mse_raw"] == pytest.approx(
         numpy_relative_mse(volumetric.rgb, gather.rgb), rel=1e-9)
     assert "+lambertian_gather2 0.0" in split.sentence()
-    assert split.sentence().endswith("The largest part: +lambertian_gather2.")
+    assert split.sentence().endswith("The largest step: +lambertian_gather2.")
     assert [entry["model"] for entry in split.as_dict()["model_steps"]] == [
         "brdf_pca_k6", "brdf_pca_k6+lambertian_gather2"]
     # without the simpler model's reference there are no steps, and the split stands
