@@ -11,12 +11,17 @@ from translucent.reports.report.pipeline import default_scenes
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _benchmarks():
-    spec = importlib.util.spec_from_file_location("asv_accuracy", ROOT / "benchmarks" /
-                                                  "accuracy.py")
+def _load(name: str):
+    """Import ``benchmarks/<name>.py`` (asv's folder is not part of the package)."""
+    spec = importlib.util.spec_from_file_location(f"asv_{name}", ROOT / "benchmarks" /
+                                                  f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def _benchmarks():
+    return _load("accuracy")
 
 
 def test_the_history_tracks_every_default_scene_and_method():
@@ -72,16 +77,8 @@ def test_the_fits_figures_are_its_coverage_its_mean_seconds_and_its_convergence(
         fit.setup(None)
 
 
-def _publish():
-    spec = importlib.util.spec_from_file_location("asv_publish", ROOT / "benchmarks" /
-                                                  "publish.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_the_published_pages_load_their_scripts_from_the_copies_beside_them():
-    publish = _publish()
+    publish = _load("publish")
     page = ('<script src="https://code.jquery.com/jquery-3.3.1.min.js" integrity="sha256-x" '
             'crossorigin="anonymous" onerror="f()"></script>\n<script src="asv.js"></script>\n'
             '<link rel="stylesheet" href="https://cdn.jsdelivr.net/npm/bootstrap@3.1.1/dist/css/'
