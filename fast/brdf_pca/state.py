@@ -22,6 +22,7 @@ from ...materials.brdfs import (
 from ..sparse_transport import product_rgb_per_row
 from ..wavelets import haar2d_forward_in_place
 from .kernels import block_reflection
+from .knobs import KNOBS
 from .lighting import check_lights, direct_samples
 from .transfer import (
     Precomputation,
@@ -131,8 +132,6 @@ class BRDFPCAState:
     """
 
     def __init__(self, scene, data: Precomputation, run_knobs: dict | None = None):
-        from .knobs import KNOBS
-
         self.scene = scene
         self.data = data
         self.log = data.log

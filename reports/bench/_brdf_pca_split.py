@@ -63,12 +63,12 @@ def _errors(reference, image, masks) -> dict:
 
 
 def _relit_frame_seconds(state, frames: int = 3) -> float:
-    from ...scenes import PointLight
+    """Return the median relit frame (nudged lights, as the report times a frame)."""
+    from ..report.runs import nudged_lights
 
     seconds = []
     for frame in range(frames):
-        lights = [PointLight(np.asarray(light.position) + [0.05 * (frame + 1), 0.0, 0.0],
-                             light.intensity) for light in state.scene.lights]
+        lights = nudged_lights(state.scene.lights, frame + 1)
         started = time.perf_counter()
         state.render(lights=lights)
         seconds.append(time.perf_counter() - started)
@@ -87,6 +87,7 @@ def split_scene(name: str, quick: bool = False) -> dict:
     from ...reference.committed import committed_reference
     from ...scenes import load_scene
     from ...scenes.gbuffer import gbuffer, interior_pixels
+    from ..report.split import model_steps, with_both_variances
 
     scene = load_scene(name)
     exact = committed_reference(name).require()
@@ -103,12 +104,15 @@ def split_scene(name: str, quick: bool = False) -> dict:
             models[key] = committed_reference(name, profile=key).require()
         return models[key]
 
+    # the steps of the method's models with either gather reflection (report.split's)
+    steps = {}
+    for reflection in ("lambertian", "brdf"):
+        keys = model_steps(brdf_pca.model_name({"gather_reflection": reflection}))
+        steps.update(zip(keys, [None, *keys[:-1]], strict=True))
     chain = {}
-    for key, against in (("brdf_pca_k6", None),
-                         ("brdf_pca_k6+lambertian_gather2", "brdf_pca_k6"),
-                         ("brdf_pca_k6+glossy_gather2", "brdf_pca_k6")):
+    for key, against in steps.items():
         earlier = exact if against is None else model(against)
-        both = type(earlier)(earlier.rgb, earlier.variance + model(key).variance)
+        both = with_both_variances(earlier, model(key))
         chain[key] = {"against": against or "exact",
                       "relative_mse": _errors(both, model(key), {"all": hit})["all"],
                       "to_exact": _errors(exact, model(key), {"all": hit})["all"]}
