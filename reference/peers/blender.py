@@ -7,15 +7,18 @@ that has ``bpy`` (the ``peers`` extra; the ``bpy`` wheel pins numpy below 2, so 
 lives in an environment of its own):
 
 * :func:`describe_scene` writes what Cycles needs of a scene as JSON: the camera, each
-  mesh with its material (an index-matched homogeneous medium, or a Lambertian surface)
-  and the point lights, every length in scene units and every coefficient per scene unit;
-* :func:`render_cycles` runs ``blender_worker.py`` in that Python, one Cycles render a pass,
-  and returns the mean of the passes with the variance of that mean, as the references.
+  mesh with its material (a homogeneous medium, given in one of :data:`MODES`: Cycles'
+  volume shader inside the object's boundary, or a Principled BSDF subsurface method with
+  :func:`subsurface_inputs`; or a Lambertian surface) and the lights, every length in scene
+  units and every coefficient per scene unit;
+* :func:`run_worker` runs ``blender_worker.py`` in that Python, one Cycles render a
+  (samples, seed) pair; :func:`render_cycles` returns the mean of passes with the variance
+  of that mean, as the references; :mod:`.cycles` is the report's renderer built on them.
 
-Cycles' point light of ``energy`` P watts is not the suite's intensity I = P / (4 pi):
-Blender's light units carry their own factor. :func:`render_cycles` writes P = 4 pi I and
-the caller calibrates the factor on a Lambertian object under the same light (the factor is
-a property of the light, not of the material), as ``tests/reference/test_cycles.py`` does.
+Each light is given in the power Cycles' own units need for the suite's radiometry (the
+worker's docstring states the conversions, read in Cycles' source); the slow tests of
+``tests/reference/test_cycles.py`` measure each on a Lambertian object against the suite's
+reference (equal within noise).
 
 Set-up (not in the default install)::
 
@@ -41,7 +44,8 @@ from ...image import Image
 from ...materials import Dipole, Lambertian
 from ...scenes import PointLight, Scene
 
-__all__ = ["BPY_PYTHON_VARIABLE", "bpy_python", "describe_scene", "render_cycles"]
+__all__ = ["BPY_PYTHON_VARIABLE", "MODES", "SUBSURFACE_METHODS", "bpy_python", "describe_scene",
+           "render_cycles", "run_worker", "subsurface_inputs"]
 
 #: The environment variable that names a Python with ``bpy``.
 BPY_PYTHON_VARIABLE = "TRANSLUCENT_BPY_PYTHON"
@@ -63,53 +67,209 @@ def bpy_python() -> str | None:
     return None
 
 
-def describe_scene(scene: Scene, *, samples: int, seeds: list[int], output: str,
-                   threads: int | None = None) -> dict:
-    """Return the JSON description ``blender_worker.py`` renders (module docstring).
+#: The Principled BSDF's subsurface methods, by the suite's mode name.
+SUBSURFACE_METHODS = {"burley": "BURLEY", "random_walk": "RANDOM_WALK",
+                      "random_walk_skin": "RANDOM_WALK_SKIN"}
+
+#: The description's material for a medium in each mode: "volume" or a subsurface method.
+MODES = ("volume", *SUBSURFACE_METHODS)
+
+
+def subsurface_inputs(medium: Dipole, mm_per_unit: float) -> dict:
+    r"""Return the Principled BSDF's subsurface inputs that match ``medium``.
+
+    Base Color is the medium's surface albedo A (the photon random walk's total diffuse
+    reflectance at its eta, as :class:`~translucent.materials.profiles.burley.BurleyProfile`
+    takes it) and the radius (Scale 1) :math:`4\pi / \sigma'_t` in scene units: Cycles
+    divides it by :math:`4\pi` into its walk's reduced mean free path and its Burley ``d``
+    (module docstring of ``blender_worker.py``), so the three modes see one medium, given as
+    a user matching the medium exactly would give it.
 
     Raises
     ------
     InputError
-        A part Cycles is not given here: a dielectric boundary (eta != 1), a material other
-        than a homogeneous medium or a Lambertian surface, a light other than a point light.
+        A channel without extinction (an infinite radius), or an eta outside the walk
+        table (1.0 .. 2.0).
     """
-    objects = []
-    for index, obj in enumerate(scene.objects):
-        material = obj.material
-        field = f"objects[{index}].material"
-        if isinstance(material, Dipole):
-            if material.eta != 1.0:
-                raise InputError("Cycles is given index-matched media only (eta = 1)",
-                                 file=scene.source, field=f"{field}.eta", value=material.eta)
-            sigma_s = material.sigma_s_prime / (1.0 - material.g)
-            spec = {"type": "medium", "g": float(material.g),
-                    "sigma_s": (sigma_s * scene.mm_per_unit).tolist(),
-                    "sigma_a": (material.sigma_a * scene.mm_per_unit).tolist()}
-        elif isinstance(material, Lambertian):
-            spec = {"type": "diffuse", "albedo": np.asarray(material.albedo).tolist()}
-        else:
-            raise InputError("Cycles is given homogeneous media and Lambertian surfaces only",
-                             file=scene.source, field=field, value=type(material).__name__)
-        objects.append({"name": obj.name, "vertices": obj.mesh.vertices.tolist(),
-                        "faces": obj.mesh.faces.tolist(), "material": spec})
-    lights = []
-    for index, light in enumerate(scene.lights):
-        if not isinstance(light, PointLight):
-            raise InputError("Cycles is given point lights only", file=scene.source,
-                             field=f"lights[{index}]", value=type(light).__name__)
-        lights.append({"position": light.position.tolist(),
-                       "energy": (4.0 * math.pi * light.intensity).tolist()})
+    from ...materials.profiles.random_walk import RandomWalkProfile
+
+    sigma_t = np.asarray(medium.sigma_a + medium.sigma_s_prime, dtype=np.float64)
+    if np.any(sigma_t <= 0):
+        raise InputError("Cycles' subsurface radius 4 pi / sigma_t' is infinite for a channel "
+                         "without extinction", field="sigma_s_prime",
+                         value=np.asarray(medium.sigma_s_prime).tolist())
+    albedo = RandomWalkProfile(medium).total()
+    return {"base_color": np.clip(albedo, 0.0, 1.0).tolist(),
+            "radius": (4.0 * math.pi / (sigma_t * mm_per_unit)).tolist(),
+            "anisotropy": float(medium.g), "ior": float(medium.eta)}
+
+
+def _material(scene: Scene, index: int, mode: str) -> dict:
+    material = scene.objects[index].material
+    field = f"objects[{index}].material"
+    if isinstance(material, Lambertian):
+        return {"type": "diffuse", "albedo": np.broadcast_to(
+            np.asarray(material.albedo, dtype=np.float64), (3,)).tolist()}
+    if not isinstance(material, Dipole):
+        raise InputError("Cycles is given homogeneous media and Lambertian surfaces only (it "
+                         "has no Ward, Blinn-Phong or Cook-Torrance node)", file=scene.source,
+                         field=field, value=type(material).__name__)
+    if mode in SUBSURFACE_METHODS:
+        return {"type": "subsurface", "method": SUBSURFACE_METHODS[mode],
+                **subsurface_inputs(material, scene.mm_per_unit)}
+    sigma_s = material.sigma_s_prime / (1.0 - material.g)
+    return {"type": "medium", "g": float(material.g), "ior": float(material.eta),
+            "sigma_s": (sigma_s * scene.mm_per_unit).tolist(),
+            "sigma_a": (material.sigma_a * scene.mm_per_unit).tolist()}
+
+
+def _pointing(position, direction, up_hint=None) -> list:
+    """Return a 4 x 4 object matrix (rows) at ``position`` whose local -z is ``direction``."""
+    forward = np.asarray(direction, dtype=np.float64)
+    forward = forward / np.linalg.norm(forward)
+    hint = np.array([0.0, 0.0, 1.0]) if up_hint is None else np.asarray(up_hint, float)
+    if abs(float(forward @ hint)) > 0.99:
+        hint = np.array([1.0, 0.0, 0.0])
+    right = np.cross(forward, hint)
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    matrix = np.eye(4)
+    matrix[:3, 0], matrix[:3, 1], matrix[:3, 2] = right, up, -forward
+    matrix[:3, 3] = np.asarray(position, dtype=np.float64)
+    return matrix.tolist()
+
+
+def _light(scene: Scene, index: int) -> dict:  # noqa: C901 - one case a light type
+    from ...scenes import (
+        ConstantEnvironment,
+        DirectionalLight,
+        RectangularAreaLight,
+        SphereAreaLight,
+        SpotLight,
+    )
+
+    light = scene.lights[index]
+    if isinstance(light, PointLight):
+        return {"type": "point", "position": light.position.tolist(),
+                "energy": (4.0 * math.pi * light.intensity).tolist()}
+    if isinstance(light, SphereAreaLight):
+        return {"type": "point", "position": light.center.tolist(), "radius": light.radius,
+                "energy": (4.0 * math.pi ** 2 * light.radius ** 2 * light.radiance).tolist()}
+    if isinstance(light, SpotLight):
+        cutoff = math.radians(light.cutoff_angle)
+        beam = math.radians(light.beam_width)
+        # the smoothstep reaches 1 where the suite's linear ramp does (at the beam width)
+        blend = (math.cos(beam) - math.cos(cutoff)) / (1.0 - math.cos(cutoff))
+        return {"type": "spot", "matrix": _pointing(light.position, light.direction),
+                "energy": (4.0 * math.pi * light.intensity).tolist(),
+                "spot_size": 2.0 * cutoff, "spot_blend": blend}
+    if isinstance(light, RectangularAreaLight):
+        u, v = light.u_axis, light.v_axis
+        if abs(float(u @ v)) > 1e-9 * float(np.linalg.norm(u) * np.linalg.norm(v)):
+            raise InputError("Cycles' area light is a rectangle: u_axis and v_axis must be "
+                             "orthogonal", file=scene.source, field=f"lights[{index}].v_axis",
+                             value=v.tolist())
+        matrix = np.eye(4)
+        # x along u, y along -v: the local -z (where Cycles emits) is cross(u, v)
+        matrix[:3, 0] = u / np.linalg.norm(u)
+        matrix[:3, 1] = -v / np.linalg.norm(v)
+        matrix[:3, 2] = -light.normal
+        matrix[:3, 3] = light.center
+        return {"type": "area", "matrix": matrix.tolist(),
+                "size_x": 2.0 * float(np.linalg.norm(u)),
+                "size_y": 2.0 * float(np.linalg.norm(v)),
+                "energy": (math.pi * light.area * light.radiance).tolist()}
+    if isinstance(light, DirectionalLight):
+        return {"type": "sun", "matrix": _pointing([0.0, 0.0, 0.0], light.direction),
+                "strength": light.irradiance.tolist()}
+    if isinstance(light, ConstantEnvironment):
+        return {"type": "environment",
+                "radiance": np.broadcast_to(light.radiance, (3,)).tolist()}
+    raise InputError("Cycles is given point, sphere, spot, rectangle and directional lights "
+                     "and a constant environment", file=scene.source,
+                     field=f"lights[{index}]", value=type(light).__name__)
+
+
+def describe_scene(scene: Scene, *, renders: list[tuple[int, int]], output: str,
+                   mode: str = "volume", threads: int | None = None,
+                   save_blend: str | None = None, warm_up: bool = False) -> dict:
+    """Return the JSON description ``blender_worker.py`` renders (module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+    renders : list of (int, int)
+        Samples per pixel and Cycles seed of each render.
+    output : str
+        The folder the worker writes the renders into.
+    mode : str
+        One of :data:`MODES`: how a homogeneous medium is given to Cycles (its volume
+        shader inside the boundary, or a Principled BSDF subsurface method).
+    threads : int, optional
+        Cycles' threads (default: every core).
+    save_blend : str, optional
+        Also save the built scene as this ``.blend`` file.
+    warm_up : bool
+        Render once at 1 spp, untimed, before the renders (as the path-tracing ladder
+        compiles its kernels before it times).
+
+    Raises
+    ------
+    InputError
+        A part Cycles is not given: a material other than a homogeneous medium or a
+        Lambertian surface, a light other than those :func:`_light` converts, a
+        non-rectangular area light, an unknown mode.
+    """
+    if mode not in MODES:
+        raise InputError(f"unknown Cycles mode; valid: {', '.join(MODES)}", field="mode",
+                         value=mode)
+    objects = [{"name": obj.name, "vertices": obj.mesh.vertices.tolist(),
+                "faces": obj.mesh.faces.tolist(), "material": _material(scene, index, mode)}
+               for index, obj in enumerate(scene.objects)]
+    lights = [_light(scene, index) for index in range(len(scene.lights))]
     camera = scene.camera
     return {"camera": {"origin": camera.origin.tolist(), "target": camera.target.tolist(),
                        "up": camera.up.tolist(), "fov_x_degrees": camera.fov,
                        "width": camera.width, "height": camera.height},
-            "objects": objects, "lights": lights, "samples": int(samples),
-            "seeds": [int(s) for s in seeds], "output": str(output),
-            **({"threads": int(threads)} if threads else {})}
+            "objects": objects, "lights": lights,
+            "renders": [{"samples": int(spp), "seed": int(seed)} for spp, seed in renders],
+            "output": str(output),
+            **({"threads": int(threads)} if threads else {}),
+            **({"warm_up": True} if warm_up else {}),
+            **({"save_blend": str(save_blend)} if save_blend else {})}
+
+
+def run_worker(description: dict, folder: Path, *, python: str | None = None,
+               timeout: float | None = None) -> tuple[list[np.ndarray], dict]:
+    """Run ``blender_worker.py`` on ``description`` in ``folder``; its images and timing.
+
+    Raises
+    ------
+    InputError
+        No Python with ``bpy`` (:data:`INSTALL_HINT`).
+    RuntimeError
+        The worker failed (the last lines of its output).
+    """
+    python = python or bpy_python()
+    if python is None:
+        raise InputError(INSTALL_HINT, field=BPY_PYTHON_VARIABLE, value=None)
+    path = Path(folder) / "scene.json"
+    path.write_text(json.dumps(description))
+    # isolated (-I): the worker's folder must not shadow Blender's own modules
+    done = subprocess.run([python, "-I", str(WORKER), str(path)], capture_output=True,
+                          text=True, timeout=timeout, check=False)
+    if done.returncode != 0:
+        tail = (done.stderr or done.stdout).strip().splitlines()[-3:]
+        raise RuntimeError(f"Cycles worker failed ({done.returncode}): {' | '.join(tail)}")
+    out = Path(description["output"])
+    images = [np.load(out / f"render_{k}.npy").astype(np.float64)
+              for k in range(len(description["renders"]))]
+    return images, json.loads((out / "timing.json").read_text())
 
 
 def render_cycles(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0,
-                  python: str | None = None, timeout: float | None = None) -> Image:
+                  mode: str = "volume", python: str | None = None,
+                  timeout: float | None = None) -> Image:
     """Render ``scene`` with Cycles: the mean of ``passes`` renders and its variance.
 
     Parameters
@@ -120,6 +280,8 @@ def render_cycles(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0
         Samples per pixel of a pass (a Cycles seed each), and passes (>= 2).
     seed : int
         Pass ``k`` uses the Cycles seed ``seed * passes + k``.
+    mode : str
+        How media are given (:func:`describe_scene`).
     python : str, optional
         The Python with ``bpy`` (default :func:`bpy_python`).
     timeout : float, optional
@@ -131,27 +293,15 @@ def render_cycles(scene: Scene, *, spp: int = 64, passes: int = 4, seed: int = 0
         Radiance under Cycles' light units (calibrate them: module docstring); the metadata
         holds the Blender version and each pass's seconds.
     """
-    python = python or bpy_python()
-    if python is None:
-        raise InputError(INSTALL_HINT, field=BPY_PYTHON_VARIABLE, value=None)
     if passes < 2:
         raise InputError("must be >= 2 (the passes' spread gives the variance)",
                          field="passes", value=passes)
     with tempfile.TemporaryDirectory(prefix="translucent-cycles-") as folder:
-        out = Path(folder) / "passes"
-        description = describe_scene(scene, samples=spp, output=str(out),
-                                     seeds=[seed * passes + k for k in range(passes)])
-        path = Path(folder) / "scene.json"
-        path.write_text(json.dumps(description))
-        # isolated (-I): the worker's folder must not shadow Blender's own modules
-        done = subprocess.run([python, "-I", str(WORKER), str(path)], capture_output=True,
-                              text=True, timeout=timeout, check=False)
-        if done.returncode != 0:
-            tail = (done.stderr or done.stdout).strip().splitlines()[-3:]
-            raise RuntimeError(f"Cycles worker failed ({done.returncode}): {' | '.join(tail)}")
-        images = np.array([np.load(out / f"pass_{k}.npy") for k in range(passes)],
-                          dtype=np.float64)
-        timing = json.loads((out / "timing.json").read_text())
+        description = describe_scene(scene, mode=mode, output=str(Path(folder) / "renders"),
+                                     renders=[(spp, seed * passes + k) for k in range(passes)])
+        images, timing = run_worker(description, Path(folder), python=python,
+                                    timeout=timeout)
+    images = np.array(images)
     mean = images.mean(axis=0)
     variance = images.var(axis=0, ddof=1) / passes
     return Image(mean, variance, {"renderer": "cycles", "blender": timing["blender"],

@@ -3,18 +3,29 @@ r"""Render a scene description with Blender Cycles: run by the Python that has `
 Usage: ``python -I blender_worker.py DESCRIPTION.json`` (isolated: this folder's modules
 must not shadow Blender's). The description (written by
 :func:`translucent.reference.peers.blender.describe_scene`) holds the camera, the triangle
-meshes with their materials, the point lights, the sample count, the seeds and the output
-folder; every pass is written there as ``pass_<k>.npy`` (float32, H x W x 3, row 0 at the top) and
-``timing.json``. This file imports nothing of the suite (the ``bpy`` wheel pins a numpy
-the suite does not use), so the two renderers share no code.
+meshes with their materials, the lights, the renders (samples and seed each) and the output
+folder; every render is written there as ``render_<k>.npy`` (float32, H x W x 3, row 0 at
+the top), with ``timing.json``. This file imports nothing of the suite (the ``bpy`` wheel
+pins a numpy the suite does not use), so the two renderers share no code.
 
-Cycles' conventions, stated where they are used:
+Cycles' conventions (``intern/cycles``, Blender 4.2 to 5.0), stated where they are used:
 
 * a material with a volume output and no surface output is a boundary of index 1 around
   a homogeneous medium; Volume Scatter gives :math:`\sigma_s = \text{color} \cdot
   \text{density}`, Volume Absorption :math:`\sigma_a = (1 - \text{color})\,\text{density}`;
-* a point light of ``energy`` W and radius 0; its intensity in the suite's units is
-  measured, not assumed, by the Lambertian calibration of the caller;
+  a Glass BSDF of roughness 0 on the same material is a smooth dielectric boundary (exact
+  unpolarised Fresnel);
+* the Principled BSDF's subsurface radius is ``Radius x Scale``, divided by
+  :math:`4\pi` for Burley and Random Walk (``bssrdf_setup_radius``): the reduced mean
+  free path :math:`1/\sigma'_t` of the walk, :math:`\sigma_t = \sigma'_t/(1-g)`; the
+  Base Color is the surface albedo the walk's single-scattering albedo is fitted to;
+  IOR 1 exactly has no specular layer;
+* lights, with ``normalize`` on: a point or spot light of ``energy`` P watts and radius 0
+  has intensity :math:`P/(4\pi)`; with radius r and no soft fall-off it is a sphere of
+  radiance :math:`P/(4\pi^2 r^2)`; a spot's ``spot_size`` is the full cone angle and its
+  edge a smoothstep in the cosine over ``spot_blend``; an area light of power P and area A
+  is one-sided with radiance :math:`P/(\pi A)` along its local -z; a sun of strength S
+  and angle 0 gives irradiance S; the world's colour times strength is its radiance;
 * the camera's horizontal field of view is ``angle`` with ``sensor_fit = 'HORIZONTAL'``;
   a box pixel filter one pixel wide, as the suite's sensor.
 """
@@ -74,12 +85,83 @@ def _medium_material(name, sigma_s, sigma_a, g):
     return material
 
 
+def _dielectric_medium_material(name, sigma_s, sigma_a, g, ior):
+    """Return the medium inside a smooth dielectric boundary (Glass BSDF, roughness 0)."""
+    material = _medium_material(name, sigma_s, sigma_a, g)
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    glass = nodes.new("ShaderNodeBsdfGlass")
+    glass.distribution = "GGX"  # roughness 0: the singular (perfectly specular) path
+    glass.inputs["Roughness"].default_value = 0.0
+    glass.inputs["IOR"].default_value = ior
+    glass.inputs["Color"].default_value = [1.0, 1.0, 1.0, 1.0]
+    output = next(node for node in nodes if node.bl_idname == "ShaderNodeOutputMaterial")
+    links.new(glass.outputs[0], output.inputs["Surface"])
+    return material
+
+
+def _subsurface_material(name, spec):
+    """Principled BSDF, all subsurface: base colour A, radius in scene units, scale 1."""
+    material, nodes, links, output = _node_material(name)
+    principled = nodes.new("ShaderNodeBsdfPrincipled")
+    principled.subsurface_method = spec["method"]
+    values = {"Base Color": list(spec["base_color"]) + [1.0], "Subsurface Weight": 1.0,
+              "Subsurface Radius": list(spec["radius"]), "Subsurface Scale": 1.0,
+              "Subsurface Anisotropy": spec["anisotropy"], "IOR": spec["ior"],
+              "Subsurface IOR": spec["ior"], "Roughness": 0.0, "Metallic": 0.0,
+              "Specular IOR Level": 0.5,  # 0.5: the IOR as given
+              "Coat Weight": 0.0, "Sheen Weight": 0.0}
+    for socket in principled.inputs:  # by name: a mode's unused sockets are not keyed
+        if socket.name in values:
+            socket.default_value = values[socket.name]
+    links.new(principled.outputs[0], output.inputs["Surface"])
+    return material
+
+
 def _diffuse_material(name, albedo):
     material, nodes, links, output = _node_material(name)
     diffuse = nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Color"].default_value = list(albedo) + [1.0]
     links.new(diffuse.outputs[0], output.inputs["Surface"])
     return material
+
+
+def _add_light(scene, world, index, spec):
+    """Add one light of the description (kinds and units: the module docstring)."""
+    kind = spec["type"]
+    if kind == "environment":
+        background = world.node_tree.nodes["Background"]
+        peak = max(max(spec["radiance"]), 1e-30)
+        background.inputs["Color"].default_value = [c / peak for c in spec["radiance"]] + [1.0]
+        background.inputs["Strength"].default_value = peak
+        return
+    light = bpy.data.lights.new(f"light_{index}", type=kind.upper())
+    power = spec["energy"] if kind != "sun" else spec["strength"]
+    peak = max(max(power), 1e-30)
+    light.energy = peak
+    if kind == "sun":
+        light.angle = 0.0  # a delta light
+    light.color = [p / peak for p in power]
+    if hasattr(light, "normalize"):
+        light.normalize = True
+    if kind in ("point", "spot"):
+        light.shadow_soft_size = float(spec.get("radius", 0.0))
+        if hasattr(light, "use_soft_falloff"):  # a true sphere light, not the soft fall-off
+            light.use_soft_falloff = False
+    if kind == "spot":
+        light.spot_size = float(spec["spot_size"])
+        light.spot_blend = float(spec["spot_blend"])
+        light.show_cone = False
+    if kind == "area":
+        light.shape = "RECTANGLE"
+        light.size = float(spec["size_x"])
+        light.size_y = float(spec["size_y"])
+        light.spread = math.pi  # a Lambertian emitter
+    holder = bpy.data.objects.new(f"light_{index}", light)
+    if "matrix" in spec:
+        holder.matrix_world = Matrix(spec["matrix"])
+    else:
+        holder.location = spec["position"]
+    scene.collection.objects.link(holder)
 
 
 def build(description):
@@ -91,7 +173,6 @@ def build(description):
     cycles.device = "CPU"
     cycles.use_denoising = False
     cycles.use_adaptive_sampling = False
-    cycles.samples = int(description["samples"])
     for bounces in ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
                     "volume_bounces", "transparent_max_bounces"):
         setattr(cycles, bounces, 4096)
@@ -129,9 +210,15 @@ def build(description):
                          [tuple(f) for f in spec["faces"]])
         mesh.update()
         material = spec["material"]
-        if material["type"] == "medium":
+        if material["type"] == "medium" and material.get("ior", 1.0) != 1.0:
+            mesh.materials.append(_dielectric_medium_material(
+                spec["name"], material["sigma_s"], material["sigma_a"], material["g"],
+                material["ior"]))
+        elif material["type"] == "medium":
             mesh.materials.append(_medium_material(spec["name"], material["sigma_s"],
                                                    material["sigma_a"], material["g"]))
+        elif material["type"] == "subsurface":
+            mesh.materials.append(_subsurface_material(spec["name"], material))
         elif material["type"] == "diffuse":
             mesh.materials.append(_diffuse_material(spec["name"], material["albedo"]))
         else:
@@ -139,14 +226,7 @@ def build(description):
         item = bpy.data.objects.new(spec["name"], mesh)
         scene.collection.objects.link(item)
     for index, spec in enumerate(description["lights"]):
-        light = bpy.data.lights.new(f"light_{index}", type="POINT")
-        peak = max(spec["energy"])
-        light.energy = peak
-        light.color = [e / peak for e in spec["energy"]]
-        light.shadow_soft_size = 0.0
-        holder = bpy.data.objects.new(f"light_{index}", light)
-        holder.location = spec["position"]
-        scene.collection.objects.link(holder)
+        _add_light(scene, world, index, spec)
     scene.render.image_settings.file_format = "OPEN_EXR"
     scene.render.image_settings.color_depth = "32"
     scene.render.image_settings.color_mode = "RGB"
@@ -155,16 +235,25 @@ def build(description):
 
 
 def main(path):
-    """Render every pass of the description at ``path`` into its output folder."""
+    """Render every render of the description at ``path`` into its output folder.
+
+    ``renders``: a list of ``{"samples": N, "seed": S}``, written as ``render_<k>.npy``
+    with their seconds in ``timing.json``.
+    """
     with open(path) as handle:
         description = json.load(handle)
     scene = build(description)
     out = description["output"]
     os.makedirs(out, exist_ok=True)
     seconds = []
-    for k, seed in enumerate(description["seeds"]):
-        scene.cycles.seed = int(seed)
-        exr = os.path.join(out, f"pass_{k}.exr")
+    if description.get("warm_up"):  # untimed: loads the kernels and builds the BVH once
+        scene.cycles.samples = 1
+        scene.render.filepath = os.path.join(out, "warm_up.exr")
+        bpy.ops.render.render(write_still=False)
+    for k, render in enumerate(description["renders"]):
+        scene.cycles.samples = int(render["samples"])
+        scene.cycles.seed = int(render["seed"])
+        exr = os.path.join(out, f"render_{k}.exr")
         scene.render.filepath = exr
         start = time.perf_counter()
         bpy.ops.render.render(write_still=True)
@@ -173,8 +262,10 @@ def main(path):
         width, height = image.size
         pixels = np.array(image.pixels[:], dtype=np.float32).reshape(height, width, -1)
         bpy.data.images.remove(image)
-        np.save(os.path.join(out, f"pass_{k}.npy"), pixels[::-1, :, :3].copy())
+        np.save(os.path.join(out, f"render_{k}.npy"), pixels[::-1, :, :3].copy())
         os.remove(exr)
+    if description.get("save_blend"):
+        bpy.ops.wm.save_as_mainfile(filepath=description["save_blend"], check_existing=False)
     with open(os.path.join(out, "timing.json"), "w") as handle:
         json.dump({"seconds": seconds, "blender": bpy.app.version_string}, handle)
 

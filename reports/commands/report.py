@@ -2,11 +2,13 @@
 
 ``translucent report [SCENE ...] [--out DIR] [--methods m1,m2] [--update-baseline]
 [--baseline FILE] [--scheduler ADDRESS | --serial] [--spp N --passes K]
-[--keep-precomputations] [--profiles all|P1,P2]``
+[--keep-precomputations] [--profiles all|P1,P2] [--renderers NAME[.MODE],...
+[--renderer-spp N1,N2,...]]``
 
 Writes ``DIR/index.html`` (images side by side, error maps, metrics, precomputation and
 frame times, what each method skipped and why, every subsurface method's error split into
-its profile's and its own against the model reference) and ``DIR/metrics.json``. Exits 0 when no
+its profile's and its own against the model reference; other renderers' modes, such as
+Blender Cycles' subsurface modes, scored beside them) and ``DIR/metrics.json``. Exits 0 when no
 gated metric is worse than the baseline beyond its tolerance, 1 when one is (or a result
 the baseline expects is missing), 2 on bad input (an unknown scene or method, an ``--out``
 that cannot hold a report), leaving nothing half-written.
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 def add_arguments(parser):
     """Scenes, output folder, methods, baseline, where tasks run, reference samples."""
+    from ..report.peer_runs import RENDERER_SPP
     from ..report.pipeline import (
         DEFAULT_PASSES,
         DEFAULT_REFERENCE_BUDGET,
@@ -65,6 +68,15 @@ def add_arguments(parser):
                         help="score another renderer's images too: DIR/<renderer>/<scene>.exr "
                              "(times from the EXR header's 'seconds'); without --methods, only "
                              "them")
+    parser.add_argument("--renderers", default=None, metavar="NAME[.MODE],...",
+                        help="score other renderers like methods: NAME (every mode) or "
+                             "NAME.MODE, comma-separated (cycles: burley, random_walk, "
+                             "random_walk_skin, volume; a Python with bpy, named by "
+                             "TRANSLUCENT_BPY_PYTHON); without --methods, only them")
+    parser.add_argument("--renderer-spp", default=None, metavar="N1,N2,...",
+                        help="samples per pixel the renderers render at, each timed; the "
+                             "largest is the scored run (default "
+                             f"{','.join(map(str, RENDERER_SPP))})")
     parser.add_argument("--profiles", default=None, metavar="all|P1,P2",
                         help="also run every method that has a profile knob with these radial "
                              "profiles (or all), each split into its profile's error and "
@@ -91,7 +103,10 @@ def run(args) -> int:
                          serial=args.serial, spp=args.spp, passes=args.passes,
                          progress=not args.no_progress,
                          keep_precomputations=args.keep_precomputations,
-                         images=args.images, profiles=args.profiles)
+                         images=args.images, profiles=args.profiles,
+                         renderers=args.renderers,
+                         renderer_spp=(None if args.renderer_spp is None
+                                       else args.renderer_spp.split(",")))
     from .record import record
 
     record(args, out=str(result.out), metrics=str(result.out / "metrics.json"),

@@ -15,10 +15,13 @@ from ...image import Image
 from .baselines import BaselineCheck
 from .runs import MethodRun
 
-__all__ = ["LADDER", "PATH_TRACING", "ReportResult", "SceneReport", "keep_run"]
+__all__ = ["LADDER", "PATH_TRACING", "PEER", "ReportResult", "SceneReport", "keep_run"]
 
 #: The owner of a ladder run among a report's tasks: ``(LADDER, method name)``.
 LADDER = "ladder"
+
+#: The owner of another renderer's task among a report's tasks: ``(PEER, "NAME.MODE")``.
+PEER = "peer"
 
 #: The owner name of a scene's path-tracing ladder task (not a method).
 PATH_TRACING = "path tracing"

@@ -52,6 +52,7 @@ from ...atomic import atomic_write_text, check_output_folder, note_input
 from ...errors import InputError, check_count
 from ...image import Image
 from ...progress import progress_bar
+from ...reference.peers.registry import renderer_entries
 from ...staging import replace_folder, staging_folder
 from .baselines import (
     BASELINE_FORMAT,
@@ -66,8 +67,9 @@ from .baselines import (
     updated_baseline,
 )
 from .metrics_json import made_with, metrics_json
-from .model import LADDER, PATH_TRACING, ReportResult, SceneReport, keep_run
+from .model import LADDER, PATH_TRACING, PEER, ReportResult, SceneReport, keep_run
 from .page import html_page
+from .peer_runs import RENDERER_SPP, check_renderer_spp, plan_peer
 from .renderer_images import renderer_images, renderers_in
 from .runs import (
     REPORT_CACHE_ENTRY_LIMIT,
@@ -97,7 +99,14 @@ from .split import (
     unrendered_profile,
 )
 from .summary import print_summary, summary_rows
-from .tasks import MethodTask, PathTracingTask, ReferenceTask, run_task, task_entry
+from .tasks import (
+    MethodTask,
+    PathTracingTask,
+    ReferenceTask,
+    RendererTask,
+    run_task,
+    task_entry,
+)
 
 __all__ = [
     "METRIC_LABELS",
@@ -325,7 +334,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
                 serial: bool = False, spp: int | None = None, passes: int = DEFAULT_PASSES,
                 progress: bool = True, stream=None,
                 keep_precomputations: bool = False, images=None,
-                profiles=None) -> ReportResult:
+                profiles=None, renderers=None, renderer_spp=None) -> ReportResult:
     """Run the report: references, fast methods, metrics, error maps, baseline, HTML.
 
     Parameters
@@ -368,6 +377,13 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
         instead of) the fast methods: one subfolder per renderer, named as it is to be
         shown, holding ``<scene name>.exr`` for each scene it rendered
         (:func:`renderer_images`).
+    renderers : str, optional
+        Other renderers to score like methods: ``NAME`` (every mode) or ``NAME.MODE``,
+        comma-separated (:mod:`translucent.reference.peers.registry`; Cycles: ``cycles``),
+        each mode the entry ``NAME.MODE`` (:mod:`.peer_runs`).
+    renderer_spp : list of int, optional
+        The samples per pixel the renderers render at (default
+        :data:`~.peer_runs.RENDERER_SPP`); the largest is the scored run.
     profiles : "all" or list of str, optional
         Besides its default profile, run every method that has a ``profile`` knob with
         each of these radial profiles (``"all"``: every one), as the entries
@@ -390,8 +406,15 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     started = time.perf_counter()
     spp = None if spp is None else check_count(spp, "--spp")
     passes = check_count(passes, "--passes")
-    chosen = _methods(methods) if methods is not None or images is None else []
+    peers = [] if renderers is None else renderer_entries(renderers)
+    peer_spp = check_renderer_spp(RENDERER_SPP if renderer_spp is None else renderer_spp)
+    chosen = (_methods(methods) if methods is not None or (images is None and not peers)
+              else [])
     renderers = renderers_in(images, chosen)
+    clash = sorted(set(peers) & set(renderers))
+    if clash:
+        raise InputError("an --images folder has the name of a renderer's mode being run: "
+                         "rename the folder", field="--images", value=clash[0])
     asked_profiles = requested_profiles(profiles)
     note_input(images, "--images")
     out = _check_out(out)
@@ -399,7 +422,7 @@ def make_report(scenes=None, out="report", *, methods=None, baseline=None,
     stored_baseline = load_baseline(baseline_path,
                                     required=baseline is not None and not update_baseline)
     plan = _plan(scenes, chosen, renderers, images, spp, passes, asked_profiles,
-                 local_workers=scheduler is None)
+                 local_workers=scheduler is None, peers=(peers, peer_spp))
     _announce(plan.tasks, stream)
     timing: dict[str, Any] = {"planning": time.perf_counter() - started, "tasks": 0.0,
                               "scoring": 0.0, "scoring_during_tasks": 0.0}
@@ -467,7 +490,7 @@ class _Plan:
 
 
 def _plan(scenes, chosen, renderers, images, spp, passes, profiles, *,
-          local_workers: bool) -> _Plan:
+          local_workers: bool, peers=((), ())) -> _Plan:
     """Load the scenes, find what is cached (references, runs, ladders), list the rest."""
     from ...cache import Cache, content_hash
     from ...scenes import Scene, load_scene
@@ -506,13 +529,19 @@ def _plan(scenes, chosen, renderers, images, spp, passes, profiles, *,
     method_sources: dict[str, str] = {}
     variants = [entry_name(name, profile) for name in chosen for profile in profiles
                 if profile_knob_of(name) is not None]
-    plan.scored = chosen + variants + renderers
+    peer_entries, peer_spp = peers
+    plan.scored = chosen + variants + list(peer_entries) + renderers
     for report in reports:
         _plan_reference(plan, report, portable, spp, passes)
         for name in chosen + variants:
             _plan_method(plan, report, name, portable, method_sources)
+        for entry in peer_entries:
+            if plan_peer(report, entry):
+                plan.tasks.append(_Planned(RendererTask(portable(report), entry,
+                                                        tuple(peer_spp)),
+                                           report, (PEER, entry), None))
         _plan_model_references(plan, report, portable, spp, passes)
-        _plan_path_tracing(plan, report, portable, chosen + variants)
+        _plan_path_tracing(plan, report, portable, chosen + variants + list(peer_entries))
     return plan
 
 
@@ -595,6 +624,8 @@ def _plan_model_references(plan: _Plan, report: SceneReport, portable, spp, pass
               for name, run in report.runs.items() if run.status == "ok"}
     wanted |= {split_profile(p.owner, p.task.knobs, report.scene)[0] for p in plan.tasks
                if p.report is report and isinstance(p.owner, str) and p.owner != PATH_TRACING}
+    wanted |= {split_profile(p.owner[1], None, report.scene)[0] for p in plan.tasks
+               if p.report is report and isinstance(p.owner, tuple) and p.owner[0] == PEER}
     for profile in sorted(wanted - {None}):
         refusal = unrendered_profile(profile) or model_reference_refusal(report.scene, profile)
         if refusal:
@@ -642,13 +673,15 @@ def _announce(tasks: list[_Planned], stream) -> None:
     if not tasks:
         return
     count = {kind: sum(1 for p in tasks if p.task.kind == kind)
-             for kind in ("reference", "method", "path tracing")}
+             for kind in ("reference", "method", "path tracing", "renderer")}
     models = sum(1 for p in tasks if p.task.kind == "reference" and p.task.profile)
     count["reference"] -= models
     model_text = f"{models} model reference render(s), " if models else ""
     print(f"running {len(tasks)} task(s): {count['reference']} reference render(s), "
           f"{model_text}"
-          f"{count['method']} method run(s), {count['path tracing']} path-tracing ladder(s)",
+          f"{count['method']} method run(s), "
+          + (f"{count['renderer']} other renderer's ladder(s), " if count["renderer"] else "")
+          + f"{count['path tracing']} path-tracing ladder(s)",
           file=stream, flush=True)
 
 
@@ -720,6 +753,10 @@ def _keep_result(plan: _Plan, planned: _Planned, result) -> None:
             report.reference = result
         else:
             report.reference_error = str(result)
+    elif isinstance(planned.owner, tuple) and planned.owner[0] == PEER:
+        main, ladder = result
+        report.runs[planned.owner[1]] = main
+        report.ladders[planned.owner[1]] = list(ladder)
     elif isinstance(planned.owner, tuple) and planned.owner[0] == MODEL:
         profile = planned.owner[1]
         if isinstance(result, Image):

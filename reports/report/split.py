@@ -50,6 +50,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ...errors import InputError
 from ...image import Image
 
@@ -256,6 +258,10 @@ class ErrorSplit:
         Where the model reference came from (source, spp, passes, noise).
     steps : list of ModelStep
         The model's error by its parts (empty where a simpler model has no reference).
+    brightness : dict or None
+        The method's image summed over its pixels over its model reference's, per channel
+        (``ratio``, ``standard_error`` from both images' variances): the mean offset the
+        relative MSE does not single out (:func:`brightness_ratio`).
     """
 
     profile: str | None
@@ -268,6 +274,7 @@ class ErrorSplit:
     approximation_verdicts: dict = field(default_factory=dict)
     model_reference: dict = field(default_factory=dict)
     steps: list = field(default_factory=list)
+    brightness: dict | None = None
 
     @property
     def dominant(self) -> str:
@@ -300,7 +307,20 @@ class ErrorSplit:
             "both": f"Model and method share the error: {numbers}.",
             "within noise": f"Neither part clears its noise floor: {numbers}.",
         }.get(self.dominant, numbers + ".")
-        return sentence + self._steps_sentence()
+        return sentence + self._brightness_sentence() + self._steps_sentence()
+
+    def _brightness_sentence(self) -> str:
+        """Say how much brighter or darker than its model, where that clears 3 sigma."""
+        found = self.brightness or {}
+        ratio, error = found.get("ratio"), found.get("standard_error")
+        if ratio is None or error is None:
+            return ""
+        resolved = [abs(r - 1.0) > 3.0 * e for r, e in zip(ratio, error, strict=True)]
+        if not any(resolved):
+            return " Its brightness equals its model's within 3 standard errors."
+        percent = " / ".join(f"{100.0 * (r - 1.0):+.1f} %" for r in ratio)
+        return (f" Summed over its pixels it is {percent} (R / G / B) against its model "
+                f"(standard errors {' / '.join(f'{100.0 * e:.2f}' for e in error)} %).")
 
     def _steps_sentence(self) -> str:
         from ..metrics.compute import RESOLVED
@@ -336,7 +356,8 @@ class ErrorSplit:
                 "model_error": block(self.model, self.model_floor, self.model_verdicts),
                 "model_steps": [step.as_dict() for step in self.steps],
                 "approximation_error": block(self.approximation, self.approximation_floor,
-                                             self.approximation_verdicts)}
+                                             self.approximation_verdicts),
+                "brightness_to_model": json_safe(self.brightness)}
 
 
 def model_reference_refusal(scene, profile: str | None = None) -> str:
@@ -423,7 +444,14 @@ def split_profile(name: str, knobs: dict | None, scene=None) -> tuple[str | None
     from ...fast.base import method
     from ...fast.knobs import DEFAULT_PROFILE
     from ...reference.model_keys import model_key
+    from ...reference.peers.registry import entry_mode
 
+    peer = entry_mode(name)
+    if peer is not None:
+        renderer, mode = peer
+        model = renderer.model_of(mode)
+        return (model, "") if model else (None, f"{name} renders no model the suite knows: "
+                                                "its error cannot be split")
     method_name, asked = entry_parts(name)
     try:
         module = method(method_name)
@@ -478,7 +506,38 @@ def _split(report, name: str, cache: dict) -> ErrorSplit:
     except InputError as error:
         return ErrorSplit(profile, f"the model reference cannot be compared: {error.reason}")
     return ErrorSplit(profile, "", *found, report.model_reference_info.get(profile, {}),
-                      steps)
+                      steps, brightness_ratio(report.runs[name].image, model, mask))
+
+
+def brightness_ratio(image: Image, model: Image, mask=None) -> dict | None:
+    """Return ``image``'s sum over ``mask`` over ``model``'s, per channel, with its error.
+
+    The standard error propagates both images' variances (an image without one counts as
+    exact); None where the model's sum is not positive in every channel.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ones = Image(np.ones((2, 2, 3)), np.full((2, 2, 3), 0.01))
+    >>> brighter = Image(np.full((2, 2, 3), 1.5))
+    >>> found = brightness_ratio(brighter, ones)
+    >>> found["ratio"], [round(e, 4) for e in found["standard_error"]]
+    ([1.5, 1.5, 1.5], [0.075, 0.075, 0.075])
+    """
+    def sums(item: Image):
+        rgb = np.asarray(item.rgb, dtype=np.float64)
+        variance = (np.zeros_like(rgb) if item.variance is None
+                    else np.asarray(item.variance, dtype=np.float64))
+        if mask is not None:
+            rgb, variance = rgb[mask], variance[mask]
+        return rgb.reshape(-1, 3).sum(axis=0), variance.reshape(-1, 3).sum(axis=0)
+
+    (top, top_variance), (bottom, bottom_variance) = sums(image), sums(model)
+    if not np.all(bottom > 0) or not np.all(np.isfinite(top)):
+        return None
+    ratio = top / bottom
+    error = np.sqrt(top_variance / bottom ** 2 + ratio ** 2 * bottom_variance / bottom ** 2)
+    return {"ratio": ratio.tolist(), "standard_error": error.tolist()}
 
 
 def split_images(reference: Image, model: Image, image: Image, mask=None, *,

@@ -22,7 +22,8 @@ from typing import Any, ClassVar
 
 from .runs import json_safe, render_reference, run_method
 
-__all__ = ["MethodTask", "PathTracingTask", "ReferenceTask", "run_task", "task_entry"]
+__all__ = ["MethodTask", "PathTracingTask", "ReferenceTask", "RendererTask", "run_task",
+           "task_entry"]
 
 
 def _scene(scene):
@@ -134,6 +135,39 @@ class PathTracingTask:
         return path_tracing_ladder(_scene(self.scene), list(self.spps))
 
 
+@dataclass(frozen=True)
+class RendererTask:
+    """Render a scene with another renderer's mode at each count of samples per pixel.
+
+    Parameters
+    ----------
+    scene : Scene or str
+    entry : str
+        ``NAME.MODE`` (:mod:`translucent.reference.peers.registry`).
+    spps : tuple of int
+        The counts (:data:`~.peer_runs.RENDERER_SPP`); the last is the scored run.
+    """
+
+    kind: ClassVar[str] = "renderer"
+    scene: Any
+    entry: str
+    spps: tuple
+
+    @property
+    def group(self) -> None:
+        """Renderer tasks wait for nothing."""
+        return None
+
+    def run(self):
+        """Return the entry's run and its ladder (:func:`~.peer_runs.peer_runs`)."""
+        from ...reference.peers.registry import entry_mode
+        from .peer_runs import peer_runs
+
+        scene = _scene(self.scene)
+        module, mode = entry_mode(self.entry)
+        return peer_runs(self.entry, scene.name, module.render(scene, mode, list(self.spps)))
+
+
 def run_task(task):
     """Run ``task`` (on a worker): what its :meth:`run` returns."""
     return task.run()
@@ -144,6 +178,8 @@ def task_entry(task, scene_name: str, seconds: float, worker: int) -> dict:
     entry = {"scene": scene_name, "kind": task.kind, "seconds": seconds, "worker": worker}
     if isinstance(task, MethodTask):
         entry["method"], entry["knobs"] = task.method, json_safe(task.knobs)
+    elif isinstance(task, RendererTask):
+        entry["method"], entry["knobs"] = task.entry, {"spp": list(task.spps)}
     elif isinstance(task, ReferenceTask) and task.profile is not None:
         entry["profile"] = task.profile
     return entry
