@@ -1,7 +1,8 @@
 r"""Render a scene description with Blender Cycles: run by the Python that has ``bpy``.
 
 Usage: ``python -I blender_worker.py DESCRIPTION.json`` (isolated: this folder's modules
-must not shadow Blender's). The description (written by
+must not shadow Blender's), or in Blender itself: ``blender --background --python
+blender_worker.py -- DESCRIPTION.json``. The description (written by
 :func:`translucent.reference.peers.blender.describe_scene`) holds the camera, the triangle
 meshes with their materials, the lights, the renders (samples and seed each) and the output
 folder; every render is written there as ``render_<k>.npy`` (float32, H x W x 3, row 0 at
@@ -271,4 +272,5 @@ def main(path):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    # ``python -I blender_worker.py FILE`` or ``blender --background --python it -- FILE``
+    main(sys.argv[sys.argv.index("--") + 1] if "--" in sys.argv else sys.argv[1])

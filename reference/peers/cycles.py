@@ -51,7 +51,15 @@ WORKER_TIMEOUT = 3600.0
 
 def available() -> str | None:
     """Return why Cycles cannot run here (no Python with ``bpy``), else None."""
-    return None if blender.bpy_python() is not None else blender.INSTALL_HINT
+    import os
+
+    python = blender.bpy_python()
+    if python is None:
+        return blender.INSTALL_HINT
+    if not (os.path.isfile(python) and os.access(python, os.X_OK)):
+        return (f"{blender.BPY_PYTHON_VARIABLE} names {python}, which is not an executable "
+                f"file; {blender.INSTALL_HINT}")
+    return None
 
 
 def applies_to(scene, mode: str) -> str | None:

@@ -253,3 +253,13 @@ def test_cycles_burley_is_brighter_than_its_profile_on_a_curved_surface():
     ratio, error = np.array(found["ratio"]), np.array(found["standard_error"])
     assert np.all(error < 0.003), error
     np.testing.assert_allclose(ratio, BURLEY_BRIGHTENING, atol=0.01)
+
+
+def test_export_refuses_a_scene_cycles_is_not_given_and_writes_nothing(tmp_path, capsys):
+    from translucent.reports.cli import main
+
+    assert main(["export", "glossy", "--format", "blender", "--out",
+                 str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "objects[0].material" in err and "no Ward, Blinn-Phong" in err
+    assert not (tmp_path / "out").exists()

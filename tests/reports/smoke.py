@@ -44,9 +44,9 @@ def run_command(*arguments, cwd, env=None, timeout=TIMEOUT_SECONDS):
                           env=environment, capture_output=True, text=True, timeout=timeout)
 
 
-def run_ok(*arguments, cwd, codes=(0,)):
+def run_ok(*arguments, cwd, codes=(0,), env=None):
     """Run a command; check its exit code is one of ``codes`` and that nothing crashed."""
-    result = run_command(*arguments, cwd=cwd)
+    result = run_command(*arguments, cwd=cwd, env=env)
     assert result.returncode in codes, explain(result)
     assert "Traceback" not in result.stderr + result.stdout, explain(result)
     return result

@@ -140,14 +140,30 @@ def test_approx_with_every_method(inputs, tmp_path, name):
 def test_export(tmp_path):
     run_ok("export", "sphere", "--out", tmp_path / "x", cwd=tmp_path)
     assert list((tmp_path / "x").glob("*.xml"))
+    # for Cycles: the description and the script that builds it (no bpy here: no .blend)
+    result = run_ok("export", "bowl", "--format", "blender", "--mode", "burley", "--out",
+                    tmp_path / "b", cwd=tmp_path,
+                    env={"TRANSLUCENT_BPY_PYTHON": str(tmp_path / "no_python")})
+    described = json.loads((tmp_path / "b" / "scene.json").read_text())
+    assert [o["material"]["type"] for o in described["objects"]] == \
+        ["subsurface", "diffuse", "diffuse"]
+    assert (tmp_path / "b" / "build_cycles.py").is_file()
+    assert "scene.blend" not in {p.name for p in (tmp_path / "b").iterdir()}
+    assert "blender --background --python" in result.stdout
 
 
 def test_report(inputs, tmp_path):
+    # Cycles named where no bpy is: each of its modes says so, the method runs
     result = run_ok("report", inputs / "tiny.toml", "--methods", "splatting", "--serial",
-                    "--spp", "2", "--passes", "2", "--out", tmp_path / "r", cwd=tmp_path)
+                    "--spp", "2", "--passes", "2", "--out", tmp_path / "r",
+                    "--renderers", "cycles.burley", "--renderer-spp", "2,8", cwd=tmp_path,
+                    env={"TRANSLUCENT_BPY_PYTHON": str(tmp_path / "no_python")})
     metrics = json.loads((tmp_path / "r" / "metrics.json").read_text())
     assert (tmp_path / "r" / "index.html").is_file() and "splatting" in result.stdout
-    assert metrics
+    methods = next(iter(metrics["scenes"].values()))["methods"]
+    assert methods["splatting"]["status"] == "ok"
+    assert methods["cycles.burley"]["status"] == "not installed"
+    assert "no_python, which is not an executable" in methods["cycles.burley"]["reason"]
 
 
 def test_stress_only(tmp_path):
