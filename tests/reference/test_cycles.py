@@ -19,9 +19,14 @@ from translucent.reference.peers import blender
 from translucent.scenes import (
     Camera,
     ConstantEnvironment,
+    DirectionalLight,
+    ImageEnvironment,
     PointLight,
+    RectangularAreaLight,
     Scene,
     SceneObject,
+    SphereAreaLight,
+    SpotLight,
 )
 from translucent.scenes.meshes import icosphere
 
@@ -86,14 +91,6 @@ def _frame(matrix):
 
 
 def test_every_light_gets_the_power_cycles_units_need():
-    from translucent.scenes import (
-        ConstantEnvironment,
-        DirectionalLight,
-        RectangularAreaLight,
-        SphereAreaLight,
-        SpotLight,
-    )
-
     lights = [SphereAreaLight([0.0, 3.0, 0.0], 0.5, 2.0),
               SpotLight([0.0, 4.0, 0.0], [0.0, -1.0, 0.0], 10.0, cutoff_angle=30.0,
                         beam_width=20.0),
@@ -128,7 +125,6 @@ def test_every_light_gets_the_power_cycles_units_need():
 
 def test_what_cycles_is_not_given_is_named():
     from translucent.materials.brdfs import AnalyticBRDF
-    from translucent.scenes import ImageEnvironment, RectangularAreaLight
 
     cases = [
         (_sphere(AnalyticBRDF("ward", 0.2, rho_s=0.5, rho_d=0.3)), "objects[0].material"),
@@ -199,14 +195,6 @@ def test_cycles_agrees_with_the_reference_on_the_skin1_sphere():
 
 
 def _light_cases():
-    from translucent.scenes import (
-        ConstantEnvironment,
-        DirectionalLight,
-        RectangularAreaLight,
-        SphereAreaLight,
-        SpotLight,
-    )
-
     return {
         "sphere light": SphereAreaLight([3.0, 4.0, 4.0], 0.5, 20.0),
         # the sphere (9 degrees seen from the light) lies inside the beam: the ramp between
