@@ -45,7 +45,7 @@ from ...materials import Dipole, Lambertian
 from ...scenes import PointLight, Scene
 
 __all__ = ["BPY_PYTHON_VARIABLE", "MODES", "SUBSURFACE_METHODS", "bpy_python", "describe_scene",
-           "render_cycles", "run_worker", "subsurface_inputs"]
+           "render_cycles", "run_worker", "subsurface_inputs", "write_description"]
 
 #: The environment variable that names a Python with ``bpy``.
 BPY_PYTHON_VARIABLE = "TRANSLUCENT_BPY_PYTHON"
@@ -104,16 +104,48 @@ def subsurface_inputs(medium: Dipole, mm_per_unit: float) -> dict:
             "anisotropy": float(medium.g), "ior": float(medium.eta)}
 
 
+def _solid_material(scene: Scene, index: int, mode: str) -> dict:
+    """Return a solid medium as Cycles is given it: its voxel grid, or its value per face.
+
+    Volume mode: the grid itself, read nearest-voxel as the reference reads it (the
+    worker's atlas lookup). Subsurface modes: each face takes the medium of the voxel its
+    centroid lies in, as a texture painted on the surface would give it (Cycles evaluates
+    the subsurface inputs where light enters), with A the walk table's total reflectance.
+    """
+    from ...materials.profiles.random_walk import load_table
+
+    solid = scene.objects[index].material
+    if mode not in SUBSURFACE_METHODS:
+        return {"type": "solid_medium", "ior": float(solid.eta),
+                "bounds": np.asarray(solid.bounds, dtype=np.float64).tolist(),
+                "sigma_s": np.asarray(solid.sigma_s_prime * scene.mm_per_unit, np.float32),
+                "sigma_a": np.asarray(solid.sigma_a * scene.mm_per_unit, np.float32)}
+    mesh = scene.objects[index].mesh
+    centroids = mesh.vertices[mesh.faces].mean(axis=1)
+    sigma_a, sigma_s_prime = solid.coefficients_at(centroids)
+    sigma_t = sigma_a + sigma_s_prime  # > 0 in every voxel (SolidMedium checks it)
+    albedo = load_table().reduced_cumulative(np.inf, sigma_s_prime / sigma_t, solid.eta)
+    return {"type": "subsurface", "method": SUBSURFACE_METHODS[mode],
+            "face_base_color": np.clip(albedo, 0.0, 1.0).astype(np.float32),
+            "face_radius": (4.0 * math.pi / (sigma_t * scene.mm_per_unit)).astype(np.float32),
+            "anisotropy": 0.0, "ior": float(solid.eta)}
+
+
 def _material(scene: Scene, index: int, mode: str) -> dict:
+    from ...materials.solid import SolidMedium
+
     material = scene.objects[index].material
     field = f"objects[{index}].material"
     if isinstance(material, Lambertian):
         return {"type": "diffuse", "albedo": np.broadcast_to(
             np.asarray(material.albedo, dtype=np.float64), (3,)).tolist()}
+    if isinstance(material, SolidMedium):
+        return _solid_material(scene, index, mode)
     if not isinstance(material, Dipole):
-        raise InputError("Cycles is given homogeneous media and Lambertian surfaces only (it "
-                         "has no Ward, Blinn-Phong or Cook-Torrance node)", file=scene.source,
-                         field=field, value=type(material).__name__)
+        raise InputError("Cycles is given homogeneous and solid media and Lambertian surfaces "
+                         "only (it has no Ward, Blinn-Phong or Cook-Torrance node; a SubEdit "
+                         "material is a surface texture of profiles, not a medium)",
+                         file=scene.source, field=field, value=type(material).__name__)
     if mode in SUBSURFACE_METHODS:
         return {"type": "subsurface", "method": SUBSURFACE_METHODS[mode],
                 **subsurface_inputs(material, scene.mm_per_unit)}
@@ -239,6 +271,28 @@ def describe_scene(scene: Scene, *, renders: list[tuple[int, int]], output: str,
             **({"save_blend": str(save_blend)} if save_blend else {})}
 
 
+def write_description(description: dict, folder) -> Path:
+    """Write ``description`` as ``folder/scene.json``, each array beside it in a ``.npy``.
+
+    An array-valued field of an object's material becomes the name of its file, relative
+    to the JSON's folder (the worker reads it there). Returns the JSON's path.
+    """
+    folder = Path(folder)
+    written = dict(description)
+    written["objects"] = []
+    for index, item in enumerate(description["objects"]):
+        material = dict(item["material"])
+        for key, value in item["material"].items():
+            if isinstance(value, np.ndarray):
+                name = f"object_{index}.{key}.npy"
+                np.save(folder / name, value)
+                material[key] = {"npy": name}
+        written["objects"].append({**item, "material": material})
+    path = folder / "scene.json"
+    path.write_text(json.dumps(written))
+    return path
+
+
 def run_worker(description: dict, folder: Path, *, python: str | None = None,
                timeout: float | None = None) -> tuple[list[np.ndarray], dict]:
     """Run ``blender_worker.py`` on ``description`` in ``folder``; its images and timing.
@@ -253,8 +307,7 @@ def run_worker(description: dict, folder: Path, *, python: str | None = None,
     python = python or bpy_python()
     if python is None:
         raise InputError(INSTALL_HINT, field=BPY_PYTHON_VARIABLE, value=None)
-    path = Path(folder) / "scene.json"
-    path.write_text(json.dumps(description))
+    path = write_description(description, folder)
     # isolated (-I): the worker's folder must not shadow Blender's own modules
     done = subprocess.run([python, "-I", str(WORKER), str(path)], capture_output=True,
                           text=True, timeout=timeout, check=False)

@@ -105,17 +105,126 @@ def _subsurface_material(name, spec):
     material, nodes, links, output = _node_material(name)
     principled = nodes.new("ShaderNodeBsdfPrincipled")
     principled.subsurface_method = spec["method"]
-    values = {"Base Color": list(spec["base_color"]) + [1.0], "Subsurface Weight": 1.0,
-              "Subsurface Radius": list(spec["radius"]), "Subsurface Scale": 1.0,
+    values = {"Subsurface Weight": 1.0, "Subsurface Scale": 1.0,
+              **({"Base Color": list(spec["base_color"]) + [1.0],
+                  "Subsurface Radius": list(spec["radius"])} if "radius" in spec else {}),
               "Subsurface Anisotropy": spec["anisotropy"], "IOR": spec["ior"],
               "Subsurface IOR": spec["ior"], "Roughness": 0.0, "Metallic": 0.0,
               "Specular IOR Level": 0.5,  # 0.5: the IOR as given
               "Coat Weight": 0.0, "Sheen Weight": 0.0}
+    per_face = {"Base Color": "face_base_color", "Subsurface Radius": "face_radius"}
     for socket in principled.inputs:  # by name: a mode's unused sockets are not keyed
-        if socket.name in values:
+        if per_face.get(socket.name) in spec:
+            attribute = nodes.new("ShaderNodeAttribute")
+            attribute.attribute_type = "GEOMETRY"
+            attribute.attribute_name = per_face[socket.name]
+            out = "Color" if socket.name == "Base Color" else "Vector"
+            links.new(attribute.outputs[out], socket)
+        elif socket.name in values:
             socket.default_value = values[socket.name]
     links.new(principled.outputs[0], output.inputs["Surface"])
     return material
+
+
+def _value(node_tree, kind, operation, *inputs):
+    """Add a Math or Vector Math node of ``operation``; inputs are sockets or constants."""
+    node = node_tree.nodes.new(kind)
+    node.operation = operation
+    sockets = [socket for socket in node.inputs if socket.enabled]
+    for socket, value in zip(sockets, inputs, strict=False):  # constants fill the rest
+        if hasattr(value, "is_output"):
+            node_tree.links.new(value, socket)
+        else:
+            socket.default_value = value
+    return node.outputs[0]
+
+
+def _grid_image(name, grid):
+    """Return a float image of the (Z, Y, X, 3) grid as an atlas: z slices side by side."""
+    depth, rows, columns, _ = grid.shape
+    image = bpy.data.images.new(name, width=columns * depth, height=rows, alpha=True,
+                                float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    atlas = np.ones((rows, depth * columns, 4), dtype=np.float32)
+    # image rows run from the bottom, as the voxel rows (y) up the grid
+    atlas[:, :, :3] = grid.transpose(1, 0, 2, 3).reshape(rows, depth * columns, 3)
+    image.pixels.foreach_set(atlas.ravel())
+    image.pack()
+    return image
+
+
+def _solid_medium_material(name, spec):
+    """Return a medium read from a voxel grid, nearest voxel, clamped at the box.
+
+    The grid's voxel (x, y, z) of the box ``bounds`` is found from the object coordinates
+    (the meshes are given in world coordinates, so object and world agree) and read from
+    an atlas image with Closest interpolation at its pixel's centre.
+    """
+    material, nodes, links, output = _node_material(name)
+    tree = material.node_tree
+    sigma_s, sigma_a = spec["sigma_s"], spec["sigma_a"]
+    depth, rows, columns, _ = sigma_s.shape
+    low, high = (np.asarray(b, dtype=np.float64) for b in spec["bounds"])
+    coordinates = nodes.new("ShaderNodeTexCoord").outputs["Object"]
+    vector = "ShaderNodeVectorMath"
+    scale = [float(n) / float(h - lo)
+             for n, h, lo in zip((columns, rows, depth), high, low, strict=True)]
+    index = _value(tree, vector, "SUBTRACT", coordinates, list(low))
+    index = _value(tree, vector, "MULTIPLY", index, scale)
+    index = _value(tree, vector, "FLOOR", index)
+    index = _value(tree, vector, "MAXIMUM", index, [0.0, 0.0, 0.0])
+    index = _value(tree, vector, "MINIMUM", index, [columns - 1.0, rows - 1.0, depth - 1.0])
+    split = nodes.new("ShaderNodeSeparateXYZ")
+    links.new(index, split.inputs[0])
+    x, y, z = split.outputs["X"], split.outputs["Y"], split.outputs["Z"]
+    math_node = "ShaderNodeMath"
+    u = _value(tree, math_node, "MULTIPLY_ADD", z, float(columns), x)
+    u = _value(tree, math_node, "ADD", u, 0.5)
+    u = _value(tree, math_node, "DIVIDE", u, float(columns * depth))
+    v = _value(tree, math_node, "ADD", y, 0.5)
+    v = _value(tree, math_node, "DIVIDE", v, float(rows))
+    uv = nodes.new("ShaderNodeCombineXYZ")
+    links.new(u, uv.inputs["X"])
+    links.new(v, uv.inputs["Y"])
+    scatter = nodes.new("ShaderNodeVolumeScatter")
+    absorb = nodes.new("ShaderNodeVolumeAbsorption")
+    for shader, grid, complement in ((scatter, sigma_s, False), (absorb, sigma_a, True)):
+        density = max(float(grid.max()), 1e-12)
+        texture = nodes.new("ShaderNodeTexImage")
+        texture.image = _grid_image(f"{name}_{shader.name}", grid / density)
+        texture.interpolation = "Closest"
+        texture.extension = "EXTEND"
+        links.new(uv.outputs[0], texture.inputs["Vector"])
+        color = texture.outputs["Color"]
+        if complement:  # Volume Absorption takes sigma_a = (1 - color) density
+            color = _value(tree, vector, "SUBTRACT", [1.0, 1.0, 1.0], color)
+        links.new(color, shader.inputs["Color"])
+        shader.inputs["Density"].default_value = density
+    scatter.inputs["Anisotropy"].default_value = 0.0
+    add = nodes.new("ShaderNodeAddShader")
+    links.new(scatter.outputs[0], add.inputs[0])
+    links.new(absorb.outputs[0], add.inputs[1])
+    links.new(add.outputs[0], output.inputs["Volume"])
+    if spec["ior"] != 1.0:
+        glass = nodes.new("ShaderNodeBsdfGlass")
+        glass.distribution = "GGX"
+        glass.inputs["Roughness"].default_value = 0.0
+        glass.inputs["IOR"].default_value = spec["ior"]
+        links.new(glass.outputs[0], output.inputs["Surface"])
+    return material
+
+
+def _face_attributes(mesh, spec):
+    """Store a subsurface material's per-face inputs on ``mesh`` as face attributes."""
+    for key, kind, field in (("face_base_color", "FLOAT_COLOR", "color"),
+                             ("face_radius", "FLOAT_VECTOR", "vector")):
+        if key not in spec:
+            continue
+        values = np.asarray(spec[key], dtype=np.float32)
+        if kind == "FLOAT_COLOR":
+            values = np.concatenate([values, np.ones((len(values), 1), np.float32)], axis=1)
+        attribute = mesh.attributes.new(key, kind, "FACE")
+        attribute.data.foreach_set(field, values.ravel())
 
 
 def _diffuse_material(name, albedo):
@@ -219,7 +328,10 @@ def build(description):
             mesh.materials.append(_medium_material(spec["name"], material["sigma_s"],
                                                    material["sigma_a"], material["g"]))
         elif material["type"] == "subsurface":
+            _face_attributes(mesh, material)
             mesh.materials.append(_subsurface_material(spec["name"], material))
+        elif material["type"] == "solid_medium":
+            mesh.materials.append(_solid_medium_material(spec["name"], material))
         elif material["type"] == "diffuse":
             mesh.materials.append(_diffuse_material(spec["name"], material["albedo"]))
         else:
@@ -243,6 +355,11 @@ def main(path):
     """
     with open(path) as handle:
         description = json.load(handle)
+    for item in description["objects"]:  # arrays live beside the description
+        for key, value in item["material"].items():
+            if isinstance(value, dict) and "npy" in value:
+                item["material"][key] = np.load(os.path.join(os.path.dirname(path),
+                                                             value["npy"]))
     scene = build(description)
     out = description["output"]
     os.makedirs(out, exist_ok=True)

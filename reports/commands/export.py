@@ -96,7 +96,6 @@ def run(args) -> int:
 
 def _export_blender(scene, out, args) -> int:
     """Write the Cycles description, its build script and, with ``bpy``, the ``.blend``."""
-    import json
     import shutil
     import tempfile
     from pathlib import Path
@@ -114,7 +113,7 @@ def _export_blender(scene, out, args) -> int:
     missing = cycles.available()
     with staged_outputs(out, field="--out") as staging, \
             output_folder(staging, field="--out", value=str(out)):
-        (Path(staging) / "scene.json").write_text(json.dumps(description, indent=1) + "\n")
+        blender.write_description(description, staging)
         shutil.copyfile(blender.WORKER, Path(staging) / "build_cycles.py")
         if missing is None:
             with tempfile.TemporaryDirectory(prefix="translucent-cycles-") as folder:

@@ -9,6 +9,7 @@ The description checks need nothing.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -125,9 +126,11 @@ def test_every_light_gets_the_power_cycles_units_need():
 
 def test_what_cycles_is_not_given_is_named():
     from translucent.materials.brdfs import AnalyticBRDF
+    from translucent.scenes import load_scene
 
     cases = [
         (_sphere(AnalyticBRDF("ward", 0.2, rho_s=0.5, rho_d=0.3)), "objects[0].material"),
+        (load_scene("heterogeneous"), "objects[0].material"),
         (_sphere(Lambertian(0.5), lights=[ImageEnvironment(np.ones((4, 8, 3)))]),
          "lights[0]"),
         (_sphere(Lambertian(0.5), lights=[RectangularAreaLight(
@@ -251,3 +254,37 @@ def test_export_refuses_a_scene_cycles_is_not_given_and_writes_nothing(tmp_path,
     err = capsys.readouterr().err
     assert "objects[0].material" in err and "no Ward, Blinn-Phong" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_solid_medium_is_its_grid_in_the_volume_and_its_voxel_per_face_in_subsurface():
+    from translucent.scenes import load_scene
+
+    scene = load_scene("solid_checker")
+    solid = scene.objects[0].material
+    (volume,) = _described(scene)["objects"]
+    np.testing.assert_allclose(volume["material"]["sigma_s"],
+                               solid.sigma_s_prime * scene.mm_per_unit, rtol=1e-6)
+    np.testing.assert_allclose(volume["material"]["sigma_a"],
+                               solid.sigma_a * scene.mm_per_unit, rtol=1e-6)
+    assert volume["material"]["bounds"] == solid.bounds.tolist()
+    (surface,) = _described(scene, "random_walk")["objects"]
+    material = surface["material"]
+    mesh = scene.objects[0].mesh
+    assert material["face_radius"].shape == material["face_base_color"].shape == \
+        (len(mesh.faces), 3)
+    # a checker of two media: two radii, each that of the voxel under the face's centroid
+    sigma_a, sigma_s = solid.coefficients_at(mesh.vertices[mesh.faces].mean(axis=1))
+    np.testing.assert_allclose(material["face_radius"],
+                               4.0 * math.pi / ((sigma_a + sigma_s) * 10.0), rtol=1e-6)
+    assert len(np.unique(material["face_radius"], axis=0)) == 2
+
+
+def test_the_arrays_of_a_description_are_written_beside_it(tmp_path):
+    from translucent.scenes import load_scene
+
+    described = _described(load_scene("solid_checker"))
+    path = blender.write_description(described, tmp_path)
+    written = json.loads(path.read_text())
+    name = written["objects"][0]["material"]["sigma_s"]["npy"]
+    np.testing.assert_array_equal(np.load(tmp_path / name),
+                                  described["objects"][0]["material"]["sigma_s"])
