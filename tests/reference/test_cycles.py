@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -288,3 +289,36 @@ def test_the_arrays_of_a_description_are_written_beside_it(tmp_path):
     name = written["objects"][0]["material"]["sigma_s"]["npy"]
     np.testing.assert_array_equal(np.load(tmp_path / name),
                                   described["objects"][0]["material"]["sigma_s"])
+
+
+@pytest.mark.slow  # about 60 s on 2 cores
+def test_the_report_scores_every_cycles_mode_through_the_command(tmp_path):
+    """``translucent report --renderers cycles``, as a user types it, on a 24-pixel sphere."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from translucent.fast.conformance import tiny_sphere_text
+
+    python = _python()
+    scene = tmp_path / "tiny_cycles.toml"
+    scene.write_text(tiny_sphere_text("tiny_cycles", 24).replace('name = "Skin1"',
+                                                                 'name = "Skin1", eta = 1.0'))
+    script = Path(sys.executable).with_name("translucent")
+    done = subprocess.run([str(script), "report", str(scene), "--renderers", "cycles",
+                           "--renderer-spp", "4,32", "--spp", "16", "--passes", "4",
+                           "--out", str(tmp_path / "r"), "--no-progress"],
+                          capture_output=True, text=True, timeout=600,
+                          env={**os.environ, blender.BPY_PYTHON_VARIABLE: python})
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "Traceback" not in done.stderr + done.stdout
+    methods = json.loads((tmp_path / "r" / "metrics.json").read_text())[
+        "scenes"]["tiny_cycles"]["methods"]
+    assert sorted(methods) == ["cycles.burley", "cycles.random_walk",
+                               "cycles.random_walk_skin", "cycles.volume"]
+    for entry in methods.values():
+        assert entry["status"] == "ok" and entry["metrics"]["relative_mse"] > 0
+        assert [p["knobs"]["spp"] for p in entry["ladder"]] == [4]
+    split = methods["cycles.burley"]["error_split"]
+    assert split["profile"] == "burley_cycles" and split["reason"] is None
+    assert len(split["brightness_to_model"]["ratio"]) == 3
