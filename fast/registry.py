@@ -25,11 +25,11 @@ import importlib.metadata
 import re
 import threading
 from collections.abc import Iterator, MutableMapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
+from ..plugins import EntryPointTarget, discovered
 from .contract import CONTRACT, OPTIONAL, REQUIRED
 
 __all__ = ["ENTRY_POINT_GROUP", "EntryPointTarget", "METHODS", "MethodContractError",
@@ -128,40 +128,9 @@ def _check_name(name) -> str:
     return name
 
 
-@dataclass(frozen=True)
-class EntryPointTarget:
-    """A method found through an entry point: ``module`` or ``module:attribute``, and whose."""
-
-    value: str
-    distribution: str = "?"
-
-    def load(self):
-        """Import the module (and look up the attribute) the entry point names."""
-        module_name, _, attribute = self.value.partition(":")
-        target = importlib.import_module(module_name.strip())
-        for part in filter(None, attribute.strip().split(".")):
-            target = getattr(target, part)
-        return target
-
-
 def _discovered() -> tuple[dict[str, Any], dict[str, list[str]]]:
     """Return the entry points of the group by name, and the names claimed twice."""
-    found: dict[str, Any] = {}
-    claims: dict[str, set[str]] = {}
-    owners: dict[str, list[str]] = {}
-    for entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
-        dist = getattr(entry, "dist", None)
-        owner = getattr(dist, "name", None) or "?"
-        claims.setdefault(entry.name, set()).add(entry.value)
-        owners.setdefault(entry.name, []).append(f"{owner} ({entry.value})")
-        found.setdefault(entry.name, EntryPointTarget(entry.value, owner))
-    conflicts = {name: owners[name] for name, values in claims.items() if len(values) > 1}
-    try:
-        importlib.metadata.distribution("translucent")
-    except importlib.metadata.PackageNotFoundError:
-        for name, module in BUILTIN_METHODS.items():
-            found.setdefault(name, module)
-    return found, conflicts
+    return discovered(ENTRY_POINT_GROUP, BUILTIN_METHODS)
 
 
 class MethodRegistry(MutableMapping):

@@ -30,12 +30,11 @@ or, for this process only, with :func:`register_renderer`. ``translucent report
 
 from __future__ import annotations
 
-import importlib
-import importlib.metadata
 import re
 from typing import Any
 
 from ...errors import InputError
+from ...plugins import EntryPointTarget, discovered
 
 __all__ = ["RENDERER_GROUP", "REQUIRED", "entry_mode", "register_renderer", "renderer",
            "renderer_entries", "renderer_names", "unregister_renderer"]
@@ -62,16 +61,8 @@ REQUIRED = {
 _registered: dict[str, Any] = {}
 
 
-def _discovered() -> dict[str, str]:
-    found = {}
-    for entry in importlib.metadata.entry_points(group=RENDERER_GROUP):
-        found.setdefault(entry.name, entry.value)
-    try:
-        importlib.metadata.distribution("translucent")
-    except importlib.metadata.PackageNotFoundError:
-        for name, module in BUILTIN_RENDERERS.items():
-            found.setdefault(name, module)
-    return found
+def _discovered() -> dict:
+    return discovered(RENDERER_GROUP, BUILTIN_RENDERERS)[0]
 
 
 def renderer_names() -> list[str]:
@@ -109,14 +100,13 @@ def renderer(name: str):
                          field="--renderers", value=name)
     target = known[name]
     if isinstance(target, str):
-        module_name, _, attribute = target.partition(":")
+        target = EntryPointTarget(target)
+    if isinstance(target, EntryPointTarget):
         try:
-            target = importlib.import_module(module_name.strip())
-        except ImportError as error:
-            raise InputError(f"cannot be imported: {error}", field="--renderers",
+            target = target.load()
+        except (ImportError, AttributeError) as error:
+            raise InputError(f"cannot be loaded: {error}", field="--renderers",
                              value=name) from None
-        for part in filter(None, attribute.strip().split(".")):
-            target = getattr(target, part)
     missing = [f"{part} ({what})" for part, what in REQUIRED.items()
                if not hasattr(target, part)]
     if missing:
