@@ -90,6 +90,7 @@ def metrics_json(reports: list[SceneReport], chosen: list[str], context: dict) -
                       "verdict": metric_verdict(report.verdicts[name][key], check, key)}
                 for key in report.verdicts.get(name, {})}
             entry["metrics_error"] = report.metric_errors.get(name, "")
+            entry["systematic"] = json_safe(report.systematic.get(name))
             entry["ladder"] = json_safe(report.ladder_points.get(name, []))
             entry["files"] = report.files.get(name, {})
             entry["baseline"] = check.as_dict() if check else None

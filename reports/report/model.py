@@ -52,6 +52,9 @@ class SceneReport:
     image_metrics: dict[str, dict] = field(default_factory=dict)
     runs: dict[str, MethodRun] = field(default_factory=dict)
     metrics: dict[str, dict] = field(default_factory=dict)
+    #: per entry, its brightness against the reference and, with its own variance, its
+    #: error with its noise discounted (:func:`~.scoring.systematic_error`)
+    systematic: dict[str, dict] = field(default_factory=dict)
     metric_errors: dict[str, str] = field(default_factory=dict)
     checks: dict[str, BaselineCheck] = field(default_factory=dict)
     files: dict[str, dict[str, str]] = field(default_factory=dict)

@@ -71,6 +71,7 @@ def score_scene(report: SceneReport, folder: Path) -> None:
             report.metric_errors[name] = str(error)
             continue
         report.metrics[name] = on_pixels.metrics.as_dict()
+        report.systematic[name] = systematic_error(report.reference, run.image, mask)
         report.image_metrics[name] = comparison.metrics.as_dict()
         report.verdicts[name] = noise_verdicts(report.metrics[name], report.floor_of(name))
         for map_name, map_files in maps.items():
@@ -81,6 +82,35 @@ def score_scene(report: SceneReport, folder: Path) -> None:
             report.model_reference_info[profile]["exr"] = f"{report.slug}/model.{profile}.exr"
         score_splits(report)
     _speedups(report, scene_folder)
+
+
+def systematic_error(reference, image, mask=None) -> dict:
+    r"""Return what of ``image``'s error is not noise: its brightness and converged error.
+
+    ``brightness_to_reference``: the image summed over ``mask`` over the reference's, per
+    channel (:func:`~.split.brightness_ratio`). Where both images carry a variance (another
+    renderer's render, its halves' spread), ``relative_mse_converged``: the relative MSE
+    with both images' noise discounted, the error the image would have at infinitely many
+    samples, :math:`\frac{1}{N}\sum_i ((t_i - r_i)^2 - \sigma_{r,i}^2 - \sigma_{t,i}^2)
+    / (r_i^2 + \epsilon)`, with the standard error of that mean over the pixels.
+    """
+    from ..metrics.compute import RELMSE_EPSILON
+    from .split import brightness_ratio
+
+    found = {"brightness_to_reference": brightness_ratio(image, reference, mask)}
+    if image.variance is None or reference.variance is None:
+        return found
+    arrays = [np.asarray(a, dtype=np.float64) for a in
+              (reference.rgb, image.rgb, reference.variance, image.variance)]
+    if mask is not None:
+        arrays = [a[mask] for a in arrays]
+    ref, test, ref_variance, test_variance = (a.reshape(-1, 3) for a in arrays)
+    terms = ((test - ref) ** 2 - ref_variance - test_variance) / (ref ** 2 + RELMSE_EPSILON)
+    terms = terms.mean(axis=1)
+    found["relative_mse_converged"] = {
+        "value": float(terms.mean()),
+        "standard_error": float(terms.std(ddof=1) / np.sqrt(max(terms.size, 1)))}
+    return found
 
 
 def scored_pixels(scene, objects=None):

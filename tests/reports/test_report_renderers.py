@@ -67,6 +67,9 @@ def test_each_mode_is_scored_with_its_ladder_or_says_why_not(tmp_path, fake_rend
     errors = [p["relative_mse"] for p in plain["ladder"]] + [plain["metrics"]["relative_mse"]]
     assert errors[0] != errors[1] != errors[2]
     assert "renders no model the suite knows" in plain["error_split"]["reason"]
+    # a render without a variance: its brightness, not its converged error
+    assert len(plain["systematic"]["brightness_to_reference"]["ratio"]) == 3
+    assert "relative_mse_converged" not in plain["systematic"]
     assert methods["fake.refuses"]["status"] == "not applicable"
     assert methods["fake.refuses"]["reason"] == "it has no light of that kind"
     assert methods["fake.broken"]["status"] == "failed"
@@ -116,3 +119,27 @@ def test_only_the_burley_mode_has_a_model_the_split_knows():
     assert split_profile("cycles.burley", None) == ("burley_cycles", "")
     model, reason = split_profile("cycles.random_walk", None)
     assert model is None and "renders no model the suite knows" in reason
+
+
+def test_the_converged_error_discounts_both_images_noise():
+    from translucent.reports.report.scoring import systematic_error
+
+    rng = np.random.default_rng(7)
+    truth = rng.uniform(5.0, 20.0, (64, 64, 3))
+
+    def noisy(scale, sigma):
+        return Image(truth * scale + rng.normal(0.0, sigma, truth.shape),
+                     np.full(truth.shape, sigma ** 2))
+
+    reference = noisy(1.0, 0.5)
+    unbiased = systematic_error(reference, noisy(1.0, 1.0))
+    converged = unbiased["relative_mse_converged"]
+    # the raw relative MSE is about 1.25 / 150 = 0.008; its converged part is 0
+    assert abs(converged["value"]) < 4.0 * converged["standard_error"]
+    assert converged["standard_error"] < 0.1 * 1.25 / 150.0
+    brighter = systematic_error(reference, noisy(1.05, 1.0))["relative_mse_converged"]
+    # 5 % brighter: (0.05 r)^2 / (r^2 + eps) of relative MSE once the noise is discounted
+    expected = np.mean((0.05 * truth) ** 2 / (truth ** 2 + 1e-2))
+    assert abs(brighter["value"] - expected) < 4.0 * brighter["standard_error"]
+    ratio = systematic_error(reference, noisy(1.05, 0.0))["brightness_to_reference"]
+    np.testing.assert_allclose(ratio["ratio"], 1.05, atol=4.0 * max(ratio["standard_error"]))
