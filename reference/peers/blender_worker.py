@@ -267,6 +267,9 @@ def _add_light(scene, world, index, spec):
         light.size_y = float(spec["size_y"])
         light.spread = math.pi  # a Lambertian emitter
     holder = bpy.data.objects.new(f"light_{index}", light)
+    # an emitter with an area is seen by the camera, as the suite's shapes that emit are
+    # (Cycles hides lights from the camera by default)
+    holder.visible_camera = kind == "area" or float(spec.get("radius", 0.0)) > 0.0
     if "matrix" in spec:
         holder.matrix_world = Matrix(spec["matrix"])
     else:
