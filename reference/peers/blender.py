@@ -188,13 +188,10 @@ def _light(scene: Scene, index: int) -> dict:  # noqa: C901 - one case a light t
         return {"type": "point", "position": light.center.tolist(), "radius": light.radius,
                 "energy": (4.0 * math.pi ** 2 * light.radius ** 2 * light.radiance).tolist()}
     if isinstance(light, SpotLight):
-        cutoff = math.radians(light.cutoff_angle)
-        beam = math.radians(light.beam_width)
-        # the smoothstep reaches 1 where the suite's linear ramp does (at the beam width)
-        blend = (math.cos(beam) - math.cos(cutoff)) / (1.0 - math.cos(cutoff))
         return {"type": "spot", "matrix": _pointing(light.position, light.direction),
                 "energy": (4.0 * math.pi * light.intensity).tolist(),
-                "spot_size": 2.0 * cutoff, "spot_blend": blend}
+                "cutoff": math.radians(light.cutoff_angle),
+                "beam_width": math.radians(light.beam_width)}
     if isinstance(light, RectangularAreaLight):
         u, v = light.u_axis, light.v_axis
         if abs(float(u @ v)) > 1e-9 * float(np.linalg.norm(u) * np.linalg.norm(v)):

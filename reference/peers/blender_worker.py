@@ -23,8 +23,10 @@ Cycles' conventions (``intern/cycles``, Blender 4.2 to 5.0), stated where they a
   IOR 1 exactly has no specular layer;
 * lights, with ``normalize`` on: a point or spot light of ``energy`` P watts and radius 0
   has intensity :math:`P/(4\pi)`; with radius r and no soft fall-off it is a sphere of
-  radiance :math:`P/(4\pi^2 r^2)`; a spot's ``spot_size`` is the full cone angle and its
-  edge a smoothstep in the cosine over ``spot_blend``; an area light of power P and area A
+  radiance :math:`P/(4\pi^2 r^2)`; a spot's ``spot_size`` is the full cone angle (its own
+  edge, a smoothstep in the cosine over ``spot_blend``, is replaced by the suite's linear
+  ramp in angle, made in the light's node tree from its Texture Coordinate ``Normal``, the
+  direction of emission); an area light of power P and area A
   is one-sided with radiance :math:`P/(\pi A)` along its local -z; a sun of strength S
   and angle 0 gives irradiance S; the world's colour times strength is its radiance;
 * the camera's horizontal field of view is ``angle`` with ``sensor_fit = 'HORIZONTAL'``;
@@ -235,6 +237,27 @@ def _diffuse_material(name, albedo):
     return material
 
 
+def _spot_falloff(light, cutoff, beam_width):
+    """Multiply the spot's emission by 1 inside the beam, linear in angle to 0 at the cutoff.
+
+    A light's Texture Coordinate ``Normal`` is the direction of emission in the light's
+    frame, which looks down its -z: the angle off the axis is ``acos(-z)``.
+    """
+    light.use_nodes = True
+    tree = light.node_tree
+    emission = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeEmission")
+    direction = tree.nodes.new("ShaderNodeSeparateXYZ")
+    tree.links.new(tree.nodes.new("ShaderNodeTexCoord").outputs["Normal"], direction.inputs[0])
+    math_node = "ShaderNodeMath"
+    cosine = _value(tree, math_node, "MULTIPLY", direction.outputs["Z"], -1.0)
+    angle = _value(tree, math_node, "ARCCOSINE", cosine)
+    ramp = _value(tree, math_node, "SUBTRACT", cutoff, angle)
+    ramp = _value(tree, math_node, "DIVIDE", ramp, max(cutoff - beam_width, 1e-12))
+    ramp = _value(tree, math_node, "MINIMUM", ramp, 1.0)
+    ramp = _value(tree, math_node, "MAXIMUM", ramp, 0.0)
+    tree.links.new(ramp, emission.inputs["Strength"])
+
+
 def _add_light(scene, world, index, spec):
     """Add one light of the description (kinds and units: the module docstring)."""
     kind = spec["type"]
@@ -258,9 +281,10 @@ def _add_light(scene, world, index, spec):
         if hasattr(light, "use_soft_falloff"):  # a true sphere light, not the soft fall-off
             light.use_soft_falloff = False
     if kind == "spot":
-        light.spot_size = float(spec["spot_size"])
-        light.spot_blend = float(spec["spot_blend"])
+        light.spot_size = 2.0 * float(spec["cutoff"])
+        light.spot_blend = 0.0  # a hard cone: the fall-off is the node tree's
         light.show_cone = False
+        _spot_falloff(light, float(spec["cutoff"]), float(spec["beam_width"]))
     if kind == "area":
         light.shape = "RECTANGLE"
         light.size = float(spec["size_x"])

@@ -108,10 +108,8 @@ def test_every_light_gets_the_power_cycles_units_need():
     np.testing.assert_allclose(-rotation[:, 2], [0.0, -1.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(origin, [0.0, 4.0, 0.0])
     np.testing.assert_allclose(spot["energy"], [40.0 * math.pi] * 3)
-    assert spot["spot_size"] == pytest.approx(math.radians(60.0))
-    # the smoothstep in the cosine reaches 1 at the beam width, 0 at the cutoff
-    cos_beam, cos_cut = math.cos(math.radians(20.0)), math.cos(math.radians(30.0))
-    assert (cos_beam - cos_cut) / ((1.0 - cos_cut) * spot["spot_blend"]) == pytest.approx(1.0)
+    assert spot["cutoff"] == pytest.approx(math.radians(30.0))
+    assert spot["beam_width"] == pytest.approx(math.radians(20.0))
     rotation, _ = _frame(rect["matrix"])
     # Cycles emits along the local -z: the suite's cross(u, v), here -y (down)
     np.testing.assert_allclose(-rotation[:, 2], np.cross([0.5, 0, 0], [0, 0, 0.25]) /
@@ -201,10 +199,12 @@ def test_cycles_agrees_with_the_reference_on_the_skin1_sphere():
 def _light_cases():
     return {
         "sphere light": SphereAreaLight([3.0, 4.0, 4.0], 0.5, 20.0),
-        # the sphere (9 degrees seen from the light) lies inside the beam: the ramp between
-        # beam width and cutoff, a smoothstep in Cycles, is not tested by it
+        # the sphere (9 degrees seen from the light) inside the beam
         "spot": SpotLight([3.0, 4.0, 4.0], [-3.0, -4.0, -4.0], 100.0, cutoff_angle=40.0,
                           beam_width=30.0),
+        # the sphere (9 degrees seen from the light) across the ramp from 3 to 8 degrees
+        "spot penumbra": SpotLight([3.0, 4.0, 4.0], [-3.0, -4.0, -4.0], 100.0,
+                                   cutoff_angle=8.0, beam_width=3.0),
         "rectangle": RectangularAreaLight([0.0, 3.0, 1.0], [0.5, 0.0, 0.0], [0.0, 0.0, 0.5],
                                           20.0),
         # behind the sphere, facing the camera: the emitter seen as well as its light
