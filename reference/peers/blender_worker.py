@@ -90,7 +90,11 @@ def _medium_material(name, sigma_s, sigma_a, g):
 
 def _dielectric_medium_material(name, sigma_s, sigma_a, g, ior):
     """Return the medium inside a smooth dielectric boundary (Glass BSDF, roughness 0)."""
-    material = _medium_material(name, sigma_s, sigma_a, g)
+    return _with_glass_boundary(_medium_material(name, sigma_s, sigma_a, g), ior)
+
+
+def _with_glass_boundary(material, ior):
+    """Give a medium's material the surface of a smooth dielectric of index ``ior``."""
     nodes, links = material.node_tree.nodes, material.node_tree.links
     glass = nodes.new("ShaderNodeBsdfGlass")
     glass.distribution = "GGX"  # roughness 0: the singular (perfectly specular) path
@@ -207,13 +211,7 @@ def _solid_medium_material(name, spec):
     links.new(scatter.outputs[0], add.inputs[0])
     links.new(absorb.outputs[0], add.inputs[1])
     links.new(add.outputs[0], output.inputs["Volume"])
-    if spec["ior"] != 1.0:
-        glass = nodes.new("ShaderNodeBsdfGlass")
-        glass.distribution = "GGX"
-        glass.inputs["Roughness"].default_value = 0.0
-        glass.inputs["IOR"].default_value = spec["ior"]
-        links.new(glass.outputs[0], output.inputs["Surface"])
-    return material
+    return _with_glass_boundary(material, spec["ior"]) if spec["ior"] != 1.0 else material
 
 
 def _face_attributes(mesh, spec):
