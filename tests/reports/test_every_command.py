@@ -67,8 +67,10 @@ def inputs(tmp_path_factory):
 
 
 def test_doctor(tmp_path):
-    shown = run_ok("doctor", cwd=tmp_path).stdout
+    shown = run_ok("doctor", cwd=tmp_path,
+                   env={"TRANSLUCENT_BPY_PYTHON": str(tmp_path / "no_python")}).stdout
     assert "mitsuba" in shown and "variant" in shown
+    assert "cycles not usable (TRANSLUCENT_BPY_PYTHON names" in shown
 
 
 def test_scenes(tmp_path):
