@@ -1,12 +1,17 @@
-"""``translucent report --images DIR``: another renderer's images scored like a method's."""
+"""Other renderers scored like methods: ``report --images DIR`` and ``report --renderers``.
+
+One file, so that one test process pays the first report's compiled kernels for both.
+"""
 
 import json
+import types
 
 import numpy as np
 import OpenEXR
 import pytest
 from translucent.fast.conformance import tiny_sphere_text
 from translucent.image import Image
+from translucent.reference.peers import blender, registry
 from translucent.reports.cli import main
 
 #: The conformance checks' tiny skin sphere, at 24 x 24 pixels.
@@ -109,3 +114,139 @@ def test_error_maps_hatch_the_pixels_the_numbers_do_not_count(tmp_path):
     header = read_exr(files["flip"].exr).metadata
     assert header["scored_pixels"] == int(scored.sum())
     assert header["mean"] == pytest.approx(on_pixels.metrics.hdr_flip)
+
+
+# ------------------------------------------------------------------ --renderers
+PEERS_SCENE = tiny_sphere_text("tiny_peers", 16)
+
+
+def _fake_render(scene, mode, spp_values, seed=0):
+    if mode == "broken":
+        return [{"spp": spp, "error": "RuntimeError: the fake renderer broke"}
+                for spp in spp_values]
+    shape = (scene.camera.height, scene.camera.width, 3)
+    return [{"spp": spp, "seconds": 0.01 * spp,
+             "image": Image(np.full(shape, 0.05 + 0.1 / spp, np.float32),
+                            metadata={"version": "fake 1.0"})}
+            for spp in sorted(spp_values)]
+
+
+FAKE = types.SimpleNamespace(
+    NAME="fake",
+    MODES={"plain": "a grey image", "refuses": "never applies", "broken": "always fails"},
+    available=lambda: None,
+    applies_to=lambda scene, mode: "it has no light of that kind" if mode == "refuses"
+    else None,
+    model_of=lambda mode: None,
+    render=_fake_render,
+)
+
+
+@pytest.fixture
+def fake_renderer(monkeypatch):
+    registry.register_renderer("fake", FAKE)
+    # Cycles without bpy: its modes are "not installed", with the hint
+    monkeypatch.setattr(blender, "bpy_python", lambda: None)
+    yield
+    registry.unregister_renderer("fake")
+
+
+def _renderers_report(tmp_path, *extra):
+    scene = tmp_path / "tiny_peers.toml"
+    scene.write_text(PEERS_SCENE)
+    return main(["report", str(scene), "--out", str(tmp_path / "report"), "--serial",
+                 "--no-progress", "--spp", "4", "--passes", "2", "--baseline",
+                 str(tmp_path / "baseline.json"), "--update-baseline", *extra])
+
+
+def test_each_mode_is_scored_with_its_ladder_or_says_why_not(tmp_path, fake_renderer):
+    assert _renderers_report(tmp_path, "--renderers", "fake,cycles.burley",
+                   "--renderer-spp", "16,4,64") == 0
+    data = json.loads((tmp_path / "report" / "metrics.json").read_text())
+    methods = data["scenes"]["tiny_peers"]["methods"]
+    assert set(methods) == {"fake.plain", "fake.refuses", "fake.broken", "cycles.burley"}
+    plain = methods["fake.plain"]
+    assert plain["status"] == "ok" and plain["knobs"] == {"spp": 64}
+    assert plain["frame_seconds"] == pytest.approx(0.64)
+    assert plain["metrics"]["relative_mse"] > 0
+    # the cheaper counts are its ladder, each scored on the same pixels
+    assert [p["knobs"]["spp"] for p in plain["ladder"]] == [4, 16]
+    errors = [p["relative_mse"] for p in plain["ladder"]] + [plain["metrics"]["relative_mse"]]
+    assert errors[0] != errors[1] != errors[2]
+    assert "renders no model the suite knows" in plain["error_split"]["reason"]
+    # a render without a variance: its brightness, not its converged error
+    assert len(plain["systematic"]["brightness_to_reference"]["ratio"]) == 3
+    assert "relative_mse_converged" not in plain["systematic"]
+    assert methods["fake.refuses"]["status"] == "not applicable"
+    assert methods["fake.refuses"]["reason"] == "it has no light of that kind"
+    assert methods["fake.broken"]["status"] == "failed"
+    assert "the fake renderer broke" in methods["fake.broken"]["reason"]
+    assert methods["cycles.burley"]["status"] == "not installed"
+    assert "pip install bpy" in methods["cycles.burley"]["reason"]
+    assert "fake.plain" in (tmp_path / "report" / "index.html").read_text()
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--renderers", "nosuch"], "unknown renderer; known: cycles"),
+    (["--renderers", "cycles.photon_map"], "cycles has no mode 'photon_map'"),
+    (["--renderers", ","], "give at least one renderer"),
+    (["--renderers", "cycles", "--renderer-spp", "0"], "between 1 and 1048576"),
+    (["--renderers", "cycles", "--renderer-spp", "4,many"], "whole numbers"),
+])
+def test_bad_renderer_arguments_are_input_errors_and_write_nothing(tmp_path, capsys, extra,
+                                                                    words):
+    assert _renderers_report(tmp_path, *extra) == 2
+    assert words in capsys.readouterr().err
+    assert not (tmp_path / "report").exists()
+    assert not (tmp_path / "baseline.json").exists()
+
+
+def test_a_renderer_lacking_part_of_the_contract_is_named(fake_renderer):
+    registry.register_renderer("half", types.SimpleNamespace(NAME="half", MODES={"a": "a"}))
+    try:
+        with pytest.raises(registry.InputError, match="lacks available"):
+            registry.renderer_entries("half")
+    finally:
+        registry.unregister_renderer("half")
+
+
+def test_the_suite_finds_cycles_through_its_entry_point():
+    import importlib.metadata
+
+    found = {e.name: e.value for e in
+             importlib.metadata.entry_points(group=registry.RENDERER_GROUP)}
+    assert found["cycles"] == "translucent.reference.peers.cycles"
+    assert registry.renderer_entries("cycles") == [
+        "cycles.burley", "cycles.random_walk", "cycles.random_walk_skin", "cycles.volume"]
+
+
+def test_only_the_burley_mode_has_a_model_the_split_knows():
+    from translucent.reports.report.split import split_profile
+
+    assert split_profile("cycles.burley", None) == ("burley_cycles", "")
+    model, reason = split_profile("cycles.random_walk", None)
+    assert model is None and "renders no model the suite knows" in reason
+
+
+def test_the_converged_error_discounts_both_images_noise():
+    from translucent.reports.report.scoring import systematic_error
+
+    rng = np.random.default_rng(7)
+    truth = rng.uniform(5.0, 20.0, (64, 64, 3))
+
+    def noisy(scale, sigma):
+        return Image(truth * scale + rng.normal(0.0, sigma, truth.shape),
+                     np.full(truth.shape, sigma ** 2))
+
+    reference = noisy(1.0, 0.5)
+    unbiased = systematic_error(reference, noisy(1.0, 1.0))
+    converged = unbiased["relative_mse_converged"]
+    # the raw relative MSE is about 1.25 / 150 = 0.008; its converged part is 0
+    assert abs(converged["value"]) < 4.0 * converged["standard_error"]
+    assert converged["standard_error"] < 0.1 * 1.25 / 150.0
+    brighter = systematic_error(reference, noisy(1.05, 1.0))["relative_mse_converged"]
+    # 5 % brighter: (0.05 r)^2 / (r^2 + eps) of relative MSE once the noise is discounted
+    expected = np.mean((0.05 * truth) ** 2 / (truth ** 2 + 1e-2))
+    assert abs(brighter["value"] - expected) < 4.0 * brighter["standard_error"]
+    ratio = systematic_error(reference, noisy(1.05, 0.0))["brightness_to_reference"]
+    np.testing.assert_allclose(ratio["ratio"], 1.05, atol=4.0 * max(ratio["standard_error"]))
