@@ -107,6 +107,7 @@ def test_seeded_solves_add_every_refraction_point_the_straight_start_misses(mi, 
         assert nearest.max() < 1e-2
 
 
+@pytest.mark.slow  # 9 s; the fast tier keeps the seeded solves' added refraction points
 def test_at_eta_one_seeded_solves_find_no_other_path(mi):
     """Without refraction the only path is the straight line: a seeded solve never adds one."""
     seeded = sphere_scene(mi, "volpath_mnee", {"type": "dielectric", "int_ior": 1.0}, POINT,
