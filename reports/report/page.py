@@ -382,6 +382,7 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         parts.append(_metrics_table(metrics, check, report.floor_of(name),
                                     report.verdicts.get(name, {})))
         parts.append(_split_block(report, name))
+        parts.append(_systematic_line(report, name))
     if run.status == "ok":
         cached = (f" Image and times from the run of {_e(run.measured_at)} (cached: nothing "
                   "it depends on has changed since)." if run.cached else "")
@@ -412,6 +413,27 @@ def _method_block(report: SceneReport, name: str, run: MethodRun) -> str:
         parts.append("<p class=meta>The method skipped nothing for this scene.</p>")
     parts.append("</div>")
     return "\n".join(parts)
+
+
+def _systematic_line(report: SceneReport, name: str) -> str:
+    """Say how bright the image is against the reference, and its converged error.
+
+    The converged error needs the image's own variance (:func:`~.scoring.systematic_error`).
+    """
+    found = report.systematic.get(name) or {}
+    bright = found.get("brightness_to_reference")
+    converged = found.get("relative_mse_converged")
+    words = []
+    if bright:
+        words.append("Summed over its pixels, against the reference: " + " / ".join(
+            f"{100.0 * (r - 1.0):+.1f} %" for r in bright["ratio"]) + " (R / G / B; standard "
+            "errors " + " / ".join(f"{100.0 * e:.2f}" for e in bright["standard_error"]) +
+            " %).")
+    if converged:
+        words.append(f"Relative MSE with its own noise discounted too (converged) "
+                     f"{format_value(converged['value'], 3)} +- "
+                     f"{format_value(converged['standard_error'], 2)}.")
+    return f"<p class=meta>{_e(' '.join(words))}</p>" if words else ""
 
 
 def _ratio_sentence(report: SceneReport, name: str) -> str:

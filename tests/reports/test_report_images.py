@@ -183,7 +183,8 @@ def test_each_mode_is_scored_with_its_ladder_or_says_why_not(tmp_path, fake_rend
     assert "the fake renderer broke" in methods["fake.broken"]["reason"]
     assert methods["cycles.burley"]["status"] == "not installed"
     assert "pip install bpy" in methods["cycles.burley"]["reason"]
-    assert "fake.plain" in (tmp_path / "report" / "index.html").read_text()
+    page = (tmp_path / "report" / "index.html").read_text()
+    assert "fake.plain" in page and "Summed over its pixels, against the reference" in page
 
 
 @pytest.mark.parametrize("extra, words", [
