@@ -93,6 +93,9 @@ def run(args) -> int:
     if args.spp is None and args.passes != DEFAULT_PASSES:
         raise InputError("goes with --spp (without it the references are committed or "
                          "rendered to a noise target)", field="--passes", value=args.passes)
+    if args.renderer_spp is not None and args.renderers is None:
+        raise InputError("goes with --renderers (the counts other renderers render at)",
+                         field="--renderer-spp", value=args.renderer_spp)
     methods = None
     if args.methods is not None:
         methods = [name for name in args.methods.split(",") if name.strip()]

@@ -165,7 +165,12 @@ class RendererTask:
 
         scene = _scene(self.scene)
         module, mode = entry_mode(self.entry)
-        return peer_runs(self.entry, scene.name, module.render(scene, mode, list(self.spps)))
+        try:
+            points = module.render(scene, mode, list(self.spps))
+        except Exception as error:  # the renderer's failure is its entry's, not the report's
+            points = [{"spp": spp, "error": f"{type(error).__name__}: {error}"}
+                      for spp in sorted(self.spps)]
+        return peer_runs(self.entry, scene.name, points)
 
 
 def run_task(task):

@@ -124,6 +124,8 @@ def _fake_render(scene, mode, spp_values, seed=0):
     if mode == "broken":
         return [{"spp": spp, "error": "RuntimeError: the fake renderer broke"}
                 for spp in spp_values]
+    if mode == "raises":
+        raise TimeoutError("the fake renderer took too long")
     shape = (scene.camera.height, scene.camera.width, 3)
     return [{"spp": spp, "seconds": 0.01 * spp,
              "image": Image(np.full(shape, 0.05 + 0.1 / spp, np.float32),
@@ -133,7 +135,8 @@ def _fake_render(scene, mode, spp_values, seed=0):
 
 FAKE = types.SimpleNamespace(
     NAME="fake",
-    MODES={"plain": "a grey image", "refuses": "never applies", "broken": "always fails"},
+    MODES={"plain": "a grey image", "refuses": "never applies", "broken": "always fails",
+           "raises": "raises instead of returning"},
     available=lambda: None,
     applies_to=lambda scene, mode: "it has no light of that kind" if mode == "refuses"
     else None,
@@ -164,7 +167,8 @@ def test_each_mode_is_scored_with_its_ladder_or_says_why_not(tmp_path, fake_rend
                    "--renderer-spp", "16,4,64") == 0
     data = json.loads((tmp_path / "report" / "metrics.json").read_text())
     methods = data["scenes"]["tiny_peers"]["methods"]
-    assert set(methods) == {"fake.plain", "fake.refuses", "fake.broken", "cycles.burley"}
+    assert set(methods) == {"fake.plain", "fake.refuses", "fake.broken", "fake.raises",
+                            "cycles.burley"}
     plain = methods["fake.plain"]
     assert plain["status"] == "ok" and plain["knobs"] == {"spp": 64}
     assert plain["frame_seconds"] == pytest.approx(0.64)
@@ -181,6 +185,9 @@ def test_each_mode_is_scored_with_its_ladder_or_says_why_not(tmp_path, fake_rend
     assert methods["fake.refuses"]["reason"] == "it has no light of that kind"
     assert methods["fake.broken"]["status"] == "failed"
     assert "the fake renderer broke" in methods["fake.broken"]["reason"]
+    # an exception is the entry's failure, named, not the report's
+    assert methods["fake.raises"]["status"] == "failed"
+    assert "TimeoutError: the fake renderer took too long" in methods["fake.raises"]["reason"]
     assert methods["cycles.burley"]["status"] == "not installed"
     assert "pip install bpy" in methods["cycles.burley"]["reason"]
     page = (tmp_path / "report" / "index.html").read_text()
@@ -193,6 +200,7 @@ def test_each_mode_is_scored_with_its_ladder_or_says_why_not(tmp_path, fake_rend
     (["--renderers", ","], "give at least one renderer"),
     (["--renderers", "cycles", "--renderer-spp", "0"], "between 1 and 1048576"),
     (["--renderers", "cycles", "--renderer-spp", "4,many"], "whole numbers"),
+    (["--renderer-spp", "4,16"], "goes with --renderers"),
 ])
 def test_bad_renderer_arguments_are_input_errors_and_write_nothing(tmp_path, capsys, extra,
                                                                     words):
