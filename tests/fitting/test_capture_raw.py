@@ -70,6 +70,7 @@ def test_a_dng_reads_as_its_photosites_with_the_file_levels(tmp_path):
         assert np.isnan(raw.values[..., c][~own]).all()
 
 
+@pytest.mark.slow  # 9 s; the photo import's fit to its truth stays in the fast tier
 def test_an_imported_dng_fits_its_truth(tmp_path):
     from translucent.fitting.fit import fit_dipole
 

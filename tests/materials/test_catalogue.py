@@ -259,6 +259,18 @@ intensity = 100.0
 """
 
 
+def test_the_commands_take_a_narasimhan_medium_by_its_name(tmp_path, capsys):
+    from translucent.reports.cli import main
+
+    # the name the command is given, with its space, is the catalogue's
+    assert measured_medium("Lowfat Milk").name == "Lowfat Milk"
+    assert main(["approx", "prt", "sphere", "--material", "Lowfat Jelly", "--out",
+                 str(tmp_path / "jelly.exr")]) == 2
+    assert "valid names: Apple" in capsys.readouterr().err
+    assert not (tmp_path / "jelly.exr").exists()
+
+
+@pytest.mark.slow  # 12 s of PRT's kernels in this process; the fast tier keeps the name check
 def test_the_prt_command_renders_one(tmp_path, capsys):
     from translucent.image import Image
     from translucent.reports.cli import main
