@@ -102,11 +102,12 @@ def _eta_one(mi, size, spp, passes, kind="point", sigma_t=(1.0, 1.0, 1.0)):
     _agree(first, _passes(mi, plain, spp, passes, seed=100), passes)
 
 
+@pytest.mark.slow  # 12 s; the fast tier keeps the slab against an independent photon tracer
 def test_at_eta_one_the_connection_is_next_event_estimation(mi):
     _eta_one(mi, 16, 64, 8)
 
 
-@pytest.mark.slow  # 11 s; the fast tier keeps the grey medium's agreement above
+@pytest.mark.slow  # 11 s
 def test_on_a_chromatic_medium_it_gives_what_volpath_gives(mi):
     _eta_one(mi, 16, 64, 8, sigma_t=CHROMATIC)
 
@@ -142,7 +143,7 @@ def _area_limit(mi, size, spp_plain, spp_manifold, passes, reflective=True, reso
            _passes(mi, plain, spp_plain, passes, seed=100), passes, resolution)
 
 
-@pytest.mark.slow  # 20 s; the point-light agreement above stays fast
+@pytest.mark.slow  # 20 s
 def test_a_small_sphere_light_gives_what_volpath_gives(mi):
     _area_limit(mi, 8, 4096, 128, 16, reflective=False, resolution=0.1)
 

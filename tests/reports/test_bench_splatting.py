@@ -10,6 +10,7 @@ TINY = ["bench", "splatting", "--width", "32", "--height", "24", "--irradiance-r
         "--validation-stride", "2", "--epsilons", ""]
 
 
+@pytest.mark.slow  # 9 s; `bench splatting --quick` runs in the fast tier (test_bench_quick_methods)
 def test_tiny_bench_writes_every_row_with_its_error(tmp_path, capsys):
     out = tmp_path / "bench.json"
     assert main(TINY + ["--settings", "no acceleration,both", "--level-samplings", "1",
