@@ -339,6 +339,7 @@ def test_precomputation_is_cached_by_geometry_and_knobs(state):
     assert other_knobs.log.notes["cache"]["sphere"] == "miss"
 
 
+@pytest.mark.slow  # 16 s; `bench prt --quick` (fast tier) compresses a geometry image too
 def test_spatial_compression_on_a_geometry_image():
     mesh = geometry_image(17)
     scene = sphere_scene(material=measured_medium("Skin1"), mesh=mesh)

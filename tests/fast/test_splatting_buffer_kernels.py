@@ -59,6 +59,7 @@ def _rasterize_args(vertices, faces, eye, forward, width, height, orthographic):
 
 
 @settings(max_examples=15, deadline=None)
+@pytest.mark.slow  # 9 s
 @given(st.integers(min_value=0, max_value=2**31 - 1), st.booleans())
 def test_rasterizer_bits_do_not_depend_on_bands_outlines_or_threads(seed, orthographic):
     # random overlapping triangles around an eye inside the cloud: some behind it, some

@@ -43,6 +43,7 @@ def capture(material=SKIN, **options):
     return Capture(spec, pixels)
 
 
+@pytest.mark.slow  # 9 s; the fast tier keeps the other recoveries (defects, finite slab, eta)
 def test_recovers_dipole_parameters_with_unknown_exposure():
     result = fit_dipole(capture(camera=Camera(peak_signal=40000)), seed=1, walkers=QUICK_WALKERS)
     assert_recovered(result, SKIN)
