@@ -45,7 +45,8 @@ from ...materials import Dipole, Lambertian
 from ...scenes import PointLight, Scene
 
 __all__ = ["BPY_PYTHON_VARIABLE", "MODES", "SUBSURFACE_METHODS", "bpy_python", "describe_scene",
-           "render_cycles", "run_worker", "subsurface_inputs", "write_description"]
+           "render_cycles", "run_worker", "scene_refusal", "subsurface_inputs",
+           "write_description"]
 
 #: The environment variable that names a Python with ``bpy``.
 BPY_PYTHON_VARIABLE = "TRANSLUCENT_BPY_PYTHON"
@@ -75,6 +76,19 @@ SUBSURFACE_METHODS = {"burley": "BURLEY", "random_walk": "RANDOM_WALK",
 MODES = ("volume", *SUBSURFACE_METHODS)
 
 
+def _check_subsurface_medium(medium: Dipole) -> np.ndarray:
+    """Return sigma_t' (mm^-1), or raise where a subsurface mode cannot be given ``medium``."""
+    from ...materials.profiles.random_walk import load_table
+
+    sigma_t = np.asarray(medium.sigma_a + medium.sigma_s_prime, dtype=np.float64)
+    if np.any(sigma_t <= 0):
+        raise InputError("Cycles' subsurface radius 4 pi / sigma_t' is infinite for a channel "
+                         "without extinction", field="sigma_s_prime",
+                         value=np.asarray(medium.sigma_s_prime).tolist())
+    load_table().check_eta(medium.eta)  # A is the walk table's total at this eta
+    return sigma_t
+
+
 def subsurface_inputs(medium: Dipole, mm_per_unit: float) -> dict:
     r"""Return the Principled BSDF's subsurface inputs that match ``medium``.
 
@@ -93,11 +107,7 @@ def subsurface_inputs(medium: Dipole, mm_per_unit: float) -> dict:
     """
     from ...materials.profiles.random_walk import RandomWalkProfile
 
-    sigma_t = np.asarray(medium.sigma_a + medium.sigma_s_prime, dtype=np.float64)
-    if np.any(sigma_t <= 0):
-        raise InputError("Cycles' subsurface radius 4 pi / sigma_t' is infinite for a channel "
-                         "without extinction", field="sigma_s_prime",
-                         value=np.asarray(medium.sigma_s_prime).tolist())
+    sigma_t = _check_subsurface_medium(medium)
     albedo = RandomWalkProfile(medium).total()
     return {"base_color": np.clip(albedo, 0.0, 1.0).tolist(),
             "radius": (4.0 * math.pi / (sigma_t * mm_per_unit)).tolist(),
@@ -131,21 +141,51 @@ def _solid_material(scene: Scene, index: int, mode: str) -> dict:
             "anisotropy": 0.0, "ior": float(solid.eta)}
 
 
+def _check_material(scene: Scene, index: int, mode: str) -> None:
+    """Raise where Cycles cannot be given object ``index``'s material in ``mode``."""
+    from ...materials.solid import SolidMedium
+
+    material = scene.objects[index].material
+    if isinstance(material, (Lambertian, SolidMedium)):
+        return
+    if not isinstance(material, Dipole):
+        raise InputError("Cycles is given homogeneous and solid media and Lambertian surfaces "
+                         "only (it has no Ward, Blinn-Phong or Cook-Torrance node; a SubEdit "
+                         "material is a surface texture of profiles, not a medium)",
+                         file=scene.source, field=f"objects[{index}].material",
+                         value=type(material).__name__)
+    if mode in SUBSURFACE_METHODS:
+        _check_subsurface_medium(material)
+
+
+def scene_refusal(scene: Scene, mode: str) -> InputError | None:
+    """Return why Cycles cannot be given ``scene`` in ``mode`` (the error naming the part).
+
+    The checks :func:`describe_scene` makes, without building the description: the
+    planning of a report asks this of every scene and mode.
+    """
+    try:
+        if mode not in MODES:
+            raise InputError(f"unknown Cycles mode; valid: {', '.join(MODES)}", field="mode",
+                             value=mode)
+        for index in range(len(scene.objects)):
+            _check_material(scene, index, mode)
+        for index in range(len(scene.lights)):
+            _light(scene, index)
+    except InputError as error:
+        return error
+    return None
+
+
 def _material(scene: Scene, index: int, mode: str) -> dict:
     from ...materials.solid import SolidMedium
 
     material = scene.objects[index].material
-    field = f"objects[{index}].material"
     if isinstance(material, Lambertian):
         return {"type": "diffuse", "albedo": np.broadcast_to(
             np.asarray(material.albedo, dtype=np.float64), (3,)).tolist()}
     if isinstance(material, SolidMedium):
         return _solid_material(scene, index, mode)
-    if not isinstance(material, Dipole):
-        raise InputError("Cycles is given homogeneous and solid media and Lambertian surfaces "
-                         "only (it has no Ward, Blinn-Phong or Cook-Torrance node; a SubEdit "
-                         "material is a surface texture of profiles, not a medium)",
-                         file=scene.source, field=field, value=type(material).__name__)
     if mode in SUBSURFACE_METHODS:
         return {"type": "subsurface", "method": SUBSURFACE_METHODS[mode],
                 **subsurface_inputs(material, scene.mm_per_unit)}
@@ -249,9 +289,9 @@ def describe_scene(scene: Scene, *, renders: list[tuple[int, int]], output: str,
         Lambertian surface, a light other than those :func:`_light` converts, a
         non-rectangular area light, an unknown mode.
     """
-    if mode not in MODES:
-        raise InputError(f"unknown Cycles mode; valid: {', '.join(MODES)}", field="mode",
-                         value=mode)
+    refusal = scene_refusal(scene, mode)
+    if refusal is not None:
+        raise refusal
     objects = [{"name": obj.name, "vertices": obj.mesh.vertices.tolist(),
                 "faces": obj.mesh.faces.tolist(), "material": _material(scene, index, mode)}
                for index, obj in enumerate(scene.objects)]

@@ -29,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import InputError
 from ...image import Image
 from . import blender
 
@@ -64,11 +63,10 @@ def available() -> str | None:
 
 def applies_to(scene, mode: str) -> str | None:
     """Return why ``scene`` is beyond ``mode`` (the part Cycles is not given), else None."""
-    try:
-        blender.describe_scene(scene, renders=[], output="", mode=mode)
-    except InputError as error:
-        return f"{error.field}: {error.reason}" if error.field else error.reason
-    return None
+    error = blender.scene_refusal(scene, mode)
+    if error is None:
+        return None
+    return f"{error.field}: {error.reason}" if error.field else error.reason
 
 
 def model_of(mode: str) -> str | None:

@@ -30,6 +30,7 @@ or, for this process only, with :func:`register_renderer`. ``translucent report
 
 from __future__ import annotations
 
+import functools
 import re
 from typing import Any
 
@@ -61,7 +62,9 @@ REQUIRED = {
 _registered: dict[str, Any] = {}
 
 
+@functools.cache
 def _discovered() -> dict:
+    """Return the installed renderers, read once a process (the metadata does not change)."""
     return discovered(RENDERER_GROUP, BUILTIN_RENDERERS)[0]
 
 
