@@ -4,23 +4,28 @@ PRT (Wang et al. 2008) and splatting (Chen et al. 2012) sum a radial profile
 :math:`R(\lVert x_o - x_i\rVert)` over the entry points: the profile of a half-space,
 whatever the object. On a thin wall or a small object that misses where the light
 diffusing below the surface comes out: through the wall, round a convex surface, and how
-much of it. This module adds what diffusion theory says the object's shape changes
-(:mod:`translucent.scenes.object_diffusion`), as a knob of each method:
+much of it. This module adds what the object's shape changes, as a knob of each method:
 
 .. math:: J(x_o) = \sum_i R(\lVert x_o - x_i\rVert)\,E_i A_i
-          + s\sum_m W^{exit}_{om} \sum_k C_{mk} \sum_i W^{entry}_{ik} E_i A_i,
+          + \sum_m W^{exit}_{om} \sum_k C_{mk} \sum_i W^{entry}_{ik} E_i A_i,
 
-with :math:`C` the correction between the object's surface clusters (solved once per
-material), :math:`W` each point's weights over the clusters, and :math:`s` the ratio of
-the method's profile's half-space total to the dipole's, per channel (the correction is
-diffusion's, measured in the dipole's units; another profile carries its own energy). A
-frame costs two sparse products and one K x K product per channel; a new material one
-solve (:meth:`~translucent.scenes.object_diffusion.ObjectDiffusion.response`, kept per
-material).
+with :math:`C` the correction between the object's surface clusters (made once per
+material and profile), :math:`W` each point's weights over the clusters. Two models of
+:math:`C`, the knob ``geometry``:
 
-The knob ``geometry``: ``"diffusion"`` (the default) adds it, ``"half_space"`` is the
-papers' profile alone. An open mesh (a sheet) has no inside to diffuse in: it keeps the
-half-space, said in the method's log.
+- ``"walk"`` (the default): photon random walks in the object's mesh, less the profile
+  summed on its surface (:mod:`translucent.scenes.object_walk`): at the clusters' scale the
+  object returns transport's light (through a thin wall, round a convex surface, and the
+  energy the profile's own model misses), below it the profile's shape.
+- ``"diffusion"``: diffusion's solve in the object, less the dipole's half-space field
+  (:mod:`translucent.scenes.object_diffusion`), scaled by the method's profile's
+  half-space total over the dipole's (the profile keeps its own energy); zero where a wall
+  is thinner than diffusion describes.
+- ``"half_space"``: the papers' profile alone.
+
+A frame costs two sparse products and one K x K product per channel; a new material one
+solve or one set of walks (kept per material). An open mesh (a sheet) has no inside to
+diffuse in: it keeps the half-space, said in the method's log.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import numpy as np
 from scipy import sparse
 
 from ..materials.homogeneous import Dipole
+from ..materials.profiles import profile as named_profile
 from ..scenes.mesh_shape import closed_surface
 from ..scenes.object_diffusion import (
     DEFAULT_CELLS,
@@ -40,17 +46,19 @@ from ..scenes.object_diffusion import (
     object_diffusion,
     profile_scale,
 )
-from .knobs import Knob
+from ..scenes.object_walk import DEFAULT_WALKS, walk_response
+from .knobs import DEFAULT_PROFILE, Knob, radial_profile
 
 __all__ = ["GEOMETRY", "QUICK_GEOMETRY_KNOBS", "ObjectGeometry", "geometry_knobs",
            "object_geometries"]
 
 #: Values of the knob ``geometry``.
-GEOMETRY = ("diffusion", "half_space")
+GEOMETRY = ("walk", "diffusion", "half_space")
 
 #: Cheap geometry knobs for smoke runs and the conformance checks (a coarse grid and few
 #: clusters: the correction in well under a second).
-QUICK_GEOMETRY_KNOBS = {"geometry_cells": 1000, "geometry_clusters": 48}
+QUICK_GEOMETRY_KNOBS = {"geometry_cells": 1000, "geometry_clusters": 48,
+                        "geometry_walks": 2048}
 
 def geometry_knobs() -> list[Knob]:
     """Return the knobs every method with the geometry correction declares.
@@ -59,15 +67,18 @@ def geometry_knobs() -> list[Knob]:
     correction is made beside it.
     """
     return [
-        Knob("geometry", "diffusion", "the object's own shape in the profile: diffusion "
-             "(the half-space profile plus diffusion's correction for the object's finite "
-             "extent) or half_space (the profile alone, as the paper)", kind="choice",
-             choices=GEOMETRY, keyed=False),
+        Knob("geometry", "walk", "the object's own shape in the profile: walk (the "
+             "profile plus what photon random walks in the object's mesh return beyond it, "
+             "at the scale of the surface clusters), diffusion (the profile plus diffusion's "
+             "correction for the object's finite extent) or half_space (the profile alone, "
+             "as the paper)", kind="choice", choices=GEOMETRY, keyed=False),
         Knob("geometry_cells", DEFAULT_CELLS, "finite-volume cells of the object's "
              "diffusion solve, about", kind="int", low=8, high=1 << 22, keyed=False),
         Knob("geometry_clusters", DEFAULT_CLUSTERS, "surface clusters the geometry "
              "correction is solved between", kind="int", low=1, high=4096, keyed=False,
              ladder=(32, 128)),
+        Knob("geometry_walks", DEFAULT_WALKS, "photon random walks per channel of the "
+             "walk geometry's correction", kind="int", low=8, high=1 << 24, keyed=False),
     ]
 
 
@@ -85,13 +96,35 @@ class ObjectGeometry:
 
     diffusion: ObjectDiffusion
     mm_per_unit: float
+    model: str = "diffusion"
+    triangles: np.ndarray | None = None
+    walks: int = DEFAULT_WALKS
+    seed: int = 0
+
+    def response(self, material, profile=None) -> np.ndarray:
+        """Return the correction between the clusters for ``profile``, mm^-2, (K, K, 3).
+
+        ``profile``: the method's radial profile of ``material`` (None: the classical
+        dipole). Diffusion's correction is scaled by its half-space total over the
+        dipole's; the walks' is measured beyond the profile itself.
+        """
+        if self.model == "walk":
+            if profile is None:
+                profile = named_profile("dipole", material)
+            return walk_response(self.diffusion, self.triangles, material, profile,
+                                 walks=self.walks, seed=self.seed)
+        response = self.diffusion.response(material.sigma_a, material.sigma_s_prime,
+                                           material.eta)
+        if profile is None:
+            return response
+        return response * profile_scale(material, profile.total())[None, None, :]
 
     def weights(self, points, normals) -> sparse.csr_matrix:
         """Each point's weights over the clusters (points in scene units), shape (P, K)."""
         return self.diffusion.weights(np.asarray(points, np.float64) * self.mm_per_unit,
                                       normals)
 
-    def exitance(self, entry, entry_power, exit, material, profile_total=None) -> np.ndarray:
+    def exitance(self, entry, entry_power, exit, material, profile=None) -> np.ndarray:
         r"""Return the correction's exitance at the exit points, shape (V, 3).
 
         Parameters
@@ -105,20 +138,16 @@ class ObjectGeometry:
             The exit points' :meth:`weights`.
         material : Dipole
             Its coefficients (mm^-1) and eta.
-        profile_total : array_like, shape (3,), optional
-            The method's profile's half-space total, when not the dipole's.
+        profile : RadialProfile, optional
+            The method's profile of ``material``, when not the classical dipole.
 
         Returns
         -------
         ndarray
             In the units of :math:`\sum_i R\,E_i A_i` (the profile in mm^-2).
         """
-        response = self.diffusion.response(material.sigma_a, material.sigma_s_prime,
-                                           material.eta)
         power = np.asarray(entry.T @ np.asarray(entry_power, dtype=np.float64))
-        clusters = np.einsum("mkc,kc->mc", response, power)
-        if profile_total is not None:
-            clusters = clusters * profile_scale(material, profile_total)
+        clusters = np.einsum("mkc,kc->mc", self.response(material, profile), power)
         return np.asarray(exit @ clusters)
 
 
@@ -162,9 +191,13 @@ def object_geometries(scene, names, knobs: dict, log=None) -> dict:
         diffusion = object_diffusion(triangles, cells=int(knobs["geometry_cells"]),
                                      clusters=int(knobs["geometry_clusters"]),
                                      seed=int(knobs.get("seed", 0)))
-        material = item.material
-        diffusion.response(material.sigma_a, material.sigma_s_prime, material.eta)
-        out[name] = ObjectGeometry(diffusion, mm)
+        walks = int(knobs.get("geometry_walks", DEFAULT_WALKS))
+        out[name] = ObjectGeometry(diffusion, mm, knobs["geometry"], triangles, walks,
+                                   int(knobs.get("seed", 0)))
+        # the scene's own material is made here, so that the first frame does not pay
+        method_profile = knobs.get("profile", DEFAULT_PROFILE)
+        out[name].response(item.material, None if method_profile == DEFAULT_PROFILE
+                           else radial_profile(method_profile, item.material))
         facts[name] = {"cells": diffusion.grid.cells,
                        "voxel_mm": round(diffusion.grid.voxel_size, 4),
                        "clusters": diffusion.clusters,

@@ -31,11 +31,12 @@ from pathlib import Path
 from ..errors import InputError
 from ..image import Image, read_exr
 from .mitsuba_scene import GATHER_INTEGRATOR
-from .model_keys import GEOMETRY_SUFFIX, model_key
+from .model_keys import GEOMETRY_SUFFIX, WALK_SUFFIX, model_key
 
 __all__ = ["REFERENCE_FOLDER", "PLANS", "MODEL_PLANS", "MODEL_PROFILES", "ReferencePlan",
            "CommittedReference", "committed_path", "committed_reference",
            "committed_scene_names", "committed_model_cases", "committed_model_scene_names",
+           "geometry_model",
            "render_committed", "rerender_command"]
 
 #: Where the committed references live.
@@ -106,9 +107,9 @@ MODEL_INTEGRATOR = "bssrdf_path"
 #: (:data:`translucent.fast.knobs.DEFAULT_PROFILE`, the classical dipole), by the BSSRDF
 #: path tracer, which needs no manifold search behind a dielectric and no per-channel
 #: walks, with the half-space profile alone (``dipole``) and with the object's geometry
-#: (``dipole+geometry``, :mod:`.geometry_term`: the model of PRT and splatting by
-#: default); every default scene with a heterogeneous (solid) medium with the dipole of
-#: each of its media mixed by each method's rule (``dipole+geometric_mean``: splatting's,
+#: (:mod:`.geometry_term`: ``dipole+walk``, the model of PRT and splatting by default, and
+#: ``dipole+geometry``, diffusion's); every default scene with a heterogeneous (solid)
+#: medium with the dipole of each of its media mixed by each method's rule (``dipole+geometric_mean``: splatting's,
 #: ``dipole+segment_mix``: radiosity's; :mod:`.bssrdf_tables`); and the glossy scene with
 #: the BRDF-editing method's default model, the 6-term PCA of its BRDFs
 #: (:func:`~translucent.materials.brdf_pca.pca_model_name`), by Mitsuba's path tracer with
@@ -121,7 +122,7 @@ METHOD_RULES = ("geometric_mean", "segment_mix")
 
 MODEL_PLANS: dict[str, dict[str, ReferencePlan]] = {
     name: {model: ReferencePlan(spp=spp, budget_seconds=1200.0, integrator=MODEL_INTEGRATOR)
-           for model in ("dipole", "dipole" + GEOMETRY_SUFFIX)}
+           for model in ("dipole", "dipole" + GEOMETRY_SUFFIX, "dipole" + WALK_SUFFIX)}
     for name, spp in (("sphere", 256), ("bowl", 256), ("cornell_block", 64),
                       ("sphere_dielectric", 256), ("dielectric_on_floor", 256))
 } | {
@@ -139,6 +140,12 @@ MODEL_PLANS: dict[str, dict[str, ReferencePlan]] = {
 
 #: Every model whose references are committed (for some scene).
 MODEL_PROFILES = tuple(sorted({profile for plans in MODEL_PLANS.values() for profile in plans}))
+
+
+def geometry_model(header: dict) -> str | None:
+    """Return the geometry model a model reference's header records (None: none)."""
+    geometry = header.get("geometry")
+    return geometry.get("model", "diffusion") if isinstance(geometry, dict) else None
 
 
 def committed_model_cases() -> list[tuple[str, str]]:
@@ -283,7 +290,7 @@ def committed_reference(name: str, scene=None, profile: str | None = None
         made = (meta.get("profile") or {}).get("name") if isinstance(
             meta.get("profile"), dict) else None
         if made is not None:
-            made = model_key(made, isinstance(meta.get("geometry"), dict))
+            made = model_key(made, geometry_model(meta))
         if meta.get("integrator") != plan.integrator or made != profile:
             return unusable(f"the committed reference is not the {plan.integrator} render of "
                             f"profile {profile!r} (integrator {meta.get('integrator')!r}, "
@@ -291,10 +298,11 @@ def committed_reference(name: str, scene=None, profile: str | None = None
         if isinstance(meta.get("geometry"), dict):
             from .geometry_term import geometry_settings  # needs numba: only for such a one
 
-            if meta["geometry"] != geometry_settings():
+            now = geometry_settings(geometry_model(meta))
+            if meta["geometry"] != now:
                 return unusable(f"the committed reference is stale: its geometry correction "
                                 f"was rendered with {meta['geometry']}, the suite's is "
-                                f"{geometry_settings()}", image)
+                                f"{now}", image)
     return CommittedReference(name, path, image, True, profile=profile)
 
 

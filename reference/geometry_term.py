@@ -1,7 +1,8 @@
 r"""The object's shape in a model reference: the geometry correction rendered by Mitsuba.
 
-A fast method with the knob ``geometry = "diffusion"`` renders its profile plus the
-correction of :mod:`translucent.scenes.object_diffusion` (:mod:`translucent.fast.object_geometry`):
+A fast method with the knob ``geometry = "walk"`` or ``"diffusion"`` renders its profile
+plus the correction of :mod:`translucent.scenes.object_walk` or
+:mod:`translucent.scenes.object_diffusion` (:mod:`translucent.fast.object_geometry`):
 
 .. math:: J(x_o) = \int R(\lVert x_o - x_i\rVert) E_t(x_i)\,dA_i
           + s\sum_m W_m(x_o) \sum_k C_{mk} \int W_k(x_i) E_t(x_i)\,dA_i.
@@ -41,6 +42,7 @@ from ..scenes.object_diffusion import (
     object_diffusion,
     profile_scale,
 )
+from ..scenes.object_walk import DEFAULT_WALKS, WALK_FORMAT, walk_response
 from .bssrdf_tables import exit_normalisation
 
 __all__ = ["GeometryTerm", "geometry_settings"]
@@ -55,8 +57,16 @@ RAYS = 16
 ORIGIN_OFFSET = 1e-5
 
 
-def geometry_settings() -> dict:
-    """Return what a model reference with the geometry was rendered with (its header's)."""
+def geometry_settings(model: str = "diffusion") -> dict:
+    """Return what a model reference with the geometry ``model`` was rendered with.
+
+    Its header's ``geometry``; ``model`` is ``"diffusion"`` or ``"walk"`` (the knob
+    ``geometry`` of the methods).
+    """
+    if model == "walk":
+        return {"model": "walk", "version": WALK_FORMAT, "cells": DEFAULT_CELLS,
+                "clusters": DEFAULT_CLUSTERS, "walks": DEFAULT_WALKS, "seed": 0,
+                "points": POINTS, "rays": RAYS}
     return {"model": "diffusion", "version": CACHE_FORMAT, "cells": DEFAULT_CELLS,
             "clusters": DEFAULT_CLUSTERS, "points": POINTS, "rays": RAYS}
 
@@ -81,14 +91,16 @@ class GeometryTerm:
     mitsuba_scene
         The loaded Mitsuba scene, whose integrator is the BSSRDF path tracer.
     profile : str
-        The tracer's profile: the correction is scaled by its half-space total over the
-        dipole's, as the methods scale it.
+        The tracer's profile: diffusion's correction is scaled by its half-space total
+        over the dipole's, and the walks' is measured beyond it, as the methods do.
+    model : {"diffusion", "walk"}
+        The geometry model.
     points, rays : int
         Per object and estimate.
     """
 
     def __init__(self, scene, conversion, mitsuba_scene, profile: str, *,
-                 points: int = POINTS, rays: int = RAYS):
+                 model: str = "diffusion", points: int = POINTS, rays: int = RAYS):
         from ..scenes.gbuffer import gbuffer
 
         self.scene = scene
@@ -107,12 +119,17 @@ class GeometryTerm:
             where = view.mask(item.name)
             if not where.any():
                 continue
-            diffusion = object_diffusion(item.mesh.vertices[item.mesh.faces] * mm,
-                                         cells=DEFAULT_CELLS, clusters=DEFAULT_CLUSTERS)
-            response = diffusion.response(material.sigma_a, material.sigma_s_prime,
-                                          material.eta)
-            response = response * profile_scale(
-                material, named_profile(profile, material).total())[None, None, :]
+            triangles = item.mesh.vertices[item.mesh.faces] * mm
+            diffusion = object_diffusion(triangles, cells=DEFAULT_CELLS,
+                                         clusters=DEFAULT_CLUSTERS)
+            radial = named_profile(profile, material)
+            if model == "walk":
+                response = walk_response(diffusion, triangles, material, radial,
+                                         walks=DEFAULT_WALKS, seed=0)
+            else:
+                response = diffusion.response(material.sigma_a, material.sigma_s_prime,
+                                              material.eta)
+                response = response * profile_scale(material, radial.total())[None, None, :]
             cosine = np.clip(np.einsum("...d,...d->...", view.normal, view.view_direction)
                              [where], 0.0, 1.0)
             exit_factor = fresnel_transmittance(material.eta, cosine) / float(

@@ -65,7 +65,7 @@ def reference_settings(*, spp: int, passes: int, seed: int, integrator: str | No
             "delta_light_size": float(delta_light_size), "mitsuba": mi.__version__,
             "drjit": dr.__version__, "variant": mi.variant(),
             **({"profile": profile} if profile is not None else {}),
-            **({"geometry": _geometry_settings()}
+            **({"geometry": _geometry_settings(parse_model_key(profile)[1])}
                if profile is not None and parse_model_key(profile)[1] else {})}
 
 
@@ -127,12 +127,12 @@ def load_scenes(scene: Scene, *, spp: int, per_channel: bool | None = None,
     return channels, conversions, [mi.load_dict(c.scene_dict) for c in conversions]
 
 
-def _geometry_settings() -> dict:
+def _geometry_settings(model: str) -> dict:
     # imported here: the geometry's diffusion solve needs numba, which a render without
     # the geometry does not (the base install names the render extra it lacks first)
     from .geometry_term import geometry_settings
 
-    return geometry_settings()
+    return geometry_settings(model)
 
 
 def geometry_term_of(scene: Scene, profile: str | None, channels, conversions, mitsuba_scenes):
@@ -153,7 +153,8 @@ def geometry_term_of(scene: Scene, profile: str | None, channels, conversions, m
     if conversions[0].integrator != "bssrdf_path" or channels != (None,):
         raise InputError("the geometry term is rendered with bssrdf_path in RGB only",
                          field="profile", value=profile)
-    term = GeometryTerm(scene, conversions[0], mitsuba_scenes[0], parse_model_key(profile)[0])
+    base, model = parse_model_key(profile)
+    term = GeometryTerm(scene, conversions[0], mitsuba_scenes[0], base, model=model)
     return None if term.empty else term
 
 
@@ -516,8 +517,8 @@ def _metadata(scene, key, settings, conversions, channels, mitsuba_scenes=(),
         **({"media": dict(first.media)} if first.media else {}),
         **({"manifold_nee": manifold} if manifold is not None else {}),
         **({"profile": dict(first.profile)} if first.profile else {}),
-        **({"geometry": _geometry_settings()} if parse_model_key(settings.get("profile") or "")[1]
-           else {}),
+        **({"geometry": _geometry_settings(parse_model_key(settings.get("profile") or "")[1])}
+           if parse_model_key(settings.get("profile") or "")[1] else {}),
     }
 
 

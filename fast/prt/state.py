@@ -412,9 +412,10 @@ class PRTState:
             return radiance
         geometry, entry, exit_weights = self.geometry[transfer.name]
         profile = self.profile_of(material)
-        return radiance + geometry.exitance(
+        # an exitance: the walks' noise can take the sum below zero where both are dark
+        return np.maximum(radiance + geometry.exitance(
             entry, self._entry_power[transfer.name], exit_weights, material,
-            None if profile is None else profile.total()).astype(np.float32)
+            profile).astype(np.float32), 0.0)
 
     def coefficients(self, material: Dipole, sample_spacing: float | None = None) -> np.ndarray:
         r"""Weights of the K basis vectors and of the local vector, per channel, (3, K + 1).

@@ -383,8 +383,9 @@ class SplattingState:
             radiance = splat_frame(camera_buffer, camera, views, material,
                                    mm_per_unit=scene.mm_per_unit, sphere_radius=radius,
                                    knobs=self.knobs, log=log)
-        return radiance + self._geometry_radiance(scene, index, camera_buffer, camera, views,
-                                                  material, log)
+        # an exitance: the walks' noise can take the sum below zero where both are dark
+        return np.maximum(radiance + self._geometry_radiance(
+            scene, index, camera_buffer, camera, views, material, log), 0.0)
 
     def _exit_weights(self, name: str, geometry, camera_buffer):
         """Return the camera pixels' cluster weights, kept while their surface points stay.
@@ -427,13 +428,13 @@ class SplattingState:
             normals.append(view.buffer.normal[chosen])
             power.append(flux * mm2)
         valid = camera_buffer.valid
-        total = None if self.knobs["profile"] == DEFAULT_PROFILE else \
-            radial_profile(self.knobs["profile"], item.material).total()
+        profile = None if self.knobs["profile"] == DEFAULT_PROFILE else \
+            radial_profile(self.knobs["profile"], item.material)
         exitance = np.zeros(camera_buffer.shape + (3,))
         exitance[valid] = geometry.exitance(
             geometry.weights(np.concatenate(points), np.concatenate(normals)),
             np.concatenate(power), self._exit_weights(item.name, geometry, camera_buffer),
-            item.material, total)
+            item.material, profile)
         radiance = exitant_radiance_of(exitance, camera_buffer, camera, material.eta)
         log.seconds["geometry"] = log.seconds.get("geometry", 0.0) + time.perf_counter() - start
         return radiance

@@ -30,8 +30,8 @@ def add_arguments(parser):
                         help="with render: the scenes to render again, or 'all'")
     parser.add_argument("--profile", default=None, metavar="NAME",
                         help="with render: the model references of this profile (the BSSRDF "
-                        "path tracer; dipole+geometry: with the object's own shape) instead "
-                        "of the volumetric references")
+                        "path tracer; dipole+walk or dipole+geometry: with the object's own "
+                        "shape by walks or by diffusion) instead of the volumetric references")
     parser.add_argument("--budget", type=float, default=None, metavar="SECONDS",
                         help="with render: rendering time at most per scene (default: the "
                         "scene's plan)")

@@ -53,8 +53,9 @@ def add_arguments(parser):
     parser.add_argument("--profile", default=None, metavar="NAME",
                         help="with --integrator bssrdf_path: the radial profile each "
                         "translucent object is rendered with (translucent profiles lists "
-                        "them); NAME+geometry adds the object's own shape as PRT and "
-                        "splatting do (docs/geometry.md); NAME+geometric_mean, "
+                        "them); NAME+walk (by photon random walks, the methods' default) "
+                        "or NAME+geometry (by diffusion) adds the object's own shape as PRT "
+                        "and splatting do (docs/geometry.md); NAME+geometric_mean, "
                         "NAME+segment_mix or NAME+segment_average mixes the media of a "
                         "solid (heterogeneous) object by that rule (docs/heterogeneous.md)")
     parser.add_argument("--per-channel", action=argparse.BooleanOptionalAction, default=None,

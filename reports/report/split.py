@@ -424,9 +424,10 @@ def heterogeneous_objects(scene) -> list[str]:
 def split_profile(name: str, knobs: dict | None, scene=None) -> tuple[str | None, str]:
     """Return the model a report entry rendered (its model reference's key), or why none.
 
-    The key is the profile's name, with :data:`~translucent.reference.model_keys.GEOMETRY_SUFFIX`
-    where the method adds the object's geometry to it (its knob ``geometry`` is
-    ``"diffusion"``, :mod:`translucent.fast.object_geometry`): the model reference then
+    The key is the profile's name, with the suffix of the geometry model
+    (:data:`~translucent.reference.model_keys.GEOMETRY_SUFFIXES`) where the method adds the
+    object's geometry to it (its knob ``geometry`` is ``"walk"`` or ``"diffusion"``,
+    :mod:`translucent.fast.object_geometry`): the model reference then
     renders the same correction (:mod:`translucent.reference.geometry_term`), so that the
     method is not credited with its model's gain.
 
@@ -464,15 +465,17 @@ def split_profile(name: str, knobs: dict | None, scene=None) -> tuple[str | None
                       "error cannot be split")
     chosen = (knobs or {}).get("profile", asked or DEFAULT_PROFILE)
     spec = getattr(module, "KNOBS", None)
-    geometry = spec is not None and "geometry" in spec and \
-        (knobs or {}).get("geometry", spec["geometry"].default) == "diffusion"
+    geometry = None
+    if spec is not None and "geometry" in spec:
+        geometry = (knobs or {}).get("geometry", spec["geometry"].default)
+        geometry = None if geometry == "half_space" else geometry
     if scene is not None and heterogeneous_objects(scene):
         rule = getattr(module, "HETEROGENEOUS_RULE", None)
         if rule is None:
             return None, (f"{method_name} names no rule that mixes a heterogeneous medium "
                           "(HETEROGENEOUS_RULE): its error cannot be split")
         # the geometry correction is made for homogeneous (Dipole) objects only
-        return model_key(chosen, geometry and _has_dipole(scene), rule), ""
+        return model_key(chosen, geometry if _has_dipole(scene) else None, rule), ""
     return model_key(chosen, geometry), ""
 
 

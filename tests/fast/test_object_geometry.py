@@ -57,7 +57,7 @@ def test_prts_clusters_carry_the_correction_of_every_sample():
     clusters' interpolation misses the sharpest part of the correction near each sample
     (a short diffusion length on a curved surface) by a few per cent of it.
     """
-    state = prt.precompute(_sphere_scene(), **prt.QUICK_KNOBS)
+    state = prt.precompute(_sphere_scene(), **{**prt.QUICK_KNOBS, "geometry": "diffusion"})
     state.render()
     transfer = state.transfers[0]
     geometry, entry, exit_weights = state.geometry[transfer.name]

@@ -33,6 +33,7 @@ from translucent.reference.committed import (
     committed_model_scene_names,
     committed_path,
     committed_reference,
+    geometry_model,
     rerender_command,
 )
 from translucent.reference.model_keys import model_key
@@ -139,7 +140,7 @@ def test_committed_model_reference_is_current_and_meets_its_noise_target(name, p
     meta = entry.image.metadata
     plan = MODEL_PLANS[name][profile]
     assert meta["integrator"] == plan.integrator
-    assert model_key(meta["profile"]["name"], isinstance(meta.get("geometry"), dict)) == profile
+    assert model_key(meta["profile"]["name"], geometry_model(meta)) == profile
     summary = noise_summary(entry.image.rgb, entry.image.variance)
     assert summary.median <= plan.target_rse, summary.text()
     assert summary.p99 <= plan.target_p99_rse, summary.text()

@@ -274,9 +274,10 @@ def test_a_report_splits_each_profiles_error_against_its_model_reference(tmp_pat
 
 
 @pytest.mark.parametrize("name, knobs, model", [
-    ("prt", {}, "dipole+geometry"), ("splatting", None, "dipole+geometry"),
+    ("prt", {}, "dipole+walk"), ("splatting", None, "dipole+walk"),
+    ("prt", {"geometry": "diffusion"}, "dipole+geometry"),
     ("prt", {"geometry": "half_space"}, "dipole"),
-    ("splatting@better_dipole", {"profile": "better_dipole"}, "better_dipole+geometry"),
+    ("splatting@better_dipole", {"profile": "better_dipole"}, "better_dipole+walk"),
     ("radiosity", {}, "dipole")])
 def test_a_method_with_the_geometry_is_split_against_the_model_with_the_geometry(name, knobs,
                                                                                model):

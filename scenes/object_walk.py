@@ -1,0 +1,364 @@
+r"""The object's own transport at the scale of its surface clusters: photon random walks.
+
+The correction of :mod:`translucent.scenes.object_diffusion` is diffusion's, and diffusion
+does not describe a wall as thin as a transport length (Chicken1's red in the bowl's 6 mm
+wall: there every cluster keeps the half-space). It also keeps the profile's own energy,
+and a profile's energy is a second model error of its own (the dipole returns 15-20 % less
+light than transport from Chicken1's green and blue). This module measures, with transport
+itself, what the object returns beyond a method's profile, on the same surface clusters:
+photon random walks inside the object's closed mesh (isotropic scattering with the reduced
+coefficients and a smooth Fresnel boundary of relative index eta, the walk of
+:mod:`translucent.materials.profiles.random_walk`'s table), entering at points spread over
+the surface in cosine-distributed directions (light entering a rough or diffusely lit
+boundary, as Cycles' random walk enters), and kept as the difference from the profile:
+
+.. math:: C_{mk} = \frac{1}{P_k A_m}\int W_m(x_o) \int W_k(x_i)\,
+          \big(T(x_i \to x_o) - R(\lVert x_o - x_i\rVert)\big)\,dA_i\,dA_o
+
+:math:`T` is the walks' exitance in the object (Monte Carlo: each exit's weight after the
+boundary's Fresnel transmittance, deposited on the clusters by the exit point's weights),
+:math:`R` the method's profile summed on the object's surface as the method sums it (a
+quadrature over area-uniform surface points, with the tangent plane's own integral of the
+profile inside the quadrature's spacing), :math:`P_k = \int W_k\,dA` the cluster's entry
+area and :math:`A_m = \int W_m\,dA` its exit area. A method adds
+:math:`\sum_m W_{om} \sum_k C_{mk} P_k` to its profile's sum: at the clusters' scale it
+then returns the walk's transport in the object (through a thin wall, round a convex
+surface, none past a fold, and the walk's energy), below it the profile's shape, which
+changes fastest there. Unlike diffusion's correction it is not zero on a plane: there it is
+the walk's half-space against the profile's (a test checks that the walk's own table gets
+nothing on a box's face).
+
+Lengths in mm, coefficients in mm^-1, :math:`C` in mm^-2 (an exitance per unit entering
+power), as :meth:`~translucent.scenes.object_diffusion.ObjectDiffusion.response`.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import math
+
+import numpy as np
+
+from ..cache import Cache, content_hash
+from ..errors import InputError, check_count
+from ..materials.fresnel import fresnel_reflectance
+from .mesh_shape import stratified_surface_points
+from .scene import Mesh
+
+__all__ = ["DEFAULT_WALKS", "QUADRATURE_POINTS", "SURFACE_OFFSET", "WALK_FORMAT", "WALKS_PER_ENTRY",
+           "walk_correction", "walk_exits", "walk_response"]
+
+#: Walks per object and channel (:data:`WALKS_PER_ENTRY` from each entry point).
+DEFAULT_WALKS = 32768
+#: Walks from each entry point.
+WALKS_PER_ENTRY = 8
+#: Area-uniform surface points of the profile's quadrature.
+QUADRATURE_POINTS = 32768
+#: The profile's entry points (the quadrature is smooth in them; the walks' are many more).
+QUADRATURE_ENTRIES = 2048
+#: A walk whose weight falls below this plays Russian roulette (survives with probability
+#: weight / this, at this weight).
+ROULETTE_WEIGHT = 0.05
+#: Steps after which the walks still going are given up (counted in the statistics).
+MAX_STEPS = 100000
+#: Points leave the surface inwards by this fraction of the object's bounding diagonal.
+SURFACE_OFFSET = 1e-6
+#: Nodes of the profile's log-radius lookup per decade.
+LOOKUP_PER_DECADE = 64
+#: The disk cache's namespace, and the version of the walks' estimator: a change makes
+#: every cached response, and every committed model reference rendered with it, stale.
+CACHE_NAMESPACE = "object_walk"
+WALK_FORMAT = 1
+#: Responses kept in memory per process.
+KEPT_RESPONSES = 16
+
+
+def _triangle_mesh(triangles) -> Mesh:
+    triangles = np.ascontiguousarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    return Mesh(triangles.reshape(-1, 3), np.arange(3 * len(triangles)).reshape(-1, 3),
+                name="object")
+
+
+def _isotropic(rng, count: int) -> np.ndarray:
+    cos_theta = 1.0 - 2.0 * rng.random(count)
+    phi = 2.0 * math.pi * rng.random(count)
+    sin_theta = np.sqrt(np.maximum(0.0, 1.0 - cos_theta ** 2))
+    return np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), cos_theta], axis=1)
+
+
+def _cosine_inwards(normals, rng) -> np.ndarray:
+    """Cosine-distributed unit directions about ``-normals`` (Lambertian transmission)."""
+    u, phi = rng.random(len(normals)), 2.0 * math.pi * rng.random(len(normals))
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    first = np.cross(normals, helper)
+    first /= np.linalg.norm(first, axis=1, keepdims=True)
+    second = np.cross(normals, first)
+    radial = np.sqrt(u)[:, None]
+    return (radial * (np.cos(phi)[:, None] * first + np.sin(phi)[:, None] * second)
+            - np.sqrt(1.0 - u)[:, None] * normals)
+
+
+def walk_exits(engine, points, normals, sigma_a: float, sigma_s_prime: float, eta: float,
+               walks: int, rng, offset: float):
+    """Walk ``walks`` photons from each entry point; return where they left and with what.
+
+    Parameters
+    ----------
+    engine : RayEngine
+        The object's closed mesh (mm).
+    points, normals : ndarray, shape (S, 3)
+        Entry points on the surface and their outward unit normals.
+    sigma_a, sigma_s_prime : float
+        mm^-1, sigma_a + sigma_s_prime > 0.
+    eta : float
+        The medium's index over the outside's.
+    walks : int
+        From each entry point, in cosine-distributed directions into the medium.
+    rng : numpy.random.Generator
+    offset : float
+        How far inside the surface a walk starts, or goes on after a reflection, mm.
+
+    Returns
+    -------
+    source : ndarray of int, (E,)
+        The entry point of each exit.
+    position, normal : ndarray, (E, 3)
+        Where it left, and the surface's outward normal there.
+    weight : ndarray, (E,)
+        The power that left there per unit power entering (after the Fresnel
+        transmittance out).
+    statistics : dict
+        ``walks``, ``steps`` (free flights traced), ``leaks`` (walks that met the surface
+        from outside, through a crack, and were dropped), ``given_up`` (still going after
+        :data:`MAX_STEPS` flights).
+    """
+    sigma_t = sigma_a + sigma_s_prime
+    albedo = sigma_s_prime / sigma_t
+    source = np.repeat(np.arange(len(points)), walks)
+    position = np.repeat(points - offset * normals, walks, axis=0)
+    direction = _cosine_inwards(np.repeat(normals, walks, axis=0), rng)
+    weight = np.ones(len(source))
+    exits = {"source": [], "position": [], "normal": [], "weight": []}
+    stats = {"walks": len(source), "steps": 0, "leaks": 0, "given_up": 0}
+    for _ in range(MAX_STEPS):
+        if not len(source):
+            break
+        stats["steps"] += len(source)
+        free = -np.log1p(-rng.random(len(source))) / sigma_t
+        hits = engine.trace(position, direction, free)
+        inside = ~hits.hit
+        # a scattering inside the medium: move, weigh by the albedo, turn isotropically
+        position[inside] += free[inside, None] * direction[inside]
+        weight[inside] *= albedo
+        direction[inside] = _isotropic(rng, int(inside.sum()))
+        # the boundary: out by the Fresnel transmittance, the rest reflected back in
+        at = np.flatnonzero(hits.hit)
+        normal = hits.geometric_normal[at]
+        cosine = np.einsum("nd,nd->n", direction[at], normal)
+        leaked = cosine <= 0.0
+        stats["leaks"] += int(leaked.sum())
+        reflect = np.where(leaked, 0.0, fresnel_reflectance(1.0 / eta, np.abs(cosine)))
+        out = ~leaked
+        exits["source"].append(source[at[out]])
+        exits["position"].append(hits.position[at[out]])
+        exits["normal"].append(normal[out])
+        exits["weight"].append(weight[at[out]] * (1.0 - reflect[out]))
+        weight[at] = np.where(leaked, 0.0, weight[at] * reflect)
+        direction[at] -= 2.0 * cosine[:, None] * normal
+        position[at] = hits.position[at] - offset * normal
+        low = weight < ROULETTE_WEIGHT
+        survive = rng.random(len(weight)) * ROULETTE_WEIGHT < weight
+        weight = np.where(low, np.where(survive, ROULETTE_WEIGHT, 0.0), weight)
+        keep = weight > 0.0
+        source, position, direction, weight = (source[keep], position[keep],
+                                               direction[keep], weight[keep])
+    stats["given_up"] = int(len(source))
+    if not exits["source"]:
+        return (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0),
+                stats)
+    return (np.concatenate(exits["source"]).astype(np.int64),
+            np.concatenate(exits["position"]).reshape(-1, 3),
+            np.concatenate(exits["normal"]).reshape(-1, 3),
+            np.concatenate(exits["weight"]), stats)
+
+
+@functools.lru_cache(maxsize=1)
+def _compiled_profile_sum():
+    import numba
+
+    from ..compiled import parallel_njit
+
+    @parallel_njit(cache=True)
+    def profile_sum(entries, points, index, weight, near, log_r0, per_step, values,
+                    out):  # pragma: no cover - compiled
+        """out[s, m, c] = sum over points t beyond ``near`` of R_c(|x_t - x_s|) W_tm."""
+        last = values.shape[0] - 1
+        for s in numba.prange(len(entries)):
+            for t in range(len(points)):
+                dx = points[t, 0] - entries[s, 0]
+                dy = points[t, 1] - entries[s, 1]
+                dz = points[t, 2] - entries[s, 2]
+                r = math.sqrt(dx * dx + dy * dy + dz * dz)
+                if r <= near:
+                    continue
+                u = (math.log(r) - log_r0) / per_step
+                if u >= last:
+                    continue
+                i = int(u)
+                f = u - i
+                for c in range(values.shape[1]):
+                    value = values[i, c] + f * (values[i + 1, c] - values[i, c])
+                    for j in range(index.shape[1]):
+                        out[s, index[t, j], c] += value * weight[t, j]
+
+    return profile_sum
+
+
+def _padded_rows(matrix):
+    """Return a CSR matrix's rows as (index, value) arrays of its widest row's width."""
+    matrix = matrix.tocsr()
+    count = np.diff(matrix.indptr)
+    width = int(count.max()) if len(count) else 1
+    index = np.zeros((matrix.shape[0], width), dtype=np.int64)
+    value = np.zeros((matrix.shape[0], width))
+    slot = np.arange(matrix.nnz) - np.repeat(matrix.indptr[:-1], count)
+    rows = np.repeat(np.arange(matrix.shape[0]), count)
+    index[rows, slot] = matrix.indices
+    value[rows, slot] = matrix.data
+    return index, value
+
+
+def _profile_on_surface(profile, clusters, mesh, diagonal: float, quadrature: int, rng):
+    r"""Return the profile summed on the object's surface between the clusters, (K, K, C).
+
+    :math:`\int W_m(x_o) \int W_k(x_i) R(\lVert x_o - x_i\rVert)\,dA_i\,dA_o` over
+    :data:`QUADRATURE_ENTRIES` entry and ``quadrature`` exit points, per unit power
+    entering at cluster k (divided by its :math:`P_k`), and each cluster's exit area
+    :math:`A_m = \int W_m\,dA` (mm^2).
+    """
+    entry_point, entry_normal, area = stratified_surface_points(mesh, QUADRATURE_ENTRIES, rng)
+    point, normal, _ = stratified_surface_points(mesh, quadrature, rng)
+    point_area = area / quadrature
+    entry_weights = clusters.weights(entry_point, entry_normal)
+    weights = clusters.weights(point, normal)
+    exit_area = point_area * np.asarray(weights.sum(axis=0)).ravel()
+    index, value = _padded_rows(weights)
+    # inside the quadrature's spacing the surface is its tangent plane
+    near = 2.0 * math.sqrt(point_area)
+    largest = 1.01 * diagonal
+    nodes = max(2, int(math.ceil(LOOKUP_PER_DECADE * math.log10(largest / near))) + 1)
+    radius = np.geomspace(near, largest, nodes)
+    table = np.ascontiguousarray(np.asarray(profile.reflection(radius), np.float64))
+    summed = np.zeros((len(entry_point), clusters.clusters, table.shape[1]))
+    _compiled_profile_sum()(entry_point, point, index, value, near, math.log(near),
+                            math.log(radius[1] / radius[0]), table, summed)
+    summed *= point_area
+    near_total = np.asarray(profile.total(max_radius=near), np.float64)
+    summed += entry_weights.toarray()[:, :, None] * near_total[None, None, :]
+    dense = entry_weights.toarray()
+    share = dense.sum(axis=0)
+    share = np.where(share > 0, share, np.inf)  # a cluster no entry point reaches: 0
+    return np.einsum("sk,smc->mkc", dense, summed) / share[None, :, None], \
+        exit_area
+
+
+def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAULT_WALKS,
+                    quadrature: int = QUADRATURE_POINTS, seed: int = 0,
+                    statistics: dict | None = None) -> np.ndarray:
+    r"""Return the walks' transport beyond ``profile`` between the clusters, (K, K, 3).
+
+    Parameters
+    ----------
+    triangles : ndarray, shape (F, 3, 3)
+        The object's closed surface, mm, counter-clockwise seen from outside.
+    clusters : ObjectDiffusion
+        The clusters and their weights (:meth:`ObjectDiffusion.weights`).
+    medium : Dipole
+        sigma_a, sigma_s' (mm^-1, per channel) and eta (1 to 2: the walk table's range,
+        which the profile ``random_walk`` needs).
+    profile : RadialProfile
+        The method's profile of ``medium`` (mm^-2): what the correction is beyond.
+    walks : int
+        Per channel (:data:`WALKS_PER_ENTRY` from each entry point).
+    quadrature : int
+        Surface points of the profile's sum on the surface.
+    seed : int
+    statistics : dict, optional
+        Filled with each channel's walk statistics (:func:`walk_exits`), its exits and
+        the energy they carried out per unit entering power.
+
+    Returns
+    -------
+    ndarray
+        :math:`C_{mk}` in mm^-2 (module docstring); zero in a channel without scattering.
+    """
+    from .raycast import RayEngine
+
+    check_count(walks, "geometry_walks", minimum=WALKS_PER_ENTRY)
+    check_count(quadrature, "quadrature", minimum=16)
+    eta = float(medium.eta)
+    if not 1.0 <= eta <= 2.0:
+        raise InputError("the walks take eta from 1 to 2", field="eta", value=eta)
+    mesh = _triangle_mesh(triangles)
+    engine = RayEngine([mesh])
+    rng = np.random.default_rng(seed)
+    entries = max(1, int(walks) // WALKS_PER_ENTRY)
+    entry_point, entry_normal, area = stratified_surface_points(mesh, entries, rng)
+    entry_weights = clusters.weights(entry_point, entry_normal)
+    entry_area = area / entries
+    entry_power = entry_area * np.asarray(entry_weights.sum(axis=0)).ravel()    # P_k
+    entry_power = np.where(entry_power > 0, entry_power, np.inf)
+    profile_sum, exit_area = _profile_on_surface(profile, clusters, mesh, engine.diagonal,
+                                                 int(quadrature), rng)
+    sigma_a = np.asarray(medium.sigma_a, np.float64)
+    sigma_s_prime = np.asarray(medium.sigma_s_prime, np.float64)
+    out = np.zeros((clusters.clusters, clusters.clusters, len(sigma_a)))
+    for c in np.flatnonzero(sigma_s_prime > 0):
+        source, position, normal, weight, stats = walk_exits(
+            engine, entry_point, entry_normal, float(sigma_a[c]), float(sigma_s_prime[c]),
+            eta, WALKS_PER_ENTRY, rng, SURFACE_OFFSET * engine.diagonal)
+        transport = np.asarray(
+            (clusters.weights(position, normal).multiply(weight[:, None])).T
+            @ entry_weights[source]) * (entry_area / WALKS_PER_ENTRY)
+        out[:, :, c] = (transport / entry_power[None, :] - profile_sum[:, :, c]) \
+            / np.where(exit_area > 0, exit_area, np.inf)[:, None]
+        if statistics is not None:
+            statistics[int(c)] = {**stats, "exits": int(len(weight)), "energy": float(
+                weight.sum() / (entries * WALKS_PER_ENTRY))}
+    return out
+
+
+_KEPT: dict = {}
+
+
+def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_WALKS,
+                  seed: int = 0, cache: bool = True) -> np.ndarray:
+    """Return :func:`walk_correction`, kept per object, medium, profile and settings.
+
+    In memory (the last :data:`KEPT_RESPONSES`) and, where ``clusters`` has a key and
+    ``cache`` is true, in the disk cache (namespace ``object_walk``).
+    """
+    triangles = np.ascontiguousarray(triangles, dtype=np.float64)
+    key = content_hash("object walk response", WALK_FORMAT, clusters.key or hashlib.sha256(
+        np.ascontiguousarray(clusters.cluster_point).tobytes()).hexdigest(),
+        hashlib.sha256(triangles.tobytes()).hexdigest(), medium.cache_key(),
+        profile.cache_key(), int(walks), int(seed))
+    held = _KEPT.get(key)
+    if held is not None:
+        return held
+    shape = (clusters.clusters, clusters.clusters, len(np.atleast_1d(medium.sigma_a)))
+
+    def make():
+        return walk_correction(triangles, clusters, medium, profile, walks=walks, seed=seed)
+
+    if cache and clusters.key:
+        out, _ = Cache(CACHE_NAMESPACE).load_or_make(
+            key, make, valid=lambda value: isinstance(value, np.ndarray)
+            and value.shape == shape, what="the walks' correction of an object")
+    else:
+        out = make()
+    if len(_KEPT) >= KEPT_RESPONSES:
+        _KEPT.pop(next(iter(_KEPT)))
+    _KEPT[key] = out
+    return out
