@@ -109,8 +109,8 @@ MODEL_INTEGRATOR = "bssrdf_path"
 #: walks, with the half-space profile alone (``dipole``) and with the object's geometry
 #: (:mod:`.geometry_term`: ``dipole+walk``, the model of PRT and splatting by default, and
 #: ``dipole+geometry``, diffusion's); every default scene with a heterogeneous (solid)
-#: medium with the dipole of each of its media mixed by each method's rule (``dipole+geometric_mean``: splatting's,
-#: ``dipole+segment_mix``: radiosity's; :mod:`.bssrdf_tables`); and the glossy scene with
+#: medium with the dipole of each of its media mixed by each method's rule
+#: (``dipole+geometric_mean``: splatting's, ``dipole+segment_mix``: radiosity's; :mod:`.bssrdf_tables`); and the glossy scene with
 #: the BRDF-editing method's default model, the 6-term PCA of its BRDFs
 #: (:func:`~translucent.materials.brdf_pca.pca_model_name`), by Mitsuba's path tracer with
 #: the PCA BRDF plugin (:mod:`.brdf_plugins`), and with the method's full model, that PCA
