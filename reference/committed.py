@@ -110,8 +110,8 @@ MODEL_INTEGRATOR = "bssrdf_path"
 #: (:mod:`.geometry_term`: ``dipole+walk``, the model of PRT and splatting by default, and
 #: ``dipole+geometry``, diffusion's); every default scene with a heterogeneous (solid)
 #: medium with the dipole of each of its media mixed by each method's rule
-#: (``dipole+geometric_mean``: splatting's, ``dipole+segment_mix``: radiosity's; :mod:`.bssrdf_tables`); and the glossy scene with
-#: the BRDF-editing method's default model, the 6-term PCA of its BRDFs
+#: (``dipole+geometric_mean``: splatting's, ``dipole+segment_mix``: radiosity's;
+#: :mod:`.bssrdf_tables`); and the glossy scene with the BRDF-editing method's default model, the 6-term PCA of its BRDFs
 #: (:func:`~translucent.materials.brdf_pca.pca_model_name`), by Mitsuba's path tracer with
 #: the PCA BRDF plugin (:mod:`.brdf_plugins`), and with the method's full model, that PCA
 #: carried by its Lambertian-gather transport (``brdf_pca_k6+lambertian_gather2``), and by
