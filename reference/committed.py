@@ -101,22 +101,21 @@ PLANS: dict[str, ReferencePlan] = {
 #: The integrator of a profile's model reference (the BSSRDF path tracer).
 MODEL_INTEGRATOR = "bssrdf_path"
 
-#: The built-in scenes whose model references are committed, per model, and how each is
-#: rendered: every default scene whose translucent objects are homogeneous with the
-#: profile every method uses unless told otherwise
-#: (:data:`translucent.fast.knobs.DEFAULT_PROFILE`, the classical dipole), by the BSSRDF
-#: path tracer, which needs no manifold search behind a dielectric and no per-channel
+#: The built-in scenes whose model references are committed, per model, and how each is rendered:
+#: every default scene whose translucent objects are homogeneous with the profile every method uses
+#: unless told otherwise (:data:`translucent.fast.knobs.DEFAULT_PROFILE`, the classical dipole), by
+#: the BSSRDF path tracer, which needs no manifold search behind a dielectric and no per-channel
 #: walks, with the half-space profile alone (``dipole``) and with the object's geometry
 #: (:mod:`.geometry_term`: ``dipole+walk``, the model of PRT and splatting by default, and
-#: ``dipole+geometry``, diffusion's); every default scene with a heterogeneous (solid)
-#: medium with the dipole of each of its media mixed by each method's rule
-#: (``dipole+geometric_mean``: splatting's, ``dipole+segment_mix``: radiosity's;
-#: :mod:`.bssrdf_tables`); and the glossy scene with the BRDF-editing method's default model, the 6-term PCA of its BRDFs
-#: (:func:`~translucent.materials.brdf_pca.pca_model_name`), by Mitsuba's path tracer with
-#: the PCA BRDF plugin (:mod:`.brdf_plugins`), and with the method's full model, that PCA
-#: carried by its Lambertian-gather transport (``brdf_pca_k6+lambertian_gather2``), and by
-#: the transport of its knob ``gather_reflection="brdf"`` (``brdf_pca_k6+glossy_gather2``),
-#: by the gather integrator of the same module.
+#: ``dipole+geometry``, diffusion's); every default scene with a heterogeneous (solid) medium with
+#: the dipole of each of its media mixed by each method's rule (``dipole+geometric_mean``:
+#: splatting's, ``dipole+segment_mix``: radiosity's; :mod:`.bssrdf_tables`); and the glossy scene
+#: with the BRDF-editing method's default model, the 6-term PCA of its BRDFs
+#: (:func:`~translucent.materials.brdf_pca.pca_model_name`), by Mitsuba's path tracer with the PCA
+#: BRDF plugin (:mod:`.brdf_plugins`), and with the method's full model, that PCA carried by its
+#: Lambertian-gather transport (``brdf_pca_k6+lambertian_gather2``), and by the transport of its
+#: knob ``gather_reflection="brdf"`` (``brdf_pca_k6+glossy_gather2``), by the gather integrator of
+#: the same module.
 #: The heterogeneous rules the built-in methods follow (splatting's, radiosity's).
 METHOD_RULES = ("geometric_mean", "segment_mix")
 
