@@ -9,8 +9,9 @@ itself, what the object returns beyond a method's profile, on the same surface c
 photon random walks inside the object's closed mesh (isotropic scattering with the reduced
 coefficients and a smooth Fresnel boundary of relative index eta, the walk of
 :mod:`translucent.materials.profiles.random_walk`'s table), entering at points spread over
-the surface in cosine-distributed directions (light entering a rough or diffusely lit
-boundary, as Cycles' random walk enters), and kept as the difference from the profile:
+the surface in the directions of diffuse light refracted through that boundary
+(cosine-distributed at eta 1, as Cycles' random walk enters), and kept as the difference
+from the profile:
 
 .. math:: C_{mk} = \frac{1}{P_k A_m}\int W_m(x_o) \int W_k(x_i)\,
           \big(T(x_i \to x_o) - R(\lVert x_o - x_i\rVert)\big)\,dA_i\,dA_o
@@ -42,7 +43,7 @@ import numpy as np
 
 from ..cache import Cache, content_hash
 from ..errors import InputError, check_count
-from ..materials.fresnel import fresnel_reflectance
+from ..materials.fresnel import fresnel_reflectance, fresnel_transmittance
 from .mesh_shape import stratified_surface_points
 from .scene import Mesh
 
@@ -69,7 +70,7 @@ LOOKUP_PER_DECADE = 64
 #: The disk cache's namespace, and the version of the walks' estimator: a change makes
 #: every cached response, and every committed model reference rendered with it, stale.
 CACHE_NAMESPACE = "object_walk"
-WALK_FORMAT = 1
+WALK_FORMAT = 2
 #: Responses kept in memory per process.
 KEPT_RESPONSES = 16
 
@@ -87,16 +88,30 @@ def _isotropic(rng, count: int) -> np.ndarray:
     return np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), cos_theta], axis=1)
 
 
-def _cosine_inwards(normals, rng) -> np.ndarray:
-    """Cosine-distributed unit directions about ``-normals`` (Lambertian transmission)."""
-    u, phi = rng.random(len(normals)), 2.0 * math.pi * rng.random(len(normals))
+def _diffuse_entry(normals, eta: float, rng) -> np.ndarray:
+    """Directions into the medium of diffuse light refracted through the boundary.
+
+    Outside, cosine-distributed about the normal and weighted by the Fresnel transmittance
+    of relative index ``eta`` (drawn by rejection); inside, refracted by Snell's law (at
+    eta 1: cosine-distributed about ``-normals``).
+    """
+    count = len(normals)
+    cos_out = np.empty(count)
+    todo = np.arange(count)
+    while len(todo):
+        cosine = np.sqrt(1.0 - rng.random(len(todo)))
+        accepted = rng.random(len(todo)) < fresnel_transmittance(eta, cosine)
+        cos_out[todo[accepted]] = cosine[accepted]
+        todo = todo[~accepted]
+    sin_in = np.sqrt(np.maximum(0.0, 1.0 - cos_out ** 2)) / eta
+    cos_in = np.sqrt(np.maximum(0.0, 1.0 - sin_in ** 2))
+    phi = 2.0 * math.pi * rng.random(count)
     helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     first = np.cross(normals, helper)
     first /= np.linalg.norm(first, axis=1, keepdims=True)
     second = np.cross(normals, first)
-    radial = np.sqrt(u)[:, None]
-    return (radial * (np.cos(phi)[:, None] * first + np.sin(phi)[:, None] * second)
-            - np.sqrt(1.0 - u)[:, None] * normals)
+    return (sin_in[:, None] * (np.cos(phi)[:, None] * first + np.sin(phi)[:, None] * second)
+            - cos_in[:, None] * normals)
 
 
 def walk_exits(engine, points, normals, sigma_a: float, sigma_s_prime: float, eta: float,
@@ -114,7 +129,8 @@ def walk_exits(engine, points, normals, sigma_a: float, sigma_s_prime: float, et
     eta : float
         The medium's index over the outside's.
     walks : int
-        From each entry point, in cosine-distributed directions into the medium.
+        From each entry point, in the directions of diffuse light refracted in
+        (:func:`_diffuse_entry`).
     rng : numpy.random.Generator
     offset : float
         How far inside the surface a walk starts, or goes on after a reflection, mm.
@@ -137,7 +153,7 @@ def walk_exits(engine, points, normals, sigma_a: float, sigma_s_prime: float, et
     albedo = sigma_s_prime / sigma_t
     source = np.repeat(np.arange(len(points)), walks)
     position = np.repeat(points - offset * normals, walks, axis=0)
-    direction = _cosine_inwards(np.repeat(normals, walks, axis=0), rng)
+    direction = _diffuse_entry(np.repeat(normals, walks, axis=0), eta, rng)
     weight = np.ones(len(source))
     exits = {"source": [], "position": [], "normal": [], "weight": []}
     stats = {"walks": len(source), "steps": 0, "leaks": 0, "given_up": 0}

@@ -151,3 +151,23 @@ def test_eta_outside_the_walks_range_is_refused():
     medium = Dipole([0.05] * 3, [1.0] * 3, 2.5)
     with pytest.raises(InputError, match="eta"):
         walk_correction(triangles, clusters, medium, profile("dipole", medium), walks=64)
+
+
+@pytest.mark.parametrize("eta", [1.0, 1.3])
+def test_walks_enter_as_diffuse_light_refracted_through_the_boundary(eta):
+    """The mean cosine inside against a quadrature of F_t(cos_o) cos_o over the outside
+    hemisphere mapped by Snell's law; within the critical cone behind a dielectric."""
+    from translucent.materials.fresnel import fresnel_transmittance
+    from translucent.scenes.object_walk import _diffuse_entry
+
+    normals = np.tile([[0.0, 0.6, 0.8]], (200000, 1))
+    direction = _diffuse_entry(normals, eta, np.random.default_rng(4))
+    np.testing.assert_allclose(np.linalg.norm(direction, axis=1), 1.0, rtol=1e-12)
+    cos_in = -np.einsum("nd,nd->n", direction, normals)
+    assert cos_in.min() >= np.sqrt(1.0 - 1.0 / eta ** 2) - 1e-12
+    x, w = np.polynomial.legendre.leggauss(200)
+    cos_out = 0.5 * (x + 1.0)
+    density = fresnel_transmittance(eta, cos_out) * cos_out * 0.5 * w
+    refracted = np.sqrt(1.0 - (1.0 - cos_out ** 2) / eta ** 2)
+    expected = (density * refracted).sum() / density.sum()
+    assert cos_in.mean() == pytest.approx(expected, abs=4.0 * cos_in.std() / np.sqrt(len(cos_in)))
