@@ -94,8 +94,10 @@ def _scaling(figures):
     assert [(row["method"], row["size"]) for row in rows] == [("splatting", 96),
                                                              ("splatting", 192)]
     assert all(row["status"] == "ok" for row in rows)
-    # the 192 px image, box-filtered to 96 px, is scored against the same reference
-    assert abs(rows[1]["relative_mse"] - rows[0]["relative_mse"]) < 0.5 * rows[0]["relative_mse"]
+    # the 192 px image, box-filtered to 96 px, is scored against the same reference: no
+    # worse than the 96 px one (an image out of register would be far worse), and closer
+    # by about the half of the error that sampling pixel centres leaves (docs/scaling.md)
+    assert 0.25 * rows[0]["relative_mse"] < rows[1]["relative_mse"] < rows[0]["relative_mse"]
     # path tracing at 192 px costs more than at 96 px for the same samples
     assert rows[1]["path_tracing_spp_seconds"]["4"] > rows[0]["path_tracing_spp_seconds"]["4"]
     assert [row["vertices"] for row in figures["meshes"]["rows"]] == [642]
