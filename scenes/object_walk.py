@@ -291,8 +291,8 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
     clusters : ObjectDiffusion
         The clusters and their weights (:meth:`ObjectDiffusion.weights`).
     medium : Dipole
-        sigma_a, sigma_s' (mm^-1, per channel) and eta (1 to 2: the walk table's range,
-        which the profile ``random_walk`` needs).
+        sigma_a, sigma_s' (mm^-1, per channel) and eta (any: the walks need no table; the
+        profile ``random_walk`` takes 1 to 2).
     profile : RadialProfile
         The method's profile of ``medium`` (mm^-2): what the correction is beyond.
     walks : int
@@ -314,8 +314,8 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
     check_count(walks, "geometry_walks", minimum=WALKS_PER_ENTRY)
     check_count(quadrature, "quadrature", minimum=16)
     eta = float(medium.eta)
-    if not 1.0 <= eta <= 2.0:
-        raise InputError("the walks take eta from 1 to 2", field="eta", value=eta)
+    if not (math.isfinite(eta) and eta > 0.0):
+        raise InputError("must be finite and > 0", field="eta", value=eta)
     mesh = _triangle_mesh(triangles)
     engine = RayEngine([mesh])
     rng = np.random.default_rng(seed)

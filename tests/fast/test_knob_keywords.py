@@ -23,7 +23,7 @@ APPROX_OWN_KEYWORDS = {"lights", "material"}
 
 #: Folders that are not the project's source; the tests pass unknown knobs on purpose (to
 #: see them refused) and run every call they make anyway.
-SKIPPED = {".tox", ".git", "build", "dist", ".venv", "__pycache__", "report", "tests"}
+SKIPPED = {".tox", ".git", ".asv", "build", "dist", ".venv", "__pycache__", "report", "tests"}
 
 
 def _sources() -> list[Path]:
