@@ -38,6 +38,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -47,8 +48,9 @@ from ..materials.fresnel import fresnel_reflectance, fresnel_transmittance
 from .mesh_shape import stratified_surface_points
 from .scene import Mesh
 
-__all__ = ["DEFAULT_WALKS", "QUADRATURE_POINTS", "SURFACE_OFFSET", "WALK_FORMAT", "WALKS_PER_ENTRY",
-           "walk_correction", "walk_exits", "walk_response"]
+__all__ = ["DEFAULT_WALKS", "QUADRATURE_POINTS", "SURFACE_OFFSET", "WALK_FORMAT",
+           "WALKS_PER_ENTRY", "WalkPaths", "walk_correction", "walk_exits", "walk_paths",
+           "walk_response"]
 
 #: Walks per object and channel (:data:`WALKS_PER_ENTRY` from each entry point).
 DEFAULT_WALKS = 32768
@@ -70,9 +72,14 @@ LOOKUP_PER_DECADE = 64
 #: The disk cache's namespace, and the version of the walks' estimator: a change makes
 #: every cached response, and every committed model reference rendered with it, stale.
 CACHE_NAMESPACE = "object_walk"
-WALK_FORMAT = 2
+WALK_FORMAT = 3
 #: Responses kept in memory per process.
 KEPT_RESPONSES = 16
+#: Objects' walks kept in memory per process (one per object, sigma_s' and eta).
+KEPT_PATHS = 4
+#: The walks are made with this fraction of the medium's absorption (their Russian
+#: roulette's): an edit to any absorption at or above it re-weighs them exactly.
+FLOOR_FRACTION = 0.5
 
 
 def _triangle_mesh(triangles) -> Mesh:
@@ -114,9 +121,16 @@ def _diffuse_entry(normals, eta: float, rng) -> np.ndarray:
             - cos_in[:, None] * normals)
 
 
-def walk_exits(engine, points, normals, sigma_a: float, sigma_s_prime: float, eta: float,
-               walks: int, rng, offset: float):
-    """Walk ``walks`` photons from each entry point; return where they left and with what.
+def walk_exits(engine, points, normals, sigma_s_prime: float, eta: float, walks: int, rng,
+               offset: float, sigma_a_floor: float = 0.0):
+    r"""Walk ``walks`` photons from each entry point; return their exits and path lengths.
+
+    Path lengths as in white Monte Carlo (Alerstam et al. 2008): the walks fly and scatter
+    with the reduced scattering coefficient alone, absorbed continuously by
+    ``sigma_a_floor`` (which lets Russian roulette end them), and record their path
+    length, so that any absorption :math:`\sigma_a \ge` ``sigma_a_floor`` weighs an exit
+    by :math:`e^{-(\sigma_a - \sigma_{floor}) L}` afterwards (the same expectation as
+    walks in the medium of absorption :math:`\sigma_a`, and never a larger weight).
 
     Parameters
     ----------
@@ -124,8 +138,8 @@ def walk_exits(engine, points, normals, sigma_a: float, sigma_s_prime: float, et
         The object's closed mesh (mm).
     points, normals : ndarray, shape (S, 3)
         Entry points on the surface and their outward unit normals.
-    sigma_a, sigma_s_prime : float
-        mm^-1, sigma_a + sigma_s_prime > 0.
+    sigma_s_prime : float
+        mm^-1, > 0.
     eta : float
         The medium's index over the outside's.
     walks : int
@@ -134,6 +148,8 @@ def walk_exits(engine, points, normals, sigma_a: float, sigma_s_prime: float, et
     rng : numpy.random.Generator
     offset : float
         How far inside the surface a walk starts, or goes on after a reflection, mm.
+    sigma_a_floor : float
+        mm^-1, >= 0: the least absorption the walks will be weighed for.
 
     Returns
     -------
@@ -142,31 +158,34 @@ def walk_exits(engine, points, normals, sigma_a: float, sigma_s_prime: float, et
     position, normal : ndarray, (E, 3)
         Where it left, and the surface's outward normal there.
     weight : ndarray, (E,)
-        The power that left there per unit power entering (after the Fresnel
-        transmittance out).
+        The power that left there per unit power entering, with the absorption
+        ``sigma_a_floor`` (after the Fresnel transmittance out).
+    length : ndarray, (E,)
+        The path's length inside the medium up to that exit, mm.
     statistics : dict
         ``walks``, ``steps`` (free flights traced), ``leaks`` (walks that met the surface
         from outside, through a crack, and were dropped), ``given_up`` (still going after
         :data:`MAX_STEPS` flights).
     """
-    sigma_t = sigma_a + sigma_s_prime
-    albedo = sigma_s_prime / sigma_t
     source = np.repeat(np.arange(len(points)), walks)
     position = np.repeat(points - offset * normals, walks, axis=0)
     direction = _diffuse_entry(np.repeat(normals, walks, axis=0), eta, rng)
     weight = np.ones(len(source))
-    exits = {"source": [], "position": [], "normal": [], "weight": []}
+    length = np.zeros(len(source))
+    exits = {"source": [], "position": [], "normal": [], "weight": [], "length": []}
     stats = {"walks": len(source), "steps": 0, "leaks": 0, "given_up": 0}
     for _ in range(MAX_STEPS):
         if not len(source):
             break
         stats["steps"] += len(source)
-        free = -np.log1p(-rng.random(len(source))) / sigma_t
+        free = -np.log1p(-rng.random(len(source))) / sigma_s_prime
         hits = engine.trace(position, direction, free)
         inside = ~hits.hit
-        # a scattering inside the medium: move, weigh by the albedo, turn isotropically
+        flight = np.where(inside, free, hits.t)
+        length += flight
+        weight *= np.exp(-sigma_a_floor * flight)
+        # a scattering inside the medium: move, turn isotropically
         position[inside] += free[inside, None] * direction[inside]
-        weight[inside] *= albedo
         direction[inside] = _isotropic(rng, int(inside.sum()))
         # the boundary: out by the Fresnel transmittance, the rest reflected back in
         at = np.flatnonzero(hits.hit)
@@ -180,6 +199,7 @@ def walk_exits(engine, points, normals, sigma_a: float, sigma_s_prime: float, et
         exits["position"].append(hits.position[at[out]])
         exits["normal"].append(normal[out])
         exits["weight"].append(weight[at[out]] * (1.0 - reflect[out]))
+        exits["length"].append(length[at[out]])
         weight[at] = np.where(leaked, 0.0, weight[at] * reflect)
         direction[at] -= 2.0 * cosine[:, None] * normal
         position[at] = hits.position[at] - offset * normal
@@ -187,16 +207,16 @@ def walk_exits(engine, points, normals, sigma_a: float, sigma_s_prime: float, et
         survive = rng.random(len(weight)) * ROULETTE_WEIGHT < weight
         weight = np.where(low, np.where(survive, ROULETTE_WEIGHT, 0.0), weight)
         keep = weight > 0.0
-        source, position, direction, weight = (source[keep], position[keep],
-                                               direction[keep], weight[keep])
+        source, position, direction, weight, length = (
+            source[keep], position[keep], direction[keep], weight[keep], length[keep])
     stats["given_up"] = int(len(source))
     if not exits["source"]:
         return (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0),
-                stats)
+                np.zeros(0), stats)
     return (np.concatenate(exits["source"]).astype(np.int64),
             np.concatenate(exits["position"]).reshape(-1, 3),
             np.concatenate(exits["normal"]).reshape(-1, 3),
-            np.concatenate(exits["weight"]), stats)
+            np.concatenate(exits["weight"]), np.concatenate(exits["length"]), stats)
 
 
 @functools.lru_cache(maxsize=1)
@@ -279,8 +299,101 @@ def _profile_on_surface(profile, clusters, mesh, diagonal: float, quadrature: in
         exit_area
 
 
+@dataclass(eq=False)
+class WalkPaths:
+    r"""One object's white walks for one reduced scattering per channel and one eta.
+
+    Made by :func:`walk_paths`; :meth:`transport` weighs them by any absorption.
+
+    Attributes
+    ----------
+    entry_power : ndarray, shape (K,)
+        :math:`P_k = \int W_k\,dA` over the walks' entry points, mm^2.
+    channels : dict
+        Channel -> ``(exits, sources, length, floor)``: each exit's cluster weights times
+        its weight (CSR, (E, K)), its entry point's cluster weights times the entry area
+        per walk (CSR, (E, K)), its path length (mm, (E,)), and the absorption the walks
+        were made with (mm^-1; :meth:`transport` takes any at or above it).
+    statistics : dict
+        Channel -> :func:`walk_exits`' statistics.
+    """
+
+    entry_power: np.ndarray
+    channels: dict
+    statistics: dict
+
+    def serves(self, sigma_a) -> bool:
+        """Return whether every channel's walks can be weighed for the absorption."""
+        return all(float(sigma_a[c]) >= item[3] for c, item in self.channels.items())
+
+    def transport(self, channel: int, sigma_a: float) -> np.ndarray:
+        """Return the power leaving at cluster m per unit entering at cluster k, (K, K)."""
+        size = len(self.entry_power)
+        if channel not in self.channels:
+            return np.zeros((size, size))
+        exits, sources, length, floor = self.channels[channel]
+        if float(sigma_a) < floor:
+            raise InputError(f"the walks were made for an absorption of at least {floor} "
+                             "mm^-1", field="sigma_a", value=float(sigma_a))
+        weighed = exits.multiply(np.exp(-(float(sigma_a) - floor) * length)[:, None])
+        return np.asarray((weighed.T @ sources).todense()) / self.entry_power[None, :]
+
+
+def walk_paths(triangles, clusters, sigma_s_prime, eta: float, sigma_a_floor=0.0, *,
+               walks: int = DEFAULT_WALKS, seed: int = 0) -> WalkPaths:
+    """Walk an object's photons without absorption, per channel (:func:`walk_exits`).
+
+    Parameters
+    ----------
+    triangles : ndarray, shape (F, 3, 3)
+        The object's closed surface, mm, counter-clockwise seen from outside.
+    clusters : ObjectDiffusion
+        The clusters and their weights.
+    sigma_s_prime : array_like, shape (C,)
+        mm^-1, >= 0 (a channel without scattering has no walks).
+    eta : float
+        > 0.
+    sigma_a_floor : array_like, shape (C,) or float
+        mm^-1, >= 0: the least absorption each channel's walks will serve.
+    walks : int
+        Per channel (:data:`WALKS_PER_ENTRY` from each entry point).
+    seed : int
+
+    Returns
+    -------
+    WalkPaths
+    """
+    from .raycast import RayEngine
+
+    check_count(walks, "geometry_walks", minimum=WALKS_PER_ENTRY)
+    eta = float(eta)
+    if not (math.isfinite(eta) and eta > 0.0):
+        raise InputError("must be finite and > 0", field="eta", value=eta)
+    mesh = _triangle_mesh(triangles)
+    engine = RayEngine([mesh])
+    rng = np.random.default_rng([int(seed), 1])
+    entries = max(1, int(walks) // WALKS_PER_ENTRY)
+    entry_point, entry_normal, area = stratified_surface_points(mesh, entries, rng)
+    entry_weights = clusters.weights(entry_point, entry_normal).tocsr()
+    entry_area = area / entries
+    entry_power = entry_area * np.asarray(entry_weights.sum(axis=0)).ravel()
+    channels, statistics = {}, {}
+    sigma_s_prime = np.atleast_1d(np.asarray(sigma_s_prime, np.float64))
+    floors = np.broadcast_to(np.asarray(sigma_a_floor, np.float64), sigma_s_prime.shape)
+    for c in np.flatnonzero(sigma_s_prime > 0):
+        source, position, normal, weight, length, stats = walk_exits(
+            engine, entry_point, entry_normal, float(sigma_s_prime[c]), eta, WALKS_PER_ENTRY,
+            rng, SURFACE_OFFSET * engine.diagonal, float(floors[c]))
+        exits = clusters.weights(position, normal).multiply(weight[:, None]).tocsr()
+        sources = (entry_weights[source] * (entry_area / WALKS_PER_ENTRY)).tocsr()
+        channels[int(c)] = (exits, sources, length, float(floors[c]))
+        statistics[int(c)] = {**stats, "exits": int(len(weight))}
+    return WalkPaths(np.where(entry_power > 0, entry_power, np.inf), channels, statistics)
+
+
 def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAULT_WALKS,
                     quadrature: int = QUADRATURE_POINTS, seed: int = 0,
+                    paths: WalkPaths | None = None,
                     statistics: dict | None = None) -> np.ndarray:
     r"""Return the walks' transport beyond ``profile`` between the clusters, (K, K, 3).
 
@@ -300,6 +413,9 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
     quadrature : int
         Surface points of the profile's sum on the surface.
     seed : int
+    paths : WalkPaths, optional
+        The object's walks for ``medium``'s sigma_s' and eta (:func:`walk_paths`), when
+        already made: an edit of the absorption re-weighs them.
     statistics : dict, optional
         Filled with each channel's walk statistics (:func:`walk_exits`), its exits and
         the energy they carried out per unit entering power.
@@ -309,43 +425,31 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
     ndarray
         :math:`C_{mk}` in mm^-2 (module docstring); zero in a channel without scattering.
     """
-    from .raycast import RayEngine
-
-    check_count(walks, "geometry_walks", minimum=WALKS_PER_ENTRY)
     check_count(quadrature, "quadrature", minimum=16)
-    eta = float(medium.eta)
-    if not (math.isfinite(eta) and eta > 0.0):
-        raise InputError("must be finite and > 0", field="eta", value=eta)
+    if paths is None:
+        paths = walk_paths(triangles, clusters, medium.sigma_s_prime, medium.eta,
+                           FLOOR_FRACTION * np.asarray(medium.sigma_a, np.float64),
+                           walks=walks, seed=seed)
     mesh = _triangle_mesh(triangles)
-    engine = RayEngine([mesh])
-    rng = np.random.default_rng(seed)
-    entries = max(1, int(walks) // WALKS_PER_ENTRY)
-    entry_point, entry_normal, area = stratified_surface_points(mesh, entries, rng)
-    entry_weights = clusters.weights(entry_point, entry_normal)
-    entry_area = area / entries
-    entry_power = entry_area * np.asarray(entry_weights.sum(axis=0)).ravel()    # P_k
-    entry_power = np.where(entry_power > 0, entry_power, np.inf)
-    profile_sum, exit_area = _profile_on_surface(profile, clusters, mesh, engine.diagonal,
-                                                 int(quadrature), rng)
-    sigma_a = np.asarray(medium.sigma_a, np.float64)
-    sigma_s_prime = np.asarray(medium.sigma_s_prime, np.float64)
+    diagonal = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    profile_sum, exit_area = _profile_on_surface(profile, clusters, mesh, diagonal,
+                                                 int(quadrature),
+                                                 np.random.default_rng([int(seed), 2]))
+    sigma_a = np.atleast_1d(np.asarray(medium.sigma_a, np.float64))
     out = np.zeros((clusters.clusters, clusters.clusters, len(sigma_a)))
-    for c in np.flatnonzero(sigma_s_prime > 0):
-        source, position, normal, weight, stats = walk_exits(
-            engine, entry_point, entry_normal, float(sigma_a[c]), float(sigma_s_prime[c]),
-            eta, WALKS_PER_ENTRY, rng, SURFACE_OFFSET * engine.diagonal)
-        transport = np.asarray(
-            (clusters.weights(position, normal).multiply(weight[:, None])).T
-            @ entry_weights[source]) * (entry_area / WALKS_PER_ENTRY)
-        out[:, :, c] = (transport / entry_power[None, :] - profile_sum[:, :, c]) \
+    for c in paths.channels:
+        transport = paths.transport(c, float(sigma_a[c]))
+        out[:, :, c] = (transport - profile_sum[:, :, c]) \
             / np.where(exit_area > 0, exit_area, np.inf)[:, None]
         if statistics is not None:
-            statistics[int(c)] = {**stats, "exits": int(len(weight)), "energy": float(
-                weight.sum() / (entries * WALKS_PER_ENTRY))}
+            statistics[c] = {**paths.statistics[c], "energy": float(
+                (transport * paths.entry_power[None, :]).sum()
+                / paths.entry_power[np.isfinite(paths.entry_power)].sum())}
     return out
 
 
 _KEPT: dict = {}
+_PATHS: dict = {}
 
 
 def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_WALKS,
@@ -353,20 +457,36 @@ def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_
     """Return :func:`walk_correction`, kept per object, medium, profile and settings.
 
     In memory (the last :data:`KEPT_RESPONSES`) and, where ``clusters`` has a key and
-    ``cache`` is true, in the disk cache (namespace ``object_walk``).
+    ``cache`` is true, in the disk cache (namespace ``object_walk``). The walks themselves
+    are kept in memory per object, sigma_s' and eta (the last :data:`KEPT_PATHS`), made
+    with :data:`FLOOR_FRACTION` of the absorption: a new absorption at or above that
+    re-weighs them (and makes the profile's sum on the surface once more), a lower one
+    walks again.
     """
     triangles = np.ascontiguousarray(triangles, dtype=np.float64)
-    key = content_hash("object walk response", WALK_FORMAT, clusters.key or hashlib.sha256(
+    shape_key = (clusters.key or hashlib.sha256(
         np.ascontiguousarray(clusters.cluster_point).tobytes()).hexdigest(),
-        hashlib.sha256(triangles.tobytes()).hexdigest(), medium.cache_key(),
-        profile.cache_key(), int(walks), int(seed))
+        hashlib.sha256(triangles.tobytes()).hexdigest(), int(walks), int(seed))
+    key = content_hash("object walk response", WALK_FORMAT, *shape_key, medium.cache_key(),
+                       profile.cache_key())
     held = _KEPT.get(key)
     if held is not None:
         return held
     shape = (clusters.clusters, clusters.clusters, len(np.atleast_1d(medium.sigma_a)))
 
     def make():
-        return walk_correction(triangles, clusters, medium, profile, walks=walks, seed=seed)
+        paths_key = shape_key + (np.asarray(medium.sigma_s_prime, np.float64).tobytes(),
+                                 float(medium.eta))
+        paths = _PATHS.get(paths_key)
+        if paths is None or not paths.serves(medium.sigma_a):
+            paths = walk_paths(triangles, clusters, medium.sigma_s_prime, medium.eta,
+                               FLOOR_FRACTION * np.asarray(medium.sigma_a, np.float64),
+                               walks=walks, seed=seed)
+            if len(_PATHS) >= KEPT_PATHS:
+                _PATHS.pop(next(iter(_PATHS)))
+            _PATHS[paths_key] = paths
+        return walk_correction(triangles, clusters, medium, profile, walks=walks, seed=seed,
+                               paths=paths)
 
     if cache and clusters.key:
         out, _ = Cache(CACHE_NAMESPACE).load_or_make(

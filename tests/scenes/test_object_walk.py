@@ -6,6 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from translucent.errors import InputError
 from translucent.materials.homogeneous import Dipole
 from translucent.materials.profiles import profile
 from translucent.scenes.meshes import box, icosphere
@@ -49,11 +50,14 @@ def test_a_thick_box_returns_the_half_spaces_spherical_albedo(albedo):
     points = np.tile([[0.0, 0.0, 100.0]], (count, 1))
     normals = np.tile([[0.0, 0.0, 1.0]], (count, 1))
     rng = np.random.default_rng(3)
-    source, position, _, weight, stats = walk_exits(
-        _engine(mesh), points, normals, 1.0 - albedo, albedo, 1.0, 1, rng, _offset(mesh))
+    # made with half the absorption, weighed for the rest by each path's length
+    source, position, _, weight, length, stats = walk_exits(
+        _engine(mesh), points, normals, albedo, 1.0, 1, rng, _offset(mesh),
+        0.5 * (1.0 - albedo))
     assert stats["leaks"] == 0 and stats["given_up"] == 0
     assert np.all(position[:, 2] > 99.9)  # nothing reaches the other faces
-    per_walk = np.bincount(source, weights=weight, minlength=count)
+    per_walk = np.bincount(source, weights=weight * np.exp(-0.5 * (1.0 - albedo) * length),
+                           minlength=count)
     mu, w, h = _chandrasekhar_h(albedo)
     expected = 1.0 - 2.0 * np.sqrt(1.0 - albedo) * (w * h * mu).sum()
     error = per_walk.std() / np.sqrt(count)
@@ -65,8 +69,8 @@ def test_without_absorption_every_walk_leaves_whole_at_eta_1():
     count = 200
     rng = np.random.default_rng(0)
     points, normals = mesh.vertices[:count], mesh.normals[:count]
-    source, _, _, weight, stats = walk_exits(_engine(mesh), points, normals, 0.0, 2.0, 1.0,
-                                             1, rng, _offset(mesh))
+    source, _, _, weight, _, stats = walk_exits(_engine(mesh), points, normals, 2.0, 1.0, 1,
+                                                rng, _offset(mesh))
     assert stats["given_up"] == 0 and stats["leaks"] == 0
     np.testing.assert_allclose(np.bincount(source, weights=weight, minlength=count), 1.0,
                                rtol=1e-12)
@@ -79,8 +83,8 @@ def test_without_absorption_the_walks_keep_the_power_behind_a_dielectric(eta):
     count = 3000
     rng = np.random.default_rng(1)
     index = rng.integers(0, len(mesh.vertices), count)
-    source, _, _, weight, stats = walk_exits(
-        _engine(mesh), mesh.vertices[index], mesh.normals[index], 0.0, 2.0, eta, 1, rng,
+    source, _, _, weight, _, stats = walk_exits(
+        _engine(mesh), mesh.vertices[index], mesh.normals[index], 2.0, eta, 1, rng,
         _offset(mesh))
     per_walk = np.bincount(source, weights=weight, minlength=count)
     assert stats["given_up"] == 0
@@ -163,3 +167,27 @@ def test_walks_enter_as_diffuse_light_refracted_through_the_boundary(eta):
     refracted = np.sqrt(np.maximum(0.0, 1.0 - (1.0 - cos_out ** 2) / eta ** 2))
     expected = (density * refracted).sum() / density.sum()
     assert cos_in.mean() == pytest.approx(expected, abs=4.0 * cos_in.std() / np.sqrt(len(cos_in)))
+
+
+def test_an_absorption_edit_reweighs_the_walks_a_lower_one_walks_again():
+    from translucent.scenes import object_walk
+
+    triangles, clusters = _box_case()
+    object_walk._PATHS.clear()
+    medium = Dipole([0.1, 0.2, 0.4], [1.0, 1.5, 2.0], 1.3)
+    kept = dict(walks=2048, seed=3, cache=False)
+    object_walk.walk_response(clusters, triangles, medium, profile("dipole", medium), **kept)
+    (paths,) = object_walk._PATHS.values()
+    assert [item[3] for item in paths.channels.values()] == pytest.approx([0.05, 0.1, 0.2])
+    more = Dipole(medium.sigma_a * 1.5, medium.sigma_s_prime, 1.3)
+    edited = object_walk.walk_response(clusters, triangles, more, profile("dipole", more),
+                                       **kept)
+    assert list(object_walk._PATHS.values()) == [paths]  # no new walks
+    np.testing.assert_array_equal(edited, walk_correction(
+        triangles, clusters, more, profile("dipole", more), seed=3, paths=paths))
+    less = Dipole(medium.sigma_a * 0.4, medium.sigma_s_prime, 1.3)  # below the walks' floor
+    with pytest.raises(InputError, match="absorption"):
+        paths.transport(0, float(less.sigma_a[0]))
+    object_walk.walk_response(clusters, triangles, less, profile("dipole", less), **kept)
+    (again,) = object_walk._PATHS.values()
+    assert again is not paths and again.serves(less.sigma_a)
