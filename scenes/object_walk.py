@@ -49,8 +49,8 @@ from .mesh_shape import stratified_surface_points
 from .scene import Mesh
 
 __all__ = ["DEFAULT_WALKS", "QUADRATURE_POINTS", "SURFACE_OFFSET", "WALK_FORMAT",
-           "WALKS_PER_ENTRY", "WalkPaths", "walk_correction", "walk_exits", "walk_paths",
-           "walk_response"]
+           "WALKS_PER_ENTRY", "SurfaceSums", "WalkPaths", "surface_sums", "walk_correction",
+           "walk_exits", "walk_paths", "walk_response"]
 
 #: Walks per object and channel (:data:`WALKS_PER_ENTRY` from each entry point).
 DEFAULT_WALKS = 32768
@@ -220,17 +220,17 @@ def walk_exits(engine, points, normals, sigma_s_prime: float, eta: float, walks:
 
 
 @functools.lru_cache(maxsize=1)
-def _compiled_profile_sum():
+def _compiled_distance_histogram():
     import numba
 
-    from ..compiled import parallel_njit
-
-    @parallel_njit(cache=True)
-    def profile_sum(entries, points, index, weight, near, log_r0, per_step, values,
-                    out):  # pragma: no cover - compiled
-        """out[s, m, c] = sum over points t beyond ``near`` of R_c(|x_t - x_s|) W_tm."""
-        last = values.shape[0] - 1
-        for s in numba.prange(len(entries)):
+    @numba.njit(cache=True)
+    def histogram(entries, entry_index, entry_weight, points, index, weight, near, log_r0,
+                  per_step, out):  # pragma: no cover - compiled
+        """out[k, m, b] += W_sk W_tm over pairs beyond ``near``, split linearly in ln r."""
+        nodes = out.shape[2]
+        local = np.zeros((out.shape[1], nodes))
+        for s in range(len(entries)):
+            local[:, :] = 0.0
             for t in range(len(points)):
                 dx = points[t, 0] - entries[s, 0]
                 dy = points[t, 1] - entries[s, 1]
@@ -239,16 +239,21 @@ def _compiled_profile_sum():
                 if r <= near:
                     continue
                 u = (math.log(r) - log_r0) / per_step
-                if u >= last:
+                if u >= nodes - 1:
                     continue
                 i = int(u)
                 f = u - i
-                for c in range(values.shape[1]):
-                    value = values[i, c] + f * (values[i + 1, c] - values[i, c])
-                    for j in range(index.shape[1]):
-                        out[s, index[t, j], c] += value * weight[t, j]
+                for j in range(index.shape[1]):
+                    w = weight[t, j]
+                    if w != 0.0:
+                        local[index[t, j], i] += (1.0 - f) * w
+                        local[index[t, j], i + 1] += f * w
+            for q in range(entry_index.shape[1]):
+                w = entry_weight[s, q]
+                if w != 0.0:
+                    out[entry_index[s, q]] += w * local
 
-    return profile_sum
+    return histogram
 
 
 def _padded_rows(matrix):
@@ -265,14 +270,54 @@ def _padded_rows(matrix):
     return index, value
 
 
-def _profile_on_surface(profile, clusters, mesh, diagonal: float, quadrature: int, rng):
-    r"""Return the profile summed on the object's surface between the clusters, (K, K, C).
+@dataclass(eq=False)
+class SurfaceSums:
+    r"""How an object's surface sums any radial profile between its clusters.
 
-    :math:`\int W_m(x_o) \int W_k(x_i) R(\lVert x_o - x_i\rVert)\,dA_i\,dA_o` over
-    :data:`QUADRATURE_ENTRIES` entry and ``quadrature`` exit points, per unit power
-    entering at cluster k (divided by its :math:`P_k`), and each cluster's exit area
-    :math:`A_m = \int W_m\,dA` (mm^2).
+    The profile's part of the correction, :math:`\int W_m(x_o) \int W_k(x_i)
+    R(\lVert x_o - x_i\rVert)\,dA_i\,dA_o / P_k`, over :data:`QUADRATURE_ENTRIES` entry and
+    ``quadrature`` exit points spread over the surface, kept as what does not depend on the
+    profile: the pairs' cluster weights binned on a geometric grid of distances (each pair
+    split between its two nodes as linear interpolation in ln r would weigh the profile
+    there), and, inside twice the quadrature's spacing, the entry points' own weights (the
+    surface there is its tangent plane, and the profile's integral over the disc is its
+    cumulative total). A profile then costs one product (:meth:`profile_sum`): an edit of
+    the material does not sum the surface again.
+
+    Attributes
+    ----------
+    radius : ndarray, shape (B,)
+        The distance nodes, mm.
+    histogram : ndarray, shape (K, K, B)
+        Entry cluster k, exit cluster m, node: the pairs' weights times the exit points'
+        area, per unit entry weight of k.
+    near : float
+        The tangent-plane disc's radius, mm.
+    near_weights : ndarray, shape (K, K)
+        :math:`\sum_s W_{sk} W_{sm}` per unit entry weight of k.
+    exit_area : ndarray, shape (K,)
+        :math:`A_m = \int W_m\,dA`, mm^2.
     """
+
+    radius: np.ndarray
+    histogram: np.ndarray
+    near: float
+    near_weights: np.ndarray
+    exit_area: np.ndarray
+
+    def profile_sum(self, profile) -> np.ndarray:
+        """Return the profile summed on the surface per unit power entering at k, (K, K, C).
+
+        Indexed ``[m, k, c]`` (exit, entry, channel); ``profile`` in mm^-2.
+        """
+        table = np.asarray(profile.reflection(self.radius), np.float64)        # (B, C)
+        near_total = np.asarray(profile.total(max_radius=self.near), np.float64)
+        far = np.einsum("kmb,bc->mkc", self.histogram, table)
+        return far + self.near_weights.T[:, :, None] * near_total[None, None, :]
+
+
+def surface_sums(clusters, mesh, diagonal: float, quadrature: int, rng) -> SurfaceSums:
+    """Make an object's :class:`SurfaceSums` (one compiled pass over the point pairs)."""
     entry_point, entry_normal, area = stratified_surface_points(mesh, QUADRATURE_ENTRIES, rng)
     point, normal, _ = stratified_surface_points(mesh, quadrature, rng)
     point_area = area / quadrature
@@ -280,23 +325,21 @@ def _profile_on_surface(profile, clusters, mesh, diagonal: float, quadrature: in
     weights = clusters.weights(point, normal)
     exit_area = point_area * np.asarray(weights.sum(axis=0)).ravel()
     index, value = _padded_rows(weights)
-    # inside the quadrature's spacing the surface is its tangent plane
+    entry_index, entry_value = _padded_rows(entry_weights)
     near = 2.0 * math.sqrt(point_area)
     largest = 1.01 * diagonal
     nodes = max(2, int(math.ceil(LOOKUP_PER_DECADE * math.log10(largest / near))) + 1)
     radius = np.geomspace(near, largest, nodes)
-    table = np.ascontiguousarray(np.asarray(profile.reflection(radius), np.float64))
-    summed = np.zeros((len(entry_point), clusters.clusters, table.shape[1]))
-    _compiled_profile_sum()(entry_point, point, index, value, near, math.log(near),
-                            math.log(radius[1] / radius[0]), table, summed)
-    summed *= point_area
-    near_total = np.asarray(profile.total(max_radius=near), np.float64)
-    summed += entry_weights.toarray()[:, :, None] * near_total[None, None, :]
+    histogram = np.zeros((clusters.clusters, clusters.clusters, nodes))
+    _compiled_distance_histogram()(entry_point, entry_index, entry_value, point, index,
+                                   value, near, math.log(near),
+                                   math.log(radius[1] / radius[0]), histogram)
     dense = entry_weights.toarray()
     share = dense.sum(axis=0)
     share = np.where(share > 0, share, np.inf)  # a cluster no entry point reaches: 0
-    return np.einsum("sk,smc->mkc", dense, summed) / share[None, :, None], \
-        exit_area
+    histogram *= point_area / share[:, None, None]
+    near_weights = (dense.T @ dense) / share[:, None]
+    return SurfaceSums(radius, histogram, near, near_weights, exit_area)
 
 
 @dataclass(eq=False)
@@ -393,7 +436,7 @@ def walk_paths(triangles, clusters, sigma_s_prime, eta: float, sigma_a_floor=0.0
 
 def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAULT_WALKS,
                     quadrature: int = QUADRATURE_POINTS, seed: int = 0,
-                    paths: WalkPaths | None = None,
+                    paths: WalkPaths | None = None, sums: SurfaceSums | None = None,
                     statistics: dict | None = None) -> np.ndarray:
     r"""Return the walks' transport beyond ``profile`` between the clusters, (K, K, 3).
 
@@ -416,6 +459,9 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
     paths : WalkPaths, optional
         The object's walks for ``medium``'s sigma_s' and eta (:func:`walk_paths`), when
         already made: an edit of the absorption re-weighs them.
+    sums : SurfaceSums, optional
+        The object's :func:`surface_sums` for ``quadrature`` and ``seed``, when already
+        made.
     statistics : dict, optional
         Filled with each channel's walk statistics (:func:`walk_exits`), its exits and
         the energy they carried out per unit entering power.
@@ -430,11 +476,12 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
         paths = walk_paths(triangles, clusters, medium.sigma_s_prime, medium.eta,
                            FLOOR_FRACTION * np.asarray(medium.sigma_a, np.float64),
                            walks=walks, seed=seed)
-    mesh = _triangle_mesh(triangles)
-    diagonal = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
-    profile_sum, exit_area = _profile_on_surface(profile, clusters, mesh, diagonal,
-                                                 int(quadrature),
-                                                 np.random.default_rng([int(seed), 2]))
+    if sums is None:
+        mesh = _triangle_mesh(triangles)
+        sums = surface_sums(clusters, mesh, float(np.linalg.norm(np.ptp(mesh.vertices,
+                                                                        axis=0))),
+                            int(quadrature), np.random.default_rng([int(seed), 2]))
+    profile_sum, exit_area = sums.profile_sum(profile), sums.exit_area
     sigma_a = np.atleast_1d(np.asarray(medium.sigma_a, np.float64))
     out = np.zeros((clusters.clusters, clusters.clusters, len(sigma_a)))
     for c in paths.channels:
@@ -450,6 +497,7 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
 
 _KEPT: dict = {}
 _PATHS: dict = {}
+_SUMS: dict = {}
 
 
 def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_WALKS,
@@ -485,8 +533,17 @@ def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_
             if len(_PATHS) >= KEPT_PATHS:
                 _PATHS.pop(next(iter(_PATHS)))
             _PATHS[paths_key] = paths
+        sums = _SUMS.get(shape_key)
+        if sums is None:
+            mesh = _triangle_mesh(triangles)
+            sums = surface_sums(clusters, mesh, float(np.linalg.norm(np.ptp(
+                mesh.vertices, axis=0))), QUADRATURE_POINTS,
+                np.random.default_rng([int(seed), 2]))
+            if len(_SUMS) >= KEPT_PATHS:
+                _SUMS.pop(next(iter(_SUMS)))
+            _SUMS[shape_key] = sums
         return walk_correction(triangles, clusters, medium, profile, walks=walks, seed=seed,
-                               paths=paths)
+                               paths=paths, sums=sums)
 
     if cache and clusters.key:
         out, _ = Cache(CACHE_NAMESPACE).load_or_make(

@@ -191,3 +191,33 @@ def test_an_absorption_edit_reweighs_the_walks_a_lower_one_walks_again():
     object_walk.walk_response(clusters, triangles, less, profile("dipole", less), **kept)
     (again,) = object_walk._PATHS.values()
     assert again is not paths and again.serves(less.sigma_a)
+
+
+def test_the_surface_sums_any_profile_as_a_direct_quadrature_does():
+    """The distance histogram against the profile summed pair by pair in numpy, with the
+    profile's exact values (the histogram interpolates it linearly in ln r)."""
+    from translucent.scenes.mesh_shape import stratified_surface_points
+    from translucent.scenes.object_walk import QUADRATURE_ENTRIES, _triangle_mesh, surface_sums
+
+    mesh = icosphere(2, 6.0)
+    triangles = mesh.vertices[mesh.faces]
+    clusters = object_diffusion(triangles, cells=500, clusters=24, cache=False)
+    surface = _triangle_mesh(triangles)
+    sums = surface_sums(clusters, surface, 12.0, 1024, np.random.default_rng(9))
+    rng = np.random.default_rng(9)  # the same draws, in the same order
+    entry, entry_normal, area = stratified_surface_points(surface, QUADRATURE_ENTRIES, rng)
+    point, normal, _ = stratified_surface_points(surface, 1024, rng)
+    entry_weights = clusters.weights(entry, entry_normal).toarray()
+    weights = clusters.weights(point, normal).toarray()
+    distance = np.linalg.norm(point[None, :, :] - entry[:, None, :], axis=2)
+    for medium in (Dipole([0.01, 0.1, 0.5], [1.0, 1.0, 1.0], 1.3),
+                   Dipole([0.05, 0.05, 0.05], [0.2, 2.0, 8.0], 1.0)):
+        radial = profile("dipole", medium)
+        values = np.where((distance > sums.near)[..., None], radial.reflection(distance), 0.0)
+        far = np.stack([(entry_weights.T @ values[:, :, c] @ weights).T for c in range(3)],
+                       axis=2) * (area / 1024)
+        near = np.einsum("sk,sm->mk", entry_weights, entry_weights)[..., None] \
+            * radial.total(max_radius=sums.near)
+        expected = (far + near) / entry_weights.sum(axis=0)[None, :, None]
+        np.testing.assert_allclose(sums.profile_sum(radial), expected, rtol=2e-3,
+                                   atol=2e-3 * np.abs(expected).max())
