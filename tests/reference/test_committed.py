@@ -167,14 +167,15 @@ def test_a_fresh_bssrdf_render_is_consistent_with_the_committed_model_reference(
 
 
 @pytest.mark.slow  # 5-11 s; the geometry term renders in the fast tier by the command's test
-def test_a_fresh_render_with_the_geometry_is_consistent_with_its_committed_model_reference():
+@pytest.mark.parametrize("model", ["dipole+geometry", "dipole+walk"])
+def test_a_fresh_render_with_the_geometry_is_consistent_with_its_committed_model_reference(
+        model):
     """The geometry term (reference/geometry_term.py) rendered again with other seeds; and
     the half-space's committed model reference is not it (the term is seen)."""
-    committed = committed_reference("sphere_dielectric", profile="dipole+geometry").require()
+    committed = committed_reference("sphere_dielectric", profile=model).require()
     fresh = render(load_scene("sphere_dielectric"), spp=16, passes=8, seed=1, cache=False,
-                   progress=False, integrator="bssrdf_path", profile="dipole+geometry")
-    _assert_consistent_and_sensitive("sphere_dielectric (model with geometry)", fresh,
-                                     committed)
+                   progress=False, integrator="bssrdf_path", profile=model)
+    _assert_consistent_and_sensitive(f"sphere_dielectric ({model})", fresh, committed)
     half_space = committed_reference("sphere_dielectric", profile="dipole").require()
     assert np.abs(_global_z(fresh, half_space)).max() > GLOBAL_Z
 
