@@ -164,7 +164,8 @@ TWO_HALF_LEVELS = 1.0 / 32767 + 1e-6
 
 
 def test_shared_layout_keeps_every_row_selection_and_more(state):
-    rows = prt.precompute(sphere_scene(), samples=SAMPLES, layout="rows")
+    rows = prt.precompute(sphere_scene(), samples=SAMPLES, layout="rows",
+                          **QUICK_GEOMETRY_KNOBS)
     separate = rows.transfers[0].transfer.dequantised()
     shared = state.transfers[0].transfer.dequantised()
     assert rows.transfers[0].statistics["layout"] == "rows"
@@ -307,7 +308,7 @@ def test_far_small_emitters_act_as_point_lights(state, emitter):
 
 def test_constant_environment_on_a_convex_object(state):
     scene = sphere_scene(lights=[ConstantEnvironment(1.0)])
-    environment_state = prt.precompute(scene, samples=1024)
+    environment_state = prt.precompute(scene, samples=1024, **QUICK_GEOMETRY_KNOBS)
     transfer = environment_state.transfers[0]
     irradiance = environment_state.irradiance(transfer, scene.lights, 1.3)[:, 0]
     mu = np.linspace(0, 1, 20001)
@@ -333,9 +334,9 @@ def test_fresnel_factors_reproduce_the_hemispherical_integral():
 def test_precomputation_is_cached_by_geometry_and_knobs(state):
     relit = sphere_scene(material=measured_medium("Skin1"),
                          lights=[DirectionalLight([0, -1, 0], 1.0)])
-    again = prt.precompute(relit, samples=SAMPLES)
+    again = prt.precompute(relit, samples=SAMPLES, **QUICK_GEOMETRY_KNOBS)
     assert again.log.notes["cache"]["sphere"] == "hit"
-    other_knobs = prt.precompute(relit, samples=1024, seed=7)
+    other_knobs = prt.precompute(relit, samples=1024, seed=7, **QUICK_GEOMETRY_KNOBS)
     assert other_knobs.log.notes["cache"]["sphere"] == "miss"
 
 
@@ -374,7 +375,7 @@ def test_approx_command_writes_an_exr(tmp_path, capsys):
     out = tmp_path / "prt.exr"
     code = main(["approx", "prt", "sphere", "--samples", "1024", "--no-progress",
                  "--geometry-cells", "1000", "--geometry-clusters", "48",
-                 "--material", "Skin1", "--out", str(out)])
+                 "--geometry-walks", "2048", "--material", "Skin1", "--out", str(out)])
     assert code == 0 and out.is_file()
     image = Image.read(out)
     assert image.metadata["producer"] == "prt" and image.rgb.max() > 0
@@ -397,7 +398,7 @@ def test_approx_command_rejects_half_a_material(tmp_path, capsys):
 
 def test_approx_command_says_what_it_skipped(tmp_path, capsys):
     code = main(["approx", "prt", "sphere", "--samples", "1024", "--no-progress", "--spatial",
-                 "on", "--out", str(tmp_path / "x.exr")])
+                 "on", "--geometry", "half_space", "--out", str(tmp_path / "x.exr")])
     assert code == 0
     assert "skipped: object 'sphere': no spatial compression" in capsys.readouterr().out
 
@@ -452,7 +453,7 @@ def test_other_objects_in_view_are_left_black_named_and_not_scored():
     scene = Scene(list(plain.objects) + [ball], list(plain.lights), plain.camera,
                   mm_per_unit=MM_PER_UNIT)
     assert prt.scored_objects(scene) == ["sphere"]
-    image = prt.precompute(scene, samples=SAMPLES).render()
+    image = prt.precompute(scene, samples=SAMPLES, **QUICK_GEOMETRY_KNOBS).render()
     from translucent.scenes import gbuffer
 
     seen = gbuffer(scene).object_id
