@@ -431,7 +431,9 @@ def check_geometry(module, scene, knobs) -> str:
     spec = getattr(module, "KNOBS", None)
     if spec is None or "geometry" not in spec:
         raise NotChecked("the method declares no geometry knob")
-    flat = _pixels(module.precompute(scene, **{**knobs, "geometry": "half_space"}).render(),
+    # the half-space profile alone (a method's own finite-object energy off too)
+    half_space = getattr(module, "HALF_SPACE_KNOBS", {"geometry": "half_space"})
+    flat = _pixels(module.precompute(scene, **{**knobs, **half_space}).render(),
                    scene, "render() with geometry 'half_space'")
     gains = []
     for model in ("walk", "diffusion"):

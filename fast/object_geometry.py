@@ -60,14 +60,14 @@ GEOMETRY = ("walk", "diffusion", "half_space")
 QUICK_GEOMETRY_KNOBS = {"geometry_cells": 1000, "geometry_clusters": 48,
                         "geometry_walks": 2048}
 
-def geometry_knobs() -> list[Knob]:
+def geometry_knobs(default: str = "walk") -> list[Knob]:
     """Return the knobs every method with the geometry correction declares.
 
     Not part of the cache key of a method's own precomputation (``keyed=False``): the
-    correction is made beside it.
+    correction is made beside it. ``default``: the method's value of ``geometry``.
     """
     return [
-        Knob("geometry", "walk", "the object's own shape in the profile: walk (the "
+        Knob("geometry", default, "the object's own shape in the profile: walk (the "
              "profile plus what photon random walks in the object's mesh return beyond it, "
              "at the scale of the surface clusters), diffusion (the profile plus diffusion's "
              "correction for the object's finite extent) or half_space (the profile alone, "

@@ -13,6 +13,7 @@ from ..knobs import (
     directional_profile_names,
     profile_knob,
 )
+from ..object_geometry import QUICK_GEOMETRY_KNOBS, geometry_knobs
 
 FORMAT_VERSION = 6
 
@@ -79,10 +80,13 @@ KNOBS = KnobSpec([
     Knob("sheet_thickness_mm", None, "thin (open) translucent sheets: slab thickness",
          kind="float", positive=True, unit="mm", optional=True),
     Knob("finite_object_energy", True, "S columns carry the object's diffusion escape "
-         "(gain); off: the dipole as the paper uses it", kind="bool"),
+         "(gain) of the dipole; off: the dipole as the paper uses it; with a geometry other "
+         "than half_space the geometry's correction takes its place", kind="bool"),
     Knob("diffusion_voxels_per_axis", 32, "its finite-volume grid, along the longest side",
          kind="int", low=4),
     # solving and lighting: read every frame, not part of the cache key
+    # the object's own shape (fast.object_geometry), added to S as a low-rank block
+    *geometry_knobs(default="half_space"),
     Knob("solver", "jacobi", "the iterative solver", kind="choice", choices=SOLVERS,
          keyed=False),
     Knob("tolerance", 5e-3, "relative residual (the paper's 0.5 %)", kind="float",
@@ -130,7 +134,11 @@ LADDERS: dict = KNOBS.ladders
 #: Cheap knobs for smoke runs and the conformance checks (fast.conformance): few
 #: form-factor rays, and a tight solve, so that relighting through T and an iterative
 #: solve agree far below the checks' tolerance.
-QUICK_KNOBS: dict = {"rays_per_patch": 16, "tolerance": 1e-7}
+QUICK_KNOBS: dict = {"rays_per_patch": 16, "tolerance": 1e-7, **QUICK_GEOMETRY_KNOBS}
+
+#: The knobs that leave the profile a half-space's alone (fast.conformance's geometry
+#: check): no geometry correction and no finite-object energy.
+HALF_SPACE_KNOBS: dict = {"geometry": "half_space", "finite_object_energy": False}
 
 #: Knobs that only steer solving and lighting: not part of the precomputation's cache key.
 RUNTIME_KNOBS = KNOBS.unkeyed

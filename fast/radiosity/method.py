@@ -59,6 +59,9 @@ def applies_to(scene) -> Refusal | None:
 def _resolve_knobs(scene, knobs: dict) -> dict:
     """Return the knobs checked (:data:`KNOBS`), the cut-off max_d derived where None."""
     resolved = KNOBS.resolve(knobs)
+    if resolved["geometry"] != "half_space":
+        # the geometry's correction carries the object's finite extent in its place
+        resolved["finite_object_energy"] = False
     if resolved["max_distance_mm"] is None:
         radii = []
         for obj in scene.objects:
@@ -222,7 +225,8 @@ def add_approx_arguments(parser) -> None:
     parser.add_argument("--component", default="both", choices=COMPONENTS,
                         help="bounce component of Sheng et al. 2014, Fig. 6 (default: both)")
     parser.add_argument("--semi-infinite", action="store_true",
-                        help="the dipole as the paper uses it: --no-finite-object-energy")
+                        help="the dipole as the paper uses it: --geometry half_space "
+                        "--no-finite-object-energy")
     KNOBS.add_arguments(parser)
 
 
@@ -249,6 +253,7 @@ def approx(scene, args) -> Image:
     knobs = KNOBS.from_arguments(args)
     if args.semi_infinite:
         knobs["finite_object_energy"] = False
+        knobs["geometry"] = "half_space"
     state = precompute(scene, **knobs)
     image = state.render(component=args.component)
     for sentence in state.log.skipped:

@@ -52,36 +52,105 @@ class ScatteringMatrix:
     indptr: np.ndarray
     indices: np.ndarray
     data: np.ndarray
+    #: the objects' geometry corrections, each a :class:`GeometryBlock`, added to the
+    #: sparse factors in every product (knob ``geometry``)
+    blocks: tuple = ()
+
+    @property
+    def size(self) -> int:
+        """The number of patches P."""
+        return len(self.indptr) - 1
 
     def channel(self, c: int) -> sparse.csr_matrix:
-        """S of channel ``c`` as a CSR matrix (shares the pattern)."""
-        size = len(self.indptr) - 1
+        """Return the sparse factors of channel ``c`` as a CSR matrix (shares the pattern).
+
+        Without the geometry :attr:`blocks`; :meth:`channel_dot` and :meth:`dense_channel`
+        include them.
+        """
         return sparse.csr_matrix((self.data[:, c], self.indices, self.indptr),
-                                 shape=(size, size))
+                                 shape=(self.size, self.size))
+
+    def channel_dot(self, c: int, vector) -> np.ndarray:
+        """``S_c @ vector`` with the geometry blocks, shape (P,)."""
+        out = self.channel(c) @ vector
+        for block in self.blocks:
+            out[block.members] += block.left @ (block.right[c] @ vector[block.members])
+        return out
+
+    def dense_channel(self, c: int, dtype=np.float32) -> np.ndarray:
+        """S of channel ``c`` as a dense (P, P) array, the geometry blocks added."""
+        out = self.channel(c).toarray().astype(dtype)
+        for block in self.blocks:
+            out[np.ix_(block.members, block.members)] += \
+                (block.left @ block.right[c]).astype(dtype)
+        return out
 
     def dot(self, vectors) -> np.ndarray:
         """``S_c @ vectors[:, c]`` for c = R, G, B; shape (P, 3).
 
         Large matrices take one compiled pass over the shared pattern for the three
-        channels (a Jacobi sweep multiplies by S once per iteration, Sect. 5.3).
+        channels (a Jacobi sweep multiplies by S once per iteration, Sect. 5.3); a
+        geometry block costs two thin products per channel.
         """
         vectors = np.asarray(vectors)
         if len(self.indices) < COMPILED_PRODUCT_ENTRIES:
-            return np.stack([self.channel(c) @ vectors[:, c] for c in range(3)], axis=1)
-        out = np.empty((len(self.indptr) - 1, 3))
-        compiled_rgb_product()(self.indptr, self.indices, self.data,
-                                np.ascontiguousarray(vectors, np.float64), out)
+            out = np.stack([self.channel(c) @ vectors[:, c] for c in range(3)], axis=1)
+        else:
+            out = np.empty((self.size, 3))
+            compiled_rgb_product()(self.indptr, self.indices, self.data,
+                                    np.ascontiguousarray(vectors, np.float64), out)
+        for block in self.blocks:
+            clusters = np.einsum("ckn,nc->kc", block.right, vectors[block.members])
+            out[block.members] += block.left @ clusters
         return out
 
     def power_column_sums(self, area) -> np.ndarray:
         r""":math:`\sum_j A_j S_{ji} / A_i` per patch and channel, shape (P, 3) (Eq. 15)."""
         area = np.asarray(area, dtype=np.float64)
-        return np.stack([self.channel(c).T @ area for c in range(3)], axis=1) / area[:, None]
+        sums = np.stack([self.channel(c).T @ area for c in range(3)], axis=1)
+        for block in self.blocks:
+            exit_area = block.left.T @ area[block.members]  # (K,)
+            sums[block.members] += np.einsum("k,ckn->nc", exit_area, block.right)
+        return sums / area[:, None]
 
     @property
     def bytes(self) -> int:
-        """Memory of the three channels and the shared pattern."""
-        return int(self.data.nbytes + self.indices.nbytes + self.indptr.nbytes)
+        """Memory of the three channels, the shared pattern and the geometry blocks."""
+        return int(self.data.nbytes + self.indices.nbytes + self.indptr.nbytes
+                   + sum(block.bytes for block in self.blocks))
+
+
+@dataclass(eq=False)
+class GeometryBlock:
+    r"""One object's geometry correction in S, as a product of thin factors.
+
+    :math:`S^{geo}_{ji} = \sum_m W_{jm}\,R^c_{mi}` over the object's patches ``members``,
+    with :math:`W` the exit patches' weights over the object's surface clusters and
+    :math:`R^c = f_c\,C^c\,W^T \mathrm{diag}(A_i)` (:mod:`translucent.fast.object_geometry`):
+    the response :math:`C` between clusters per unit power entering, the patches' areas in
+    mm^2 and :math:`f_c` the profile's total over the dipole's (its entry transmittance
+    included), so that the correction carries the profile's own energy.
+
+    Parameters
+    ----------
+    members : ndarray of int, shape (n,)
+        The object's patches.
+    left : scipy.sparse.csr_matrix, shape (n, K)
+        Exit weights :math:`W`.
+    right : ndarray, shape (3, K, n)
+        :math:`R^c`.
+    """
+
+    members: np.ndarray
+    left: sparse.csr_matrix
+    right: np.ndarray
+
+    @property
+    def bytes(self) -> int:
+        """Memory of the two factors."""
+        left = self.left
+        return int(self.right.nbytes + self.members.nbytes + left.data.nbytes
+                   + left.indices.nbytes + left.indptr.nbytes)
 
 
 def scattering_profile(material, profile: str = DEFAULT_PROFILE):
@@ -131,7 +200,8 @@ def _object_profile_tables(profile: RadialProfile, grid: RadialGrid, kind: str =
 
 def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
                       materials: dict | None = None, *,
-                      profile: str = DEFAULT_PROFILE) -> ScatteringMatrix:
+                      profile: str = DEFAULT_PROFILE,
+                      geometries: dict | None = None) -> ScatteringMatrix:
     """Build S from the cached geometry and the materials: one sparse product per object.
 
     Sheng et al. 2014, Sect. 4-5.2: "the subsurface scattering matrix is then computed by
@@ -148,6 +218,11 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
     profile : str
         The knob ``profile``: the radial profile made from Dipole media
         (:func:`scattering_profile`).
+    geometries : dict of str to ObjectGeometry, optional
+        The objects' geometry corrections (knob ``geometry``,
+        :func:`~translucent.fast.object_geometry.object_geometries`): each such object with
+        a Dipole material gets its :class:`GeometryBlock`, in place of the escape gain of
+        the knob ``finite_object_energy``.
 
     Returns
     -------
@@ -161,9 +236,11 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
         a profile with NaN / negative values.
     """
     materials = materials or {}
+    geometries = geometries or {}
     chosen = profile
     grid = geometry.grid
     data = np.zeros((geometry.nnz, 3))
+    blocks = []
     for index, obj in enumerate(scene.objects):
         material = materials.get(obj.name, obj.material)
         profile = _sheet_profile(scattering_profile(material, chosen), index, geometry,
@@ -189,7 +266,12 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
                 if item.self_cumulative is not None:
                     data[own_position] += (item.self_cumulative @ cumulative
                                            + item.self_segment @ table)
-            if item.diffusion is not None and isinstance(profile, DipoleProfile):
+            shape = geometries.get(obj.name)
+            if shape is not None and isinstance(material, Dipole) and \
+                    index not in geometry.sheets:
+                blocks.append(geometry_block(shape, patches, members, material, profile,
+                                             chosen))
+            elif item.diffusion is not None and isinstance(profile, DipoleProfile):
                 _carry_finite_object_energy(data, geometry, patches, item, profile)
             continue
         if item.samples is None:
@@ -210,7 +292,29 @@ def scattering_matrix(geometry: ScatteringGeometry, scene, patches: Patches,
             for label, values in enumerate(own_values):
                 mine = labels == label
                 data[own_position[mine]] += values[mine]
-    return ScatteringMatrix(geometry.indptr, geometry.indices, data)
+    return ScatteringMatrix(geometry.indptr, geometry.indices, data, tuple(blocks))
+
+
+def geometry_block(shape, patches: Patches, members, material: Dipole,
+                   profile: RadialProfile, chosen: str = DEFAULT_PROFILE) -> GeometryBlock:
+    """Return the :class:`GeometryBlock` of one object's patches ``members``.
+
+    ``shape`` is the object's :class:`~translucent.fast.object_geometry.ObjectGeometry`;
+    the patches enter and leave at their centroids, each standing for its area. ``profile``
+    is the one S is filled from (:func:`scattering_profile`: the knob's profile ``chosen``
+    times the entry transmittance); the correction is made for the knob's profile per unit
+    power entering and carries the same entry term.
+    """
+    weights = shape.weights(patches.centroid[members], patches.normal[members])
+    base = None if chosen == DEFAULT_PROFILE else radial_profile(chosen, material)
+    base_total = (base if base is not None
+                  else DipoleProfile(material, entry_fresnel=False)).total()
+    entry_term = np.divide(profile.total(), base_total, out=np.ones(3), where=base_total > 0)
+    response = shape.response(material, base)  # (K, K, 3): exit, entry
+    area = patches.area[members] * patches.mm_per_unit ** 2
+    entry = np.asarray((weights.T.multiply(area[None, :])).todense())  # (K, n)
+    right = np.stack([entry_term[c] * (response[:, :, c] @ entry) for c in range(3)])
+    return GeometryBlock(np.asarray(members), weights.tocsr(), right)
 
 
 def _carry_finite_object_energy(data, geometry: ScatteringGeometry, patches: Patches,

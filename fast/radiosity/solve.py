@@ -201,12 +201,11 @@ def _krylov(S, F, source, solver, tolerance, max_iterations, start):
     most = 0
     method = sparse_linalg.gmres if solver == "gmres" else sparse_linalg.bicgstab
     for c in range(3):
-        S_c = S.channel(c)
         products = [0]
 
-        def matvec(x, S_c=S_c, products=products):
+        def matvec(x, c=c, products=products):
             products[0] += 1
-            return x - S_c @ (F @ x)
+            return x - S.channel_dot(c, F @ x)
 
         operator = sparse_linalg.LinearOperator((size, size), matvec=matvec, dtype=np.float64)
         if not np.any(source[:, c]):
@@ -240,12 +239,12 @@ def transfer_matrix(S: ScatteringMatrix, F) -> list[np.ndarray]:
     import scipy.linalg
 
     if F is None:
-        return [S.channel(c).toarray().astype(np.float32) for c in range(3)]
+        return [S.dense_channel(c) for c in range(3)]
     size = len(S.indptr) - 1
     F_transposed = F.T.tocsr().astype(np.float32)
     out = []
     for c in range(3):
-        S_c = S.channel(c).toarray().astype(np.float32)
+        S_c = S.dense_channel(c)
         # (F^T S^T)^T = S F, in Fortran order: LAPACK's own, so the solve copies nothing
         system = np.asfortranarray(-(F_transposed @ S_c.T).T)
         system[np.diag_indices(size)] += 1.0

@@ -17,6 +17,7 @@ from ...materials.profiles import (
 )
 from ...materials.solid import SolidMedium
 from ..knobs import DEFAULT_PROFILE
+from ..object_geometry import object_geometries
 from ..solid_inputs import mixed_profiles_from_solid
 from .knobs import COMPONENTS, WARM_START_FRAMES
 from .lighting import AreaLightShadows, direct_irradiance, emitters_seen
@@ -90,6 +91,10 @@ class RadiosityState:
         self._interreflected = None         # S F B of the last solve (warm start)
         self._cached_gbuffer = None
         self._cached_image_operators = None
+        # the geometry correction of each closed Dipole object (knob geometry): made once
+        # here, its response solved per material in set_material (and kept by the cache)
+        self.object_shapes = object_geometries(
+            scene, [scene.objects[i].name for i in geometry.objects], knobs, log)
         self.set_material(None)
 
     # -- materials ---------------------------------------------------------------------
@@ -104,7 +109,8 @@ class RadiosityState:
         overrides = materials_of(self.scene, material)
         self.materials = {**self.materials, **overrides}
         self.S = scattering_matrix(self.geometry, self.scene, self.patches, self.materials,
-                                   profile=self.knobs["profile"])
+                                   profile=self.knobs["profile"],
+                                   geometries=self.object_shapes)
         self._say_profile()
         self.convergence = check_convergence(self.S, self.form_factors, self.patches,
                                              form_factor_facts=self._form_factor_facts)

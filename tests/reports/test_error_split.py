@@ -278,7 +278,7 @@ def test_a_report_splits_each_profiles_error_against_its_model_reference(tmp_pat
     ("prt", {"geometry": "diffusion"}, "dipole+geometry"),
     ("prt", {"geometry": "half_space"}, "dipole"),
     ("splatting@better_dipole", {"profile": "better_dipole"}, "better_dipole+walk"),
-    ("radiosity", {}, "dipole")])
+    ("radiosity", {}, "dipole"), ("radiosity", {"geometry": "walk"}, "dipole+walk")])
 def test_a_method_with_the_geometry_is_split_against_the_model_with_the_geometry(name, knobs,
                                                                                model):
     from translucent.reports.report.split import split_profile
