@@ -64,9 +64,10 @@ def geometry_settings(model: str = "diffusion") -> dict:
     ``geometry`` of the methods).
     """
     if model == "walk":
-        return {"model": "walk", "version": WALK_FORMAT, "cells": DEFAULT_CELLS,
-                "clusters": DEFAULT_CLUSTERS, "walks": DEFAULT_WALKS, "seed": 0,
-                "points": POINTS, "rays": RAYS}
+        # the walks are read on object_diffusion's clusters: their version counts too
+        return {"model": "walk", "version": WALK_FORMAT, "clusters_version": CACHE_FORMAT,
+                "cells": DEFAULT_CELLS, "clusters": DEFAULT_CLUSTERS, "walks": DEFAULT_WALKS,
+                "seed": 0, "points": POINTS, "rays": RAYS}
     return {"model": "diffusion", "version": CACHE_FORMAT, "cells": DEFAULT_CELLS,
             "clusters": DEFAULT_CLUSTERS, "points": POINTS, "rays": RAYS}
 

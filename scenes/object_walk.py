@@ -509,30 +509,41 @@ def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_
     are kept in memory per object, sigma_s' and eta (the last :data:`KEPT_PATHS`), made
     with :data:`FLOOR_FRACTION` of the absorption: a new absorption at or above that
     re-weighs them (and makes the profile's sum on the surface once more), a lower one
-    walks again.
+    walks again. The floor of the walks used is part of the key: a material reached by
+    editing is another estimate than the same material made fresh, and each is kept as
+    what it is (a model reference and a method's own material are always made fresh).
     """
     triangles = np.ascontiguousarray(triangles, dtype=np.float64)
     shape_key = (clusters.key or hashlib.sha256(
         np.ascontiguousarray(clusters.cluster_point).tobytes()).hexdigest(),
         hashlib.sha256(triangles.tobytes()).hexdigest(), int(walks), int(seed))
+    paths_key = shape_key + (np.asarray(medium.sigma_s_prime, np.float64).tobytes(),
+                             float(medium.eta))
+    paths = _PATHS.get(paths_key)
+    if paths is None or not paths.serves(medium.sigma_a):
+        paths = None
+        floors = [float(f) for f in FLOOR_FRACTION * np.atleast_1d(
+            np.asarray(medium.sigma_a, np.float64))]
+    else:
+        floors = [float(item[3]) for item in paths.channels.values()]
+    # the walks' floor is part of what was computed: kept walks made for a lower
+    # absorption give another (equally valid) estimate than fresh ones
     key = content_hash("object walk response", WALK_FORMAT, *shape_key, medium.cache_key(),
-                       profile.cache_key())
+                       profile.cache_key(), floors)
     held = _KEPT.get(key)
     if held is not None:
         return held
     shape = (clusters.clusters, clusters.clusters, len(np.atleast_1d(medium.sigma_a)))
 
     def make():
-        paths_key = shape_key + (np.asarray(medium.sigma_s_prime, np.float64).tobytes(),
-                                 float(medium.eta))
-        paths = _PATHS.get(paths_key)
-        if paths is None or not paths.serves(medium.sigma_a):
-            paths = walk_paths(triangles, clusters, medium.sigma_s_prime, medium.eta,
-                               FLOOR_FRACTION * np.asarray(medium.sigma_a, np.float64),
-                               walks=walks, seed=seed)
-            if len(_PATHS) >= KEPT_PATHS:
+        made = paths
+        if made is None:
+            made = walk_paths(triangles, clusters, medium.sigma_s_prime, medium.eta,
+                              FLOOR_FRACTION * np.asarray(medium.sigma_a, np.float64),
+                              walks=walks, seed=seed)
+            if paths_key not in _PATHS and len(_PATHS) >= KEPT_PATHS:
                 _PATHS.pop(next(iter(_PATHS)))
-            _PATHS[paths_key] = paths
+            _PATHS[paths_key] = made
         sums = _SUMS.get(shape_key)
         if sums is None:
             mesh = _triangle_mesh(triangles)
@@ -543,7 +554,7 @@ def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_
                 _SUMS.pop(next(iter(_SUMS)))
             _SUMS[shape_key] = sums
         return walk_correction(triangles, clusters, medium, profile, walks=walks, seed=seed,
-                               paths=paths, sums=sums)
+                               paths=made, sums=sums)
 
     if cache and clusters.key:
         out, _ = Cache(CACHE_NAMESPACE).load_or_make(

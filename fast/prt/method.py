@@ -102,6 +102,8 @@ def precompute(scene, **knobs) -> PRTState:
         scene.objects[i].name: scene.objects[i].material for i in _translucent_objects(scene)}),
         **facts}
     others = _other_objects_in_view(scene)
+    # the geometry correction is made on the objects' own meshes, as the model reference's
+    unrefined = scene
     scene = refined_scene(scene, _translucent_objects(scene), knobs, log)
     if others:
         kinds = ", ".join(f"'{name}' ({type(scene.object(name).material).__name__})"
@@ -126,7 +128,8 @@ def precompute(scene, **knobs) -> PRTState:
     geometry = {name: (item, item.weights(samples[name].positions, samples[name].normals),
                        item.weights(scene.object(name).mesh.vertices,
                                     scene.object(name).mesh.normals))
-                for name, item in object_geometries(scene, list(samples), knobs, log).items()}
+                for name, item in object_geometries(unrefined, list(samples), knobs,
+                                                    log).items()}
     hidden = [o.name for o in scene.objects
               if not isinstance(o.material, Dipole) and o.name not in others]
     if hidden:
