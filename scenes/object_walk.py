@@ -49,6 +49,7 @@ from .mesh_shape import stratified_surface_points
 from .scene import Mesh
 
 __all__ = ["DEFAULT_WALKS", "QUADRATURE_POINTS", "SURFACE_OFFSET", "WALK_FORMAT",
+           "quadrature_sizes",
            "WALKS_PER_ENTRY", "SurfaceSums", "WalkPaths", "surface_sums", "walk_correction",
            "walk_exits", "walk_paths", "walk_response"]
 
@@ -60,6 +61,17 @@ WALKS_PER_ENTRY = 8
 QUADRATURE_POINTS = 32768
 #: The profile's entry points (the quadrature is smooth in them; the walks' are many more).
 QUADRATURE_ENTRIES = 2048
+
+
+def quadrature_sizes(walks: int) -> tuple[int, int]:
+    """Return the profile quadrature's (entry points, exit points) for ``walks`` walks.
+
+    :data:`QUADRATURE_ENTRIES` and :data:`QUADRATURE_POINTS` at :data:`DEFAULT_WALKS` and
+    more; fewer walks (a smoke run's) get a quadrature as coarse as their own estimate.
+    """
+    scale = min(1.0, int(walks) / DEFAULT_WALKS)
+    return (max(64, int(QUADRATURE_ENTRIES * scale)),
+            max(256, int(QUADRATURE_POINTS * scale)))
 #: A walk whose weight falls below this plays Russian roulette (survives with probability
 #: weight / this, at this weight).
 ROULETTE_WEIGHT = 0.05
@@ -316,9 +328,10 @@ class SurfaceSums:
         return far + self.near_weights.T[:, :, None] * near_total[None, None, :]
 
 
-def surface_sums(clusters, mesh, diagonal: float, quadrature: int, rng) -> SurfaceSums:
+def surface_sums(clusters, mesh, diagonal: float, quadrature: int, rng,
+                 entries: int = QUADRATURE_ENTRIES) -> SurfaceSums:
     """Make an object's :class:`SurfaceSums` (one compiled pass over the point pairs)."""
-    entry_point, entry_normal, area = stratified_surface_points(mesh, QUADRATURE_ENTRIES, rng)
+    entry_point, entry_normal, area = stratified_surface_points(mesh, int(entries), rng)
     point, normal, _ = stratified_surface_points(mesh, quadrature, rng)
     point_area = area / quadrature
     entry_weights = clusters.weights(entry_point, entry_normal)
@@ -435,7 +448,7 @@ def walk_paths(triangles, clusters, sigma_s_prime, eta: float, sigma_a_floor=0.0
 
 
 def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAULT_WALKS,
-                    quadrature: int = QUADRATURE_POINTS, seed: int = 0,
+                    quadrature: int | None = None, seed: int = 0,
                     paths: WalkPaths | None = None, sums: SurfaceSums | None = None,
                     statistics: dict | None = None) -> np.ndarray:
     r"""Return the walks' transport beyond ``profile`` between the clusters, (K, K, 3).
@@ -453,8 +466,9 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
         The method's profile of ``medium`` (mm^-2): what the correction is beyond.
     walks : int
         Per channel (:data:`WALKS_PER_ENTRY` from each entry point).
-    quadrature : int
-        Surface points of the profile's sum on the surface.
+    quadrature : int, optional
+        Surface points of the profile's sum on the surface (default: as many as
+        :func:`quadrature_sizes` gives ``walks``; its entry points always so).
     seed : int
     paths : WalkPaths, optional
         The object's walks for ``medium``'s sigma_s' and eta (:func:`walk_paths`), when
@@ -471,6 +485,8 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
     ndarray
         :math:`C_{mk}` in mm^-2 (module docstring); zero in a channel without scattering.
     """
+    entries, points = quadrature_sizes(walks)
+    quadrature = points if quadrature is None else quadrature
     check_count(quadrature, "quadrature", minimum=16)
     if paths is None:
         paths = walk_paths(triangles, clusters, medium.sigma_s_prime, medium.eta,
@@ -480,7 +496,7 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
         mesh = _triangle_mesh(triangles)
         sums = surface_sums(clusters, mesh, float(np.linalg.norm(np.ptp(mesh.vertices,
                                                                         axis=0))),
-                            int(quadrature), np.random.default_rng([int(seed), 2]))
+                            int(quadrature), np.random.default_rng([int(seed), 2]), entries)
     profile_sum, exit_area = sums.profile_sum(profile), sums.exit_area
     sigma_a = np.atleast_1d(np.asarray(medium.sigma_a, np.float64))
     out = np.zeros((clusters.clusters, clusters.clusters, len(sigma_a)))
@@ -547,9 +563,10 @@ def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_
         sums = _SUMS.get(shape_key)
         if sums is None:
             mesh = _triangle_mesh(triangles)
+            entries, points = quadrature_sizes(walks)
             sums = surface_sums(clusters, mesh, float(np.linalg.norm(np.ptp(
-                mesh.vertices, axis=0))), QUADRATURE_POINTS,
-                np.random.default_rng([int(seed), 2]))
+                mesh.vertices, axis=0))), points, np.random.default_rng([int(seed), 2]),
+                entries)
             if len(_SUMS) >= KEPT_PATHS:
                 _SUMS.pop(next(iter(_SUMS)))
             _SUMS[shape_key] = sums

@@ -184,7 +184,7 @@ def test_an_absorption_edit_reweighs_the_walks_a_lower_one_walks_again():
                                        **kept)
     assert list(object_walk._PATHS.values()) == [paths]  # no new walks
     np.testing.assert_array_equal(edited, walk_correction(
-        triangles, clusters, more, profile("dipole", more), seed=3, paths=paths))
+        triangles, clusters, more, profile("dipole", more), walks=2048, seed=3, paths=paths))
     less = Dipole(medium.sigma_a * 0.4, medium.sigma_s_prime, 1.3)  # below the walks' floor
     with pytest.raises(InputError, match="absorption"):
         paths.transport(0, float(less.sigma_a[0]))
