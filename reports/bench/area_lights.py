@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from ...errors import InputError
-from . import count_list, steps_bar, write_figures
+from . import count_list, quick_knobs, steps_bar, write_figures
 
 #: Scenes lit by area lights whose translucent objects splatting renders.
 DEFAULT_SCENES = ("bowl", "cornell_block")
@@ -61,10 +61,11 @@ def measure(scene_name: str, counts, frames: int) -> dict:
     mask = scored_pixels(scene, splatting.scored_objects(scene))
     floor = noise_floor(reference, mask=mask)
     rows = []
+    cheap = (quick_knobs(["splatting"]) or {}).get("splatting", {})  # --quick: its QUICK_KNOBS
     with steps_bar(f"area lights on {scene_name}", len(counts), unit="count") as bar:
         for count in counts:
             bar.set_postfix_str(f"{count} points")
-            state = splatting.precompute(scene, area_light_points=count)
+            state = splatting.precompute(scene, **{**cheap, "area_light_points": count})
             state.render()  # untimed: compiled kernels, first-call costs
             timings = []
             for _ in range(frames):

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 from translucent.errors import InputError
+from translucent.fast.object_geometry import QUICK_GEOMETRY_KNOBS
 from translucent.image import Image
 from translucent.reports.bench import model_error
 from translucent.reports.bench.model_error import (
@@ -28,8 +29,8 @@ TINY_MEDIA = ("Skin1", "Ketchup")
 #: Cheaper knobs than the methods' defaults (the benchmark uses the defaults): 256
 #: illumination samples for PRT (4 parts x 8 x 8, one core) and a 64 x 64 irradiance buffer
 #: for splatting. The tests check the table's machinery, not the methods' accuracy.
-TINY_KNOBS = {"prt": {"samples": 256, "workers": 1},
-              "splatting": {"irradiance_resolution": 64}}
+TINY_KNOBS = {"prt": {"samples": 256, "workers": 1, **QUICK_GEOMETRY_KNOBS},
+              "splatting": {"irradiance_resolution": 64, **QUICK_GEOMETRY_KNOBS}}
 TINY_METHODS = ("prt", "splatting")
 
 #: Sums of float64 squares over a few hundred pixels agree to rounding.
