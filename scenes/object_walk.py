@@ -45,6 +45,7 @@ import numpy as np
 from ..cache import Cache, content_hash
 from ..errors import InputError, check_count
 from ..materials.fresnel import fresnel_reflectance, fresnel_transmittance
+from .lighting import tangent_frames
 from .mesh_shape import stratified_surface_points
 from .scene import Mesh
 
@@ -125,11 +126,10 @@ def _diffuse_entry(normals, eta: float, rng) -> np.ndarray:
     sin_in = np.sqrt(np.maximum(0.0, 1.0 - cos_out ** 2)) / eta
     cos_in = np.sqrt(np.maximum(0.0, 1.0 - sin_in ** 2))
     phi = 2.0 * math.pi * rng.random(count)
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    first = np.cross(normals, helper)
-    first /= np.linalg.norm(first, axis=1, keepdims=True)
-    second = np.cross(normals, first)
-    return (sin_in[:, None] * (np.cos(phi)[:, None] * first + np.sin(phi)[:, None] * second)
+    tangent, bitangent = tangent_frames(normals)
+    # the frame's opposite axes: the directions these walks were first drawn about
+    return (sin_in[:, None] * (np.cos(phi)[:, None] * -tangent
+                               + np.sin(phi)[:, None] * -bitangent)
             - cos_in[:, None] * normals)
 
 
@@ -485,18 +485,14 @@ def walk_correction(triangles, clusters, medium, profile, *, walks: int = DEFAUL
     ndarray
         :math:`C_{mk}` in mm^-2 (module docstring); zero in a channel without scattering.
     """
-    entries, points = quadrature_sizes(walks)
-    quadrature = points if quadrature is None else quadrature
-    check_count(quadrature, "quadrature", minimum=16)
+    if quadrature is not None:
+        check_count(quadrature, "quadrature", minimum=16)
     if paths is None:
         paths = walk_paths(triangles, clusters, medium.sigma_s_prime, medium.eta,
                            FLOOR_FRACTION * np.asarray(medium.sigma_a, np.float64),
                            walks=walks, seed=seed)
     if sums is None:
-        mesh = _triangle_mesh(triangles)
-        sums = surface_sums(clusters, mesh, float(np.linalg.norm(np.ptp(mesh.vertices,
-                                                                        axis=0))),
-                            int(quadrature), np.random.default_rng([int(seed), 2]), entries)
+        sums = _object_sums(triangles, clusters, walks, seed, quadrature)
     profile_sum, exit_area = sums.profile_sum(profile), sums.exit_area
     sigma_a = np.atleast_1d(np.asarray(medium.sigma_a, np.float64))
     out = np.zeros((clusters.clusters, clusters.clusters, len(sigma_a)))
@@ -516,6 +512,24 @@ _PATHS: dict = {}
 _SUMS: dict = {}
 
 
+def _keep(store: dict, key, value, limit: int):
+    """Keep ``value`` under ``key``, dropping the oldest entry beyond ``limit``."""
+    if key not in store and len(store) >= limit:
+        store.pop(next(iter(store)))
+    store[key] = value
+    return value
+
+
+def _object_sums(triangles, clusters, walks: int, seed: int,
+                 quadrature: int | None = None) -> SurfaceSums:
+    """Make an object's :class:`SurfaceSums` at the walks' quadrature sizes."""
+    entries, points = quadrature_sizes(walks)
+    mesh = _triangle_mesh(triangles)
+    diagonal = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    return surface_sums(clusters, mesh, diagonal, points if quadrature is None else quadrature,
+                        np.random.default_rng([int(seed), 2]), entries)
+
+
 def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_WALKS,
                   seed: int = 0, cache: bool = True) -> np.ndarray:
     """Return :func:`walk_correction`, kept per object, medium, profile and settings.
@@ -530,9 +544,11 @@ def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_
     what it is (a model reference and a method's own material are always made fresh).
     """
     triangles = np.ascontiguousarray(triangles, dtype=np.float64)
-    shape_key = (clusters.key or hashlib.sha256(
-        np.ascontiguousarray(clusters.cluster_point).tobytes()).hexdigest(),
-        hashlib.sha256(triangles.tobytes()).hexdigest(), int(walks), int(seed))
+    # a keyed object's clusters already name its triangles: no hashing them every frame
+    object_key = clusters.key or hashlib.sha256(
+        np.ascontiguousarray(clusters.cluster_point).tobytes()
+        + triangles.tobytes()).hexdigest()
+    shape_key = (object_key, int(walks), int(seed))
     paths_key = shape_key + (np.asarray(medium.sigma_s_prime, np.float64).tobytes(),
                              float(medium.eta))
     paths = _PATHS.get(paths_key)
@@ -557,19 +573,11 @@ def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_
             made = walk_paths(triangles, clusters, medium.sigma_s_prime, medium.eta,
                               FLOOR_FRACTION * np.asarray(medium.sigma_a, np.float64),
                               walks=walks, seed=seed)
-            if paths_key not in _PATHS and len(_PATHS) >= KEPT_PATHS:
-                _PATHS.pop(next(iter(_PATHS)))
-            _PATHS[paths_key] = made
+            _keep(_PATHS, paths_key, made, KEPT_PATHS)
         sums = _SUMS.get(shape_key)
         if sums is None:
-            mesh = _triangle_mesh(triangles)
-            entries, points = quadrature_sizes(walks)
-            sums = surface_sums(clusters, mesh, float(np.linalg.norm(np.ptp(
-                mesh.vertices, axis=0))), points, np.random.default_rng([int(seed), 2]),
-                entries)
-            if len(_SUMS) >= KEPT_PATHS:
-                _SUMS.pop(next(iter(_SUMS)))
-            _SUMS[shape_key] = sums
+            sums = _keep(_SUMS, shape_key, _object_sums(triangles, clusters, walks, seed),
+                         KEPT_PATHS)
         return walk_correction(triangles, clusters, medium, profile, walks=walks, seed=seed,
                                paths=made, sums=sums)
 
@@ -579,7 +587,4 @@ def walk_response(clusters, triangles, medium, profile, *, walks: int = DEFAULT_
             and value.shape == shape, what="the walks' correction of an object")
     else:
         out = make()
-    if len(_KEPT) >= KEPT_RESPONSES:
-        _KEPT.pop(next(iter(_KEPT)))
-    _KEPT[key] = out
-    return out
+    return _keep(_KEPT, key, out, KEPT_RESPONSES)
