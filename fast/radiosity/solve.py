@@ -67,6 +67,14 @@ def check_convergence(S: ScatteringMatrix, F, patches: Patches, *,
     report["energy_conserving"] = largest < 1.0
     report["inter_reflects"] = F is not None and F.nnz > 0
     if not np.isfinite(largest) or (largest >= 1.0 and report["inter_reflects"]):
+        if getattr(S, "blocks", ()):
+            raise InputError(
+                f"the geometry correction breaks the convergence condition of Eq. 15 (Sheng "
+                f"et al. 2014): patch {patch} of '{object_name}' sends {largest:.4f} of the "
+                f"light it receives back out in channel {'RGB'[channel]} (must be < 1); "
+                "the correction is made at the clusters' scale and this object folds at a "
+                "smaller one -- use geometry half_space (with finite_object_energy)",
+                field="geometry", value=largest)
         raise InputError(
             f"the scattering factors break the convergence condition of Eq. 15 (Sheng et al. "
             f"2014): patch {patch} of '{object_name}' sends {largest:.4f} of the light it "

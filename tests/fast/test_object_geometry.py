@@ -118,3 +118,16 @@ def test_splatting_leaves_a_deformed_mesh_with_the_half_space():
     flat = splatting.precompute(scene, **{**splatting.QUICK_KNOBS,
                                           "geometry": "half_space"}).render()
     assert shaped.rgb.sum() > flat.rgb.sum()
+
+
+@pytest.mark.slow  # 10-20 s: radiosity's scattering geometry of the Cornell block
+def test_radiosity_refuses_a_geometry_correction_that_breaks_eq15_naming_the_knob(tmp_path,
+                                                                                 capsys):
+    from translucent.reports.cli import main
+
+    out = tmp_path / "block.exr"
+    assert main(["approx", "radiosity", "cornell_block", "--geometry", "walk",
+                 "--geometry-walks", "2048", "--no-progress", "--out", str(out)]) == 2
+    error = capsys.readouterr().err
+    assert "geometry" in error and "Eq. 15" in error and "half_space" in error
+    assert not out.exists()
